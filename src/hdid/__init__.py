@@ -1,0 +1,67 @@
+"""hdid — identify the physics of a harmonic drive from encoder logs.
+
+Heavy modules (jax, optimistix) load on first use so that ``hdid --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+__version__ = "0.1.0"
+
+_LAZY = {
+    "fit": "._fit",
+    "FitResult": "._result",
+    "Model": "._model",
+    "DEFAULT_INERTIA": "._model",
+    "DEFAULT_RATIO": "._model",
+    "simulate": "._simulate",
+    "read_log": "._io",
+    "write_log": "._io",
+    "Log": "._io",
+    "Run": "._io",
+    "LogError": "._errors",
+    "FitError": "._errors",
+    "HdidError": "._errors",
+    "AbstractEffect": ".effects",
+    "Parameter": ".effects",
+    "Motion": ".effects",
+    "CubicStiffness": ".effects",
+    "StribeckFriction": ".effects",
+    "ViscousFriction": ".effects",
+    "effects": ".effects",
+}
+
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        module = importlib.import_module(_LAZY[name], __name__)
+        value = module if name == "effects" else getattr(module, name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'hdid' has no attribute {name!r}")
+
+
+def __dir__():
+    return __all__
+
+
+if TYPE_CHECKING:  # pragma: no cover
+    from . import effects
+    from ._errors import FitError, HdidError, LogError
+    from ._fit import fit
+    from ._io import Log, Run, read_log, write_log
+    from ._model import DEFAULT_INERTIA, DEFAULT_RATIO, Model
+    from ._result import FitResult
+    from ._simulate import simulate
+    from .effects import (
+        AbstractEffect,
+        CubicStiffness,
+        Motion,
+        Parameter,
+        StribeckFriction,
+        ViscousFriction,
+    )

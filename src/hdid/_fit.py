@@ -1,0 +1,284 @@
+"""Joint least-squares fit of a model to every run of a free-motion log."""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Iterable, Mapping
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import lineax as lx
+import optimistix as optx
+
+from . import _config  # noqa: F401
+from ._errors import FitError
+from ._identifiability import analyse
+from ._io import Log, read_log
+from ._model import CATALOG_CSF8, DEFAULT_INERTIA, Model
+from ._prepare import Prepared, offset_guess, prepare
+from ._problem import Problem, build_problem, with_jacobian
+from ._result import FitResult, StartSummary
+from ._simulate import DEFAULT_MAX_SUBSTEP
+from ._transforms import interval_to_u, to_unconstrained
+
+#: Frequencies [Hz] and Coulomb fractions (τ_c / spring torque at release) of the coarse
+#: grid that seeds the local fits. 15–400 Hz covers size-8 to size-20 gears with motors.
+GRID_FREQUENCIES_HZ = np.geomspace(15.0, 400.0, 15)
+GRID_COULOMB_FRACTIONS = np.array([0.02, 0.05, 0.1, 0.18, 0.3])
+
+
+def fit(
+    log: Log | str | os.PathLike | object,
+    model: Model | None = None,
+    *,
+    inertia: float | None = None,
+    fix: Mapping[str, float] | Iterable[str] | None = None,
+    free_inertia: bool | None = None,
+    inertia_prior: tuple[float, float] | None = None,
+    release_time: float | None = None,
+    counts_per_rev: float | None = None,
+    n_starts: int = 4,
+    max_substep: float | None = None,
+    max_steps: int = 300,
+) -> FitResult:
+    """Fit stiffness, friction (and optionally inertia) to all runs of a log jointly.
+
+    Parameters
+    ----------
+    log:
+        A :class:`~hdid.Log`, a CSV path or a pandas DataFrame (see :func:`hdid.read_log`).
+    model:
+        Structure and starting/fixed values; default :meth:`Model.default`.
+    inertia:
+        Total inertia at the wave generator [kg m²] (default: the model's, i.e. the
+        CSF-8 + small-motor datasheet value 7e-7). Free motion fixes only torques
+        *relative to* the inertia, so this sets the absolute scale.
+    fix:
+        Parameters held fixed: names (at the model's value) or ``{name: value}``.
+    free_inertia:
+        Fit the inertia too. Only meaningful with runs of different known
+        ``added_inertia`` or with ``inertia_prior``; default: free exactly when the
+        runs' added inertias differ.
+    inertia_prior:
+        ``(mean, relative_sd)`` — a log-normal prior on the inertia (e.g. a datasheet
+        value ±30 %).
+    release_time:
+        Known release instant [s] in each run's time axis (otherwise fitted per run).
+    counts_per_rev:
+        Convert a log of raw encoder counts.
+    n_starts:
+        Local fits started from the best points of a coarse data-driven grid.
+    max_substep:
+        Longest RK4 substep [s] (default 0.5 ms).
+    max_steps:
+        Levenberg–Marquardt iteration limit per start.
+    """
+    t_start = time.perf_counter()
+    if not isinstance(log, Log):
+        log = read_log(log, counts_per_rev=counts_per_rev)
+    prep = prepare(log, release_time=release_time)
+
+    model = Model.default() if model is None else model
+    if inertia is not None:
+        if not inertia > 0:
+            raise ValueError(f"inertia = {inertia!r}: must be > 0 kg m^2")
+        model = model.replace(inertia=float(inertia))
+    fixed_values = _fixed_values(model, fix)
+    if fixed_values:
+        model = model.replace(**fixed_values)
+    specs = model.parameter_specs()
+    added_varies = np.ptp(prep.added_inertia) > 0
+    if free_inertia is None:
+        free_inertia = bool(added_varies) and inertia is None and "inertia" not in fixed_values
+    free = tuple(
+        n for n in specs if n not in fixed_values and (n != "inertia" or free_inertia)
+    )
+    priors = {n: specs[n].prior for n in free if specs[n].prior is not None}
+    if inertia_prior is not None and "inertia" in free:
+        mean, rel = inertia_prior
+        priors["inertia"] = (math.log(mean), rel)
+
+    n_data = int(np.sum(prep.weight > 0))
+    sub = DEFAULT_MAX_SUBSTEP if max_substep is None else float(max_substep)
+    offset0 = offset_guess(prep)
+    problem = build_problem(
+        prep, model, free, offset0, sub, release_time is not None, priors
+    )
+    if n_data <= problem.n_unknowns:
+        raise FitError(
+            f"{prep.source}: {n_data} samples but {problem.n_unknowns} unknowns; "
+            "log more samples per run, add runs, or fix parameters (fix=/--fix)"
+        )
+
+    U0, grid_cost = _grid_starts(problem, prep, model, n_starts)
+    # Phase 1: every start a few iterations; phase 2: the best ones to convergence
+    # (a start stuck in a poor basin would otherwise hold up the whole vmapped batch).
+    active = jnp.ones(len(U0), dtype=bool)
+    U, costs, ok, steps = _solve_many(problem, jnp.asarray(U0), active, jnp.asarray(PHASE1_STEPS))
+    keep = np.zeros(len(U0), dtype=bool)
+    keep[np.argsort(np.where(np.isfinite(costs), costs, np.inf))[:CONTINUED_STARTS]] = True
+    U, costs, ok, steps2 = _solve_many(problem, U, jnp.asarray(keep), jnp.asarray(max_steps))
+    U, costs, ok = map(np.asarray, (U, costs, ok))
+    steps = np.asarray(steps) + np.asarray(steps2)
+    ok = ok & keep
+    finite = np.isfinite(costs)
+    if not finite.any():
+        raise FitError(
+            f"{prep.source}: every start diverged (non-finite residuals); check units "
+            "(rad vs counts) and --inertia, or fix some parameters"
+        )
+    order = np.argsort(np.where(finite, costs, np.inf))
+    best = int(order[0])
+    u = U[best]
+    starts = StartSummary.from_solutions(problem, U, costs, ok, steps, best)
+    result = analyse(problem, prep, u, starts, fixed=set(specs) - set(free))
+    result.wall_time_s = time.perf_counter() - t_start
+    if not ok[best]:
+        result.warnings.append(
+            f"the best start stopped after {int(steps[best])} iterations without meeting "
+            "the convergence tolerance; results may not be at the optimum"
+        )
+    return result
+
+
+def _fixed_values(model: Model, fix) -> dict[str, float]:
+    if fix is None:
+        return {}
+    specs = model.parameter_specs()
+    current = model.float_values()
+    items = fix.items() if isinstance(fix, Mapping) else ((n, None) for n in fix)
+    out = {}
+    for name, value in items:
+        if name not in specs:
+            raise KeyError(f"fix: unknown parameter {name!r}; choose from {list(specs)}")
+        out[name] = current[name] if value is None else float(value)
+    return out
+
+
+def _grid_starts(problem: Problem, prep: Prepared, model: Model, n_starts: int):
+    """Coarse grid over natural frequency and Coulomb level, release times from the data."""
+    N = model.ratio
+    specs = model.parameter_specs()
+    current = model.float_values()
+    inertia = current["inertia"] + prep.added_inertia  # per run
+    offset = np.asarray(problem.offset0)[prep.setup_index]
+    theta0 = prep.hold - offset
+    amp = float(np.median(np.abs(theta0)))
+    rest = np.abs(prep.rest - offset)
+    y1 = prep.theta[np.arange(prep.n_runs), prep.first_moved] - offset
+    t1 = prep.times[np.arange(prep.n_runs), prep.first_moved]
+    k2_ratio = CATALOG_CSF8["k2"] / CATALOG_CSF8["k1"]
+    cands, keys = [], []
+    for f in GRID_FREQUENCIES_HZ:
+        w = 2 * math.pi * f
+        k_wg = float(np.median(inertia)) * w**2
+        for frac in GRID_COULOMB_FRACTIONS:
+            tau_c = frac * k_wg * amp
+            vals = {
+                "k1": k_wg * N**2,
+                "k2": k_wg * N**2 * k2_ratio,
+                "tau_c": tau_c,
+                "tau_s": max(1.3 * tau_c, 1.05 * k_wg * float(rest.max())),
+                "c_v": 0.05 * 2 * math.sqrt(k_wg * float(np.median(inertia))),
+            }
+            vals = {n: v for n, v in vals.items() if n in problem.free}
+            full = {**current, **vals}
+            # Release instant: invert the first half-cycle θ = θ_eq + (θ0 − θ_eq)·cos(ω τ).
+            wr = np.sqrt(k_wg / inertia)
+            d = -np.sign(theta0)
+            eq = -d * full.get("tau_c", 0.0) / k_wg
+            c = np.clip((y1 - eq) / (theta0 - eq), -1.0, 1.0)
+            tr = np.clip(t1 - np.arccos(c) / wr, prep.release_lo, prep.release_hi)
+            cands.append(_pack(problem, specs, {**current, **vals}, tr))
+            keys.append(f)
+    U = np.array(cands)
+    cost = np.asarray(_costs(problem, jnp.asarray(U)))
+    cost = np.where(np.isfinite(cost), cost, np.inf)
+    # Best candidate per frequency, then the n best of those (diverse starting points).
+    keys = np.array(keys)
+    chosen = []
+    for i in np.argsort(cost):
+        if all(abs(math.log(keys[i] / keys[j])) > 0.15 for j in chosen):
+            chosen.append(i)
+        if len(chosen) == n_starts:
+            break
+    return U[chosen], cost[chosen]
+
+
+def _pack(problem: Problem, specs, values, t_release) -> np.ndarray:
+    parts = [np.array([to_unconstrained(specs[n], values[n]) for n in problem.free])]
+    if problem.release_free:
+        parts.append(
+            interval_to_u(t_release, np.asarray(problem.release_lo), np.asarray(problem.release_hi))
+        )
+    parts.append(np.zeros(problem.n_runs))
+    parts.append(np.zeros(problem.n_setups))
+    return np.concatenate(parts)
+
+
+@eqx.filter_jit
+def _costs(problem: Problem, U):
+    return jax.vmap(problem.cost)(U)
+
+
+#: Stop when two consecutive accepted Levenberg–Marquardt steps each lower χ² (residuals
+#: in units of the quantization σ) by less than this: the optimum is then within about
+#: sqrt(0.01) = 0.1 standard deviations along every direction, and the remaining crawl
+#: along flat (prior-dominated) valleys would only cost time.
+CHI2_STALL = 0.01
+
+
+#: Iterations every start gets before only the best ``CONTINUED_STARTS`` go on.
+PHASE1_STEPS = 12
+CONTINUED_STARTS = 2
+
+
+@eqx.filter_jit
+def _solve_many(problem: Problem, U0, active, max_steps):
+    return jax.vmap(lambda u0, a: _levenberg_marquardt(problem, u0, a, max_steps))(U0, active)
+
+
+def _levenberg_marquardt(problem: Problem, u0, active, max_steps):
+    """optimistix's Levenberg–Marquardt, stepped by hand to add a statistical stop."""
+    residuals = with_jacobian(problem.residuals, problem.residuals_and_jacobian)
+
+    def fn(u, args):
+        del args
+        return residuals(u), None
+
+    # Normal equations + Cholesky: lineax's QR of the tall (samples × unknowns) matrix
+    # costs ~50× more here, and the damping keeps JᵀJ + λI positive definite even where
+    # J is rank-deficient (the identifiability report names those directions).
+    solver = optx.LevenbergMarquardt(
+        rtol=1e-8, atol=1e-8, linear_solver=lx.Normal(lx.Cholesky())
+    )
+    tags = frozenset()
+    f_struct = jax.eval_shape(problem.residuals, u0)
+    state = solver.init(fn, u0, None, {}, f_struct, None, tags)
+    dynamic0, static = eqx.partition(state, eqx.is_array)
+    cost0 = problem.cost(u0)
+
+    def cond(carry):
+        _, _, k, _, _, done = carry
+        return (~done) & (k < max_steps)
+
+    def body(carry):
+        u, dynamic, k, cost, stall, _ = carry
+        state = eqx.combine(static, dynamic)
+        u, state, _ = solver.step(fn, u, None, {}, state, tags)
+        terminate, _ = solver.terminate(fn, u, None, {}, state, tags)
+        new_cost = jnp.sum(state.f_info.residual**2)
+        improved = new_cost < cost
+        small = improved & (cost - new_cost < CHI2_STALL)
+        stall = jnp.where(small, stall + 1, jnp.where(improved, 0, stall))
+        done = terminate | (stall >= 2) | ~jnp.isfinite(new_cost)
+        dynamic, _ = eqx.partition(state, eqx.is_array)
+        return u, dynamic, k + 1, jnp.minimum(cost, new_cost), stall, done
+
+    init = (u0, dynamic0, jnp.array(0), cost0, jnp.array(0), ~active)
+    u, _, k, _, stall, done = jax.lax.while_loop(cond, body, init)
+    return u, problem.cost(u), done, k

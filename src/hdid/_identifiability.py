@@ -1,0 +1,284 @@
+"""Uncertainty and identifiability at the optimum: covariance, flags, derived quantities."""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._prepare import Prepared
+from ._problem import Problem
+from ._result import FitResult, ParameterEstimate, RunSummary, StartSummary
+from ._transforms import derivative
+
+#: A direction in the optimiser's space whose data-only standard deviation exceeds this
+#: (0.5 ≈ ±50 % in a log-parameter) is reported as not determined by the data.
+ILL_DETERMINED_STD = 0.5
+#: Posterior std above this fraction of the prior sd: the prior, not the data, decides.
+PRIOR_DOMINATED = 0.7
+#: Correlations above this are reported.
+HIGH_CORRELATION = 0.95
+#: Stribeck shape is only visible when the motion goes well past the Stribeck velocity.
+STRIBECK_VISIBLE = 5.0
+
+
+@eqx.filter_jit
+def _jacobian(problem: Problem, u):
+    r, J = problem.data_residuals_and_jacobian(u)
+    return J, r
+
+
+@eqx.filter_jit
+def _dense(problem: Problem, u, times):
+    values, t_release, theta0_enc, offset = problem.unpack(u)
+    model = problem.model(u)
+    from ._simulate import simulate
+
+    off = offset[problem.setup_index]
+    run = jax.vmap(
+        lambda t, th0, tr, ai: simulate(
+            model, t, th0, tr, added_inertia=ai, max_substep=problem.max_substep, full_output=True
+        )
+    )
+    return run(times, theta0_enc - off, t_release, problem.added_inertia)
+
+
+def unknown_labels(problem: Problem, prep: Prepared) -> list[str]:
+    labels = list(problem.free)
+    if problem.release_free:
+        labels += [f"release_time[{n}]" for n in prep.run_names]
+    labels += [f"theta0[{n}]" for n in prep.run_names]
+    labels += [f"offset[{s}]" for s in prep.setup_names]
+    return labels
+
+
+def analyse(problem: Problem, prep: Prepared, u, starts: StartSummary, fixed: set[str]) -> FitResult:
+    u = jnp.asarray(u)
+    J, r = map(np.asarray, _jacobian(problem, u))
+    P = problem.n_physical
+    labels = unknown_labels(problem, prep)
+    warnings: list[str] = []
+
+    n_eff = prep.n_effective
+    dof = n_eff - problem.n_unknowns
+    rss = float(np.sum(r**2))
+    s2 = rss / dof if dof > 0 else float("nan")
+    if not dof > 0:
+        warnings.append(
+            f"only {n_eff:.1f} effective observations for {problem.n_unknowns} unknowns: "
+            "standard errors are not available; add runs or fix parameters"
+        )
+        s2_used = 1.0
+    else:
+        s2_used = max(s2, 1e-12)
+
+    fisher_data = J.T @ J / s2_used
+    prior_prec = np.zeros(problem.n_unknowns)
+    prior_on = np.asarray(problem.prior_on)
+    prior_sd = np.asarray(problem.prior_sd)
+    prior_prec[:P] = np.where(prior_on, 1.0 / prior_sd**2, 0.0)
+    cov = _pinv_psd(fisher_data + np.diag(prior_prec))
+    cov_data = _pinv_psd(fisher_data)
+    std_u = np.sqrt(np.clip(np.diag(cov), 0, None))
+    std_u_data = np.sqrt(np.clip(np.diag(cov_data), 0, None))
+
+    # -- identifiability ------------------------------------------------------------
+    flags: dict[str, str] = {}
+    col_norm = np.linalg.norm(J, axis=0)
+    for i, name in enumerate(labels[:P]):
+        if col_norm[i] == 0:
+            flags[name] = "has no effect on these data"
+        elif std_u_data[i] > ILL_DETERMINED_STD:
+            if prior_on[i] and std_u[i] > PRIOR_DOMINATED * prior_sd[i]:
+                flags[name] = "not determined by the data: the weak prior sets it"
+            else:
+                flags[name] = (
+                    f"poorly determined by the data alone (±{_pct(std_u_data[i])} from data)"
+                )
+    evals, evecs = np.linalg.eigh(fisher_data)
+    combos = []
+    for lam, vec in zip(evals, evecs.T):
+        std_dir = 1.0 / math.sqrt(lam) if lam > 0 else math.inf
+        if std_dir <= ILL_DETERMINED_STD:
+            continue
+        members = [labels[i] for i in np.argsort(-np.abs(vec)) if abs(vec[i]) > 0.3]
+        if len(members) >= 2:
+            combos.append(members)
+    for members in combos[:3]:
+        warnings.append(
+            "only a combination of " + ", ".join(members) + " is determined by the data"
+            + (
+                " (free motion fixes torques relative to the inertia: fix the inertia, give "
+                "a prior, or add runs with known added inertia)"
+                if "inertia" in members
+                else ""
+            )
+        )
+    for name, why in flags.items():
+        warnings.append(f"{name}: {why}")
+
+    corr = cov[:P, :P] / np.outer(std_u[:P], std_u[:P]).clip(1e-300)
+    pairs = sorted(
+        ((abs(corr[i, j]), labels[i], labels[j], corr[i, j]) for i in range(P) for j in range(i + 1, P)
+         if abs(corr[i, j]) > HIGH_CORRELATION),
+        reverse=True,
+    )
+    if pairs:
+        shown = ", ".join(f"{a}~{b} ({c:+.3f})" for _, a, b, c in pairs[:6])
+        more = f" and {len(pairs) - 6} more" if len(pairs) > 6 else ""
+        warnings.append(
+            f"strongly correlated (|r| > {HIGH_CORRELATION}): {shown}{more}; the data fix "
+            "mainly combinations of these"
+        )
+
+    # -- parameters -----------------------------------------------------------------
+    model = problem.model(u)
+    values = model.float_values()
+    specs = model.parameter_specs()
+    params: dict[str, ParameterEstimate] = {}
+    for name, spec in specs.items():
+        if name in problem.free:
+            i = problem.free.index(name)
+            std = float(abs(derivative(spec, u[i])) * std_u[i])
+        else:
+            std = 0.0
+        params[name] = ParameterEstimate(
+            name=name, value=values[name], std=std, unit=spec.unit, fixed=name not in problem.free,
+            doc=spec.doc, note=flags.get(name, ""),
+        )
+
+    # -- derived quantities ---------------------------------------------------------
+    cov_pp = cov[:P, :P]
+    derived = _derived(problem, u, cov_pp)
+
+    # -- per run --------------------------------------------------------------------
+    _, t_release, theta0_enc, offset = problem.unpack(u)
+    t_release, theta0_enc, offset = map(np.asarray, (t_release, theta0_enc, offset))
+    theta_pred, omega_pred, stuck = map(np.asarray, _dense(problem, u, problem.times))
+    off_run = offset[prep.setup_index]
+    pred_enc = theta_pred + off_run[:, None]
+    w2 = prep.weight**2
+    err = pred_enc - prep.theta
+    runs = []
+    for i, name in enumerate(prep.run_names):
+        n = prep.lengths[i]
+        rms = math.sqrt(np.sum(w2[i, :n] * err[i, :n] ** 2) / np.sum(w2[i, :n]))
+        runs.append(
+            RunSummary(
+                name=name,
+                setup=prep.setup_names[prep.setup_index[i]],
+                n_samples=int(n),
+                release_time=float(t_release[i]),
+                release_time_std=_release_std(problem, u, std_u, i),
+                theta0=float(theta0_enc[i] - off_run[i]),
+                offset=float(off_run[i]),
+                rms_rad=rms,
+                rest_logged=float(prep.rest[i] - off_run[i]),
+                rest_model=float(theta_pred[i, n - 1]),
+                stuck_at_end=bool(stuck[i, n - 1]),
+                peak_speed=float(np.max(np.abs(omega_pred[i, :n]))),
+            )
+        )
+    rms_all = math.sqrt(np.sum(w2 * err**2) / np.sum(w2))
+
+    if "v_s" in values and runs:
+        peak = max(r.peak_speed for r in runs)
+        if peak < STRIBECK_VISIBLE * values["v_s"]:
+            warnings.append(
+                f"peak speed {peak:.3g} rad/s is not far above the Stribeck velocity "
+                f"{values['v_s']:.3g} rad/s: tau_c, tau_s, v_s and delta blur together"
+            )
+    not_stuck = [r.name for r in runs if not r.stuck_at_end]
+    if not_stuck:
+        warnings.append(
+            "the model is still moving at the end of run(s) " + ", ".join(not_stuck)
+            + ": the fitted friction cannot hold the logged rest point"
+        )
+
+    return FitResult(
+        source=prep.source,
+        model=model,
+        parameters=params,
+        derived=derived,
+        runs=runs,
+        setups={s: float(offset[k]) for k, s in enumerate(prep.setup_names)},
+        rms_residual_rad=rms_all,
+        resolution_rad=prep.resolution,
+        resolution_known=prep.resolution_known,
+        sample_period=prep.sample_period,
+        n_effective=n_eff,
+        n_unknowns=problem.n_unknowns,
+        noise_scale=math.sqrt(s2) if dof > 0 else float("nan"),
+        correlation={(labels[i], labels[j]): float(corr[i, j]) for i in range(P) for j in range(i + 1, P)},
+        warnings=warnings,
+        starts=starts,
+        problem=problem,
+        u=np.asarray(u),
+        covariance=cov,
+        labels=labels,
+    )
+
+
+def _derived(problem: Problem, u, cov_pp) -> dict:
+    """Stick band, inertia-normalised torques, natural frequency, damping ratio (± std)."""
+    vals, jac = _derived_and_jacobian(problem, jnp.asarray(u))
+    out = {}
+    for k, v in vals.items():
+        g = np.asarray(jac[k])
+        std = float(math.sqrt(max(g @ cov_pp @ g, 0.0))) if g.size else 0.0
+        out[k] = (float(v), std)
+    return out
+
+
+def derived_quantities(model) -> dict:
+    """Derived physical quantities of a model (JAX scalars)."""
+    N = model.ratio
+    v = model.values()
+    I = v["inertia"]
+    lo, hi = model.stick_band()
+    out = {"stick_band_halfwidth_rad": 0.5 * (hi - lo), "stick_band_lower_rad": lo,
+           "stick_band_upper_rad": hi}
+    for n in ("k1", "k2", "tau_c", "tau_s", "c_v"):
+        if n in v:
+            out[f"{n}/inertia"] = v[n] / I
+    if "k1" in v:
+        k_wg = v["k1"] / N**2
+        out["natural_frequency_hz"] = jnp.sqrt(k_wg / I) / (2 * jnp.pi)
+        if "c_v" in v:
+            out["damping_ratio"] = v["c_v"] / (2 * jnp.sqrt(k_wg * I))
+    return out
+
+
+@eqx.filter_jit
+def _derived_and_jacobian(problem: Problem, u):
+    P = problem.n_physical
+
+    def quantities(up):
+        return derived_quantities(problem.model(jnp.concatenate([up, u[P:]])))
+
+    return quantities(u[:P]), jax.jacfwd(quantities)(u[:P])
+
+
+def _release_std(problem: Problem, u, std_u, i: int) -> float:
+    """Standard error of a run's release instant [s] (delta method through the map)."""
+    if not problem.release_free:
+        return 0.0
+    j = problem.n_physical + i
+    lo, hi = float(problem.release_lo[i]), float(problem.release_hi[i])
+    s = 1.0 / (1.0 + math.exp(-float(u[j])))
+    return float((hi - lo) * s * (1 - s) * std_u[j])
+
+
+def _pinv_psd(a: np.ndarray) -> np.ndarray:
+    a = 0.5 * (a + a.T)
+    w, v = np.linalg.eigh(a)
+    tol = max(w.max(), 0.0) * 1e-13 if w.size else 0.0
+    inv = np.where(w > tol, 1.0 / np.where(w > tol, w, 1.0), 0.0)
+    return (v * inv) @ v.T
+
+
+def _pct(x: float) -> str:
+    return f"{100 * (math.exp(x) - 1):.0f} %" if x < 3 else "orders of magnitude"

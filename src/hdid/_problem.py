@@ -1,0 +1,237 @@
+"""The least-squares problem: parameter layout, forward model and weighted residuals."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from . import _config  # noqa: F401
+from ._model import Model
+from ._prepare import Prepared
+from ._simulate import simulate
+from ._transforms import from_unconstrained, interval_from_u
+
+#: Scale of the per-set-up offset in the optimiser's space [rad].
+OFFSET_SCALE = 0.01
+
+
+class Problem(eqx.Module):
+    """Residuals of one log for a model whose ``free`` parameters are being fitted.
+
+    The unknowns ``u`` are laid out as: free physical parameters (transformed), then the
+    release instant of each run (logistic map onto its bracket; absent when fixed), the
+    true encoder reading at release of each run (in encoder steps from the logged hold),
+    and the encoder reading at the spring's zero of each set-up (``OFFSET_SCALE`` units).
+    Residuals are ``weight·(model − measured)/σ_q`` with ``σ_q = step/√12`` — the
+    quantization noise of an ideal encoder — followed by weak-prior rows.
+    """
+
+    base: Model
+    times: Float[Array, "R T"]
+    theta: Float[Array, "R T"]
+    weight: Float[Array, "R T"]
+    setup_index: Array
+    added_inertia: Float[Array, " R"]
+    hold: Float[Array, " R"]
+    release_lo: Float[Array, " R"]
+    release_hi: Float[Array, " R"]
+    offset0: Float[Array, " S"]
+    step: Float[Array, ""]
+    prior_mean: Float[Array, " P"]
+    prior_sd: Float[Array, " P"]
+    prior_on: Array
+    free: tuple[str, ...] = eqx.field(static=True)
+    release_free: bool = eqx.field(static=True)
+    max_substep: float = eqx.field(static=True)
+
+    @property
+    def n_runs(self) -> int:
+        return self.times.shape[0]
+
+    @property
+    def n_setups(self) -> int:
+        return self.offset0.shape[0]
+
+    @property
+    def n_physical(self) -> int:
+        return len(self.free)
+
+    @property
+    def n_unknowns(self) -> int:
+        return self.n_physical + (2 if self.release_free else 1) * self.n_runs + self.n_setups
+
+    @property
+    def sigma(self):
+        return self.step / jnp.sqrt(12.0)
+
+    # -- layout -----------------------------------------------------------------------
+    def unpack(self, u):
+        P, R = self.n_physical, self.n_runs
+        specs = self.base.parameter_specs()
+        values = {n: from_unconstrained(specs[n], u[i]) for i, n in enumerate(self.free)}
+        i = P
+        if self.release_free:
+            t_release = interval_from_u(u[i : i + R], self.release_lo, self.release_hi)
+            i += R
+        else:
+            t_release = self.release_lo
+        theta0_enc = self.hold + self.step * u[i : i + R]
+        i += R
+        offset = self.offset0 + OFFSET_SCALE * u[i : i + self.n_setups]
+        return values, t_release, theta0_enc, offset
+
+    def model(self, u) -> Model:
+        values, *_ = self.unpack(u)
+        return self.base.replace(**values) if values else self.base
+
+    # -- forward model ----------------------------------------------------------------
+    def predict(self, u, times=None):
+        """Predicted encoder readings ``(R, T)`` (or at ``times`` ``(R, T')``)."""
+        values, t_release, theta0_enc, offset = self.unpack(u)
+        model = self.base.replace(**values) if values else self.base
+        off = offset[self.setup_index]
+        times = self.times if times is None else times
+        sim = jax.vmap(
+            lambda t, th0, tr, ai: simulate(
+                model, t, th0, tr, added_inertia=ai, max_substep=self.max_substep
+            )
+        )
+        return sim(times, theta0_enc - off, t_release, self.added_inertia) + off[:, None]
+
+    def data_residuals(self, u):
+        return (self.weight * (self.predict(u) - self.theta) / self.sigma).ravel()
+
+    def prior_residuals(self, u):
+        z = (u[: self.n_physical] - self.prior_mean) / self.prior_sd
+        return jnp.where(self.prior_on, z, 0.0)
+
+    def residuals(self, u):
+        return jnp.concatenate([self.data_residuals(u), self.prior_residuals(u)])
+
+    def cost(self, u):
+        r = self.residuals(u)
+        return jnp.sum(r**2)
+
+    # -- structured Jacobian ----------------------------------------------------------
+    def _local(self, u):
+        """Per-run unknowns ``(R, P+3)``: physical, release, start angle, own offset."""
+        P, R = self.n_physical, self.n_runs
+        i = P + (R if self.release_free else 0)
+        tr = u[P : P + R] if self.release_free else jnp.zeros(R)
+        th0 = u[i : i + R]
+        off = u[i + R : i + R + self.n_setups][self.setup_index]
+        phys = jnp.broadcast_to(u[:P], (R, P))
+        return jnp.concatenate([phys, tr[:, None], th0[:, None], off[:, None]], axis=1)
+
+    def _run_residuals(self, local, times, theta, weight, hold, lo, hi, added, offset0):
+        P = self.n_physical
+        specs = self.base.parameter_specs()
+        values = {n: from_unconstrained(specs[n], local[k]) for k, n in enumerate(self.free)}
+        model = self.base.replace(**values) if values else self.base
+        t_release = interval_from_u(local[P], lo, hi) if self.release_free else lo
+        theta0_enc = hold + self.step * local[P + 1]
+        off = offset0 + OFFSET_SCALE * local[P + 2]
+        pred = simulate(
+            model, times, theta0_enc - off, t_release, added_inertia=added,
+            max_substep=self.max_substep,
+        )
+        return weight * (pred + off - theta) / self.sigma
+
+    def data_residuals_and_jacobian(self, u):
+        """Data residuals ``(R·T,)`` and their Jacobian ``(R·T, n_unknowns)``.
+
+        Each run depends only on the shared physical parameters and its own release,
+        start angle and set-up offset: forward-mode over those ``P + 3`` local unknowns
+        per run (vmapped over runs), scattered into the full matrix — instead of
+        carrying every unknown's tangent through every run's simulation.
+        """
+        P, R, S = self.n_physical, self.n_runs, self.n_setups
+        T = self.times.shape[1]
+        args = (
+            self.times, self.theta, self.weight, self.hold, self.release_lo,
+            self.release_hi, self.added_inertia, self.offset0[self.setup_index],
+        )
+
+        def one(local, *a):
+            r = self._run_residuals(local, *a)
+            return r, r
+
+        jac_local, r = jax.vmap(jax.jacfwd(one, has_aux=True))(self._local(u), *args)
+        idx = jnp.arange(R)
+        rel = P if self.release_free else None
+        th0 = P + (R if self.release_free else 0)
+        off = th0 + R
+        J = jnp.zeros((R, T, self.n_unknowns))
+        J = J.at[:, :, :P].set(jac_local[:, :, :P])
+        if rel is not None:
+            J = J.at[idx, :, rel + idx].set(jac_local[:, :, P])
+        J = J.at[idx, :, th0 + idx].set(jac_local[:, :, P + 1])
+        J = J.at[idx, :, off + self.setup_index].add(jac_local[:, :, P + 2])
+        del S
+        return r.reshape(-1), J.reshape(R * T, self.n_unknowns)
+
+    def residuals_and_jacobian(self, u):
+        r, J = self.data_residuals_and_jacobian(u)
+        P = self.n_physical
+        rp = self.prior_residuals(u)
+        Jp = jnp.zeros((P, self.n_unknowns)).at[:, :P].set(
+            jnp.diag(jnp.where(self.prior_on, 1.0 / self.prior_sd, 0.0))
+        )
+        return jnp.concatenate([r, rp]), jnp.concatenate([J, Jp], axis=0)
+
+
+def build_problem(
+    prep: Prepared,
+    base: Model,
+    free: tuple[str, ...],
+    offset0: np.ndarray,
+    max_substep: float,
+    release_fixed: bool,
+    priors: dict[str, tuple[float, float]],
+) -> Problem:
+    mean = np.array([priors[n][0] if n in priors else 0.0 for n in free])
+    sd = np.array([priors[n][1] if n in priors else 1.0 for n in free])
+    on = np.array([n in priors for n in free], dtype=bool)
+    return Problem(
+        base=base,
+        times=jnp.asarray(prep.times),
+        theta=jnp.asarray(prep.theta),
+        weight=jnp.asarray(prep.weight),
+        setup_index=jnp.asarray(prep.setup_index),
+        added_inertia=jnp.asarray(prep.added_inertia),
+        hold=jnp.asarray(prep.hold),
+        release_lo=jnp.asarray(prep.release_lo),
+        release_hi=jnp.asarray(prep.release_hi),
+        offset0=jnp.asarray(offset0, dtype=float),
+        step=jnp.asarray(prep.resolution),
+        prior_mean=jnp.asarray(mean, dtype=float),
+        prior_sd=jnp.asarray(sd, dtype=float),
+        prior_on=jnp.asarray(on),
+        free=tuple(free),
+        release_free=not release_fixed,
+        max_substep=max_substep,
+    )
+
+
+def with_jacobian(fn, fn_and_jac):
+    """``fn`` whose JVP uses a materialised Jacobian from ``fn_and_jac(u) -> (r, J)``.
+
+    optimistix linearises the residual function; forward-mode through the simulator's
+    while_loop cannot be linearised directly, and a materialised forward-mode Jacobian
+    (all tangents in one pass) is also the fastest way for a few dozen unknowns.
+    """
+
+    @jax.custom_jvp
+    def wrapped(u):
+        return fn(u)
+
+    @wrapped.defjvp
+    def _jvp(primals, tangents):
+        (u,), (du,) = primals, tangents
+        r, jac = fn_and_jac(u)
+        return r, jac @ du
+
+    return wrapped

@@ -1,0 +1,260 @@
+"""Fit results: a readable report, a JSON-able summary and a plot (lmfit style)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+
+@dataclass
+class ParameterEstimate:
+    name: str
+    value: float
+    std: float
+    unit: str
+    fixed: bool
+    doc: str = ""
+    note: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "value": self.value,
+            "unit": self.unit,
+            "std": None if self.fixed else self.std,
+            "fixed": self.fixed,
+            **({"note": self.note} if self.note else {}),
+        }
+
+
+@dataclass
+class RunSummary:
+    name: str
+    setup: str
+    n_samples: int
+    release_time: float
+    release_time_std: float
+    theta0: float
+    offset: float
+    rms_rad: float
+    rest_logged: float
+    rest_model: float
+    stuck_at_end: bool
+    peak_speed: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+
+
+@dataclass
+class StartSummary:
+    """What the multi-start local fits found."""
+
+    costs: np.ndarray
+    converged: np.ndarray
+    steps: np.ndarray
+    values: dict[str, np.ndarray]
+    best: int
+
+    @classmethod
+    def from_solutions(cls, problem, U, costs, ok, steps, best) -> StartSummary:
+        models = [problem.model(u) for u in U]
+        values = {n: np.array([float(m.float_values()[n]) for m in models]) for n in problem.free}
+        return cls(np.asarray(costs), np.asarray(ok), np.asarray(steps), values, int(best))
+
+    def same_minimum(self, rtol: float = 1e-3) -> np.ndarray:
+        c = self.costs
+        return np.isfinite(c) & (c <= c[self.best] * (1 + rtol) + 1e-9)
+
+    def spread(self) -> dict[str, float]:
+        """Largest relative deviation from the best among starts that reached its cost."""
+        same = self.same_minimum()
+        out = {}
+        for n, v in self.values.items():
+            ref = v[self.best]
+            out[n] = float(np.max(np.abs(v[same] - ref)) / abs(ref)) if ref else 0.0
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "n_starts": int(len(self.costs)),
+            "n_at_best_cost": int(self.same_minimum().sum()),
+            "costs": [float(c) for c in self.costs],
+            "converged": [bool(x) for x in self.converged],
+            "iterations": [int(s) for s in self.steps],
+            "relative_spread_at_best_cost": self.spread(),
+        }
+
+
+@dataclass
+class FitResult:
+    """Outcome of :func:`hdid.fit`.
+
+    Use :meth:`report` for text, :meth:`to_dict` for JSON and :meth:`plot` for a
+    measured-vs-model figure. ``model`` is the fitted :class:`~hdid.Model`.
+    """
+
+    source: str
+    model: Any
+    parameters: dict[str, ParameterEstimate]
+    derived: dict[str, tuple[float, float]]
+    runs: list[RunSummary]
+    setups: dict[str, float]
+    rms_residual_rad: float
+    resolution_rad: float
+    resolution_known: bool
+    sample_period: float
+    n_effective: float
+    n_unknowns: int
+    noise_scale: float
+    correlation: dict[tuple[str, str], float]
+    warnings: list[str]
+    starts: StartSummary
+    problem: Any = field(repr=False)
+    u: np.ndarray = field(repr=False)
+    covariance: np.ndarray = field(repr=False)
+    labels: list[str] = field(repr=False)
+    wall_time_s: float = float("nan")
+
+    # -- accessors --------------------------------------------------------------------
+    @property
+    def values(self) -> dict[str, float]:
+        return {n: p.value for n, p in self.parameters.items()}
+
+    @property
+    def stick_band_halfwidth_rad(self) -> float:
+        return self.derived["stick_band_halfwidth_rad"][0]
+
+    @property
+    def quantization_floor_rad(self) -> float:
+        """RMS error of rounding to the encoder step, ``step/√12``."""
+        return self.resolution_rad / math.sqrt(12)
+
+    def predict(self, times=None) -> np.ndarray:
+        """Model encoder readings per run at the logged times, or at ``times`` ``(R, T')``."""
+        import jax.numpy as jnp
+
+        from ._identifiability import _dense
+
+        t = self.problem.times if times is None else jnp.asarray(times)
+        theta, _, _ = _dense(self.problem, jnp.asarray(self.u), t)
+        off = np.array([r.offset for r in self.runs])
+        return np.asarray(theta) + off[:, None]
+
+    # -- output -----------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able summary (the ``hdid fit --json`` schema)."""
+        return {
+            "source": self.source,
+            "parameters": {n: p.to_dict() for n, p in self.parameters.items()},
+            "nuisance": {
+                r.name: {
+                    "release_time": r.release_time,
+                    "release_time_std": r.release_time_std,
+                    "offset": r.offset,
+                    "theta0": r.theta0,
+                    "setup": r.setup,
+                }
+                for r in self.runs
+            },
+            "rms_residual_rad": self.rms_residual_rad,
+            "rms_residual_counts": self.rms_residual_rad / self.resolution_rad,
+            "quantization_floor_rad": self.quantization_floor_rad,
+            "stick_band_halfwidth_rad": self.stick_band_halfwidth_rad,
+            "stick_band_halfwidth_std_rad": self.derived["stick_band_halfwidth_rad"][1],
+            "derived": {k: {"value": v, "std": s} for k, (v, s) in self.derived.items()},
+            "runs": [r.to_dict() for r in self.runs],
+            "setups": {s: {"offset": o} for s, o in self.setups.items()},
+            "warnings": list(self.warnings),
+            "starts": self.starts.to_dict(),
+            "effective_observations": self.n_effective,
+            "unknowns": self.n_unknowns,
+            "noise_scale_vs_quantization": self.noise_scale,
+            "wall_time_s": self.wall_time_s,
+        }
+
+    def report(self) -> str:
+        """A readable text report."""
+        lines = [f"hdid fit: {self.source}", ""]
+        lines.append(f"{'parameter':<10} {'value':>12} {'std':>11} {'rel':>7}  unit")
+        for p in self.parameters.values():
+            if p.fixed:
+                std, rel = "(fixed)", ""
+            else:
+                std = f"{p.std:11.3g}"
+                rel = f"{100 * p.std / abs(p.value):6.1f}%" if p.value else ""
+            flag = "  *" if p.note else ""
+            lines.append(f"{p.name:<10} {p.value:12.5g} {std:>11} {rel:>7}  {p.unit}{flag}")
+        if any(p.note for p in self.parameters.values()):
+            lines.append("  * see warnings")
+        lines.append("")
+        lines.append("derived (torques relative to the inertia are what free motion fixes):")
+        order = ["stick_band_halfwidth_rad", "natural_frequency_hz", "damping_ratio",
+                 "k1/inertia", "k2/inertia", "tau_c/inertia", "tau_s/inertia", "c_v/inertia"]
+        keys = [k for k in order if k in self.derived] + [
+            k for k in self.derived if k not in order and not k.startswith("stick_band_")
+        ]
+        for k in keys:
+            v, s = self.derived[k]
+            rel = f" ({100 * s / abs(v):.1f}%)" if v else ""
+            lines.append(f"  {k:<26} {v:12.5g} ± {s:.3g}{rel}")
+        lines.append("")
+        floor = self.quantization_floor_rad
+        lines.append(
+            f"RMS residual {self.rms_residual_rad:.3e} rad = "
+            f"{self.rms_residual_rad / self.resolution_rad:.3f} counts "
+            f"(quantization floor {floor:.3e} rad = 0.289 counts"
+            + ("" if self.resolution_known else f", encoder step {self.resolution_rad:.4g} rad assumed")
+            + ")"
+        )
+        lo = self.derived["stick_band_lower_rad"][0]
+        hi = self.derived["stick_band_upper_rad"][0]
+        hw, hws = self.derived["stick_band_halfwidth_rad"]
+        lines.append(
+            f"stick band (WG, from spring zero): [{lo:+.4f}, {hi:+.4f}] rad, "
+            f"half-width {hw:.4f} ± {hws:.4f} rad"
+        )
+        lines.append("")
+        lines.append(
+            f"{'run':<6} {'setup':<6} {'n':>4} {'release [s]':>12} {'theta0':>9} "
+            f"{'rest logged':>12} {'rest model':>11} {'RMS [counts]':>12}"
+        )
+        for r in self.runs:
+            lines.append(
+                f"{r.name:<6} {r.setup:<6} {r.n_samples:>4} {r.release_time:12.5f} "
+                f"{r.theta0:+9.4f} {r.rest_logged:+12.4f} {r.rest_model:+11.4f} "
+                f"{r.rms_rad / self.resolution_rad:12.3f}"
+            )
+        for s, o in self.setups.items():
+            lines.append(f"set-up {s}: encoder reading at spring zero {o:+.5f} rad")
+        st = self.starts
+        lines.append("")
+        lines.append(
+            f"starts: {int(st.same_minimum().sum())} of {len(st.costs)} reached the best cost; "
+            f"largest relative spread there {max(st.spread().values(), default=0):.2e}; "
+            f"{self.wall_time_s:.2f} s"
+        )
+        if self.warnings:
+            lines.append("")
+            lines.append("warnings:")
+            lines += [f"  - {w}" for w in self.warnings]
+        return "\n".join(lines)
+
+    def __str__(self) -> str:
+        return self.report()
+
+    def plot(self, path=None, *, axes=None, fine_rate: float = 20000.0):
+        """Measured vs model for every run (top) with residuals in counts (bottom).
+
+        Parameters
+        ----------
+        path:
+            Save the figure here (PNG, PDF, …) if given.
+        axes:
+            ``(2, R)`` array of matplotlib axes to draw into; a new figure otherwise.
+        """
+        from ._plot import plot_fit
+
+        return plot_fit(self, path=path, axes=axes, fine_rate=fine_rate)

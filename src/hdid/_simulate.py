@@ -1,0 +1,190 @@
+"""Stick-exact simulation of the free-motion test.
+
+Scheme (chosen by measurement, see ``benchmarks/simulator_schemes.py``): fixed RK4
+substeps between samples with the friction *direction* frozen inside a step. When the
+velocity would cross zero inside a substep the step is split at the crossing: the
+crossing fraction ``α = ω0 / (ω0 − ω1)`` and the cubic-Hermite position there are smooth
+functions of the parameters, so the rest position and its sensitivity are correct under
+automatic differentiation (unlike time-stepping schemes that snap the stop to the grid).
+At the crossing the set-valued friction decides: if the net torque at rest can be held
+(``|Σ torque| ≤ Σ holding``) the wave generator stays exactly put — no creep — else it
+slides on in the direction of the net torque for the rest of the substep.
+
+The release instant ``t_release`` may lie anywhere between samples: each sample interval
+is integrated over its part after the release, ``[max(t_{k−1} − t_r, 0), max(t_k − t_r, 0)]``,
+which is continuous (and piecewise smooth) in ``t_r``.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+from . import _config  # noqa: F401
+from ._model import Model
+from .effects import Motion
+
+#: Longest RK4 substep [s]. Against the event-driven reference this keeps the error far
+#: below the 250 Hz quantization floor (benchmarks/results/simulator_schemes.md).
+DEFAULT_MAX_SUBSTEP = 5e-4
+
+
+def substeps_for(sample_period: float, max_substep: float = DEFAULT_MAX_SUBSTEP) -> int:
+    """Number of substeps per sample so that each is at most ``max_substep`` seconds."""
+    import math
+
+    return max(1, math.ceil(sample_period / max_substep - 1e-9))
+
+
+def _accel(model: Model, inertia, theta, omega, direction, states):
+    motion = Motion(theta=theta, omega=omega, direction=direction, ratio=model.ratio)
+    return model.torque(motion, states) / inertia
+
+
+def _rk4(model, inertia, theta, omega, direction, states, h):
+    a1 = _accel(model, inertia, theta, omega, direction, states)
+    v2 = omega + 0.5 * h * a1
+    a2 = _accel(model, inertia, theta + 0.5 * h * omega, v2, direction, states)
+    v3 = omega + 0.5 * h * a2
+    a3 = _accel(model, inertia, theta + 0.5 * h * v2, v3, direction, states)
+    v4 = omega + h * a3
+    a4 = _accel(model, inertia, theta + h * v3, v4, direction, states)
+    theta_new = theta + h / 6.0 * (omega + 2.0 * v2 + 2.0 * v3 + v4)
+    omega_new = omega + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
+    return theta_new, omega_new, a1
+
+
+def _safe_div(num, den, ok):
+    return jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0)
+
+
+def _substep(model: Model, inertia, carry, h):
+    theta, omega, direction, states = carry
+    theta1, omega1, acc0 = _rk4(model, inertia, theta, omega, direction, states, h)
+
+    sliding = direction != 0
+    crossed = sliding & (direction * omega1 <= 0) & (omega1 != omega)
+    # Crossing fraction: linear estimate refined by one Newton step on the quadratic
+    # v(α) ≈ ω0 + b·α + c·α² through (ω0, a0·h) and ω1.
+    alpha_lin = jnp.clip(_safe_div(omega, omega - omega1, crossed), 0.0, 1.0)
+    b = acc0 * h
+    c = omega1 - omega - b
+    v_at = omega + b * alpha_lin + c * alpha_lin**2
+    dv = b + 2.0 * c * alpha_lin
+    newton_ok = crossed & (jnp.abs(dv) > 0)
+    alpha_nt = alpha_lin - _safe_div(v_at, dv, newton_ok)
+    alpha = jnp.where(newton_ok & (alpha_nt >= 0) & (alpha_nt <= 1), alpha_nt, alpha_lin)
+    alpha = jnp.where(crossed, alpha, 0.0)
+
+    # Re-integrate up to the crossing: on [0, α·h] the velocity keeps its sign, so the
+    # friction law is smooth there and RK4 keeps its order (integrating across the kink
+    # of the Stribeck curve at ω = 0 would make the stop position only second order).
+    theta_a, omega_a, acc_a = _rk4(model, inertia, theta, omega, direction, states, alpha * h)
+    # Close the small remaining gap to ω = 0 with a quadratic in time:
+    # θ_stop = θ_a − ω_a² / (2 a), a the deceleration there.
+    acc_stop = _accel(model, inertia, theta_a, omega_a, direction, states)
+    stop_ok = crossed & (acc_stop * omega_a < 0)
+    theta_cross = theta_a - 0.5 * omega_a * _safe_div(omega_a, acc_stop, stop_ok)
+    del acc_a
+
+    event = crossed | ~sliding
+    theta_c = jnp.where(crossed, theta_cross, theta)
+
+    rest = Motion(theta=theta_c, omega=jnp.zeros(()), direction=jnp.zeros(()), ratio=model.ratio)
+    net = model.torque(rest, states)
+    stick = jnp.abs(net) <= model.holding_torque(rest, states)
+    new_direction = jnp.sign(net)
+    theta2, omega2, _ = _rk4(
+        model, inertia, theta_c, jnp.zeros(()), new_direction, states, (1.0 - alpha) * h
+    )
+
+    theta_n = jnp.where(event, jnp.where(stick, theta_c, theta2), theta1)
+    omega_n = jnp.where(event, jnp.where(stick, 0.0, omega2), omega1)
+    direction_n = jnp.where(event, jnp.where(stick, 0.0, new_direction), direction)
+    states_n = model.update_state(states, theta, theta_n)
+    return theta_n, omega_n, direction_n, states_n
+
+
+def simulate(
+    model: Model,
+    times: Float[ArrayLike, " T"],
+    theta0: Float[ArrayLike, ""],
+    t_release: Float[ArrayLike, ""],
+    *,
+    added_inertia: Float[ArrayLike, ""] = 0.0,
+    max_substep: float = None,
+    substeps: int = 1,
+    full_output: bool = False,
+):
+    """Wave-generator angle at ``times`` after a release from rest.
+
+    Parameters
+    ----------
+    model:
+        The :class:`~hdid.Model`.
+    times:
+        Sample times [s], non-decreasing.
+    theta0:
+        WG angle at release [rad], measured from the spring's zero.
+    t_release:
+        Release instant [s]; anywhere, also between samples. Before it ``θ = θ0``.
+    added_inertia:
+        Known inertia added for this run [kg m²].
+    max_substep:
+        Longest RK4 substep [s] (default ``DEFAULT_MAX_SUBSTEP``); each sample interval
+        is cut into ``max(substeps, ceil(interval / max_substep))`` equal substeps, so a
+        release long before the first sample is integrated as finely as the rest.
+    substeps:
+        Minimum number of substeps per sample interval.
+    full_output:
+        Also return velocity and the stuck flag at each sample.
+
+    Returns
+    -------
+    theta, or ``(theta, omega, stuck)`` with ``full_output``: arrays of shape ``(T,)``.
+    """
+    times = jnp.asarray(times, dtype=float)
+    theta0 = jnp.asarray(theta0, dtype=float)
+    t_release = jnp.asarray(t_release, dtype=float)
+    inertia = jnp.asarray(model.inertia, dtype=float) + added_inertia
+    if not isinstance(inertia, jax.core.Tracer) and not bool(jnp.all(inertia > 0)):
+        raise ValueError(
+            f"inertia + added_inertia = {inertia}: must be > 0 kg m^2; check both values"
+        )
+    h_max = DEFAULT_MAX_SUBSTEP if max_substep is None else max_substep
+    n = times.shape[0]
+    elapsed = jnp.maximum(times - t_release, 0.0)
+    intervals = jnp.diff(elapsed, prepend=0.0)
+
+    # The dynamics are autonomous and effect state changes only when θ moves, so once
+    # the wave generator sticks it stays stuck: integrate from the first sample after
+    # the release until it sticks (forward-differentiable while_loop), then hold.
+    first = jnp.sum(elapsed <= 0.0)
+
+    def cond(carry):
+        k, (_, _, direction, _), _ = carry
+        return (k < n) & ((direction != 0) | (k == first))
+
+    def body(carry):
+        k, state, out = carry
+        dt = intervals[k]
+        n_sub = jnp.maximum(substeps, jnp.ceil(dt / h_max - 1e-9)).astype(int)
+        h = dt / n_sub
+        state = jax.lax.fori_loop(0, n_sub, lambda _, c: _substep(model, inertia, c, h), state)
+        theta, omega, direction, _ = state
+        out = tuple(o.at[k].set(v) for o, v in zip(out, (theta, omega, direction == 0)))
+        return k + 1, state, out
+
+    # Before release the wave generator rests at θ0 (held by the servo, not friction).
+    state0 = (theta0, jnp.zeros(()), jnp.zeros(()), model.init_state(theta0))
+    out0 = (jnp.full((n,), theta0), jnp.zeros((n,)), jnp.zeros((n,), dtype=bool))
+    k, (theta_end, _, _, _), (theta, omega, stuck) = jax.lax.while_loop(
+        cond, body, (first, state0, out0)
+    )
+    idx = jnp.arange(n)
+    theta = jnp.where(idx >= k, theta_end, theta)
+    stuck = jnp.where(idx >= k, True, stuck) & (idx >= first)
+    if full_output:
+        return theta, omega, stuck
+    return theta

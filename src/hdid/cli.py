@@ -1,0 +1,201 @@
+"""Command line: ``hdid fit`` and ``hdid simulate``.
+
+The commands only parse arguments, call the library, print a report and write files;
+all science lives in the library. Heavy imports (jax) happen inside the commands so
+that ``hdid --help`` answers at once.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import click
+
+
+class _Fail(click.ClickException):
+    """One-line error, exit status 2, no traceback."""
+
+    exit_code = 2
+
+    def show(self, file=None):
+        click.echo(f"hdid: error: {self.format_message()}", err=True, file=file)
+
+
+def _parse_floats(text: str | None, what: str) -> list[float] | None:
+    if text is None:
+        return None
+    try:
+        return [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise _Fail(f"{what}: expected comma-separated numbers, got {text!r}") from None
+
+
+def _parse_fix(items: tuple[str, ...]) -> dict[str, float | None]:
+    out: dict[str, float | None] = {}
+    for item in items:
+        name, _, value = item.partition("=")
+        name = name.strip()
+        if not name:
+            raise _Fail(f"--fix {item!r}: expected NAME or NAME=VALUE (e.g. --fix k2=6.5e7)")
+        try:
+            out[name] = float(value) if value else None
+        except ValueError:
+            raise _Fail(f"--fix {item!r}: {value!r} is not a number") from None
+    return out
+
+
+def _check_output(path: str | None, inputs: list[Path], option: str) -> None:
+    if path is None:
+        return
+    p = Path(path).resolve()
+    if any(p == i.resolve() for i in inputs):
+        raise _Fail(f"{option} {path}: would overwrite an input log; choose another file")
+    if not p.parent.exists():
+        raise _Fail(f"{option} {path}: folder {p.parent} does not exist")
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="hdid")
+def main():
+    """hdid — identify harmonic-drive physics (stiffness, Stribeck friction, stick band,
+    inertia) from encoder logs of the elastic-slide-free-motion test."""
+
+
+@main.command("fit")
+@click.argument("log", type=click.Path(dir_okay=False))
+@click.option("--json", "json_out", metavar="OUT.json", help="Write the results as JSON.")
+@click.option("--plot", "plot_out", metavar="OUT.png", help="Measured vs model, residuals below.")
+@click.option("--inertia", type=float, help="Total WG inertia [kg m^2] (default 7e-7, CSF-8 + small Maxon rotor).")
+@click.option("--added-inertia", metavar="I1,I2,...", help="Known inertia added per run [kg m^2], in run order (or an added_inertia column).")
+@click.option("--free-inertia", is_flag=True, help="Fit the inertia (needs --added-inertia runs or --inertia-prior).")
+@click.option("--inertia-prior", metavar="MEAN,REL", help="Log-normal prior on the inertia, e.g. 7e-7,0.3.")
+@click.option("--fix", multiple=True, metavar="NAME[=VALUE]", help="Hold a parameter fixed (repeatable).")
+@click.option("--release-time", type=float, help="Known release instant [s] in each run's time axis.")
+@click.option("--counts-per-rev", type=float, help="theta holds raw encoder counts with this many per revolution.")
+@click.option("--starts", type=click.IntRange(1, 32), default=4, show_default=True, help="Multi-starts.")
+@click.option("--quiet", "-q", is_flag=True, help="No report on stdout.")
+def fit_cmd(log, json_out, plot_out, inertia, added_inertia, free_inertia, inertia_prior, fix,
+            release_time, counts_per_rev, starts, quiet):
+    """Fit stiffness, friction (and inertia) jointly to all runs of LOG.csv.
+
+    LOG.csv has a header with columns time [s] and theta [rad, WG/motor angle]; optional
+    run, setup, added_inertia.
+    """
+    log_path = Path(log)
+    _check_output(json_out, [log_path], "--json")
+    _check_output(plot_out, [log_path], "--plot")
+    prior = _parse_floats(inertia_prior, "--inertia-prior")
+    if prior is not None and len(prior) != 2:
+        raise _Fail("--inertia-prior: expected MEAN,REL (e.g. 7e-7,0.3)")
+    added = _parse_floats(added_inertia, "--added-inertia")
+    fixed = _parse_fix(fix)
+
+    from . import _fit, _io
+    from ._errors import HdidError
+
+    try:
+        data = _io.read_log(log_path, counts_per_rev=counts_per_rev)
+        if added is not None:
+            data = _with_added_inertia(data, added)
+        result = _fit.fit(
+            data,
+            inertia=inertia,
+            fix={k: v for k, v in fixed.items() if v is not None}
+            | {k: None for k, v in fixed.items() if v is None} or None,
+            free_inertia=True if free_inertia else None,
+            inertia_prior=tuple(prior) if prior else None,
+            release_time=release_time,
+            n_starts=starts,
+        )
+    except (HdidError, ValueError, KeyError) as exc:
+        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
+        raise _Fail(str(msg).replace("\n", " ")) from None
+    if not quiet:
+        click.echo(result.report())
+    if json_out:
+        Path(json_out).write_text(json.dumps(_finite(result.to_dict()), indent=2) + "\n")
+        if not quiet:
+            click.echo(f"\nwrote {json_out}")
+    if plot_out:
+        result.plot(plot_out)
+        if not quiet:
+            click.echo(f"wrote {plot_out}")
+
+
+def _with_added_inertia(data, added):
+    from dataclasses import replace
+
+    from ._errors import LogError
+
+    if len(added) != len(data.runs):
+        raise LogError(
+            f"--added-inertia gives {len(added)} values but the log has {len(data.runs)} "
+            "runs; give one value per run, in run order",
+            path=data.source,
+        )
+    if any(not (a >= 0) for a in added):
+        raise LogError("--added-inertia: values must be >= 0 kg m^2", path=data.source)
+    runs = tuple(replace(r, added_inertia=float(a)) for r, a in zip(data.runs, added))
+    return replace(data, runs=runs)
+
+
+def _finite(obj):
+    """JSON has no NaN/inf: write them as null."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    return obj
+
+
+@main.command("simulate")
+@click.argument("out", type=click.Path(dir_okay=False))
+@click.option("--amplitudes", default="0.157,-0.157", show_default=True, help="Release angles [rad, WG], one run each.")
+@click.option("--rate", type=float, default=250.0, show_default=True, help="Sample rate [Hz].")
+@click.option("--duration", type=float, default=0.5, show_default=True, help="Length of each run [s].")
+@click.option("--hold", type=float, default=0.04, show_default=True, help="Pre-release hold [s].")
+@click.option("--offset", type=float, default=0.0, show_default=True, help="Encoder reading at the spring zero [rad].")
+@click.option("--counts-per-rev", type=int, default=4000, show_default=True, help="Encoder resolution (0: no quantization).")
+@click.option("--noise", type=float, default=0.0, show_default=True, help="Gaussian noise before quantization [rad].")
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed for sub-sample release instants and noise.")
+@click.option("--set", "values", multiple=True, metavar="NAME=VALUE", help="Model parameter, e.g. --set k1=1200 (repeatable).")
+@click.option("--counts", is_flag=True, help="Write theta as integer counts.")
+@click.option("--overwrite", is_flag=True, help="Replace OUT if it exists.")
+def simulate_cmd(out, amplitudes, rate, duration, hold, offset, counts_per_rev, noise, seed,
+                 values, counts, overwrite):
+    """Write a synthetic free-motion log (same format as `hdid fit` reads)."""
+    amps = _parse_floats(amplitudes, "--amplitudes") or []
+    params = {}
+    for item in values:
+        name, _, value = item.partition("=")
+        try:
+            params[name.strip()] = float(value)
+        except ValueError:
+            raise _Fail(f"--set {item!r}: expected NAME=VALUE with a number") from None
+    if rate <= 0 or duration <= 0 or hold < 0:
+        raise _Fail("--rate and --duration must be > 0 and --hold >= 0")
+    if counts and not counts_per_rev:
+        raise _Fail("--counts needs --counts-per-rev > 0")
+
+    from ._errors import HdidError
+    from ._synthetic import synthesize
+
+    try:
+        synthesize(
+            out, amplitudes=amps, rate=rate, duration=duration, hold=hold, offset=offset,
+            counts_per_rev=counts_per_rev or None, noise=noise, seed=seed, values=params,
+            as_counts=counts, overwrite=overwrite,
+        )
+    except (HdidError, ValueError, KeyError) as exc:
+        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
+        raise _Fail(str(msg).replace("\n", " ")) from None
+    click.echo(f"wrote {out}: {len(amps)} run(s) at {rate:g} Hz")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

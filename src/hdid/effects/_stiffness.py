@@ -1,0 +1,42 @@
+"""Cubic torsional stiffness of the flexspline (paper eq. 4)."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+from ._base import AbstractEffect, Motion, Parameter
+
+
+class CubicStiffness(AbstractEffect):
+    r"""Nonlinear torsional spring, ``T_k(d) = k1·d + k2·d³`` at the output.
+
+    The output is locked, so the twist is ``d = theta / N`` and the spring torque
+    reflected to the wave generator is ``-T_k(d) / N``.
+
+    Residual mark when missing or wrong: a frequency that depends on amplitude
+    (hardening ``k2 > 0`` speeds up large swings).
+    """
+
+    k1: Float[ArrayLike, ""]
+    k2: Float[ArrayLike, ""]
+
+    name: ClassVar[str] = "stiffness"
+    parameters: ClassVar[tuple[Parameter, ...]] = (
+        Parameter("k1", "N m/rad", "linear torsional stiffness, output side"),
+        Parameter("k2", "N m/rad^3", "cubic torsional stiffness, output side"),
+    )
+
+    def spring_torque(self, twist: Float[Array, ""]) -> Float[Array, ""]:
+        """Output-side torque ``T_k`` [N m] at output twist ``twist`` [rad]."""
+        return self.k1 * twist + self.k2 * twist**3
+
+    def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
+        del state
+        return -self.spring_torque(motion.theta / motion.ratio) / motion.ratio
+
+    def wg_stiffness(self, ratio: float) -> Array:
+        """Small-twist stiffness reflected to the wave generator, ``k1 / N²`` [N m/rad]."""
+        return jnp.asarray(self.k1) / ratio**2

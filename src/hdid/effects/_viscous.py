@@ -1,0 +1,28 @@
+"""Viscous damping at the wave generator."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+from jaxtyping import Array, ArrayLike, Float
+
+from ._base import AbstractEffect, Motion, Parameter
+
+
+class ViscousFriction(AbstractEffect):
+    r"""Linear viscous torque ``−c_v·ω`` (grease shear, back-EMF if phases are shorted).
+
+    Residual mark when missing or wrong: decay envelope exponential rather than linear,
+    error growing with speed.
+    """
+
+    c_v: Float[ArrayLike, ""]
+
+    name: ClassVar[str] = "viscous"
+    parameters: ClassVar[tuple[Parameter, ...]] = (
+        Parameter("c_v", "N m s/rad", "viscous friction coefficient at the wave generator"),
+    )
+
+    def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
+        del state
+        return -self.c_v * motion.omega
