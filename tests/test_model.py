@@ -1,0 +1,129 @@
+"""The effect interface and the model: composition, parameters, user-written effects."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import hdid
+from hdid import AbstractEffect, Model, Parameter
+from hdid.effects import CubicStiffness, Motion, StribeckFriction, ViscousFriction
+
+T = np.arange(100) / 1000.0
+
+
+def test_default_model_parameters_and_units():
+    m = Model.default()
+    specs = m.parameter_specs()
+    assert list(specs) == ["k1", "k2", "tau_c", "tau_s", "v_s", "delta", "c_v", "inertia"]
+    assert specs["k1"].unit == "N m/rad" and specs["inertia"].unit == "kg m^2"
+    assert m.values()["k1"] == 940.0
+    assert m.replace(k1=1000.0).values()["k1"] == 1000.0
+    with pytest.raises(KeyError, match="k9"):
+        m.replace(k9=1.0)
+
+
+def test_torques_sum_like_multiterm():
+    m = Model.default()
+    motion = Motion(theta=jnp.asarray(0.1), omega=jnp.asarray(2.0), direction=jnp.asarray(1.0), ratio=100.0)
+    states = m.init_state(jnp.asarray(0.1))
+    total = m.torque(motion, states)
+    parts = sum(e.torque(motion, None) for e in m.effects)
+    assert float(total) == pytest.approx(float(parts), rel=1e-14)
+    # Spring: -(k1 d + k2 d^3)/N with d = θ/N.
+    d = 0.1 / 100
+    assert float(m.effect("stiffness").torque(motion, None)) == pytest.approx(-(940 * d + 6.5e7 * d**3) / 100)
+    # At rest the friction's sliding part vanishes; its static capacity is tau_s.
+    rest = Motion(theta=jnp.asarray(0.1), omega=jnp.zeros(()), direction=jnp.zeros(()), ratio=100.0)
+    assert float(m.effect("stribeck").torque(rest, None)) == 0.0
+    assert float(m.holding_torque(rest, states)) == pytest.approx(4.5e-3)
+
+
+def test_effects_switch_on_and_off():
+    m = Model.default()
+    no_visc = m.without("viscous")
+    assert no_visc.effect_names == ("stiffness", "stribeck")
+    assert "c_v" not in no_visc.parameter_specs()
+    back = no_visc.with_effect(ViscousFriction(c_v=1e-5))
+    assert back.effect_names == ("stiffness", "stribeck", "viscous")
+    with pytest.raises(KeyError, match="backlash"):
+        m.without("backlash")
+    with pytest.raises(ValueError, match="clashes"):
+        Model(effects=(CubicStiffness(k1=1.0, k2=0.0), StribeckFriction(tau_c=1.0, tau_s=1.0, v_s=1.0, delta=1.0),
+                       _Clash(k1=1.0)), inertia=1e-6)
+
+
+class _Clash(AbstractEffect):
+    k1: float
+    name: ClassVar[str] = "clash"
+    parameters: ClassVar = (Parameter("k1", "N m/rad", "duplicate name"),)
+
+    def torque(self, motion, state):
+        return jnp.zeros(())
+
+
+class Cogging(AbstractEffect):
+    """The README's user-written effect, verbatim in spirit: one small class."""
+
+    amplitude: float
+    name: ClassVar[str] = "cogging"
+    parameters: ClassVar = (Parameter("amplitude", "N m", "cogging torque", transform="identity"),)
+
+    def torque(self, motion, state):
+        return -self.amplitude * jnp.sin(2 * motion.theta)
+
+
+def test_user_effect_changes_the_motion_and_is_differentiable():
+    base = Model.default()
+    model = base.with_effect(Cogging(amplitude=2e-4))
+    assert "amplitude" in model.parameter_specs()
+    a = np.asarray(hdid.simulate(base, T, 0.157, 0.0005))
+    b = np.asarray(hdid.simulate(model, T, 0.157, 0.0005))
+    assert np.max(np.abs(a - b)) > 1e-4  # 0.2 mNm against ~3 mNm friction moves the rest point
+    sens = jax.jacfwd(lambda amp: hdid.simulate(model.replace(amplitude=amp), T, 0.157, 0.0005))(2e-4)
+    assert np.all(np.isfinite(np.asarray(sens))) and np.max(np.abs(np.asarray(sens))) > 0
+
+
+class Hysteresis(AbstractEffect):
+    """An effect with internal state: one elasto-plastic (Maxwell-slip) element."""
+
+    k_h: float
+    f_h: float
+    name: ClassVar[str] = "slip1"
+    parameters: ClassVar = (
+        Parameter("k_h", "N m/rad", "element stiffness at the WG"),
+        Parameter("f_h", "N m", "element slip torque"),
+    )
+
+    def init_state(self, theta0):
+        return jnp.zeros(())
+
+    def update_state(self, state, theta_old, theta_new):
+        z = state + (theta_new - theta_old)
+        lim = self.f_h / self.k_h
+        return jnp.clip(z, -lim, lim)
+
+    def torque(self, motion, state):
+        return -self.k_h * state
+
+
+def test_stateful_effect_runs_in_the_simulator():
+    m = Model.default().with_effect(Hysteresis(k_h=0.02, f_h=1e-3))
+    assert m.replace(f_h=2e-3).values()["f_h"] == 2e-3
+    theta = np.asarray(hdid.simulate(m, T, 0.157, 0.0005))
+    assert np.all(np.isfinite(theta))
+    base = np.asarray(hdid.simulate(Model.default(), T, 0.157, 0.0005))
+    assert np.max(np.abs(theta - base)) > 1e-3
+
+
+def test_stick_band_matches_cubic_solution():
+    m = Model.default()
+    lo, hi = (float(x) for x in m.stick_band())
+    d = hi / 100
+    # (k1 d + k2 d^3)/N = tau_s at the band edge.
+    assert (940 * d + 6.5e7 * d**3) / 100 == pytest.approx(4.5e-3, rel=1e-10)
+    assert lo == pytest.approx(-hi, rel=1e-12)
