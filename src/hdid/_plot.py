@@ -64,3 +64,83 @@ def plot_fit(result, path=None, *, axes=None, fine_rate: float = 20000.0):
     if path is not None:
         fig.savefig(path, dpi=110)
     return fig
+
+
+def plot_predictive(post, path=None, *, n_draws: int = 100, axes=None, seed: int = 0):
+    """Posterior-predictive band (5–95 % and 25–75 %) over each measured run."""
+    import jax.numpy as jnp
+    import matplotlib
+
+    if path is not None and axes is None:
+        matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    from ._posterior import _predict_batch
+
+    fit = post.fit
+    prob = fit.problem
+    times = np.asarray(prob.times)
+    meas = np.asarray(prob.theta)
+    R = times.shape[0]
+    rng = np.random.default_rng(seed)
+    idx = rng.choice(post.draws.shape[0], size=min(n_draws, post.draws.shape[0]), replace=False)
+    fine = np.stack([np.linspace(t[0], t[-1], int((t[-1] - t[0]) * 5000) + 1) for t in times])
+    pred = np.asarray(_predict_batch(prob, jnp.asarray(post.draws[idx]), jnp.asarray(fine)))
+    if axes is None:
+        fig, axes = plt.subplots(1, R, figsize=(3.2 * R + 1, 3.4), squeeze=False)
+        axes = axes[0]
+    else:
+        axes = np.atleast_1d(axes)
+        fig = axes[0].figure
+    for i, run in enumerate(fit.runs):
+        ax = axes[i]
+        t0 = run.release_time
+        sel = (fine[i] >= t0 - 0.01) & (fine[i] <= t0 + 0.05)
+        lo, q1, q3, hi = np.percentile(pred[:, i, sel], [5, 25, 75, 95], axis=0)
+        ax.fill_between(fine[i, sel], lo, hi, color="C0", alpha=0.25, label="90 % predictive")
+        ax.fill_between(fine[i, sel], q1, q3, color="C0", alpha=0.45, label="50 %")
+        n = run.n_samples
+        ms = (times[i, :n] >= t0 - 0.01) & (times[i, :n] <= t0 + 0.05)
+        ax.plot(times[i, :n][ms], meas[i, :n][ms], "o", ms=3.5, mfc="none", color="k", label="encoder")
+        ax.set_title(f"run {run.name}", fontsize=9)
+        ax.set_xlabel("time [s]")
+        if i == 0:
+            ax.set_ylabel("WG angle [rad]")
+            ax.legend(fontsize=7)
+    fig.suptitle(f"{fit.source}: posterior predictive ({len(idx)} draws)", fontsize=10)
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=110)
+    return fig
+
+
+def plot_band(post, path=None, *, ax=None):
+    """Posterior of the stick-band edges beside the rest points actually logged."""
+    import matplotlib
+
+    if path is not None and ax is None:
+        matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    fit = post.fit
+    hw = post.derived["stick_band_halfwidth_rad"]
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(6.5, 3.4))
+    else:
+        fig = ax.figure
+    bins = np.linspace(-1.3 * np.percentile(hw, 99.5), 1.3 * np.percentile(hw, 99.5), 120)
+    ax.hist(hw, bins=bins, color="C0", alpha=0.6, density=True, label="upper band edge (posterior)")
+    ax.hist(-hw, bins=bins, color="C0", alpha=0.6, density=True, label="lower band edge")
+    for k, r in enumerate(fit.runs):
+        ax.axvline(r.rest_logged, color="C3", lw=1.2, label="logged rest points" if k == 0 else None)
+    q = np.percentile(hw, [2.5, 50, 97.5])
+    ax.set_title(
+        f"stick band half-width {q[1]:.4f} rad (95 %: {q[0]:.4f} – {q[2]:.4f})", fontsize=10
+    )
+    ax.set_xlabel("WG angle from the spring zero [rad]")
+    ax.set_yticks([])
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=110)
+    return fig

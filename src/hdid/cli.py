@@ -76,9 +76,16 @@ def main():
 @click.option("--release-time", type=float, help="Known release instant [s] in each run's time axis.")
 @click.option("--counts-per-rev", type=float, help="theta holds raw encoder counts with this many per revolution.")
 @click.option("--starts", type=click.IntRange(1, 32), default=4, show_default=True, help="Multi-starts.")
+@click.option("--posterior", is_flag=True, help="Also sample the posterior with emcee (slow; see README).")
+@click.option("--steps", type=click.IntRange(100, 10**6), help="Posterior chain length (default: until 50 autocorrelation times, at most 20000).")
+@click.option("--walkers", type=click.IntRange(4, 4096), help="emcee walkers (default max(32, 2·dim+2)).")
+@click.option("--seed", type=int, default=0, show_default=True, help="Posterior seed.")
+@click.option("--chains", "chains_out", metavar="OUT.nc", help="Save the posterior chains (arviz NetCDF).")
+@click.option("--corner", "corner_out", metavar="OUT.png", help="Corner plot of the posterior.")
 @click.option("--quiet", "-q", is_flag=True, help="No report on stdout.")
 def fit_cmd(log, json_out, plot_out, inertia, added_inertia, free_inertia, inertia_prior, fix,
-            release_time, counts_per_rev, starts, quiet):
+            release_time, counts_per_rev, starts, posterior, steps, walkers, seed, chains_out,
+            corner_out, quiet):
     """Fit stiffness, friction (and inertia) jointly to all runs of LOG.csv.
 
     LOG.csv has a header with columns time [s] and theta [rad, WG/motor angle]; optional
@@ -87,6 +94,8 @@ def fit_cmd(log, json_out, plot_out, inertia, added_inertia, free_inertia, inert
     log_path = Path(log)
     _check_output(json_out, [log_path], "--json")
     _check_output(plot_out, [log_path], "--plot")
+    _check_output(chains_out, [log_path], "--chains")
+    _check_output(corner_out, [log_path], "--corner")
     prior = _parse_floats(inertia_prior, "--inertia-prior")
     if prior is not None and len(prior) != 2:
         raise _Fail("--inertia-prior: expected MEAN,REL (e.g. 7e-7,0.3)")
@@ -115,8 +124,23 @@ def fit_cmd(log, json_out, plot_out, inertia, added_inertia, free_inertia, inert
         raise _Fail(str(msg).replace("\n", " ")) from None
     if not quiet:
         click.echo(result.report())
+    summary = result.to_dict()
+    if posterior or chains_out or corner_out:
+        from ._posterior import sample_posterior
+
+        post = sample_posterior(
+            result, n_steps=steps, n_walkers=walkers, seed=seed, progress=not quiet
+        )
+        summary.update(post.to_dict())
+        if not quiet:
+            click.echo("")
+            click.echo(post.report())
+        if chains_out:
+            post.save(chains_out)
+        if corner_out:
+            post.plot_corner(corner_out)
     if json_out:
-        Path(json_out).write_text(json.dumps(_finite(result.to_dict()), indent=2) + "\n")
+        Path(json_out).write_text(json.dumps(_finite(summary), indent=2) + "\n")
         if not quiet:
             click.echo(f"\nwrote {json_out}")
     if plot_out:
