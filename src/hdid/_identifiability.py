@@ -80,10 +80,17 @@ def analyse(problem: Problem, prep: Prepared, u, starts: StartSummary, fixed: se
     prior_on = np.asarray(problem.prior_on)
     prior_sd = np.asarray(problem.prior_sd)
     prior_prec[:P] = np.where(prior_on, 1.0 / prior_sd**2, 0.0)
-    cov = _pinv_psd(fisher_data + np.diag(prior_prec))
-    cov_data = _pinv_psd(fisher_data)
-    std_u = np.sqrt(np.clip(np.diag(cov), 0, None))
-    std_u_data = np.sqrt(np.clip(np.diag(cov_data), 0, None))
+    cov, null = _covariance(fisher_data + np.diag(prior_prec))
+    cov_data, null_data = _covariance(fisher_data)
+    eye = np.eye(problem.n_unknowns)
+    std_u = np.array([
+        math.inf if _undetermined(eye[i], null) else math.sqrt(max(cov[i, i], 0.0))
+        for i in range(problem.n_unknowns)
+    ])
+    std_u_data = np.array([
+        math.inf if _undetermined(eye[i], null_data) else math.sqrt(max(cov_data[i, i], 0.0))
+        for i in range(problem.n_unknowns)
+    ])
 
     # -- identifiability ------------------------------------------------------------
     flags: dict[str, str] = {}
@@ -91,6 +98,8 @@ def analyse(problem: Problem, prep: Prepared, u, starts: StartSummary, fixed: se
     for i, name in enumerate(labels[:P]):
         if col_norm[i] == 0:
             flags[name] = "has no effect on these data"
+        elif not np.isfinite(std_u[i]):
+            flags[name] = "not determined: only a combination with other parameters is"
         elif std_u_data[i] > ILL_DETERMINED_STD:
             if prior_on[i] and std_u[i] > PRIOR_DOMINATED * prior_sd[i]:
                 flags[name] = "not determined by the data: the weak prior sets it"
@@ -101,7 +110,7 @@ def analyse(problem: Problem, prep: Prepared, u, starts: StartSummary, fixed: se
     evals, evecs = np.linalg.eigh(fisher_data)
     combos = []
     for lam, vec in zip(evals, evecs.T):
-        std_dir = 1.0 / math.sqrt(lam) if lam > 0 else math.inf
+        std_dir = 1.0 / math.sqrt(lam) if lam > 1e-10 * max(evals.max(), 0.0) else math.inf
         if std_dir <= ILL_DETERMINED_STD:
             continue
         members = [labels[i] for i in np.argsort(-np.abs(vec)) if abs(vec[i]) > 0.3]
@@ -120,7 +129,9 @@ def analyse(problem: Problem, prep: Prepared, u, starts: StartSummary, fixed: se
     for name, why in flags.items():
         warnings.append(f"{name}: {why}")
 
-    corr = cov[:P, :P] / np.outer(std_u[:P], std_u[:P]).clip(1e-300)
+    with np.errstate(invalid="ignore"):
+        corr = cov[:P, :P] / np.outer(std_u[:P], std_u[:P]).clip(1e-300)
+    corr = np.where(np.isfinite(corr), corr, 0.0)
     pairs = sorted(
         ((abs(corr[i, j]), labels[i], labels[j], corr[i, j]) for i in range(P) for j in range(i + 1, P)
          if abs(corr[i, j]) > HIGH_CORRELATION),
@@ -151,8 +162,7 @@ def analyse(problem: Problem, prep: Prepared, u, starts: StartSummary, fixed: se
         )
 
     # -- derived quantities ---------------------------------------------------------
-    cov_pp = cov[:P, :P]
-    derived = _derived(problem, u, cov_pp)
+    derived = _derived(problem, u, cov, null)
 
     # -- per run --------------------------------------------------------------------
     _, t_release, theta0_enc, offset = problem.unpack(u)
@@ -222,13 +232,18 @@ def analyse(problem: Problem, prep: Prepared, u, starts: StartSummary, fixed: se
     )
 
 
-def _derived(problem: Problem, u, cov_pp) -> dict:
+def _derived(problem: Problem, u, cov, null) -> dict:
     """Stick band, inertia-normalised torques, natural frequency, damping ratio (± std)."""
     vals, jac = _derived_and_jacobian(problem, jnp.asarray(u))
+    P = problem.n_physical
     out = {}
     for k, v in vals.items():
-        g = np.asarray(jac[k])
-        std = float(math.sqrt(max(g @ cov_pp @ g, 0.0))) if g.size else 0.0
+        g = np.zeros(problem.n_unknowns)
+        g[:P] = np.asarray(jac[k]) if P else 0.0
+        if _undetermined(g, null):
+            std = math.inf
+        else:
+            std = float(math.sqrt(max(g @ cov @ g, 0.0)))
         out[k] = (float(v), std)
     return out
 
@@ -272,12 +287,35 @@ def _release_std(problem: Problem, u, std_u, i: int) -> float:
     return float((hi - lo) * s * (1 - s) * std_u[j])
 
 
-def _pinv_psd(a: np.ndarray) -> np.ndarray:
-    a = 0.5 * (a + a.T)
+def _covariance(fisher: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pseudo-inverse of a Fisher matrix and the basis of its null space.
+
+    A plain pseudo-inverse gives directions the data cannot see zero variance — exactly
+    backwards (e.g. the joint scale of every torque and the inertia in free motion).
+    Callers treat any quantity with a component along ``null`` as undetermined
+    (infinite variance); quantities orthogonal to it (like ``k1/inertia``) keep the
+    pseudo-inverse variance, which is then the right one.
+    """
+    a = 0.5 * (fisher + fisher.T)
     w, v = np.linalg.eigh(a)
-    tol = max(w.max(), 0.0) * 1e-13 if w.size else 0.0
-    inv = np.where(w > tol, 1.0 / np.where(w > tol, w, 1.0), 0.0)
-    return (v * inv) @ v.T
+    tol = max(float(w.max()), 0.0) * 1e-10 if w.size else 0.0
+    ok = w > tol
+    inv = np.where(ok, 1.0 / np.where(ok, w, 1.0), 0.0)
+    return (v * inv) @ v.T, v[:, ~ok]
+
+
+#: A quantity whose gradient has more than this relative component in the null space
+#: of the Fisher matrix is undetermined. Genuine components are O(0.1–1) (the free-motion
+#: scale direction has equal weights 1/√6 on six log-parameters); numerical mixing
+#: between near-null eigenvectors is orders of magnitude smaller.
+NULL_COMPONENT = 1e-2
+
+
+def _undetermined(g: np.ndarray, null: np.ndarray) -> bool:
+    if null.size == 0:
+        return False
+    norm = np.linalg.norm(g)
+    return bool(norm > 0 and np.linalg.norm(g @ null) > NULL_COMPONENT * norm)
 
 
 def _pct(x: float) -> str:

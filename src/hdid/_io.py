@@ -17,7 +17,8 @@ line and the columns
 ``setup`` (optional)
     Set-up label, constant within a run (default ``"1"``).
 ``added_inertia`` (optional)
-    Inertia added to the output [kg m^2], ``>= 0`` and constant within a run
+    Known inertia added at the wave generator for this run [kg m^2] (an inertia
+    mounted at the output counts divided by N²), ``>= 0`` and constant within a run
     (default 0).
 
 Column names are matched case-insensitively after stripping whitespace; other

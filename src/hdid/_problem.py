@@ -195,6 +195,9 @@ def build_problem(
     mean = np.array([priors[n][0] if n in priors else 0.0 for n in free])
     sd = np.array([priors[n][1] if n in priors else 1.0 for n in free])
     on = np.array([n in priors for n in free], dtype=bool)
+    # Fixed values as arrays, not Python floats: filter_jit would treat floats as static
+    # and recompile for every new inertia= / fix= value.
+    base = jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype=float), base)
     return Problem(
         base=base,
         times=jnp.asarray(prep.times),
