@@ -24,8 +24,9 @@ setting (``max_substep = DEFAULT_MAX_SUBSTEP``: 8 substeps at 250 Hz, 2 at 1 kHz
   t_release, but where the stop falls inside a substep does), and the spurious
   d(rest)/d(t_release) (physically 0).
 
-A second table shows the default setting when the release lies far before the first
-sample.  A third measures a candidate correction that is *not* in hdid (monkeypatched
+Further tables break the error down (before the first reversal, after it, rest point)
+and show the default setting when the release lies far before the first sample.  A last
+one measures a candidate correction that is *not* in hdid (monkeypatched
 while tracing, see ``_substep_restart_fix``): after a slide-on reversal, resume the motion
 at the corrected stop instant α·h + dt, dt = −ω_a/a, instead of α·h.  The results of the
 previous crossing scheme (cubic-Hermite stop position) are kept as static text in the

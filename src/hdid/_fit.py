@@ -27,8 +27,8 @@ from ._transforms import interval_to_u, to_unconstrained
 
 #: Frequencies [Hz] and Coulomb fractions (τ_c / spring torque at release) of the coarse
 #: grid that seeds the local fits. 15–400 Hz covers size-8 to size-20 gears with motors.
-GRID_FREQUENCIES_HZ = np.geomspace(15.0, 400.0, 15)
-GRID_COULOMB_FRACTIONS = np.array([0.02, 0.05, 0.1, 0.18, 0.3])
+GRID_FREQUENCIES_HZ = np.geomspace(15.0, 400.0, 12)
+GRID_COULOMB_FRACTIONS = np.array([0.03, 0.08, 0.2])
 
 
 def fit(
@@ -121,8 +121,10 @@ def fit(
     U, costs, ok, steps = _solve_many(problem, jnp.asarray(U0), active, jnp.asarray(PHASE1_STEPS))
     keep = np.zeros(len(U0), dtype=bool)
     keep[np.argsort(np.where(np.isfinite(costs), costs, np.inf))[:CONTINUED_STARTS]] = True
+    costs1 = np.asarray(costs)
     U, costs, ok, steps2 = _solve_many(problem, U, jnp.asarray(keep), jnp.asarray(max_steps))
-    U, costs, ok = map(np.asarray, (U, costs, ok))
+    U, ok = map(np.asarray, (U, ok))
+    costs = np.where(keep, np.asarray(costs), costs1)  # dropped starts keep their phase-1 cost
     steps = np.asarray(steps) + np.asarray(steps2)
     ok = ok & keep
     finite = np.isfinite(costs)
@@ -260,7 +262,9 @@ def _levenberg_marquardt(problem: Problem, u0, active, max_steps):
     f_struct = jax.eval_shape(problem.residuals, u0)
     state = solver.init(fn, u0, None, {}, f_struct, None, tags)
     dynamic0, static = eqx.partition(state, eqx.is_array)
-    cost0 = problem.cost(u0)
+    # (no separate cost evaluations: each would trace the simulator once more, which is
+    # what a cold CLI call pays for)
+    cost0 = jnp.asarray(jnp.inf)
 
     def cond(carry):
         _, _, k, _, _, done = carry
@@ -280,5 +284,5 @@ def _levenberg_marquardt(problem: Problem, u0, active, max_steps):
         return u, dynamic, k + 1, jnp.minimum(cost, new_cost), stall, done
 
     init = (u0, dynamic0, jnp.array(0), cost0, jnp.array(0), ~active)
-    u, _, k, _, stall, done = jax.lax.while_loop(cond, body, init)
-    return u, problem.cost(u), done, k
+    u, _, k, cost, stall, done = jax.lax.while_loop(cond, body, init)
+    return u, cost, done, k

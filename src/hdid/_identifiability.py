@@ -146,8 +146,8 @@ def analyse(problem: Problem, prep: Prepared, u, starts: StartSummary, fixed: se
         )
 
     # -- parameters -----------------------------------------------------------------
-    model = problem.model(u)
-    values = model.float_values()
+    values = problem.values_np(u)
+    model = problem.base.replace(**values)
     specs = model.parameter_specs()
     params: dict[str, ParameterEstimate] = {}
     for name, spec in specs.items():
@@ -165,8 +165,7 @@ def analyse(problem: Problem, prep: Prepared, u, starts: StartSummary, fixed: se
     derived = _derived(problem, u, cov, null)
 
     # -- per run --------------------------------------------------------------------
-    _, t_release, theta0_enc, offset = problem.unpack(u)
-    t_release, theta0_enc, offset = map(np.asarray, (t_release, theta0_enc, offset))
+    _, t_release, theta0_enc, offset = problem.unpack_np(u)
     theta_pred, omega_pred, stuck = map(np.asarray, _dense(problem, u, problem.times))
     off_run = offset[prep.setup_index]
     pred_enc = theta_pred + off_run[:, None]

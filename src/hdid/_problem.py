@@ -83,6 +83,31 @@ class Problem(eqx.Module):
         offset = self.offset0 + OFFSET_SCALE * u[i : i + self.n_setups]
         return values, t_release, theta0_enc, offset
 
+    def unpack_np(self, u):
+        """NumPy twin of :meth:`unpack` for results (no JAX dispatch outside jit)."""
+        from ._transforms import from_unconstrained_np
+
+        u = np.asarray(u, dtype=float)
+        P, R = self.n_physical, self.n_runs
+        specs = self.base.parameter_specs()
+        values = {n: float(from_unconstrained_np(specs[n], u[i])) for i, n in enumerate(self.free)}
+        i = P
+        lo, hi = np.asarray(self.release_lo), np.asarray(self.release_hi)
+        if self.release_free:
+            t_release = lo + (hi - lo) / (1.0 + np.exp(-u[i : i + R]))
+            i += R
+        else:
+            t_release = lo
+        theta0_enc = np.asarray(self.hold) + float(self.step) * u[i : i + R]
+        i += R
+        offset = np.asarray(self.offset0) + OFFSET_SCALE * u[i : i + self.n_setups]
+        return values, t_release, theta0_enc, offset
+
+    def values_np(self, u) -> dict[str, float]:
+        """All parameter values (fixed and fitted) at ``u``, as floats."""
+        fixed = {k: float(v) for k, v in self.base.values().items()}
+        return {**fixed, **self.unpack_np(u)[0]}
+
     def model(self, u) -> Model:
         values, *_ = self.unpack(u)
         return self.base.replace(**values) if values else self.base

@@ -60,8 +60,8 @@ class StartSummary:
 
     @classmethod
     def from_solutions(cls, problem, U, costs, ok, steps, best) -> StartSummary:
-        models = [problem.model(u) for u in U]
-        values = {n: np.array([float(m.float_values()[n]) for m in models]) for n in problem.free}
+        rows = [problem.values_np(u) for u in U]
+        values = {n: np.array([r[n] for r in rows]) for n in problem.free}
         return cls(np.asarray(costs), np.asarray(ok), np.asarray(steps), values, int(best))
 
     def same_minimum(self, rtol: float = 1e-3) -> np.ndarray:

@@ -80,13 +80,15 @@ def _substep(model: Model, inertia, carry, h):
     # Re-integrate up to the crossing: on [0, α·h] the velocity keeps its sign, so the
     # friction law is smooth there and RK4 keeps its order (integrating across the kink
     # of the Stribeck curve at ω = 0 would make the stop position only second order).
-    theta_a, omega_a, acc_a = _rk4(model, inertia, theta, omega, direction, states, alpha * h)
-    # Close the small remaining gap to ω = 0 with a quadratic in time:
-    # θ_stop = θ_a − ω_a² / (2 a), a the deceleration there.
+    theta_a, omega_a, _ = _rk4(model, inertia, theta, omega, direction, states, alpha * h)
+    # Close the small remaining gap to ω = 0 with a quadratic in time: the stop lies
+    # dt = −ω_a/a later, at θ_stop = θ_a + ω_a·dt/2; motion that slides on resumes from
+    # that corrected instant (α·h + dt), which keeps the scheme high-order after
+    # reversals (benchmarks/results/simulator_schemes.md).
     acc_stop = _accel(model, inertia, theta_a, omega_a, direction, states)
-    stop_ok = crossed & (acc_stop * omega_a < 0)
-    theta_cross = theta_a - 0.5 * omega_a * _safe_div(omega_a, acc_stop, stop_ok)
-    del acc_a
+    dt_gap = _safe_div(-omega_a, acc_stop, crossed & (acc_stop != 0))
+    theta_cross = theta_a + 0.5 * omega_a * dt_gap
+    alpha = jnp.where(crossed, jnp.clip(alpha + dt_gap / h, 0.0, 1.0), alpha)
 
     event = crossed | ~sliding
     theta_c = jnp.where(crossed, theta_cross, theta)

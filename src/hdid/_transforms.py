@@ -56,3 +56,15 @@ def interval_to_u(value, lo, hi):
 
 def interval_from_u(u, lo, hi):
     return lo + (hi - lo) * _sigmoid(u)
+
+
+def from_unconstrained_np(spec: Parameter, u) -> np.ndarray:
+    """NumPy twin of :func:`from_unconstrained` (no JAX dispatch outside compiled code)."""
+    t = spec.transform
+    u = np.asarray(u, dtype=float)
+    if t == "log":
+        return np.exp(u)
+    if t == "identity":
+        return u
+    _, lo, hi = t
+    return lo + (hi - lo) / (1.0 + np.exp(-u))

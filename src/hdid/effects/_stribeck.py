@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import ClassVar
 
 import jax.numpy as jnp
@@ -35,7 +36,7 @@ class StribeckFriction(AbstractEffect):
         # Weak priors (transformed space) keep the poorly identified shape parameters
         # finite when the data cannot see them; the report says when that happens.
         Parameter("v_s", "rad/s", "Stribeck velocity (wave generator)",
-                  prior=(float(jnp.log(3.0)), 2.0)),
+                  prior=(math.log(3.0), 2.0)),
         Parameter("delta", "1", "Stribeck shape exponent",
                   transform=("interval", 0.3, 4.0), prior=(0.0, 2.0)),
     )
