@@ -273,6 +273,7 @@ def sample_posterior(
     seed: int = 0,
     progress: bool = False,
     likelihood: str = "auto",
+    moves=None,
 ) -> PosteriorResult:
     """Run emcee from the least-squares optimum of ``fit``.
 
@@ -292,6 +293,9 @@ def sample_posterior(
     likelihood:
         ``"interval"`` (quantization-aware), ``"gaussian"`` or ``"auto"`` (interval when
         the log is quantized).
+    moves:
+        emcee moves (default: emcee's stretch move; a differential-evolution + snooker
+        mixture was not faster on the shipped example: τ_max 368 vs 312 steps).
     """
     import emcee
 
@@ -334,7 +338,7 @@ def sample_posterior(
     def log_prob(X):
         return np.asarray(lp.batch(jnp.asarray(X)))
 
-    sampler = emcee.EnsembleSampler(W, D, log_prob, vectorize=True)
+    sampler = emcee.EnsembleSampler(W, D, log_prob, vectorize=True, moves=moves)
     # emcee draws its moves from the state's random state: seeding it makes runs repeatable.
     state = emcee.State(P0, log_prob=lp0, random_state=np.random.RandomState(seed).get_state())
     total = n_steps or max_steps

@@ -64,9 +64,11 @@ class StartSummary:
         values = {n: np.array([r[n] for r in rows]) for n in problem.free}
         return cls(np.asarray(costs), np.asarray(ok), np.asarray(steps), values, int(best))
 
-    def same_minimum(self, rtol: float = 1e-3) -> np.ndarray:
+    def same_minimum(self, dchi2: float = 1.0) -> np.ndarray:
+        """Starts whose χ² is within ``dchi2`` of the best: statistically the same optimum
+        (χ² is in units of the quantization variance, so Δχ² = 1 is one standard error)."""
         c = self.costs
-        return np.isfinite(c) & (c <= c[self.best] * (1 + rtol) + 1e-9)
+        return np.isfinite(c) & (c - c[self.best] < dchi2)
 
     def spread(self) -> dict[str, float]:
         """Largest relative deviation from the best among starts that reached its cost."""
@@ -80,7 +82,8 @@ class StartSummary:
     def to_dict(self) -> dict[str, Any]:
         return {
             "n_starts": int(len(self.costs)),
-            "n_at_best_cost": int(self.same_minimum().sum()),
+            "n_within_dchi2_1_of_best": int(self.same_minimum().sum()),
+            "dchi2_to_best": [float(c - self.costs[self.best]) for c in self.costs],
             "costs": [float(c) for c in self.costs],
             "converged": [bool(x) for x in self.converged],
             "iterations": [int(s) for s in self.steps],
@@ -230,11 +233,12 @@ class FitResult:
         for s, o in self.setups.items():
             lines.append(f"set-up {s}: encoder reading at spring zero {o:+.5f} rad")
         st = self.starts
+        dchi = ", ".join(f"{c - st.costs[st.best]:.3g}" for c in np.sort(st.costs))
         lines.append("")
         lines.append(
-            f"starts: {int(st.same_minimum().sum())} of {len(st.costs)} reached the best cost; "
-            f"largest relative spread there {max(st.spread().values(), default=0):.2e}; "
-            f"{self.wall_time_s:.2f} s"
+            f"starts: Δχ² to the best = {dchi}; {int(st.same_minimum().sum())} of "
+            f"{len(st.costs)} within Δχ² < 1, largest relative parameter spread among them "
+            f"{max(st.spread().values(), default=0):.2g}; {self.wall_time_s:.2f} s"
         )
         if self.warnings:
             lines.append("")
