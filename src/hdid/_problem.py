@@ -85,12 +85,10 @@ class Problem(eqx.Module):
 
     def unpack_np(self, u):
         """NumPy twin of :meth:`unpack` for results (no JAX dispatch outside jit)."""
-        from ._transforms import from_unconstrained_np
-
         u = np.asarray(u, dtype=float)
         P, R = self.n_physical, self.n_runs
         specs = self.base.parameter_specs()
-        values = {n: float(from_unconstrained_np(specs[n], u[i])) for i, n in enumerate(self.free)}
+        values = {n: float(from_unconstrained(specs[n], u[i], np)) for i, n in enumerate(self.free)}
         i = P
         lo, hi = np.asarray(self.release_lo), np.asarray(self.release_hi)
         if self.release_free:

@@ -22,14 +22,15 @@ def to_unconstrained(spec: Parameter, value):
     return np.log(p) - np.log1p(-p)
 
 
-def from_unconstrained(spec: Parameter, u):
+def from_unconstrained(spec: Parameter, u, xp=jnp):
+    """Physical value at ``u``; ``xp=numpy`` evaluates outside JAX (no dispatch)."""
     t = spec.transform
     if t == "log":
-        return jnp.exp(u)
+        return xp.exp(u)
     if t == "identity":
         return u
     _, lo, hi = t
-    return lo + (hi - lo) * _sigmoid(u)
+    return lo + (hi - lo) / (1.0 + xp.exp(-u))
 
 
 def derivative(spec: Parameter, u) -> np.ndarray:
@@ -57,14 +58,3 @@ def interval_to_u(value, lo, hi):
 def interval_from_u(u, lo, hi):
     return lo + (hi - lo) * _sigmoid(u)
 
-
-def from_unconstrained_np(spec: Parameter, u) -> np.ndarray:
-    """NumPy twin of :func:`from_unconstrained` (no JAX dispatch outside compiled code)."""
-    t = spec.transform
-    u = np.asarray(u, dtype=float)
-    if t == "log":
-        return np.exp(u)
-    if t == "identity":
-        return u
-    _, lo, hi = t
-    return lo + (hi - lo) / (1.0 + np.exp(-u))
