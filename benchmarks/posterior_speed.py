@@ -202,6 +202,9 @@ def measure(args) -> dict:
         sample_posterior(fit, n_steps=20, n_walkers=W, seed=123)
     res["posterior_warmup"] = {"n_steps": 20, "wall_s": c.wall, "cpu_s": c.cpu,
                                "note": "first call: compiles the jitted log-posterior"}
+    with _Clock() as c:
+        short = sample_posterior(fit, n_steps=args.short, n_walkers=W, seed=0)
+    res["posterior_short"] = _post_info(short, c.wall, c.cpu, args.short)
     runs = []
     post = None
     for r in range(args.repeats):
@@ -216,20 +219,31 @@ def measure(args) -> dict:
     res["posterior_fixed"] = runs
     loads.append(_load("sample_posterior end"))
 
-    s_per_step = statistics.median(r_["s_per_step"] for r_ in runs)
+    # Marginal cost per step from the long and the short call (the fixed part — residual
+    # autocorrelation, start, derived quantities of the draws, which recompile for every new
+    # number of draws — is the intercept).
+    t_long = statistics.median(r_["wall_s"] for r_ in runs)
+    t_short = res["posterior_short"]["wall_s"]
+    s_per_step = (t_long - t_short) / (args.steps - args.short)
+    overhead = max(0.0, t_short - args.short * s_per_step)
     tau_meas = max(r_["tau_max"] for r_ in runs)
     extrap = {
         "s_per_step_median": s_per_step,
+        "s_per_step_definition": f"(t({args.steps} steps) - t({args.short} steps)) / "
+                                 f"{args.steps - args.short}",
+        "s_per_step_including_overhead": t_long / args.steps,
+        "fixed_overhead_s": overhead,
         "tau_max_measured": tau_meas,
         "steps_for_50tau_measured": GOAL_TAU_MULTIPLE * tau_meas,
-        "time_for_50tau_measured_s": GOAL_TAU_MULTIPLE * tau_meas * s_per_step,
-        "time_for_50tau_long_chain_tau_s": [GOAL_TAU_MULTIPLE * t * s_per_step
+        "time_for_50tau_measured_s": overhead + GOAL_TAU_MULTIPLE * tau_meas * s_per_step,
+        "time_for_50tau_long_chain_tau_s": [overhead + GOAL_TAU_MULTIPLE * t * s_per_step
                                             for t in TAU_RANGE_LONG_CHAINS],
         "tau_range_long_chains": list(TAU_RANGE_LONG_CHAINS),
         # what the same chain would cost with 32 walkers if the cost scaled with walkers
         "s_per_step_scaled_to_32_walkers": s_per_step * 32 / W,
-        "max_tau_for_goal_at_this_speed": GOAL_S / (GOAL_TAU_MULTIPLE * s_per_step),
-        "s_per_step_needed_for_goal_at_tau_measured": GOAL_S / (GOAL_TAU_MULTIPLE * tau_meas),
+        "max_tau_for_goal_at_this_speed": (GOAL_S - overhead) / (GOAL_TAU_MULTIPLE * s_per_step),
+        "s_per_step_needed_for_goal_at_tau_measured": (GOAL_S - overhead)
+                                                      / (GOAL_TAU_MULTIPLE * tau_meas),
     }
     res["extrapolation"] = extrap
 
@@ -242,6 +256,19 @@ def measure(args) -> dict:
         print(f"sample_posterior auto: {c.wall:.1f} s, {pa.chain.shape[0]} steps, "
               f"tau_max {np.nanmax(pa.tau):.0f}", flush=True)
         loads.append(_load("auto end"))
+
+    # Fixed cost seen in every call: the derived quantities of the draws are jitted per
+    # shape, and the number of draws changes with burn/thin, so most calls recompile.
+    from hdid._posterior import _derived_batch
+
+    Xd = jnp.asarray(np.asarray(post.draws)[:1])
+    Xd = jnp.tile(Xd, (int(post.draws.shape[0]) + 7, 1))      # a shape not seen before
+    with _Clock() as c1:
+        jax.block_until_ready(_derived_batch(prob, Xd))
+    with _Clock() as c2:
+        jax.block_until_ready(_derived_batch(prob, Xd))
+    res["derived_batch_new_shape_s"] = c1.wall
+    res["derived_batch_same_shape_s"] = c2.wall
 
     # --- (b) log-prob: vectorized vs loop ----------------------------------------------
     loads.append(_load("log-prob start"))
@@ -377,8 +404,8 @@ def render(res: dict) -> str:
     runs = res["posterior_fixed"]
     L.append(f"| posterior of a 4-run log, 32 walkers (here {W}), ≥ 50 τ, ≤ {GOAL_S:.0f} s "
              f"on 2 cores | **extrapolated** {g['extrapolated_s_measured_tau']:.0f} s "
-             f"(50 × τ_max {ex['tau_max_measured']:.0f} × {ex['s_per_step_median'] * 1e3:.1f} "
-             f"ms/step); with τ_max = {ex['tau_range_long_chains'][0]:.0f}–"
+             f"({ex['fixed_overhead_s']:.1f} s + 50 × τ_max {ex['tau_max_measured']:.0f} × "
+             f"{ex['s_per_step_median'] * 1e3:.2f} ms/step); with τ_max = {ex['tau_range_long_chains'][0]:.0f}–"
              f"{ex['tau_range_long_chains'][1]:.0f} from long chains: "
              f"{ex['time_for_50tau_long_chain_tau_s'][0]:.0f}–"
              f"{ex['time_for_50tau_long_chain_tau_s'][1]:.0f} s | "
@@ -389,8 +416,8 @@ def render(res: dict) -> str:
                  f"max_steps {pa['max_steps']}) | {pa['wall_s']:.0f} s, {pa['n_steps']} steps = "
                  f"{pa['chain_in_tau_max']:.1f} τ_max | {'✓' if g['met_measured'] else '✗'} |")
     L.append(f"\nTo meet the goal at the measured τ_max the sampler would need ≤ "
-             f"{ex['s_per_step_needed_for_goal_at_tau_measured'] * 1e3:.1f} ms per step "
-             f"(now {ex['s_per_step_median'] * 1e3:.1f}), or, at today's speed, τ_max ≤ "
+             f"{ex['s_per_step_needed_for_goal_at_tau_measured'] * 1e3:.2f} ms per step "
+             f"(now {ex['s_per_step_median'] * 1e3:.2f}), or, at today's speed, τ_max ≤ "
              f"{ex['max_tau_for_goal_at_this_speed']:.0f} steps.\n")
 
     L.append("## (a) `sample_posterior(fit, n_steps=N, n_walkers=W)`\n")
@@ -399,7 +426,8 @@ def render(res: dict) -> str:
              f"Fit: first {res['fit_first_s']:.1f} s, warm {res['fit_warm_s'] * 1e3:.0f} ms.\n")
     L.append("| seed | steps | wall | CPU | ms/step | τ_max (param) | chain / τ_max | "
              "acceptance | draws (burn, thin) |\n|---|---|---|---|---|---|---|---|---|")
-    for r in runs:
+    for r in [res["posterior_short"]] + runs:
+        r = {"seed": 0, **r}
         L.append(f"| {r['seed']} | {r['n_steps']} | {r['wall_s']:.1f} s | {r['cpu_s']:.1f} s | "
                  f"{r['s_per_step'] * 1e3:.1f} | {r['tau_max']:.0f} ({r['tau_max_label']}) | "
                  f"{r['chain_in_tau_max']:.1f} | {r['acceptance_mean']:.2f} | "
@@ -411,8 +439,17 @@ def render(res: dict) -> str:
                  f"{r['chain_in_tau_max']:.1f} | {r['acceptance_mean']:.2f} | "
                  f"{r['n_draws']} ({r['burn']}, {r['thin']}) |")
     L.append("")
-    L.append(f"**Extrapolation (not a measurement)**: 50 τ_max = "
-             f"{ex['steps_for_50tau_measured']:.0f} steps × {ex['s_per_step_median'] * 1e3:.1f} "
+    cw = runs[0]["cpu_s"] / runs[0]["wall_s"]
+    L.append(f"CPU / wall of the {runs[0]['n_steps']}-step call = {cw:.2f}: the sampler "
+             f"{'uses about one of the two cores (XLA runs the vmapped batch on one thread; emcee is serial)' if cw < 1.3 else 'uses more than one core'}.\n")
+    L.append(f"Marginal cost {ex['s_per_step_median'] * 1e3:.2f} ms per step "
+             f"({ex['s_per_step_definition']}) plus a fixed {ex['fixed_overhead_s']:.2f} s per "
+             f"call (start, residual autocorrelation, derived quantities of the draws — "
+             f"`_derived_batch` is jitted per shape and the number of draws changes with burn/thin: "
+             f"{res['derived_batch_new_shape_s']:.2f} s for a new number of draws vs "
+             f"{res['derived_batch_same_shape_s'] * 1e3:.1f} ms for a seen one).\n")
+    L.append(f"**Extrapolation (not a measurement)**: {ex['fixed_overhead_s']:.1f} s + 50 τ_max = "
+             f"{ex['steps_for_50tau_measured']:.0f} steps × {ex['s_per_step_median'] * 1e3:.2f} "
              f"ms/step ≈ **{ex['time_for_50tau_measured_s']:.0f} s**. τ estimated from a chain "
              f"of only {runs[0]['chain_in_tau_max']:.1f} τ is biased low (emcee's windowed "
              f"estimator cannot see correlations longer than the chain; the longer chains "
@@ -421,7 +458,7 @@ def render(res: dict) -> str:
              f"{ex['time_for_50tau_long_chain_tau_s'][0]:.0f}–"
              f"{ex['time_for_50tau_long_chain_tau_s'][1]:.0f} s), so the extrapolated time is "
              f"a lower estimate. Per-step cost with 32 walkers (if it scaled with walkers): "
-             f"{ex['s_per_step_scaled_to_32_walkers'] * 1e3:.1f} ms.\n")
+             f"{ex['s_per_step_scaled_to_32_walkers'] * 1e3:.2f} ms.\n")
     if runs and runs[0]["warnings"]:
         L.append("Warnings of `sample_posterior`: " + "; ".join(runs[0]["warnings"]) + "\n")
 
@@ -463,6 +500,8 @@ def render(res: dict) -> str:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--steps", type=int, default=2000, help="chain length of (a) (default 2000)")
+    ap.add_argument("--short", type=int, default=200,
+                    help="length of the short call that gives the fixed overhead (default 200)")
     ap.add_argument("--repeats", type=int, default=1, help="timed sample_posterior calls")
     ap.add_argument("--auto", action="store_true",
                     help="also time the adaptive sample_posterior (≥ 50 τ; minutes)")

@@ -13,7 +13,7 @@ def to_unconstrained(spec: Parameter, value):
     if t == "log":
         return np.log(value)
     if t == "identity":
-        return np.asarray(value, dtype=float)
+        return np.asarray(value, dtype=float) / spec.scale
     kind, lo, hi = t
     if kind != "interval":
         raise ValueError(f"parameter {spec.name!r}: unknown transform {t!r}")
@@ -28,7 +28,7 @@ def from_unconstrained(spec: Parameter, u, xp=jnp):
     if t == "log":
         return xp.exp(u)
     if t == "identity":
-        return u
+        return spec.scale * u
     _, lo, hi = t
     return lo + (hi - lo) / (1.0 + xp.exp(-u))
 
@@ -40,7 +40,7 @@ def derivative(spec: Parameter, u) -> np.ndarray:
     if t == "log":
         return np.exp(u)
     if t == "identity":
-        return np.ones_like(u)
+        return np.full_like(u, spec.scale)
     _, lo, hi = t
     s = 1.0 / (1.0 + np.exp(-u))
     return (hi - lo) * s * (1 - s)

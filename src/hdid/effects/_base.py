@@ -34,6 +34,10 @@ class Parameter:
     prior:
         Optional weak prior in the *transformed* space, ``(mean, sd)``; ``None`` means
         flat. Used to regularise parameters the data cannot fix (stated in the report).
+    scale:
+        Typical magnitude of an ``"identity"`` parameter: the optimiser sees
+        ``value / scale``, so that its steps are of order one (e.g. ``1e-3`` for a torque
+        in N m). Ignored by the other transforms, which are scale-free.
     """
 
     name: str
@@ -41,6 +45,7 @@ class Parameter:
     doc: str
     transform: str | tuple[str, float, float] = "log"
     prior: tuple[float, float] | None = None
+    scale: float = 1.0
 
 
 class Motion(eqx.Module):
@@ -82,9 +87,9 @@ class AbstractEffect(eqx.Module):
             amplitude: float | jax.Array
             name: ClassVar[str] = "cogging"
             parameters: ClassVar = (hdid.Parameter("amplitude", "N m", "cogging torque",
-                                                   transform="identity"),)
+                                                   transform="identity", scale=1e-3),)
             def torque(self, motion, state):
-                return -self.amplitude * jnp.sin(2 * motion.theta)
+                return -self.amplitude * jnp.sin(24 * motion.theta)
     """
 
     name: eqx.AbstractClassVar[str]
