@@ -200,6 +200,16 @@ def analyse(problem: Problem, prep: Prepared, u, starts: StartSummary, fixed: se
                 f"peak speed {peak:.3g} rad/s is not far above the Stribeck velocity "
                 f"{values['v_s']:.3g} rad/s: tau_c, tau_s, v_s and delta blur together"
             )
+    bracket = band_bracket(model, runs)
+    if bracket is not None:
+        lo, hi = bracket
+        hw, hw_std = derived["stick_band_halfwidth_rad"]
+        if hi > lo and 2 * hw_std < 0.5 * (hi - lo):
+            warnings.append(
+                f"stick band: the half-width {hw:.4f} ± {hw_std:.4f} rad of the smooth fit rests "
+                f"on the fitted Stribeck shape; the data alone bracket it to [{lo:.4f}, "
+                f"{hi:.4f}] rad (largest |rest point|, smallest |angle it slid on from|)"
+            )
     not_stuck = [r.name for r in runs if not r.stuck_at_end]
     if not_stuck:
         warnings.append(
@@ -222,6 +232,7 @@ def analyse(problem: Problem, prep: Prepared, u, starts: StartSummary, fixed: se
         n_unknowns=problem.n_unknowns,
         noise_scale=math.sqrt(s2) if dof > 0 else float("nan"),
         correlation={(labels[i], labels[j]): float(corr[i, j]) for i in range(P) for j in range(i + 1, P)},
+        band_bracket=bracket,
         warnings=warnings,
         starts=starts,
         problem=problem,
@@ -274,6 +285,36 @@ def _derived_and_jacobian(problem: Problem, u):
         return derived_quantities(problem.model(jnp.concatenate([up, u[P:]])))
 
     return quantities(u[:P]), jax.jacfwd(quantities)(u[:P])
+
+
+BASE_EFFECTS = ("stiffness", "stribeck", "viscous")
+
+
+def band_bracket(model, runs) -> tuple[float, float] | None:
+    """What the data say about the stick-band half-width without any smoothness: at
+    least the largest |rest point| logged, less than the smallest |angle| at which the
+    gear reversed and slid on (located with the event-driven reference simulator at the
+    fitted parameters). Base model only; ``None`` otherwise."""
+    if tuple(e.name for e in model.effects) != BASE_EFFECTS or not runs:
+        return None
+    from .reference import reference_trajectory
+
+    v = model.float_values()
+    lower = max(abs(r.rest_logged) for r in runs)
+    upper = math.inf
+    for r in runs:
+        try:
+            traj = reference_trajectory(
+                0.5, theta0=r.theta0, t_release=0.0, ratio=model.ratio,
+                **{k: v[k] for k in ("k1", "k2", "tau_c", "tau_s", "v_s", "delta", "c_v", "inertia")},
+            )
+        except (ValueError, RuntimeError):
+            return None
+        # every instant at rest from which it slid on (the release included) lies outside
+        slid = [abs(th) for (_, th, decision) in traj.events if decision.startswith("slide")]
+        if slid:
+            upper = min(upper, min(slid))
+    return lower, upper
 
 
 def _release_std(problem: Problem, u, std_u, i: int) -> float:

@@ -107,8 +107,15 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
         t, th = run.time, run.theta
         times[i, :n], times[i, n:] = t, t[-1]
         theta[i, :n], theta[i, n:] = th, th[-1]
-        h = th[0]
-        moved = np.flatnonzero(np.abs(th - h) > 1.5 * step)
+        # Hold reading and its jitter from the first few samples (robust to a flickering
+        # count): motion starts where the reading leaves the hold by more than both the
+        # quantization and ~5 noise standard deviations.
+        head = th[: max(3, min(10, n // 10))]
+        h = float(np.median(head))
+        noise = 1.4826 * float(np.median(np.abs(head - h)))
+        away = np.abs(th - h) > max(1.5 * step, 5.0 * noise)
+        # A release moves the gear away for good; a noise spike lasts one sample.
+        moved = np.flatnonzero(away & np.append(away[1:], away[-1:]))
         if moved.size == 0:
             raise LogError(
                 f"run {run.name!r} never moves more than one encoder step from its first "
@@ -117,7 +124,9 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
                 row=run.first_row,
             )
         j = int(moved[0])
-        at_hold = np.flatnonzero(np.abs(th[:j] - h) <= 0.5 * step)
+        # Readings within one count of the hold (a flickering last digit) still count as
+        # held; the release lies before the first sustained departure.
+        at_hold = np.flatnonzero(np.abs(th[:j] - h) <= 1.0 * step + 3.0 * noise)
         k0 = int(at_hold[-1]) if at_hold.size else 0
         first_moved[i] = k0 + 1
         hold[i] = np.median(th[: k0 + 1])

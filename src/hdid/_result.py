@@ -119,6 +119,7 @@ class FitResult:
     u: np.ndarray = field(repr=False)
     covariance: np.ndarray = field(repr=False)
     labels: list[str] = field(repr=False)
+    band_bracket: tuple[float, float] | None = None
     wall_time_s: float = float("nan")
 
     # -- accessors --------------------------------------------------------------------
@@ -167,6 +168,7 @@ class FitResult:
             "quantization_floor_rad": self.quantization_floor_rad,
             "stick_band_halfwidth_rad": self.stick_band_halfwidth_rad,
             "stick_band_halfwidth_std_rad": self.derived["stick_band_halfwidth_rad"][1],
+            "stick_band_bracket_rad": list(self.band_bracket) if self.band_bracket else None,
             "derived": {k: {"value": v, "std": s} for k, (v, s) in self.derived.items()},
             "runs": [r.to_dict() for r in self.runs],
             "setups": {s: {"offset": o} for s, o in self.setups.items()},
@@ -219,6 +221,12 @@ class FitResult:
             f"stick band (WG, from spring zero): [{lo:+.4f}, {hi:+.4f}] rad, "
             f"half-width {hw:.4f} ± {hws:.4f} rad"
         )
+        if self.band_bracket:
+            b0, b1 = self.band_bracket
+            lines.append(
+                f"  the data bracket the half-width to [{b0:.4f}, {b1:.4f}] rad "
+                "(largest |rest point| logged, smallest |slide-on reversal|)"
+            )
         lines.append("")
         lines.append(
             f"{'run':<6} {'setup':<6} {'n':>4} {'release [s]':>12} {'theta0':>9} "
