@@ -256,24 +256,29 @@ def test_wrong_inertia_keeps_normalised_torques(rich2_pair):
 
     ``I·θ̈ = τ(θ, θ̇)`` is invariant under (I, k1, k2, τ_c, τ_s, c_v) → λ·(…), and hdid's only
     priors are on v_s and δ (scale-free) while its start grid scales with the inertia, so
-    both fits follow the same path: the normalised values agree to rounding (1e-6) and the
-    absolute ones differ by the inertia ratio to the same precision.
+    both fits follow the same path. Rounding can still move the statistical stop (two
+    accepted steps with Δχ² < 0.01, i.e. within ~0.1 standard error of the optimum) by a
+    step in a flat valley, so the normalised values agree to 0.1 of their standard error,
+    and the absolute ones differ by the inertia ratio to the same precision.
     """
     right, wrong, _ = rich2_pair
     lam = WRONG_INERTIA / TRUTH2["inertia"]
     _check_normalised(wrong, TRUTH2)
     for name in ("k1", "k2", "tau_c", "tau_s", "c_v"):
-        assert _normalised(wrong, name) == pytest.approx(_normalised(right, name), rel=1e-6)
-        assert wrong.parameters[name].value == pytest.approx(
-            lam * right.parameters[name].value, rel=1e-6
+        tol = 0.1 * right.derived[f"{name}/inertia"][1]
+        assert abs(_normalised(wrong, name) - _normalised(right, name)) < tol
+        assert abs(wrong.parameters[name].value - lam * right.parameters[name].value) < (
+            0.1 * lam * right.parameters[name].std
         )
     for name in ("v_s", "delta"):
-        assert wrong.parameters[name].value == pytest.approx(right.parameters[name].value, rel=1e-6)
+        p = right.parameters[name]
+        assert abs(wrong.parameters[name].value - p.value) < 0.1 * p.std
     # ... and hence absolute k1 is off from the truth by the inertia ratio (within the 5 %
     # accuracy of k1/I), not by anything the data could reveal.
     assert wrong.parameters["k1"].value / TRUTH2["k1"] == pytest.approx(lam, rel=0.05)
-    assert wrong.rms_residual_rad == pytest.approx(right.rms_residual_rad, rel=1e-6)
-    assert wrong.stick_band_halfwidth_rad == pytest.approx(right.stick_band_halfwidth_rad, rel=1e-6)
+    assert wrong.rms_residual_rad == pytest.approx(right.rms_residual_rad, rel=1e-3)
+    hw_std = right.derived["stick_band_halfwidth_rad"][1]
+    assert abs(wrong.stick_band_halfwidth_rad - right.stick_band_halfwidth_rad) < 0.1 * hw_std
 
 
 # ================================================================ 2. the paper's design

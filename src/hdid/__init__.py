@@ -12,6 +12,7 @@ __version__ = "0.1.0"
 
 _LAZY = {
     "fit": "._fit",
+    "fit_many": "._batch",
     "FitResult": "._result",
     "Model": "._model",
     "DEFAULT_INERTIA": "._model",
@@ -52,6 +53,7 @@ def __dir__():
 if TYPE_CHECKING:  # pragma: no cover
     from . import effects
     from ._errors import FitError, HdidError, LogError
+    from ._batch import fit_many
     from ._fit import fit
     from ._io import Log, Run, read_log, write_log
     from ._model import DEFAULT_INERTIA, DEFAULT_RATIO, Model

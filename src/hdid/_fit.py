@@ -25,10 +25,14 @@ from ._result import FitResult, StartSummary
 from ._simulate import DEFAULT_MAX_SUBSTEP
 from ._transforms import interval_to_u, to_unconstrained
 
-#: Frequencies [Hz] and Coulomb fractions (τ_c / spring torque at release) of the coarse
-#: grid that seeds the local fits. 15–400 Hz covers size-8 to size-20 gears with motors.
+#: Frequencies [Hz] of the coarse grid that seeds the local fits: 15–400 Hz covers
+#: size-8 to size-20 gears with motors.
 GRID_FREQUENCIES_HZ = np.geomspace(15.0, 400.0, 12)
-GRID_COULOMB_FRACTIONS = np.array([0.03, 0.08, 0.2])
+#: Coulomb friction removes 2·tau_c/k of amplitude per half-cycle, so the logged start and
+#: rest angles give tau_c ≈ k·(|θ0| − |θ_rest|)/(2n) for n half-cycles to rest.
+GRID_HALF_CYCLES = np.array([1, 2, 3, 4, 6])
+#: ... and, for designs mixing amplitudes, fixed fractions of the spring torque at release.
+GRID_COULOMB_FRACTIONS = np.array([0.02, 0.05, 0.1, 0.18, 0.3])
 
 
 def fit(
@@ -41,7 +45,7 @@ def fit(
     inertia_prior: tuple[float, float] | None = None,
     release_time: float | None = None,
     counts_per_rev: float | None = None,
-    n_starts: int = 4,
+    n_starts: int = 6,
     max_substep: float | None = None,
     max_steps: int = 300,
 ) -> FitResult:
@@ -121,12 +125,22 @@ def fit(
     U, costs, ok, steps = _solve_many(problem, jnp.asarray(U0), active, jnp.asarray(PHASE1_STEPS))
     keep = np.zeros(len(U0), dtype=bool)
     keep[np.argsort(np.where(np.isfinite(costs), costs, np.inf))[:CONTINUED_STARTS]] = True
-    costs1 = np.asarray(costs)
-    U, costs, ok, steps2 = _solve_many(problem, U, jnp.asarray(keep), jnp.asarray(max_steps))
-    U, ok = map(np.asarray, (U, ok))
-    costs = np.where(keep, np.asarray(costs), costs1)  # dropped starts keep their phase-1 cost
-    steps = np.asarray(steps) + np.asarray(steps2)
-    ok = ok & keep
+    # Phase 2 in chunks: between chunks, lanes stuck in a basin far worse than the best
+    # lane (Δχ² > DROP_DCHI2) stop, so they do not hold up the vmapped batch.
+    U, costs, steps = np.array(U), np.array(costs), np.array(steps)
+    ok = np.zeros(len(U0), dtype=bool)
+    active = keep.copy()
+    used = 0
+    while active.any() and used < max_steps:
+        chunk = min(PHASE2_CHUNK, max_steps - used)
+        U2, c2, done2, s2 = map(
+            np.asarray, _solve_many(problem, jnp.asarray(U), jnp.asarray(active), jnp.asarray(chunk))
+        )
+        U[active], costs[active], steps[active] = U2[active], c2[active], steps[active] + s2[active]
+        ok[active] = done2[active]
+        used += chunk
+        best_now = np.min(np.where(np.isfinite(costs), costs, np.inf))
+        active = active & ~done2 & (costs - best_now < DROP_DCHI2)
     finite = np.isfinite(costs)
     if not finite.any():
         raise FitError(
@@ -178,8 +192,11 @@ def _grid_starts(problem: Problem, prep: Prepared, model: Model, n_starts: int):
     for f in GRID_FREQUENCIES_HZ:
         w = 2 * math.pi * f
         k_wg = float(np.median(inertia)) * w**2
-        for frac in GRID_COULOMB_FRACTIONS:
-            tau_c = frac * k_wg * amp
+        decrement = float(np.median(np.abs(theta0) - np.minimum(rest, np.abs(theta0))))
+        levels = np.concatenate([
+            k_wg * decrement / (2 * GRID_HALF_CYCLES), GRID_COULOMB_FRACTIONS * k_wg * amp
+        ])
+        for tau_c in np.maximum(levels, 1e-3 * k_wg * amp):
             vals = {
                 "k1": k_wg * N**2,
                 "k2": k_wg * N**2 * k2_ratio,
@@ -236,7 +253,11 @@ CHI2_STALL = 0.01
 
 #: Iterations every start gets before only the best ``CONTINUED_STARTS`` go on.
 PHASE1_STEPS = 12
-CONTINUED_STARTS = 2
+CONTINUED_STARTS = 3
+#: Phase-2 iterations between checks, and the χ² excess over the best lane at which a
+#: lane is abandoned (a different, clearly worse basin: Δχ² = 50 is ~7 standard errors).
+PHASE2_CHUNK = 25
+DROP_DCHI2 = 50.0
 
 
 @eqx.filter_jit

@@ -65,7 +65,8 @@ def main():
 
 
 @main.command("fit")
-@click.argument("log", type=click.Path(dir_okay=False))
+@click.argument("logs", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.option("--summary", "summary_out", metavar="OUT.csv", help="Several logs: one row per log (parameters, std, band, RMS, warnings, error).")
 @click.option("--json", "json_out", metavar="OUT.json", help="Write the results as JSON.")
 @click.option("--plot", "plot_out", metavar="OUT.png", help="Measured vs model, residuals below.")
 @click.option("--inertia", type=float, help="Total WG inertia [kg m^2] (default 7e-7, CSF-8 + small Maxon rotor).")
@@ -83,15 +84,19 @@ def main():
 @click.option("--chains", "chains_out", metavar="OUT.nc", help="Save the posterior chains (arviz NetCDF).")
 @click.option("--corner", "corner_out", metavar="OUT.png", help="Corner plot of the posterior.")
 @click.option("--quiet", "-q", is_flag=True, help="No report on stdout.")
-def fit_cmd(log, json_out, plot_out, inertia, added_inertia, free_inertia, inertia_prior, fix,
-            release_time, counts_per_rev, starts, posterior, steps, walkers, seed, chains_out,
-            corner_out, quiet):
+def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_inertia,
+            inertia_prior, fix, release_time, counts_per_rev, starts, posterior, steps, walkers,
+            seed, chains_out, corner_out, quiet):
     """Fit stiffness, friction (and inertia) jointly to all runs of LOG.csv.
 
     LOG.csv has a header with columns time [s] and theta [rad, WG/motor angle]; optional
-    run, setup, added_inertia.
+    run, setup, added_inertia. With several logs (or --summary) each is fitted on its own
+    and tabulated; a bad file is reported in its row and the others complete.
     """
-    log_path = Path(log)
+    if len(logs) > 1 or summary_out:
+        return _fit_batch(logs, summary_out, json_out, plot_out, inertia, fix, release_time,
+                          counts_per_rev, starts, quiet, posterior or chains_out or corner_out)
+    log_path = Path(logs[0])
     _check_output(json_out, [log_path], "--json")
     _check_output(plot_out, [log_path], "--plot")
     _check_output(chains_out, [log_path], "--chains")
@@ -147,6 +152,46 @@ def fit_cmd(log, json_out, plot_out, inertia, added_inertia, free_inertia, inert
         result.plot(plot_out)
         if not quiet:
             click.echo(f"wrote {plot_out}")
+
+
+def _fit_batch(logs, summary_out, json_out, plot_out, inertia, fix, release_time,
+               counts_per_rev, starts, quiet, posterior):
+    paths = [Path(p) for p in logs]
+    if plot_out or posterior:
+        raise _Fail("--plot and --posterior take one log; fit the logs one by one for those")
+    _check_output(summary_out, paths, "--summary")
+    _check_output(json_out, paths, "--json")
+    fixed = _parse_fix(fix)
+    from ._batch import fit_many
+
+    table = fit_many(
+        [str(p) for p in paths],
+        progress=not quiet,
+        inertia=inertia,
+        fix={k: v for k, v in fixed.items()} or None,
+        release_time=release_time,
+        counts_per_rev=counts_per_rev,
+        n_starts=starts,
+    )
+    flat = table.drop(columns=["result"])
+    if not quiet:
+        cols = [c for c in ("log", "k1", "k1_std", "tau_c", "tau_s", "stick_band_halfwidth_rad",
+                            "rms_residual_counts", "n_warnings", "error") if c in flat]
+        with __import__("pandas").option_context("display.width", 200, "display.max_colwidth", 60):
+            click.echo(flat[cols].to_string(index=False))
+    if summary_out:
+        flat.to_csv(summary_out, index=False)
+        if not quiet:
+            click.echo(f"wrote {summary_out}")
+    if json_out:
+        rows = [r.result.to_dict() if r.result is not None else {"source": r.log, "error": r.error}
+                for r in table.itertuples()]
+        Path(json_out).write_text(json.dumps(_finite(rows), indent=2) + "\n")
+    failed = int(flat["error"].notna().sum())
+    if failed:
+        click.echo(f"hdid: {failed} of {len(flat)} log(s) failed; see the error column", err=True)
+    if failed == len(flat):
+        raise SystemExit(2)
 
 
 def _with_added_inertia(data, added):
