@@ -32,6 +32,7 @@ Writes ``benchmarks/results/fit_speed.md`` and ``.json`` (``--out-dir`` to chang
 
 from __future__ import annotations
 
+import _common  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
 import argparse
 import datetime as _dt
 import importlib.util
@@ -120,21 +121,11 @@ def _cache_stats(path: Path):
 
 
 def _src_fingerprint() -> str:
-    """Hash of src/hdid/**/*.py: other engineers edit src/ while this runs."""
-    import hashlib
-
-    h = hashlib.sha256()
-    for f in sorted((ROOT / "src" / "hdid").rglob("*.py")):
-        h.update(str(f.relative_to(ROOT)).encode())
-        h.update(f.read_bytes())
-    return h.hexdigest()[:16]
+    return _common.src_fingerprint()
 
 
 def _import_generate():
-    spec = importlib.util.spec_from_file_location("_hdid_generate", DATA / "generate.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return _common.import_generate()
 
 
 def _import_scipy_way():
@@ -741,14 +732,7 @@ def _machine() -> dict:
 
     import hdid
 
-    cpu = "?"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+    cpu = _common.cpu_model()
     return {"date": _dt.datetime.now().isoformat(timespec="seconds"), "nproc": os.cpu_count(),
             "affinity": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
             "cpu": cpu, "python": platform.python_version(), "platform": platform.platform(),

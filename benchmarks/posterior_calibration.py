@@ -37,6 +37,7 @@ markdown from it).  ``os.getloadavg()`` is recorded for every log.
 
 from __future__ import annotations
 
+import _common  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
 import argparse
 import datetime as _dt
 import hashlib
@@ -70,18 +71,11 @@ def _load():
 
 
 def _src_fingerprint() -> str:
-    h = hashlib.sha256()
-    for f in sorted((ROOT / "src" / "hdid").rglob("*.py")):
-        h.update(str(f.relative_to(ROOT)).encode())
-        h.update(f.read_bytes())
-    return h.hexdigest()[:16]
+    return _common.src_fingerprint()
 
 
 def _import_generate():
-    spec = importlib.util.spec_from_file_location("_hdid_generate", DATA / "generate.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return _common.import_generate()
 
 
 def _machine():

@@ -37,6 +37,7 @@ Writes ``benchmarks/results/posterior_speed.md`` and ``.json`` (``--out-dir`` to
 
 from __future__ import annotations
 
+import _common  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
 import argparse
 import datetime as _dt
 import hashlib
@@ -76,12 +77,7 @@ def _stats(xs):
 
 
 def _src_fingerprint() -> str:
-    """Hash of src/hdid/**/*.py (other engineers edit src/ while benchmarks run)."""
-    h = hashlib.sha256()
-    for f in sorted((ROOT / "src" / "hdid").rglob("*.py")):
-        h.update(str(f.relative_to(ROOT)).encode())
-        h.update(f.read_bytes())
-    return h.hexdigest()[:16]
+    return _common.src_fingerprint()
 
 
 def _machine():

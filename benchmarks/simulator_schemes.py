@@ -37,6 +37,7 @@ Writes ``benchmarks/results/simulator_schemes.md``.
 
 from __future__ import annotations
 
+import _common  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
 import os
 
 os.environ.setdefault("HDID_NO_CACHE", "1")  # measure real compile times
@@ -323,14 +324,7 @@ PREVIOUS_SCHEME = """\
 
 
 def write_report(rows, lead_rows, cand_rows, elapsed, load_before, load_after):
-    cpu = platform.processor() or ""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+    cpu = _common.cpu_model()
     lines = [
         "# JAX simulator: accuracy and cost against substeps per sample",
         "",

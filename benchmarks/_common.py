@@ -1,0 +1,39 @@
+"""Helpers shared by the benchmark scripts (run them as `python benchmarks/<script>.py`)."""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import platform
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / "data" / "synthetic"
+
+
+def src_fingerprint() -> str:
+    """Hash of src/hdid/**/*.py, recorded with results (src may change between runs)."""
+    h = hashlib.sha256()
+    for f in sorted((ROOT / "src" / "hdid").rglob("*.py")):
+        h.update(str(f.relative_to(ROOT)).encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def import_generate():
+    """data/synthetic/generate.py as a module (make_log, TRUTH_CSF8, designs)."""
+    spec = importlib.util.spec_from_file_location("_hdid_generate", DATA / "generate.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def cpu_model() -> str:
+    cpu = platform.processor() or "?"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return cpu
