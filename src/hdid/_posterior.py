@@ -18,7 +18,8 @@ Priors (documented defaults, all in the sampled space):
 - physical parameters: flat in the transformed space (flat in log for positive ones)
   within ``± PRIOR_HALF_WIDTH`` of the least-squares value, times the parameters' own
   weak priors (``v_s``, ``delta``) and the inertia prior when the inertia is free;
-- release instant: uniform on its bracket between samples; start angle and offset flat;
+- release instant: uniform on its bracket between samples; start angle flat within
+  ±5 encoder steps of its least-squares value; offset flat;
 - ``σ_n``: log-uniform between ``0.02 q`` and ``20 q``.
 """
 
@@ -103,9 +104,10 @@ class LogPosterior(eqx.Module):
             v = u[P : P + R]
             # uniform on the bracket: density of the logistic variable is s(1 − s)
             lp += jnp.sum(-jax.nn.softplus(-v) - jax.nn.softplus(v))
-        # start angle: within a few steps of the hold reading (it is read to ±½ step)
+        # start angle: within a few encoder steps of its least-squares value (the hold
+        # reads it to ±½ step; a slow start can sit a few steps off the reading)
         i = P + (R if p.release_free else 0)
-        outside |= jnp.any(jnp.abs(u[i : i + R]) > 5.0)
+        outside |= jnp.any(jnp.abs(u[i : i + R] - self.centre[i : i + R]) > 5.0)
         return jnp.where(outside, -jnp.inf, lp)
 
     @eqx.filter_jit
