@@ -76,7 +76,7 @@ def main():
 @click.option("--fix", multiple=True, metavar="NAME[=VALUE]", help="Hold a parameter fixed (repeatable).")
 @click.option("--release-time", type=float, help="Known release instant [s] in each run's time axis.")
 @click.option("--counts-per-rev", type=float, help="theta holds raw encoder counts with this many per revolution.")
-@click.option("--starts", type=click.IntRange(1, 32), default=4, show_default=True, help="Multi-starts.")
+@click.option("--starts", type=click.IntRange(1, 32), help="Multi-starts (default: the library's, 6).")
 @click.option("--posterior", is_flag=True, help="Also sample the posterior with emcee (slow; see README).")
 @click.option("--steps", type=click.IntRange(100, 10**6), help="Posterior chain length (default: until 50 autocorrelation times, at most 20000).")
 @click.option("--walkers", type=click.IntRange(4, 4096), help="emcee walkers (default max(32, 2·dim+2)).")
@@ -122,7 +122,7 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
             free_inertia=True if free_inertia else None,
             inertia_prior=tuple(prior) if prior else None,
             release_time=release_time,
-            n_starts=starts,
+            **({"n_starts": starts} if starts else {}),
         )
     except (HdidError, ValueError, KeyError) as exc:
         msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
@@ -171,7 +171,7 @@ def _fit_batch(logs, summary_out, json_out, plot_out, inertia, fix, release_time
         fix={k: v for k, v in fixed.items()} or None,
         release_time=release_time,
         counts_per_rev=counts_per_rev,
-        n_starts=starts,
+        **({"n_starts": starts} if starts else {}),
     )
     flat = table.drop(columns=["result"])
     if not quiet:
