@@ -128,3 +128,49 @@ def test_simulate_then_fit_round_trip(tmp_path):
     # Same simulator, same inertia, quantized at 4000 counts/rev: k1 within the ~3 %
     # (1σ) of the 250 Hz design, allowing 3σ.
     assert abs(k1 / 1200 - 1) < 0.09
+
+
+EFFECT_FILE = '''
+from typing import ClassVar
+import jax.numpy as jnp
+import hdid
+
+class Cogging(hdid.AbstractEffect):
+    amplitude: float
+    name: ClassVar[str] = "cogging"
+    parameters: ClassVar = (hdid.Parameter("amplitude", "N m", "cogging torque",
+                                           transform="identity", scale=1e-3),)
+
+    def torque(self, motion, state):
+        return -self.amplitude * jnp.sin(24 * motion.theta)
+
+effect = Cogging(amplitude=1e-4)
+'''
+
+
+def test_effects_from_the_command_line(tmp_path):
+    # A user's effect from a file and a removed base effect: no change to hdid needed.
+    path = tmp_path / "my_effect.py"
+    path.write_text(EFFECT_FILE)
+    out = tmp_path / "e.json"
+    res = CliRunner().invoke(
+        main, ["fit", str(EXAMPLE), "--remove", "viscous", "--effect-file", str(path), "-q", "--json", str(out)]
+    )
+    assert res.exit_code == 0, res.output
+    names = list(json.loads(out.read_text())["parameters"])
+    assert "amplitude" in names and "c_v" not in names
+    # Free play from the library replaces the cubic spring.
+    res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "--add", "backlash", "-q", "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    params = json.loads(out.read_text())["parameters"]
+    assert params["backlash"]["unit"] == "rad" and params["backlash"]["value"] > 0
+
+
+@pytest.mark.parametrize(
+    "args, fragment",
+    [(["--add", "nope"], "unknown effect"), (["--remove", "nope"], "the model has"),
+     (["--effect-file", "missing.py"], "no such file")],
+)
+def test_effect_option_errors(args, fragment):
+    out = _run_cli("fit", str(EXAMPLE), *args)
+    assert out.returncode == 2 and fragment in out.stderr and "Traceback" not in out.stderr

@@ -74,6 +74,9 @@ def main():
 @click.option("--free-inertia", is_flag=True, help="Fit the inertia (needs --added-inertia runs or --inertia-prior).")
 @click.option("--inertia-prior", metavar="MEAN,REL", help="Log-normal prior on the inertia, e.g. 7e-7,0.3.")
 @click.option("--fix", multiple=True, metavar="NAME[=VALUE]", help="Hold a parameter fixed (repeatable).")
+@click.option("--add", "add_effects", multiple=True, metavar="EFFECT", help="Add a library effect (repeatable): backlash, stiffness, stribeck, viscous.")
+@click.option("--remove", "remove_effects", multiple=True, metavar="EFFECT", help="Remove an effect of the base model (repeatable), e.g. viscous.")
+@click.option("--effect-file", "effect_files", multiple=True, metavar="FILE.py", help="Your own effect: a Python file defining AbstractEffect instances (repeatable).")
 @click.option("--release-time", type=float, help="Known release instant [s] in each run's time axis.")
 @click.option("--counts-per-rev", type=float, help="theta holds raw encoder counts with this many per revolution.")
 @click.option("--starts", type=click.IntRange(1, 32), help="Multi-starts (default: the library's, 6).")
@@ -85,17 +88,20 @@ def main():
 @click.option("--corner", "corner_out", metavar="OUT.png", help="Corner plot of the posterior.")
 @click.option("--quiet", "-q", is_flag=True, help="No report on stdout.")
 def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_inertia,
-            inertia_prior, fix, release_time, counts_per_rev, starts, posterior, steps, walkers,
-            seed, chains_out, corner_out, quiet):
+            inertia_prior, fix, add_effects, remove_effects, effect_files, release_time,
+            counts_per_rev, starts, posterior, steps, walkers, seed, chains_out, corner_out,
+            quiet):
     """Fit stiffness, friction (and inertia) jointly to all runs of LOG.csv.
 
     LOG.csv has a header with columns time [s] and theta [rad, WG/motor angle]; optional
     run, setup, added_inertia. With several logs (or --summary) each is fitted on its own
     and tabulated; a bad file is reported in its row and the others complete.
     """
+    model = _build_model(add_effects, remove_effects, effect_files)
     if len(logs) > 1 or summary_out:
         return _fit_batch(logs, summary_out, json_out, plot_out, inertia, fix, release_time,
-                          counts_per_rev, starts, quiet, posterior or chains_out or corner_out)
+                          counts_per_rev, starts, quiet, posterior or chains_out or corner_out,
+                          model)
     log_path = Path(logs[0])
     _check_output(json_out, [log_path], "--json")
     _check_output(plot_out, [log_path], "--plot")
@@ -116,6 +122,7 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
             data = _with_added_inertia(data, added)
         result = _fit.fit(
             data,
+            model,
             inertia=inertia,
             fix={k: v for k, v in fixed.items() if v is not None}
             | {k: None for k, v in fixed.items() if v is None} or None,
@@ -154,8 +161,52 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
             click.echo(f"wrote {plot_out}")
 
 
+def _build_model(add, remove, files):
+    """The base model with effects removed, library effects added, and user effects."""
+    if not (add or remove or files):
+        return None
+    from ._model import Model
+    from .effects import AbstractEffect, library
+
+    model = Model.default()
+    for name in remove:
+        if name not in model.effect_names:
+            raise _Fail(f"--remove {name}: the model has {', '.join(model.effect_names)}")
+        model = model.without(name)
+    lib = library(model.float_values())
+    for name in add:
+        if name not in lib:
+            raise _Fail(f"--add {name}: unknown effect; choose from {', '.join(sorted(lib))}")
+        model = model.with_effect(lib[name])
+    for path in files:
+        effects = _load_effect_file(Path(path), AbstractEffect)
+        for effect in effects:
+            model = model.with_effect(effect)
+    return model
+
+
+def _load_effect_file(path: Path, base):
+    import importlib.util
+
+    if not path.is_file():
+        raise _Fail(f"--effect-file {path}: no such file")
+    spec = importlib.util.spec_from_file_location(f"hdid_user_effect_{path.stem}", path)
+    module = importlib.util.module_from_spec(spec)
+    try:
+        spec.loader.exec_module(module)
+    except Exception as exc:  # a user's file: report any failure in one line
+        raise _Fail(f"--effect-file {path}: {type(exc).__name__}: {exc}") from None
+    found = [v for v in vars(module).values() if isinstance(v, base)]
+    if not found:
+        raise _Fail(
+            f"--effect-file {path}: defines no effect instance; add one at module level, "
+            "e.g. `effect = MyEffect(amplitude=1e-4)` (starting values)"
+        )
+    return found
+
+
 def _fit_batch(logs, summary_out, json_out, plot_out, inertia, fix, release_time,
-               counts_per_rev, starts, quiet, posterior):
+               counts_per_rev, starts, quiet, posterior, model):
     paths = [Path(p) for p in logs]
     if plot_out or posterior:
         raise _Fail("--plot and --posterior take one log; fit the logs one by one for those")
@@ -167,6 +218,7 @@ def _fit_batch(logs, summary_out, json_out, plot_out, inertia, fix, release_time
     table = fit_many(
         [str(p) for p in paths],
         progress=not quiet,
+        model=model,
         inertia=inertia,
         fix={k: v for k, v in fixed.items()} or None,
         release_time=release_time,

@@ -1,0 +1,41 @@
+"""Free play (lost motion): a dead zone in the torsional spring."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+from ._base import AbstractEffect, Motion, Parameter
+
+
+class FreePlayStiffness(AbstractEffect):
+    r"""Cubic spring with a dead zone: ``T = k1·e + k2·e³``, ``e = sign(d)·max(|d| − b/2N, 0)``.
+
+    ``backlash`` is the total free play measured at the wave generator [rad] (at the
+    output it is ``backlash / N``). Inside the zone the spring exerts no torque, so the
+    gear coasts on friction alone. It replaces the effect named ``"stiffness"``.
+
+    Residual mark when missing: the approach to rest is too abrupt (the real gear
+    coasts without spring torque inside the zone); rest points spread wider than the
+    stick band alone explains.
+    """
+
+    k1: Float[ArrayLike, ""]
+    k2: Float[ArrayLike, ""]
+    backlash: Float[ArrayLike, ""]
+
+    name: ClassVar[str] = "stiffness"
+    parameters: ClassVar[tuple[Parameter, ...]] = (
+        Parameter("k1", "N m/rad", "linear torsional stiffness, output side"),
+        Parameter("k2", "N m/rad^3", "cubic torsional stiffness, output side"),
+        Parameter("backlash", "rad", "total free play at the wave generator"),
+    )
+
+    def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
+        del state
+        d = motion.theta / motion.ratio
+        half = 0.5 * self.backlash / motion.ratio
+        e = jnp.sign(d) * jnp.maximum(jnp.abs(d) - half, 0.0)
+        return -(self.k1 * e + self.k2 * e**3) / motion.ratio
