@@ -60,3 +60,10 @@ def test_short_chain_is_reproducible_and_summarised(fit):
         assert v["ci95"][0] <= v["ci68"][0] <= v["median"] <= v["ci68"][1] <= v["ci95"][1]
     # 150 steps is far below 50 autocorrelation times: the sampler must say so.
     assert any("autocorrelation" in w for w in s["posterior_diagnostics"]["warnings"])
+
+
+def test_too_short_chain_does_not_crash(fit):
+    # 5 steps: some walkers never move, τ is NaN; the sampler must warn, not crash.
+    post = sample_posterior(fit, n_steps=5, seed=1)
+    assert post.draws.shape[0] > 0
+    assert post.warnings

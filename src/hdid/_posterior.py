@@ -351,9 +351,15 @@ def sample_posterior(
         state = sampler.run_mcmc(state, step, progress=progress, skip_initial_state_check=True)
         done += step
         tau = sampler.get_autocorr_time(tol=0)
-        if n_steps is None and done >= MIN_TAU_MULTIPLE * np.nanmax(tau):
+        if n_steps is None and np.all(np.isfinite(tau)) and done >= MIN_TAU_MULTIPLE * np.max(tau):
             break
-    tau_max = float(np.nanmax(tau))
+    finite_tau = np.isfinite(tau)
+    tau_max = float(np.max(tau[finite_tau])) if finite_tau.any() else float(done)
+    if not finite_tau.all():
+        warnings.append(
+            "the autocorrelation time could not be estimated for every quantity (a walker "
+            "that never moves gives NaN); treat the intervals as unreliable"
+        )
     if done < MIN_TAU_MULTIPLE * tau_max:
         warnings.append(
             f"chain of {done} steps is shorter than {MIN_TAU_MULTIPLE} autocorrelation "
