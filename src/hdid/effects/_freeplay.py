@@ -8,6 +8,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ._base import AbstractEffect, Motion, Parameter
+from ._stiffness import CubicStiffness
 
 
 class FreePlayStiffness(AbstractEffect):
@@ -27,9 +28,7 @@ class FreePlayStiffness(AbstractEffect):
     backlash: Float[ArrayLike, ""]
 
     name: ClassVar[str] = "stiffness"
-    parameters: ClassVar[tuple[Parameter, ...]] = (
-        Parameter("k1", "N m/rad", "linear torsional stiffness, output side"),
-        Parameter("k2", "N m/rad^3", "cubic torsional stiffness, output side"),
+    parameters: ClassVar[tuple[Parameter, ...]] = CubicStiffness.parameters + (
         Parameter("backlash", "rad", "total free play at the wave generator"),
     )
 
@@ -38,4 +37,5 @@ class FreePlayStiffness(AbstractEffect):
         d = motion.theta / motion.ratio
         half = 0.5 * self.backlash / motion.ratio
         e = jnp.sign(d) * jnp.maximum(jnp.abs(d) - half, 0.0)
-        return -(self.k1 * e + self.k2 * e**3) / motion.ratio
+        # the same spring law as CubicStiffness, applied to the twist beyond the zone
+        return -CubicStiffness(k1=self.k1, k2=self.k2).spring_torque(e) / motion.ratio
