@@ -125,6 +125,7 @@ def make_log(
     counts_per_rev: int = COUNTS_PER_REV,
     as_counts: bool = False,
     return_truth: bool = False,
+    hidden: Mapping | None = None,
 ) -> pd.DataFrame | tuple[pd.DataFrame, dict]:
     """Make one synthetic free-motion log with the reference simulator.
 
@@ -161,6 +162,10 @@ def make_log(
         Write ``theta`` as integer counts instead of radians (needs ``quantize``).
     return_truth : bool, optional
         Also return the truth dictionary as a second value.
+    hidden : mapping, optional
+        Extra keyword arguments of :func:`hdid.reference.reference_trajectory`
+        (``extra_torque``, ``extra_holding``, ``dahl``) that hide an effect the base
+        model lacks; see ``data/synthetic/hidden.py``.
 
     Returns
     -------
@@ -200,7 +205,8 @@ def make_log(
     for i, (a, setup) in enumerate(zip(amplitudes, setups), start=1):
         offset = float(offsets_by_setup[setup])
         t_rel = float(hold + rng.uniform(0.0, 1.0) / fs)
-        traj = reference_trajectory(float(t[-1]), theta0=a, t_release=t_rel, **kw)
+        traj = reference_trajectory(float(t[-1]), theta0=a, t_release=t_rel, **kw,
+                                    **(dict(hidden) if hidden else {}))
         theta_phys, _ = traj.evaluate(t)
         reading = theta_phys + offset
         if noise_std > 0:

@@ -16,7 +16,14 @@ Model (all angles at the wave generator, WG, measured from the spring's zero)::
         |F| ≤ τ_s  →  the WG sticks, exactly and for ever;
         |F| > τ_s  →  it slides in direction sign(F), the friction at ω = 0⁺ being τ_s.
 
-``τ_x`` is the optional ``extra_torque(theta, omega)`` (zero by default).
+``τ_x`` is the optional ``extra_torque(theta, omega)`` (zero by default); the optional
+``extra_holding(theta)`` adds static capacity (the stick test becomes
+``|F| ≤ τ_s + extra_holding(θ)``) and the optional ``dahl = (f_h, sigma_h)`` adds a Dahl
+hysteresis element, an extra state ``z`` with ``dz/dt = sigma_h·ω·(1 − s·z/f_h)`` whose
+torque ``−z`` enters both the motion and ``F``; ``z(release) = sign(θ0)·f_h·(1 −
+exp(−sigma_h·|θ0|/f_h))`` (the servo twisted the WG monotonically from the spring's zero).
+These hooks let the test suite hide effects in synthetic logs with code that shares
+nothing with the JAX effects.
 
 Numerics
 --------
@@ -251,6 +258,8 @@ def reference_trajectory(
     atol: float = 1e-14,
     extra_torque: ExtraTorque | None = None,
     max_events: int = 10_000,
+    extra_holding: Callable[[float], float] | None = None,
+    dahl: tuple[float, float] | None = None,
 ) -> ReferenceTrajectory:
     """Run the event-driven simulation up to ``t_end`` and return the full trajectory object.
 
@@ -276,6 +285,11 @@ def reference_trajectory(
         ``extra_torque`` would later change (time dependence is ignored).
     max_events : int, optional
         Zeno guard: after this many velocity zeros the WG is declared stuck.
+    extra_holding : callable, optional
+        ``extra_holding(theta) -> float``: static capacity [Nm] added to ``τ_s`` in the stick
+        test (e.g. friction that grows with the load).
+    dahl : (float, float), optional
+        ``(f_h, sigma_h)``: a Dahl hysteresis element [Nm, Nm/rad] (see module docstring).
 
     Returns
     -------
@@ -294,9 +308,17 @@ def reference_trajectory(
     dstrib = tau_s - tau_c
     exp = math.exp
 
-    def net_static_torque(th: float) -> float:
+    if dahl is not None:
+        f_h, sigma_h = (float(x) for x in dahl)
+        if not (f_h > 0 and sigma_h > 0):
+            raise ValueError("dahl = (f_h, sigma_h) must both be positive")
+        z = math.copysign(f_h * -math.expm1(-sigma_h * abs(theta0) / f_h), theta0) if theta0 else 0.0
+    else:
+        z = 0.0
+
+    def net_static_torque(th: float, z: float) -> float:
         d = th / N
-        F = -(k1 * d + k2 * d * d * d) / N
+        F = -(k1 * d + k2 * d * d * d) / N - z
         if extra_torque is not None:
             F += float(extra_torque(th, 0.0))
         return F
@@ -307,8 +329,9 @@ def reference_trajectory(
     th = float(theta0)
     n_zero = 0
     while True:
-        F = net_static_torque(th)
-        if abs(F) <= tau_s:
+        F = net_static_torque(th, z)
+        holding = tau_s + (float(extra_holding(th)) if extra_holding is not None else 0.0)
+        if abs(F) <= holding:
             decision = "stick"
         elif n_zero > max_events:
             decision = "zeno-stick"
@@ -340,7 +363,10 @@ def reference_trajectory(
             acc = -spring - fr
             if extra_torque is not None:
                 acc += float(extra_torque(thv, w))
-            return np.array([w, acc * inv_I])
+            if dahl is None:
+                return np.array([w, acc * inv_I])
+            zv = float(y[2])
+            return np.array([w, (acc - zv) * inv_I, sigma_h * w * (1.0 - s * zv / f_h)])
 
         def stop(_t, y, s=s):
             return s * y[1]
@@ -348,7 +374,8 @@ def reference_trajectory(
         stop.terminal = True
         stop.direction = -1.0
 
-        sol = solve_ivp(rhs, (t, t_end), np.array([th, 0.0]), method="DOP853", rtol=rtol,
+        y0 = np.array([th, 0.0]) if dahl is None else np.array([th, 0.0, z])
+        sol = solve_ivp(rhs, (t, t_end), y0, method="DOP853", rtol=rtol,
                         atol=atol, dense_output=True, events=stop)
         if sol.status < 0:
             raise RuntimeError(f"reference integration failed: {sol.message}")
@@ -357,6 +384,8 @@ def reference_trajectory(
             traj.segments.append(_Segment(t, t_ev, s, sol.sol))
             t = t_ev
             th = float(sol.y_events[0][0][0])
+            if dahl is not None:
+                z = float(sol.y_events[0][0][2])
             n_zero += 1
             continue
         # reached the horizon while sliding
@@ -382,6 +411,8 @@ def simulate_reference(
     atol: float = 1e-14,
     extra_torque: ExtraTorque | None = None,
     max_events: int = 10_000,
+    extra_holding: Callable[[float], float] | None = None,
+    dahl: tuple[float, float] | None = None,
 ) -> np.ndarray:
     """WG angle of a free-motion release at the requested times (ground-truth simulator).
 
@@ -414,6 +445,8 @@ def simulate_reference(
         side and to the stick test; see :func:`reference_trajectory`.
     max_events : int, optional
         Zeno guard (default 10 000 velocity zeros, then stick).
+    extra_holding, dahl : optional
+        Hidden-effect hooks; see :func:`reference_trajectory`.
 
     Returns
     -------
@@ -427,7 +460,7 @@ def simulate_reference(
     traj = reference_trajectory(
         t_end, theta0=theta0, t_release=t_release, k1=k1, k2=k2, tau_c=tau_c, tau_s=tau_s,
         v_s=v_s, delta=delta, c_v=c_v, inertia=inertia, ratio=ratio, rtol=rtol, atol=atol,
-        extra_torque=extra_torque, max_events=max_events,
+        extra_torque=extra_torque, max_events=max_events, extra_holding=extra_holding, dahl=dahl,
     )
     theta, _ = traj.evaluate(t)
     return theta
@@ -453,6 +486,8 @@ def simulate_reference_dense(
     atol: float = 1e-14,
     extra_torque: ExtraTorque | None = None,
     max_events: int = 10_000,
+    extra_holding: Callable[[float], float] | None = None,
+    dahl: tuple[float, float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Angle and velocity on a fine uniform grid (for plots and tests).
 
@@ -479,6 +514,7 @@ def simulate_reference_dense(
         max(float(t[-1]), float(t_release)), theta0=theta0, t_release=t_release, k1=k1, k2=k2,
         tau_c=tau_c, tau_s=tau_s, v_s=v_s, delta=delta, c_v=c_v, inertia=inertia, ratio=ratio,
         rtol=rtol, atol=atol, extra_torque=extra_torque, max_events=max_events,
+        extra_holding=extra_holding, dahl=dahl,
     )
     theta, omega = traj.evaluate(t)
     return t, theta, omega

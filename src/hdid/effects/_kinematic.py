@@ -1,0 +1,49 @@
+"""Kinematic (positional) error of the gear inside the locked-output spring."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+from ._base import AbstractEffect, Motion, Parameter
+from ._stiffness import CubicStiffness
+
+
+class KinematicErrorStiffness(AbstractEffect):
+    r"""Cubic spring whose twist carries the gear's kinematic error (paper eq. 3).
+
+    With the output locked the flexspline twist is ``d = θ/N + e(θ)``,
+    ``e(θ) = ke_a·sin(n·θ) + ke_b·cos(n·θ)`` [rad, output side], ``n = order`` cycles per
+    WG revolution (2 for the elliptical wave generator). The spring's energy gives the WG
+    torque ``−T_k(d)·(1/N + e'(θ))``. Replaces the effect named ``"stiffness"``.
+
+    Residual mark when missing: a torque periodic in the WG angle that scales with the
+    spring torque. Over a ±0.157 rad swing ``n·θ`` spans only ±0.3 rad for ``n = 2``, so
+    ``ke_a`` looks like a change of ``k1`` and ``ke_b`` like a shift of the spring's zero:
+    free motion barely sees it. Positional error is measured with the output encoder in a
+    driven input/output test, not in free motion.
+    """
+
+    k1: Float[ArrayLike, ""]
+    k2: Float[ArrayLike, ""]
+    ke_a: Float[ArrayLike, ""]
+    ke_b: Float[ArrayLike, ""]
+    order: Float[ArrayLike, ""] = 2.0
+
+    name: ClassVar[str] = "stiffness"
+    parameters: ClassVar[tuple[Parameter, ...]] = CubicStiffness.parameters + (
+        Parameter("ke_a", "rad", "sine amplitude of the kinematic error, output side",
+                  transform="identity", scale=1e-4),
+        Parameter("ke_b", "rad", "cosine amplitude of the kinematic error, output side",
+                  transform="identity", scale=1e-4),
+    )
+
+    def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
+        del state
+        phase = self.order * motion.theta
+        e = self.ke_a * jnp.sin(phase) + self.ke_b * jnp.cos(phase)
+        de = self.order * (self.ke_a * jnp.cos(phase) - self.ke_b * jnp.sin(phase))
+        spring = CubicStiffness(k1=self.k1, k2=self.k2).spring_torque(motion.theta / motion.ratio + e)
+        return -spring * (1.0 / motion.ratio + de)

@@ -1,0 +1,31 @@
+"""Linear torsional stiffness: the cubic term switched off."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+from jaxtyping import Array, ArrayLike, Float
+
+from ._base import AbstractEffect, Motion, Parameter
+from ._stiffness import CubicStiffness
+
+
+class LinearStiffness(AbstractEffect):
+    r"""Linear spring ``T_k(d) = k1·d`` at the output (``CubicStiffness`` with ``k2 = 0``).
+
+    Use it to switch the cubic term off, e.g. to check whether the data need it. Replaces
+    the effect named ``"stiffness"``.
+
+    Residual mark when the cubic term is missing: the large first swings of a release are
+    slower in the model than in the gear (a hardening spring speeds them up), so the phase
+    error is largest early and shrinks as the amplitude decays.
+    """
+
+    k1: Float[ArrayLike, ""]
+
+    name: ClassVar[str] = "stiffness"
+    parameters: ClassVar[tuple[Parameter, ...]] = CubicStiffness.parameters[:1]
+
+    def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
+        del state
+        return -self.k1 * (motion.theta / motion.ratio) / motion.ratio

@@ -1,0 +1,44 @@
+"""Position-periodic torque: mesh ripple or motor cogging."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+from ._base import AbstractEffect, Motion, Parameter
+
+
+class PositionRipple(AbstractEffect):
+    r"""A torque periodic in the WG angle, ``τ = ripple_a·sin(n·θ) + ripple_b·cos(n·θ)``.
+
+    ``order`` ``n`` is in cycles per wave-generator revolution (2 for the elliptical
+    wave generator's mesh, the pole/slot count for motor cogging). It is not a fitted
+    parameter (the fit would be multimodal): scan it, as ``hdid diagnose`` does, or set
+    it. The sine/cosine pair makes amplitude and phase linear parameters;
+    ``amplitude = hypot(a, b)``, ``phase = atan2(b, a)``. Angles are measured from the
+    spring's zero, so the phase is relative to it.
+
+    Residual mark when missing: a residual periodic in the WG angle (not in time), with
+    the same phase in every run; the rest points scatter by ``≈ amplitude/(k1/N²)``. A
+    swing of ±0.157 rad spans only ``0.05·n`` periods, so orders below ~20 look like a
+    change of stiffness or of the spring's zero and cannot be told apart from them.
+    """
+
+    ripple_a: Float[ArrayLike, ""]
+    ripple_b: Float[ArrayLike, ""]
+    order: Float[ArrayLike, ""] = 24.0
+
+    name: ClassVar[str] = "ripple"
+    parameters: ClassVar[tuple[Parameter, ...]] = (
+        Parameter("ripple_a", "N m", "sine amplitude of the position-periodic torque (WG)",
+                  transform="identity", scale=1e-4),
+        Parameter("ripple_b", "N m", "cosine amplitude of the position-periodic torque (WG)",
+                  transform="identity", scale=1e-4),
+    )
+
+    def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
+        del state
+        phase = self.order * motion.theta
+        return self.ripple_a * jnp.sin(phase) + self.ripple_b * jnp.cos(phase)

@@ -1,0 +1,57 @@
+"""Catalog three-segment torsional stiffness (soft wind-up)."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+from ._base import AbstractEffect, Motion, Parameter
+
+
+class ThreeSegmentStiffness(AbstractEffect):
+    r"""Piecewise-linear spring of the Harmonic Drive catalogs, output side.
+
+    ``T(d) = K1·d`` up to ``T1``, slope ``K2`` up to ``T2 = T1 + dT12``, slope ``K3``
+    beyond, odd in the twist ``d = θ/N``; torque on the WG ``−T(d)/N``. The corners sit at
+    ``d1 = T1/K1`` and ``d2 = d1 + dT12/K2``. CSF-8-100 catalog: ``T1`` = 0.29 N m,
+    ``K1`` = 910, ``T2`` = 0.75 N m, ``K2`` = 1000, ``K3`` = 1200 N m/rad. Replaces the
+    effect named ``"stiffness"``.
+
+    Residual mark when missing: a cubic cannot follow a soft centre (``K1 < K2``), so the
+    swing period near rest is too short in the cubic model: the phase error grows as the
+    amplitude decays, and the last half-cycles before rest carry the residual. A release
+    amplitude that stays inside the first segment measures ``K1`` alone.
+    """
+
+    K1: Float[ArrayLike, ""]
+    K2: Float[ArrayLike, ""]
+    K3: Float[ArrayLike, ""]
+    T1: Float[ArrayLike, ""]
+    dT12: Float[ArrayLike, ""]
+
+    name: ClassVar[str] = "stiffness"
+    parameters: ClassVar[tuple[Parameter, ...]] = (
+        Parameter("K1", "N m/rad", "stiffness of the first segment (|T| ≤ T1), output side"),
+        Parameter("K2", "N m/rad", "stiffness of the second segment (T1 … T2), output side"),
+        Parameter("K3", "N m/rad", "stiffness beyond T2, output side"),
+        Parameter("T1", "N m", "output torque at the first corner"),
+        Parameter("dT12", "N m", "T2 − T1: output torque between the corners"),
+    )
+
+    def spring_torque(self, twist: Float[Array, ""]) -> Float[Array, ""]:
+        """Output-side torque [N m] at output twist ``twist`` [rad]."""
+        a = jnp.abs(twist)
+        d1 = self.T1 / self.K1
+        d2 = d1 + self.dT12 / self.K2
+        t = jnp.where(
+            a <= d1,
+            self.K1 * a,
+            jnp.where(a <= d2, self.T1 + self.K2 * (a - d1), self.T1 + self.dT12 + self.K3 * (a - d2)),
+        )
+        return jnp.sign(twist) * t
+
+    def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
+        del state
+        return -self.spring_torque(motion.theta / motion.ratio) / motion.ratio
