@@ -48,6 +48,7 @@ def fit(
     n_starts: int = 6,
     max_substep: float | None = None,
     max_steps: int = 300,
+    start_from_model: bool = False,
 ) -> FitResult:
     """Fit stiffness, friction (and optionally inertia) to all runs of a log jointly.
 
@@ -80,6 +81,9 @@ def fit(
         Longest RK4 substep [s] (default 0.5 ms).
     max_steps:
         Levenberg–Marquardt iteration limit per start.
+    start_from_model:
+        Also start from the model's own values (a warm start, e.g. a fitted model with
+        an effect added, as :func:`hdid.diagnose` does); that start is always run.
     """
     t_start = time.perf_counter()
     if not isinstance(log, Log):
@@ -118,7 +122,7 @@ def fit(
             "log more samples per run, add runs, or fix parameters (fix=/--fix)"
         )
 
-    U0, grid_cost = _grid_starts(problem, prep, model, n_starts)
+    U0, grid_cost = _grid_starts(problem, prep, model, n_starts, start_from_model)
     # Phase 1: every start a few iterations; phase 2: the best ones to convergence
     # (a start stuck in a poor basin would otherwise hold up the whole vmapped batch).
     active = jnp.ones(len(U0), dtype=bool)
@@ -175,8 +179,13 @@ def _fixed_values(model: Model, fix) -> dict[str, float]:
     return out
 
 
-def _grid_starts(problem: Problem, prep: Prepared, model: Model, n_starts: int):
-    """Coarse grid over natural frequency and Coulomb level, release times from the data."""
+def _grid_starts(
+    problem: Problem, prep: Prepared, model: Model, n_starts: int, from_model: bool = False
+):
+    """Coarse grid over natural frequency and Coulomb level, release times from the data.
+
+    With ``from_model`` the model's own values are a further candidate, always kept.
+    """
     N = model.ratio
     specs = model.parameter_specs()
     current = model.float_values()
@@ -189,9 +198,23 @@ def _grid_starts(problem: Problem, prep: Prepared, model: Model, n_starts: int):
     t1 = prep.times[np.arange(prep.n_runs), prep.first_moved]
     k2_ratio = CATALOG_CSF8["k2"] / CATALOG_CSF8["k1"]
     cands, keys = [], []
-    for f in GRID_FREQUENCIES_HZ:
+    freqs = list(GRID_FREQUENCIES_HZ)
+    if from_model:
+        probe = -0.5 * amp  # secant WG stiffness over half the release amplitude
+        k_model = float(model.rest_torque(probe)) / -probe
+        freqs.insert(0, math.sqrt(k_model / float(np.median(inertia))) / (2 * math.pi))
+    for i_f, f in enumerate(freqs):
         w = 2 * math.pi * f
         k_wg = float(np.median(inertia)) * w**2
+        if from_model and i_f == 0:
+            wr = np.sqrt(k_wg / inertia)
+            d = -np.sign(theta0)
+            eq = -d * current.get("tau_c", 0.0) / k_wg
+            c = np.clip((y1 - eq) / (theta0 - eq), -1.0, 1.0)
+            tr = np.clip(t1 - np.arccos(c) / wr, prep.release_lo, prep.release_hi)
+            cands.append(_pack(problem, specs, current, tr))
+            keys.append(-1.0)
+            continue
         decrement = float(np.median(np.abs(theta0) - np.minimum(rest, np.abs(theta0))))
         levels = np.concatenate([
             k_wg * decrement / (2 * GRID_HALF_CYCLES), GRID_COULOMB_FRACTIONS * k_wg * amp
@@ -219,9 +242,11 @@ def _grid_starts(problem: Problem, prep: Prepared, model: Model, n_starts: int):
     cost = np.where(np.isfinite(cost), cost, np.inf)
     # Best candidate per frequency, then the n best of those (diverse starting points).
     keys = np.array(keys)
-    chosen = []
+    chosen = [0] if from_model else []
     for i in np.argsort(cost):
-        if all(abs(math.log(keys[i] / keys[j])) > 0.15 for j in chosen):
+        if from_model and i == 0:
+            continue
+        if all(abs(math.log(keys[i] / keys[j])) > 0.15 for j in chosen if keys[j] > 0):
             chosen.append(i)
         if len(chosen) == n_starts:
             break
