@@ -270,3 +270,22 @@ class FitResult:
         from ._plot import plot_fit
 
         return plot_fit(self, path=path, axes=axes, fine_rate=fine_rate)
+
+    # -- residual views (see hdid._residuals) -------------------------------------------
+    def residuals(self):
+        """Per-sample frame: measured, model, residual, model state and phase."""
+        from ._residuals import residual_frame
+
+        return residual_frame(self)
+
+    def whiteness(self, max_lag: int | None = None):
+        """Ljung–Box and quantization-floor test of the moving residual."""
+        from ._residuals import whiteness
+
+        return whiteness(self, max_lag)
+
+    def plot_residuals(self, path=None, *, axes=None):
+        """Residual vs time, WG angle, velocity, deflection; ACF; spectrum (2×3 figure)."""
+        from ._residuals import plot_residuals
+
+        return plot_residuals(self, path=path, axes=axes)
