@@ -608,11 +608,13 @@ def plot_residuals(result, path=None, *, axes=None):
     mov = frame[frame["phase"] == "moving"]
     for ax, col, lab in ((ax_th, "theta_wg", "WG angle from spring zero (model) [rad]"),
                          (ax_om, "omega", "WG velocity (model) [rad/s]"),
-                         (ax_def, "deflection_out", "output deflection θ_wg/N [rad]")):
+                         (ax_def, "deflection_out", "output deflection θ_wg/N [mrad]")):
+        scale = 1e3 if col == "deflection_out" else 1.0
         for ph in PHASES:
             g = frame[frame["phase"] == ph]
             if len(g):
-                ax.plot(g[col], g["residual_counts"], ".", ms=3.5, color=colors[ph], label=ph)
+                ax.plot(scale * g[col], g["residual_counts"], ".", ms=3.5, color=colors[ph],
+                        label=ph)
         ax.set_xlabel(lab)
     for ax in (ax_t, ax_th, ax_om, ax_def):
         for y in (-0.5, 0.5):
@@ -628,10 +630,11 @@ def plot_residuals(result, path=None, *, axes=None):
     ax_def.set_title(f"vs output deflection ({len(mov)} moving samples)", fontsize=9)
     if wt.n:
         null = np.zeros(wt.max_lag) if wt.acf_null is None else wt.acf_null
-        ax_acf.bar(wt.lags, wt.acf, width=0.5, color="C0", label="ACF")
-        ax_acf.fill_between(wt.lags, null - wt.band, null + wt.band, color="0.85", step="mid",
-                            label="95 % band (around the null)")
-        ax_acf.plot(wt.lags, null, "_", ms=14, color="k", label="expected, correct model")
+        ax_acf.bar(wt.lags, 2 * wt.band, bottom=null - wt.band, width=0.8, color="0.85",
+                   label="95 % white band")
+        ax_acf.bar(wt.lags, wt.acf, width=0.35, color="C0", label="ACF")
+        ax_acf.plot(wt.lags, null, "_", ms=18, mew=2, color="k", label="expected, correct model")
+        ax_acf.set_xticks(wt.lags)
         ax_acf.legend(fontsize=7)
     ax_acf.axhline(0, color="k", lw=0.5)
     ax_acf.set_xlabel("lag [samples]")
