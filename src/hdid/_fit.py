@@ -6,6 +6,7 @@ import math
 import os
 import time
 from collections.abc import Iterable, Mapping
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -86,6 +87,53 @@ def fit(
         an effect added, as :func:`hdid.diagnose` does); that start is always run.
     """
     t_start = time.perf_counter()
+    setup = _setup(
+        log, model, inertia=inertia, fix=fix, free_inertia=free_inertia,
+        inertia_prior=inertia_prior, release_time=release_time,
+        counts_per_rev=counts_per_rev, max_substep=max_substep,
+    )
+    problem, prep, model = setup.problem, setup.prep, setup.model
+
+    U0, grid_cost = _grid_starts(problem, prep, model, n_starts, start_from_model)
+    # Phase 1: every start a few iterations; phase 2: the best ones to convergence
+    # (a start stuck in a poor basin would otherwise hold up the whole vmapped batch).
+    active = jnp.ones(len(U0), dtype=bool)
+    U, costs, ok, steps = _solve_many(problem, jnp.asarray(U0), active, jnp.asarray(PHASE1_STEPS))
+    keep = np.zeros(len(U0), dtype=bool)
+    keep[np.argsort(np.where(np.isfinite(costs), costs, np.inf))[:CONTINUED_STARTS]] = True
+    # Phase 2 in chunks: between chunks, lanes stuck in a basin far worse than the best
+    # lane (Δχ² > DROP_DCHI2) stop, so they do not hold up the vmapped batch.
+    U, costs, steps = np.array(U), np.array(costs), np.array(steps)
+    ok = np.zeros(len(U0), dtype=bool)
+    active = keep.copy()
+    used = 0
+    while active.any() and used < max_steps:
+        chunk = min(PHASE2_CHUNK, max_steps - used)
+        U2, c2, done2, s2 = map(
+            np.asarray, _solve_many(problem, jnp.asarray(U), jnp.asarray(active), jnp.asarray(chunk))
+        )
+        U[active], costs[active], steps[active] = U2[active], c2[active], steps[active] + s2[active]
+        ok[active] = done2[active]
+        used += chunk
+        best_now = np.min(np.where(np.isfinite(costs), costs, np.inf))
+        active = active & ~done2 & (costs - best_now < DROP_DCHI2)
+    return _finish(setup, U, costs, ok, steps, t_start)
+
+
+class _Setup(NamedTuple):
+    """A log made ready to fit: its arrays, the model and the least-squares problem."""
+
+    prep: Prepared
+    model: Model
+    problem: Problem
+    fixed: frozenset
+
+
+def _setup(
+    log, model=None, *, inertia=None, fix=None, free_inertia=None, inertia_prior=None,
+    release_time=None, counts_per_rev=None, max_substep=None,
+) -> _Setup:
+    """Read and prepare a log and build its :class:`Problem` (options as in :func:`fit`)."""
     if not isinstance(log, Log):
         log = read_log(log, counts_per_rev=counts_per_rev)
     prep = prepare(log, release_time=release_time)
@@ -121,30 +169,12 @@ def fit(
             f"{prep.source}: {n_data} samples but {problem.n_unknowns} unknowns; "
             "log more samples per run, add runs, or fix parameters (fix=/--fix)"
         )
+    return _Setup(prep, model, problem, frozenset(set(specs) - set(free)))
 
-    U0, grid_cost = _grid_starts(problem, prep, model, n_starts, start_from_model)
-    # Phase 1: every start a few iterations; phase 2: the best ones to convergence
-    # (a start stuck in a poor basin would otherwise hold up the whole vmapped batch).
-    active = jnp.ones(len(U0), dtype=bool)
-    U, costs, ok, steps = _solve_many(problem, jnp.asarray(U0), active, jnp.asarray(PHASE1_STEPS))
-    keep = np.zeros(len(U0), dtype=bool)
-    keep[np.argsort(np.where(np.isfinite(costs), costs, np.inf))[:CONTINUED_STARTS]] = True
-    # Phase 2 in chunks: between chunks, lanes stuck in a basin far worse than the best
-    # lane (Δχ² > DROP_DCHI2) stop, so they do not hold up the vmapped batch.
-    U, costs, steps = np.array(U), np.array(costs), np.array(steps)
-    ok = np.zeros(len(U0), dtype=bool)
-    active = keep.copy()
-    used = 0
-    while active.any() and used < max_steps:
-        chunk = min(PHASE2_CHUNK, max_steps - used)
-        U2, c2, done2, s2 = map(
-            np.asarray, _solve_many(problem, jnp.asarray(U), jnp.asarray(active), jnp.asarray(chunk))
-        )
-        U[active], costs[active], steps[active] = U2[active], c2[active], steps[active] + s2[active]
-        ok[active] = done2[active]
-        used += chunk
-        best_now = np.min(np.where(np.isfinite(costs), costs, np.inf))
-        active = active & ~done2 & (costs - best_now < DROP_DCHI2)
+
+def _finish(setup: _Setup, U, costs, ok, steps, t_start: float, **analyse_options) -> FitResult:
+    """Analyse the best of the local fits (``analyse_options`` go to :func:`analyse`)."""
+    problem, prep = setup.problem, setup.prep
     finite = np.isfinite(costs)
     if not finite.any():
         raise FitError(
@@ -155,7 +185,7 @@ def fit(
     best = int(order[0])
     u = U[best]
     starts = StartSummary.from_solutions(problem, U, costs, ok, steps, best)
-    result = analyse(problem, prep, u, starts, fixed=set(specs) - set(free))
+    result = analyse(problem, prep, u, starts, fixed=set(setup.fixed), **analyse_options)
     result.wall_time_s = time.perf_counter() - t_start
     if not ok[best]:
         result.warnings.append(
@@ -186,6 +216,13 @@ def _grid_starts(
 
     With ``from_model`` the model's own values are a further candidate, always kept.
     """
+    U, keys = _grid_candidates(problem, prep, model, from_model)
+    cost = np.asarray(_costs(problem, jnp.asarray(U)))
+    return _choose_starts(U, cost, keys, n_starts, from_model)
+
+
+def _grid_candidates(problem: Problem, prep: Prepared, model: Model, from_model: bool = False):
+    """Candidate unknown vectors of the grid (rows) and their frequency keys."""
     N = model.ratio
     specs = model.parameter_specs()
     current = model.float_values()
@@ -237,11 +274,13 @@ def _grid_starts(
             tr = np.clip(t1 - np.arccos(c) / wr, prep.release_lo, prep.release_hi)
             cands.append(_pack(problem, specs, {**current, **vals}, tr))
             keys.append(f)
-    U = np.array(cands)
-    cost = np.asarray(_costs(problem, jnp.asarray(U)))
+    return np.array(cands), np.array(keys)
+
+
+def _choose_starts(U, cost, keys, n_starts: int, from_model: bool = False):
+    """The best grid candidate per frequency, then the ``n_starts`` best of those."""
     cost = np.where(np.isfinite(cost), cost, np.inf)
     # Best candidate per frequency, then the n best of those (diverse starting points).
-    keys = np.array(keys)
     chosen = [0] if from_model else []
     for i in np.argsort(cost):
         if from_model and i == 0:

@@ -55,9 +55,20 @@ def unknown_labels(problem: Problem, prep: Prepared) -> list[str]:
     return labels
 
 
-def analyse(problem: Problem, prep: Prepared, u, starts: StartSummary, fixed: set[str]) -> FitResult:
-    u = jnp.asarray(u)
-    J, r = map(np.asarray, _jacobian(problem, u))
+def analyse(
+    problem: Problem, prep: Prepared, u, starts: StartSummary, fixed: set[str], *,
+    bracket: bool = True, precomputed: dict | None = None,
+) -> FitResult:
+    """Covariance, identifiability flags, derived quantities and per-run summaries at ``u``.
+
+    ``bracket=False`` skips the band bracket (the event-driven reference simulation of
+    every run, the slowest part); ``precomputed`` holds the JAX parts evaluated elsewhere
+    (:func:`hdid._vfit` does them for many logs at once): ``"jacobian"`` ``(J, r)``,
+    ``"dense"`` ``(theta, omega, stuck)`` and ``"derived"`` ``(values, jacobian)``.
+    """
+    pre = precomputed or {}
+    u = jnp.asarray(u) if not pre else np.asarray(u)
+    J, r = map(np.asarray, pre["jacobian"] if "jacobian" in pre else _jacobian(problem, u))
     P = problem.n_physical
     labels = unknown_labels(problem, prep)
     warnings: list[str] = []
@@ -162,11 +173,13 @@ def analyse(problem: Problem, prep: Prepared, u, starts: StartSummary, fixed: se
         )
 
     # -- derived quantities ---------------------------------------------------------
-    derived = _derived(problem, u, cov, null)
+    derived = _derived(problem, u, cov, null, pre.get("derived"))
 
     # -- per run --------------------------------------------------------------------
     _, t_release, theta0_enc, offset = problem.unpack_np(u)
-    theta_pred, omega_pred, stuck = map(np.asarray, _dense(problem, u, problem.times))
+    theta_pred, omega_pred, stuck = map(
+        np.asarray, pre["dense"] if "dense" in pre else _dense(problem, u, problem.times)
+    )
     off_run = offset[prep.setup_index]
     pred_enc = theta_pred + off_run[:, None]
     w2 = prep.weight**2
@@ -200,7 +213,7 @@ def analyse(problem: Problem, prep: Prepared, u, starts: StartSummary, fixed: se
                 f"peak speed {peak:.3g} rad/s is not far above the Stribeck velocity "
                 f"{values['v_s']:.3g} rad/s: tau_c, tau_s, v_s and delta blur together"
             )
-    bracket = band_bracket(model, runs)
+    bracket = band_bracket(model, runs) if bracket else None
     if bracket is not None:
         lo, hi = bracket
         hw, hw_std = derived["stick_band_halfwidth_rad"]
@@ -242,9 +255,11 @@ def analyse(problem: Problem, prep: Prepared, u, starts: StartSummary, fixed: se
     )
 
 
-def _derived(problem: Problem, u, cov, null) -> dict:
+def _derived(problem: Problem, u, cov, null, precomputed=None) -> dict:
     """Stick band, inertia-normalised torques, natural frequency, damping ratio (± std)."""
-    vals, jac = _derived_and_jacobian(problem, jnp.asarray(u))
+    if precomputed is None:
+        precomputed = _derived_and_jacobian(problem, jnp.asarray(u))
+    vals, jac = precomputed
     P = problem.n_physical
     out = {}
     for k, v in vals.items():
