@@ -122,7 +122,8 @@ def test_phases_follow_release_and_model_stick(paper, paper_frame):
         # The fit's weights. Moving samples have full weight except where the fitted
         # release precedes the last sample still at the logged hold reading (the model
         # has started but moved less than a count): those keep the hold's shared weight.
-        np.testing.assert_allclose(g["weight"], np.asarray(paper.problem.weight)[i, : run.n_samples])
+        fit_weight = np.asarray(paper.problem.weight)[i, : run.n_samples]
+        np.testing.assert_allclose(g["weight"], fit_weight)
         at_hold = mov["measured"] == g["measured"].iloc[0]
         assert np.all(mov["weight"][~at_hold] == 1.0)
 

@@ -301,7 +301,9 @@ def _expected_acf(cov: np.ndarray, max_lag: int) -> np.ndarray:
     return np.array([np.trace(G, offset=k) / tr if k < n else 0.0 for k in range(1, max_lag + 1)])
 
 
-def whiteness(result, max_lag: int | None = None, *, frame: pd.DataFrame | None = None) -> Whiteness:
+def whiteness(
+    result, max_lag: int | None = None, *, frame: pd.DataFrame | None = None
+) -> Whiteness:
     """Ljung–Box and quantization-floor test of the residual while the gear moves.
 
     Only ``moving`` samples are used: the hold before the release and the stuck tail read
@@ -372,7 +374,8 @@ def whiteness(result, max_lag: int | None = None, *, frame: pd.DataFrame | None 
         acf_null = np.zeros(max_lag)
     else:
         covs = _null_moving_cov(result, frame)
-        acf_null = (lengths[:, None] * np.array([_expected_acf(c, max_lag) for c in covs])).sum(0) / n
+        expected = np.array([_expected_acf(c, max_lag) for c in covs])
+        acf_null = (lengths[:, None] * expected).sum(axis=0) / n
         rms_null = float(np.sqrt(sum(np.trace(c) for c in covs) / n))
     q = float(n * (n + 2) * np.sum((acf - acf_null) ** 2 / np.maximum(n - lags, 1)))
     p = float(chi2.sf(q, max_lag))
@@ -604,7 +607,8 @@ def plot_residuals(result, path=None, *, axes=None):
     ax_t, ax_th, ax_om, ax_def, ax_acf, ax_sp = axes
     colors = {"hold": "0.6", "moving": "C0", "stuck": "C3"}
     for name, g in frame.groupby("run", sort=False, observed=True):
-        ax_t.plot(g["t_since_release"], g["residual_counts"], ".-", ms=3, lw=0.6, label=f"run {name}")
+        ax_t.plot(g["t_since_release"], g["residual_counts"], ".-", ms=3, lw=0.6,
+                  label=f"run {name}")
     mov = frame[frame["phase"] == "moving"]
     for ax, col, lab in ((ax_th, "theta_wg", "WG angle from spring zero (model) [rad]"),
                          (ax_om, "omega", "WG velocity (model) [rad/s]"),
@@ -651,8 +655,10 @@ def plot_residuals(result, path=None, *, axes=None):
     ax_sp.set_ylabel("power [rad²/Hz]")
     ax_sp.set_title("spectrum of moving residual", fontsize=9)
     verdict = "adequate" if wt.adequate else "NOT adequate"
-    fig.suptitle(f"{result.source}: residuals — {verdict} (white={wt.white}, at floor={wt.at_floor})",
-                 fontsize=10)
+    fig.suptitle(
+        f"{result.source}: residuals — {verdict} (white={wt.white}, at floor={wt.at_floor})",
+        fontsize=10,
+    )
     fig.tight_layout()
     if path is not None:
         fig.savefig(path, dpi=110)
