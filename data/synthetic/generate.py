@@ -257,6 +257,20 @@ RICH_DESIGN = dict(amplitudes=[0.157, -0.157, 0.12, -0.12, 0.08, -0.08, 0.05, -0
                    fs=1000.0, duration=0.3, hold=0.04, offsets_by_setup={"A": 0.005},
                    seed=20240612)
 
+#: A log with a hidden effect (Dahl hysteresis, ``hidden.py``) for ``hdid diagnose`` and
+#: ``notebooks/discover-missing-effect.ipynb``: 1 kHz, two amplitudes, one set-up.
+HIDDEN_DESIGN = dict(amplitudes=[0.157, -0.157, 0.08, -0.08], fs=1000.0, duration=0.25,
+                     hold=0.02, offsets_by_setup={"A": 0.005}, seed=20240613)
+
+
+def _hidden_module():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("_hdid_hidden", _HERE / "hidden.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
 
 def _write_csv(df: pd.DataFrame, path: Path, counts: bool) -> None:
     out = df.copy()
@@ -304,6 +318,17 @@ def build_all(outdir: Path | str = _HERE) -> dict:
                       "set-up. Quantized, noiseless. " + common_note)
     infor["rest_gap_pm0157"] = gap
     files["csf8_rich_1khz.csv"] = infor
+
+    hid = _hidden_module()
+    dfh, infoh = make_log(truth, **HIDDEN_DESIGN, return_truth=True,
+                          hidden=hid.reference_kwargs("hysteresis", truth))
+    _write_csv(dfh, outdir / "hidden_hysteresis_1khz.csv", counts=False)
+    infoh["hidden"] = {"effect": "hysteresis", "model": "DahlHysteresis",
+                       **hid.HIDDEN["hysteresis"]["truth"]}
+    infoh["notes"] = ("A hidden effect: Dahl hysteresis (f_h, sigma_h in 'hidden') on top of "
+                      "the base model. 1 kHz, releases +/-0.157 and +/-0.08 rad, one set-up. "
+                      "The base model's stick-band numbers do not apply. " + common_note)
+    files["hidden_hysteresis_1khz.csv"] = infoh
 
     with open(outdir / "truth.json", "w") as fh:
         json.dump(files, fh, indent=2)

@@ -31,7 +31,18 @@ _LAZY = {
     "CubicStiffness": ".effects",
     "StribeckFriction": ".effects",
     "ViscousFriction": ".effects",
+    "DahlHysteresis": ".effects",
+    "FreePlayStiffness": ".effects",
+    "AsymmetricStribeckFriction": ".effects",
+    "LoadDependentFriction": ".effects",
+    "PositionRipple": ".effects",
+    "ThreeSegmentStiffness": ".effects",
+    "KinematicErrorStiffness": ".effects",
+    "LinearStiffness": ".effects",
     "effects": ".effects",
+    "diagnose": "._diagnose",
+    "Diagnosis": "._diagnose",
+    "model_ladder": "._diagnose",
 }
 
 __all__ = sorted(_LAZY)
@@ -54,6 +65,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from . import effects
     from ._errors import FitError, HdidError, LogError
     from ._batch import fit_many
+    from ._diagnose import Diagnosis, diagnose, model_ladder
     from ._fit import fit
     from ._io import Log, Run, read_log, write_log
     from ._model import DEFAULT_INERTIA, DEFAULT_RATIO, Model
@@ -61,9 +73,17 @@ if TYPE_CHECKING:  # pragma: no cover
     from ._simulate import simulate
     from .effects import (
         AbstractEffect,
+        AsymmetricStribeckFriction,
         CubicStiffness,
+        DahlHysteresis,
+        FreePlayStiffness,
+        KinematicErrorStiffness,
+        LinearStiffness,
+        LoadDependentFriction,
         Motion,
         Parameter,
+        PositionRipple,
         StribeckFriction,
+        ThreeSegmentStiffness,
         ViscousFriction,
     )

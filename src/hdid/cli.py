@@ -1,4 +1,4 @@
-"""Command line: ``hdid fit`` and ``hdid simulate``.
+"""Command line: ``hdid fit``, ``hdid diagnose`` and ``hdid simulate``.
 
 The commands only parse arguments, call the library, print a report and write files;
 all science lives in the library. Heavy imports (jax) happen inside the commands so
@@ -74,7 +74,7 @@ def main():
 @click.option("--free-inertia", is_flag=True, help="Fit the inertia (needs --added-inertia runs or --inertia-prior).")
 @click.option("--inertia-prior", metavar="MEAN,REL", help="Log-normal prior on the inertia, e.g. 7e-7,0.3.")
 @click.option("--fix", multiple=True, metavar="NAME[=VALUE]", help="Hold a parameter fixed (repeatable).")
-@click.option("--add", "add_effects", multiple=True, metavar="EFFECT", help="Add a library effect (repeatable): backlash, stiffness, stribeck, viscous.")
+@click.option("--add", "add_effects", multiple=True, metavar="EFFECT", help="Add a library effect (repeatable): asymmetric_friction, backlash, hysteresis, kinematic_error, linear_stiffness, load_friction, ripple, soft_windup, stiffness, stribeck, viscous.")
 @click.option("--remove", "remove_effects", multiple=True, metavar="EFFECT", help="Remove an effect of the base model (repeatable), e.g. viscous.")
 @click.option("--effect-file", "effect_files", multiple=True, metavar="FILE.py", help="Your own effect: a Python file defining AbstractEffect instances (repeatable).")
 @click.option("--release-time", type=float, help="Known release instant [s] in each run's time axis.")
@@ -272,6 +272,72 @@ def _finite(obj):
     if isinstance(obj, (list, tuple)):
         return [_finite(v) for v in obj]
     return obj
+
+
+@main.command("diagnose")
+@click.argument("log", type=click.Path(dir_okay=False))
+@click.option("--json", "json_out", metavar="OUT.json", help="Write verdict, candidates (best first) and the model ladder as JSON.")
+@click.option("--plot", "plot_out", metavar="OUT.png", help="Model ladder: RMS and BIC after each step.")
+@click.option("--residuals", "residuals_out", metavar="OUT.png", help="Residual views of the current model (vs time, angle, velocity, twist; ACF, spectrum).")
+@click.option("--candidates", metavar="A,B,...", help="Only these candidates (default: every library effect that applies).")
+@click.option("--steps", type=click.IntRange(1, 5), default=1, show_default=True, help="Forward-selection steps (add the best, diagnose again).")
+@click.option("--inertia", type=float, help="Total WG inertia [kg m^2] (default 7e-7).")
+@click.option("--fix", multiple=True, metavar="NAME[=VALUE]", help="Hold a parameter fixed (repeatable).")
+@click.option("--add", "add_effects", multiple=True, metavar="EFFECT", help="Start from the base model plus this library effect (repeatable).")
+@click.option("--remove", "remove_effects", multiple=True, metavar="EFFECT", help="Start from the base model without this effect (repeatable).")
+@click.option("--effect-file", "effect_files", multiple=True, metavar="FILE.py", help="Your own effect in the starting model (repeatable).")
+@click.option("--release-time", type=float, help="Known release instant [s] in each run's time axis.")
+@click.option("--counts-per-rev", type=float, help="theta holds raw encoder counts with this many per revolution.")
+@click.option("--quiet", "-q", is_flag=True, help="No report on stdout.")
+def diagnose_cmd(log, json_out, plot_out, residuals_out, candidates, steps, inertia, fix,
+                 add_effects, remove_effects, effect_files, release_time, counts_per_rev, quiet):
+    """Fit the model to LOG.csv, then rank the effects that could be missing.
+
+    Each candidate effect is added to the fitted model and refitted; candidates are ranked
+    by ΔBIC. Verdicts: missing_effect (strong evidence and the residual then at the
+    quantization floor), adequate (residual as white as the quantization allows),
+    unexplained (structured residual no library effect fixes).
+    """
+    log_path = Path(log)
+    for opt, path in (("--json", json_out), ("--plot", plot_out), ("--residuals", residuals_out)):
+        _check_output(path, [log_path], opt)
+    model = _build_model(add_effects, remove_effects, effect_files)
+    fixed = _parse_fix(fix)
+    wanted = [c.strip() for c in candidates.split(",") if c.strip()] if candidates else None
+
+    from . import _io
+    from ._diagnose import diagnose
+    from ._errors import HdidError
+
+    try:
+        data = _io.read_log(log_path, counts_per_rev=counts_per_rev)
+        result = diagnose(
+            data,
+            model,
+            candidates=wanted,
+            steps=steps,
+            progress=None if quiet else (lambda m: click.echo(m, err=True)),
+            inertia=inertia,
+            fix=fixed or None,
+            release_time=release_time,
+        )
+    except (HdidError, ValueError, KeyError) as exc:
+        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
+        raise _Fail(str(msg).replace("\n", " ")) from None
+    if not quiet:
+        click.echo(result.report())
+    if json_out:
+        Path(json_out).write_text(json.dumps(_finite(result.to_dict()), indent=2) + "\n")
+        if not quiet:
+            click.echo(f"\nwrote {json_out}")
+    if plot_out:
+        result.plot_ladder(plot_out)
+        if not quiet:
+            click.echo(f"wrote {plot_out}")
+    if residuals_out:
+        result.base.plot_residuals(residuals_out)
+        if not quiet:
+            click.echo(f"wrote {residuals_out}")
 
 
 @main.command("simulate")
