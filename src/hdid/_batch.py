@@ -2,14 +2,27 @@
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Iterable
 from typing import Any
 
-from ._errors import HdidError
+#: Logs per dask task (each worker runs the vectorised batch fit on its chunk).
+DASK_CHUNK = 64
 
 
-def fit_many(logs: Iterable[Any], *, progress: bool = False, **options):
+def fit_many(
+    logs: Iterable[Any],
+    *,
+    progress: bool = False,
+    vectorize: bool = True,
+    band_bracket: bool | None = None,
+    lanes: int | None = None,
+    threads: int | None = None,
+    client=None,
+    chunk_size: int | None = None,
+    **options,
+):
     """Fit every log and tabulate the results.
 
     Parameters
@@ -18,8 +31,25 @@ def fit_many(logs: Iterable[Any], *, progress: bool = False, **options):
         CSV paths, pandas DataFrames or :class:`~hdid.Log` objects.
     progress:
         Show a progress bar (tqdm).
+    vectorize:
+        Run the multi-start fits of many logs as lanes of shared vmapped programs
+        (default). ``False``: one :func:`hdid.fit` after another (the reference).
+    band_bracket:
+        Compute each log's model-free stick-band bracket (``stick_band_bracket_*``
+        columns) with the event-driven reference simulator. Default: ``False`` when
+        vectorised (it is per-log NumPy/SciPy work, about a third of the batch's time),
+        ``True`` for ``vectorize=False`` (as :func:`hdid.fit`). Without it the bracket
+        columns are empty and ``band_bracket`` says so.
+    lanes, threads:
+        Vectorised path: (log, start) lanes per compiled call (default 16) and threads
+        running calls concurrently (default: the CPU count, at most 8).
+    client:
+        A ``dask.distributed.Client``: the logs are split into chunks of ``chunk_size``
+        (default 64) and each worker runs the vectorised fit on its chunks. Paths must be
+        readable on the workers (or pass DataFrames).
     **options:
-        Passed to :func:`hdid.fit` (``inertia``, ``fix``, ``counts_per_rev``, …).
+        Passed to :func:`hdid.fit` (``inertia``, ``fix``, ``counts_per_rev``, ``n_starts``,
+        …).
 
     Returns
     -------
@@ -27,53 +57,144 @@ def fit_many(logs: Iterable[Any], *, progress: bool = False, **options):
         One row per log, in input order: ``log``, ``error`` (``None`` when the fit worked),
         every parameter and its ``<name>_std``, ``stick_band_halfwidth_rad`` (± std and the
         data bracket), ``rms_residual_rad``, ``n_warnings``, ``warnings`` and ``result``
-        (the :class:`~hdid.FitResult`, for everything else).
+        (the :class:`~hdid.FitResult`, for everything else). ``table.attrs["timing"]``:
+        wall seconds in total, compiling (``compile_s``: JAX tracing, lowering and XLA
+        compilation or persistent-cache reads) and running (``run_s``), and per phase.
 
     Notes
     -----
-    Logs of the same shape (runs × samples) reuse one compiled fit, so a production
-    line's logs cost one compile. The fits run one after another (see the issue notes on
-    vectorising across logs).
+    Vectorised, every log gets the same schedule as :func:`hdid.fit` (grid, all starts a
+    few iterations, the best ones to convergence); logs whose problems have the same
+    shape share one compiled program. A log whose fit diverges gets an error in its row.
     """
     import pandas as pd
 
-    from ._fit import fit
-
     items = list(logs)
+    names = [os.fspath(x) if isinstance(x, (str, os.PathLike)) else f"<log {i}>"
+             for i, x in enumerate(items)]
+    if band_bracket is None:
+        band_bracket = not vectorize
     bar = None
     if progress:
         from tqdm.auto import tqdm
 
         bar = tqdm(total=len(items), unit="log")
-    rows = []
-    for i, item in enumerate(items):
-        name = os.fspath(item) if isinstance(item, (str, os.PathLike)) else f"<log {i}>"
-        row: dict[str, Any] = {"log": name, "error": None}
-        try:
-            res = fit(item, **options)
-        except (HdidError, ValueError, KeyError) as exc:
-            msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
-            row["error"] = str(msg).replace("\n", " ")
-            row["result"] = None
-        else:
-            for n, p in res.parameters.items():
-                row[n] = p.value
-                row[f"{n}_std"] = None if p.fixed else p.std
-            hw, hw_std = res.derived["stick_band_halfwidth_rad"]
-            row["stick_band_halfwidth_rad"] = hw
-            row["stick_band_halfwidth_std_rad"] = hw_std
-            lo, hi = res.band_bracket if res.band_bracket else (None, None)
-            row["stick_band_bracket_lo_rad"], row["stick_band_bracket_hi_rad"] = lo, hi
-            row["k1/inertia"] = res.derived["k1/inertia"][0] if "k1/inertia" in res.derived else None
-            row["rms_residual_rad"] = res.rms_residual_rad
-            row["rms_residual_counts"] = res.rms_residual_rad / res.resolution_rad
-            row["n_runs"] = len(res.runs)
-            row["n_warnings"] = len(res.warnings)
-            row["warnings"] = " | ".join(res.warnings)
-            row["result"] = res
-        rows.append(row)
-        if bar is not None:
-            bar.update(1)
+
+    if client is not None:
+        rows, timing = _fit_dask(client, items, names, chunk_size or DASK_CHUNK, bar,
+                                 dict(band_bracket=band_bracket, lanes=lanes, threads=threads,
+                                      **options))
+    elif vectorize:
+        rows, timing = _fit_vectorized(items, names, bar, band_bracket, lanes, threads, options)
+    else:
+        rows, timing = _fit_loop(items, names, bar, band_bracket, options)
     if bar is not None:
         bar.close()
-    return pd.DataFrame(rows)
+    table = pd.DataFrame(rows)
+    table.attrs["timing"] = timing
+    return table
+
+
+def _fit_loop(items, names, bar, band_bracket, options):
+    import time
+
+    from ._fit import fit
+    from ._vfit import LOG_ERRORS
+
+    t0 = time.perf_counter()
+    rows = []
+    for name, item in zip(names, items):
+        try:
+            res = fit(item, **options)
+            if not band_bracket:
+                res.band_bracket = None
+        except LOG_ERRORS as exc:
+            res = exc
+        rows.append(_row(name, res, band_bracket))
+        if bar is not None:
+            bar.update(1)
+    n_failed = sum(r["error"] is not None for r in rows)
+    return rows, {"total_s": time.perf_counter() - t0, "n_logs": len(rows),
+                  "n_failed": n_failed, "mode": "loop"}
+
+
+def _fit_vectorized(items, names, bar, band_bracket, lanes, threads, options):
+    from ._vfit import DEFAULT_LANES, fit_batch
+
+    def done(i, outcome):
+        if bar is not None:
+            bar.update(1)
+
+    outcomes, timing = fit_batch(
+        items, lanes=lanes or DEFAULT_LANES, threads=threads, bracket=band_bracket,
+        on_done=done, **options,
+    )
+    rows = [_row(name, res, band_bracket) for name, res in zip(names, outcomes)]
+    return rows, {**timing.to_dict(), "mode": "vectorized"}
+
+
+def _fit_chunk(items, names, options):
+    """One dask task: the vectorised fit of a chunk of logs (runs on a worker)."""
+    opts = dict(options)
+    band_bracket = opts.pop("band_bracket")
+    lanes, threads = opts.pop("lanes"), opts.pop("threads")
+    return _fit_vectorized(items, names, None, band_bracket, lanes, threads, opts)
+
+
+def _fit_dask(client, items, names, chunk, bar, options):
+    import time
+
+    from distributed import as_completed
+
+    t0 = time.perf_counter()
+    chunk = max(int(chunk), 1)
+    starts = list(range(0, len(items), chunk))
+    futures = {
+        client.submit(_fit_chunk, items[s : s + chunk], names[s : s + chunk], options,
+                      pure=False): s
+        for s in starts
+    }
+    rows: list = [None] * len(items)
+    timings = []
+    for fut in as_completed(futures):
+        s = futures[fut]
+        part, timing = fut.result()
+        rows[s : s + len(part)] = part
+        timings.append(timing)
+        if bar is not None:
+            bar.update(len(part))
+    summed = {k: sum(t.get(k, 0) for t in timings)
+              for k in ("compile_s", "run_s", "setup_s", "grid_s", "solve_s", "analyse_s",
+                        "lane_steps", "n_failed")}
+    return rows, {"total_s": time.perf_counter() - t0, "n_logs": len(items), "mode": "dask",
+                  "n_tasks": len(starts), "workers_sum": summed}
+
+
+def _row(name: str, res, band_bracket: bool) -> dict[str, Any]:
+    from ._vfit import error_text
+
+    row: dict[str, Any] = {"log": name, "error": None}
+    if isinstance(res, BaseException):
+        row["error"] = error_text(res)
+        row["result"] = None
+        return row
+    for n, p in res.parameters.items():
+        row[n] = p.value
+        row[f"{n}_std"] = None if p.fixed else p.std
+    hw, hw_std = res.derived["stick_band_halfwidth_rad"]
+    row["stick_band_halfwidth_rad"] = hw
+    row["stick_band_halfwidth_std_rad"] = hw_std
+    lo, hi = res.band_bracket if res.band_bracket else (None, None)
+    row["stick_band_bracket_lo_rad"], row["stick_band_bracket_hi_rad"] = lo, hi
+    row["band_bracket"] = ("computed" if res.band_bracket else
+                           "not available" if band_bracket else "skipped (band_bracket=False)")
+    row["k1/inertia"] = res.derived["k1/inertia"][0] if "k1/inertia" in res.derived else None
+    row["rms_residual_rad"] = res.rms_residual_rad
+    row["rms_residual_counts"] = res.rms_residual_rad / res.resolution_rad
+    row["n_runs"] = len(res.runs)
+    row["n_warnings"] = len(res.warnings)
+    row["warnings"] = " | ".join(res.warnings)
+    row["result"] = res
+    if not all(math.isfinite(v) for v in (hw, res.rms_residual_rad)):
+        row["error"] = "non-finite fit result"
+    return row
