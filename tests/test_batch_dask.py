@@ -1,0 +1,52 @@
+"""fit_many on a dask.distributed cluster: chunks of logs to worker processes."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+import hdid
+
+distributed = pytest.importorskip("distributed")
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "data" / "synthetic" / "csf8_paper.csv"
+
+
+def _other_log(path: Path) -> Path:
+    spec = importlib.util.spec_from_file_location("hdid_gen_dask", EXAMPLE.parent / "generate.py")
+    gen = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(gen)
+    truth = dict(gen.TRUTH_CSF8, k1=800.0, tau_c=2.2e-3)
+    gen.make_log(truth, **dict(gen.PAPER_DESIGN, seed=5)).to_csv(path, index=False)
+    return path
+
+
+def test_fit_many_on_a_local_cluster(tmp_path):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time,theta\n0,abc\n")
+    logs = [EXAMPLE, bad, _other_log(tmp_path / "other.csv")]
+    local = hdid.fit_many(logs, n_starts=2)
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster, distributed.Client(cluster) as client:
+        # chunk_size=2: two tasks, i.e. both workers busy
+        table = hdid.fit_many(logs, client=client, chunk_size=2, n_starts=2)
+        workers = {w["id"] for w in client.scheduler_info()["workers"].values()}
+    assert len(workers) == 2
+    assert table.attrs["timing"]["mode"] == "dask" and table.attrs["timing"]["n_tasks"] == 2
+    assert list(table["log"]) == [str(p) for p in logs]
+    assert "row 2" in table.loc[1, "error"] and table.loc[1, "result"] is None
+    for i in (0, 2):
+        assert pd.isna(table.loc[i, "error"])
+        res = table.loc[i, "result"]
+        assert res.parameters["k1"].value == table.loc[i, "k1"]
+        # Same program, same inputs on a worker process: the same fit (tolerance as in
+        # tests/test_batch.py: 1e-3 std is far below any change of schedule).
+        ref = local.loc[i, "result"]
+        for name in ref.problem.free:
+            assert abs(res.parameters[name].value - ref.parameters[name].value) <= (
+                1e-3 * ref.parameters[name].std
+            )
