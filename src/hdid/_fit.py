@@ -234,25 +234,30 @@ def _grid_candidates(problem: Problem, prep: Prepared, model: Model, from_model:
     y1 = prep.theta[np.arange(prep.n_runs), prep.first_moved] - offset
     t1 = prep.times[np.arange(prep.n_runs), prep.first_moved]
     k2_ratio = CATALOG_CSF8["k2"] / CATALOG_CSF8["k1"]
+    # (loop invariants hoisted: this runs for every log of a batch)
+    med_inertia = float(np.median(inertia))
+    rest_max = float(rest.max())
+    decrement = float(np.median(np.abs(theta0) - np.minimum(rest, np.abs(theta0))))
+    free = problem.free
+    pack = _packer(problem, specs)
     cands, keys = [], []
     freqs = list(GRID_FREQUENCIES_HZ)
     if from_model:
         probe = -0.5 * amp  # secant WG stiffness over half the release amplitude
         k_model = float(model.rest_torque(probe)) / -probe
-        freqs.insert(0, math.sqrt(k_model / float(np.median(inertia))) / (2 * math.pi))
+        freqs.insert(0, math.sqrt(k_model / med_inertia) / (2 * math.pi))
     for i_f, f in enumerate(freqs):
         w = 2 * math.pi * f
-        k_wg = float(np.median(inertia)) * w**2
+        k_wg = med_inertia * w**2
+        wr = np.sqrt(k_wg / inertia)
+        d = -np.sign(theta0)
         if from_model and i_f == 0:
-            wr = np.sqrt(k_wg / inertia)
-            d = -np.sign(theta0)
             eq = -d * current.get("tau_c", 0.0) / k_wg
             c = np.clip((y1 - eq) / (theta0 - eq), -1.0, 1.0)
             tr = np.clip(t1 - np.arccos(c) / wr, prep.release_lo, prep.release_hi)
-            cands.append(_pack(problem, specs, current, tr))
+            cands.append(pack(current, tr))
             keys.append(-1.0)
             continue
-        decrement = float(np.median(np.abs(theta0) - np.minimum(rest, np.abs(theta0))))
         levels = np.concatenate([
             k_wg * decrement / (2 * GRID_HALF_CYCLES), GRID_COULOMB_FRACTIONS * k_wg * amp
         ])
@@ -261,18 +266,16 @@ def _grid_candidates(problem: Problem, prep: Prepared, model: Model, from_model:
                 "k1": k_wg * N**2,
                 "k2": k_wg * N**2 * k2_ratio,
                 "tau_c": tau_c,
-                "tau_s": max(1.3 * tau_c, 1.05 * k_wg * float(rest.max())),
-                "c_v": 0.05 * 2 * math.sqrt(k_wg * float(np.median(inertia))),
+                "tau_s": max(1.3 * tau_c, 1.05 * k_wg * rest_max),
+                "c_v": 0.05 * 2 * math.sqrt(k_wg * med_inertia),
             }
-            vals = {n: v for n, v in vals.items() if n in problem.free}
+            vals = {n: v for n, v in vals.items() if n in free}
             full = {**current, **vals}
             # Release instant: invert the first half-cycle θ = θ_eq + (θ0 − θ_eq)·cos(ω τ).
-            wr = np.sqrt(k_wg / inertia)
-            d = -np.sign(theta0)
             eq = -d * full.get("tau_c", 0.0) / k_wg
             c = np.clip((y1 - eq) / (theta0 - eq), -1.0, 1.0)
             tr = np.clip(t1 - np.arccos(c) / wr, prep.release_lo, prep.release_hi)
-            cands.append(_pack(problem, specs, {**current, **vals}, tr))
+            cands.append(pack(full, tr))
             keys.append(f)
     return np.array(cands), np.array(keys)
 
@@ -301,6 +304,23 @@ def _pack(problem: Problem, specs, values, t_release) -> np.ndarray:
     parts.append(np.zeros(problem.n_runs))
     parts.append(np.zeros(problem.n_setups))
     return np.concatenate(parts)
+
+
+def _packer(problem: Problem, specs):
+    """:func:`_pack` for many candidates of one problem (its arrays read once)."""
+    free, release_free = problem.free, problem.release_free
+    lo, hi = np.asarray(problem.release_lo), np.asarray(problem.release_hi)
+    tail = np.zeros(problem.n_runs + problem.n_setups)
+    spec_list = [specs[n] for n in free]
+
+    def pack(values, t_release):
+        parts = [np.array([to_unconstrained(sp, values[n]) for sp, n in zip(spec_list, free)])]
+        if release_free:
+            parts.append(interval_to_u(t_release, lo, hi))
+        parts.append(tail)
+        return np.concatenate(parts)
+
+    return pack
 
 
 @eqx.filter_jit
