@@ -332,10 +332,11 @@ def render(res: dict) -> str:
              f"(the shipped files have none).")
     L.append(f"- `hdid.fit(log, inertia=7e-7)` (true inertia, fixed), then "
              f"`sample_posterior(fit, n_steps=N, seed=i)` with the default walkers "
-             f"(max(32, 2·D+2): {', '.join(map(str, agg['pooled']['n_walkers']))}); "
-             f"N = {o['paper_steps']} (paper) / {o['rich_steps']} (rich). Intervals: central "
-             f"68 % / 95 % of the draws after `sample_posterior`'s burn-in (2 τ_max) and "
-             f"thinning (τ_max/2).")
+             f"(max(32, 2·D): {', '.join(map(str, agg['pooled']['n_walkers']))}); "
+             f"N = {o['paper_steps']} (paper) / {o['rich_steps']} (rich) kept steps. Sampler: "
+             f"differential-evolution moves, walkers from the Laplace approximation, 400 "
+             f"discarded burn-in steps; intervals: central 68 % / 95 % of the kept draws "
+             f"thinned by τ_max/2.")
     if res.get("stopped_early"):
         L.append(f"- **Stopped early** by the budget guard: {res['stopped_early']}")
     if failed:

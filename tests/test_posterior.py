@@ -14,7 +14,7 @@ import pytest
 from scipy.stats import norm
 
 import hdid
-from hdid._posterior import LogPosterior, _log_interval, sample_posterior
+from hdid._posterior import LogPosterior, _log_interval, _reset_outliers, sample_posterior
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "data" / "synthetic" / "csf8_paper.csv"
 
@@ -51,19 +51,55 @@ def test_vectorised_log_prob_equals_per_walker(fit):
 
 
 def test_short_chain_is_reproducible_and_summarised(fit):
-    a = sample_posterior(fit, n_steps=150, seed=3)
-    b = sample_posterior(fit, n_steps=150, seed=3)
+    a = sample_posterior(fit, n_steps=150, burn_in=50, seed=3)
+    b = sample_posterior(fit, n_steps=150, burn_in=50, seed=3)
     np.testing.assert_array_equal(a.chain, b.chain)
     s = a.to_dict()
     assert set(s["posterior"]) >= {"k1", "tau_c", "stick_band_halfwidth_rad", "natural_frequency_hz"}
     for v in s["posterior"].values():
         assert v["ci95"][0] <= v["ci68"][0] <= v["median"] <= v["ci68"][1] <= v["ci95"][1]
     # 150 steps is far below 50 autocorrelation times: the sampler must say so.
-    assert any("autocorrelation" in w for w in s["posterior_diagnostics"]["warnings"])
+    assert any("NOT CONVERGED" in w and "autocorrelation" in w
+               for w in s["posterior_diagnostics"]["warnings"])
+    assert a.chain.shape[0] == 150 and a.burn_in == 50  # burn-in run and discarded
 
 
 def test_too_short_chain_does_not_crash(fit):
     # 5 steps: some walkers never move, τ is NaN; the sampler must warn, not crash.
-    post = sample_posterior(fit, n_steps=5, seed=1)
+    post = sample_posterior(fit, n_steps=5, burn_in=0, seed=1)
     assert post.draws.shape[0] > 0
     assert post.warnings
+
+
+def test_gaussian_likelihood_has_the_quantization_floor(fit):
+    # likelihood="gaussian": rounding as uniform noise of variance q²/12 added to σ_n²
+    # (Widrow), so even σ_n → 0 leaves the q/√12 floor. Checked against the formula.
+    q = float(fit.problem.step)
+    lp = LogPosterior(problem=fit.problem, centre=jnp.asarray(fit.u), temper=jnp.asarray(1.0),
+                      quantized=False, quant_var=q**2 / 12)
+    x = np.concatenate([fit.u, [np.log(0.1 * q)]])
+    got = float(lp.log_prob(jnp.asarray(x)))
+    p = fit.problem
+    r = np.asarray(p.predict(jnp.asarray(fit.u))) - np.asarray(p.theta)
+    var = (0.1 * q) ** 2 + q**2 / 12
+    ll = np.sum(np.asarray(p.weight) ** 2 * (-0.5 * r**2 / var - 0.5 * np.log(2 * np.pi * var)))
+    prior = float(lp._log_prior(jnp.asarray(fit.u), jnp.log(0.1 * q)))
+    assert got == pytest.approx(ll + prior, rel=1e-10)
+
+
+def test_stranded_walker_is_reset_after_burn_in():
+    # 2·(log p_max − log p) of a posterior draw is ≈ χ²_D; a walker 200 log-units below the
+    # best (far past the 0.9999 quantile, ≈ 26 for D = 18) is stranded, the rest are not.
+    import emcee
+
+    rng = np.random.default_rng(0)
+    D, W = 18, 36
+    X = rng.standard_normal((W, D))
+    lp = -0.5 * np.sum(X**2, axis=1)
+    X[5] += 20.0
+    lp[5] = -200.0
+    state = emcee.State(X, log_prob=lp)
+    new, n = _reset_outliers(state, rng, D)
+    assert n == 1
+    assert np.all(np.abs(new.coords[5]) < 10)          # now on top of a good walker
+    np.testing.assert_array_equal(np.delete(new.coords, 5, 0), np.delete(X, 5, 0))

@@ -20,7 +20,15 @@ Priors (documented defaults, all in the sampled space):
   weak priors (``v_s``, ``delta``) and the inertia prior when the inertia is free;
 - release instant: uniform on its bracket between samples; start angle flat within
   ±5 encoder steps of its least-squares value; offset flat;
-- ``σ_n``: log-uniform between ``0.02 q`` and ``20 q``.
+- ``σ_n``: log-uniform between ``0.05 q`` (the simulator's accuracy) and ``20 q``.
+
+``likelihood="gaussian"`` instead treats the rounding as additive uniform noise of
+variance ``q²/12`` (Widrow): Gaussian with ``σ² = σ_n² + q²/12``, never below the
+quantization floor.
+
+Sampling: emcee with differential-evolution moves (:func:`default_moves`), walkers started
+from the least-squares (Laplace) approximation, a discarded burn-in, and a kept chain grown
+until it is ``MIN_TAU_MULTIPLE`` integrated autocorrelation times long.
 """
 
 from __future__ import annotations
@@ -44,8 +52,11 @@ from ._transforms import from_unconstrained
 #: Flat prior half-width around the least-squares value in the transformed space
 #: (±7 in log ≈ a factor 1000 either way: uninformative but proper).
 PRIOR_HALF_WIDTH = 7.0
-#: Noise prior bounds, in encoder steps.
-SIGMA_BOUNDS = (0.02, 20.0)
+#: Noise prior bounds, in encoder steps. The floor is the forward model's own accuracy:
+#: the simulator's error at the default substep is ≤ 0.042 steps
+#: (benchmarks/results/simulator_schemes.md); a smaller σ_n would claim the model reproduces
+#: readings more exactly than it can compute them.
+SIGMA_BOUNDS = (0.05, 20.0)
 #: Chains shorter than this many integrated autocorrelation times get a warning.
 MIN_TAU_MULTIPLE = 50
 
@@ -71,6 +82,8 @@ class LogPosterior(eqx.Module):
     centre: jax.Array
     temper: jax.Array
     quantized: bool = eqx.field(static=True)
+    sigma_bounds: tuple[float, float] = SIGMA_BOUNDS
+    quant_var: float = 0.0
 
     @property
     def ndim(self) -> int:
@@ -87,8 +100,11 @@ class LogPosterior(eqx.Module):
         if self.quantized:
             ll = _log_interval(p.theta, pred, 0.5 * q, sigma)
         else:
-            z = (p.theta - pred) / sigma
-            ll = -0.5 * z**2 - log_sigma - 0.5 * jnp.log(2 * jnp.pi)
+            # Gaussian; on a quantized log the rounding error is added as uniform noise of
+            # variance q²/12 (Widrow): the total noise never falls below that floor.
+            var = sigma**2 + self.quant_var
+            z2 = (p.theta - pred) ** 2 / var
+            ll = -0.5 * z2 - 0.5 * jnp.log(2 * jnp.pi * var)
         total = lp + self.temper * jnp.sum(w2 * ll)
         return jnp.where(jnp.isfinite(total) & jnp.isfinite(lp), total, -jnp.inf)
 
@@ -98,7 +114,7 @@ class LogPosterior(eqx.Module):
         lp = -0.5 * jnp.sum(p.prior_residuals(u) ** 2)
         outside = jnp.any(jnp.abs(u[:P] - self.centre[:P]) > PRIOR_HALF_WIDTH)
         q = p.step
-        lo, hi = jnp.log(SIGMA_BOUNDS[0] * q), jnp.log(SIGMA_BOUNDS[1] * q)
+        lo, hi = jnp.log(self.sigma_bounds[0] * q), jnp.log(self.sigma_bounds[1] * q)
         outside |= (log_sigma < lo) | (log_sigma > hi)
         if p.release_free:
             v = u[P : P + R]
@@ -147,6 +163,7 @@ class PosteriorResult:
     residual_rho1: float
     fit: Any = field(repr=False)
     draws: np.ndarray = field(repr=False)    # (draws, D) sampled space, after burn/thin
+    burn_in: int = 0                         # steps run and discarded before ``chain``
 
     def summary(self) -> dict[str, dict[str, Any]]:
         """Median and central 68 % / 95 % intervals of every parameter and derived quantity."""
@@ -265,46 +282,132 @@ def residual_autocorrelation(fit) -> float:
     return num / den if den > 0 else 0.0
 
 
+def default_moves():
+    """emcee moves used by default: differential evolution, with snooker and mode jumps.
+
+    Measured on an 18-D Gaussian with the shipped log's least-squares covariance (36
+    walkers, 20000 steps): emcee's default stretch move has τ ≈ 250–290 steps, the
+    differential-evolution mixture ≈ 65 — the stretch move's efficiency falls with the
+    dimension, and at 18 unknowns it alone cannot reach 50 τ in a minute. ``γ = 1`` DE
+    steps (ter Braak 2006) let walkers jump between separated modes (the paper design's
+    stick band can be bimodal).
+    """
+    import emcee
+
+    return [
+        (emcee.moves.DEMove(), 0.7),
+        (emcee.moves.DEMove(gamma0=1.0), 0.1),
+        (emcee.moves.DESnookerMove(), 0.2),
+    ]
+
+
+def _laplace_start(fit, x0, lp_batch, W, rng, sigma_lo, sigma_hi, scale=0.5):
+    """Walkers drawn from the least-squares (Laplace) approximation, scaled by ``scale``.
+
+    The interval likelihood is sharper than the ``q/√12`` Gaussian the fit's covariance
+    assumes (posterior spreads are 0.4–1× the least-squares ones on the shipped log), so
+    half the Laplace width starts the ensemble inside the bulk yet spread over it; the
+    noise ``log σ_n`` starts uniform between its prior floor and the fit's RMS. Walkers
+    with zero prior density are pulled back towards the optimum.
+    """
+    D = x0.size
+    cov = np.asarray(fit.covariance, dtype=float)
+    cov = 0.5 * (cov + cov.T)
+    w, V = np.linalg.eigh(cov)
+    L = V * np.sqrt(np.clip(w, 0.0, None))
+    z = rng.standard_normal((W, D - 1))
+    P0 = np.empty((W, D))
+    P0[:, :-1] = x0[:-1] + scale * z @ L.T
+    P0[:, -1] = rng.uniform(sigma_lo, max(sigma_hi, sigma_lo + 0.5), W)
+    lp0 = lp_batch(P0)
+    for _ in range(60):
+        bad = ~np.isfinite(lp0)
+        if not bad.any():
+            break
+        P0[bad, :-1] = x0[:-1] + 0.7 * (P0[bad, :-1] - x0[:-1])
+        lp0[bad] = lp_batch(P0[bad])
+    return P0, lp0
+
+
+def _reset_outliers(state, rng, ndim):
+    """Move walkers stranded far below the bulk onto copies of good walkers (burn-in only).
+
+    Under a roughly Gaussian posterior ``2·(log p_max − log p)`` of a draw is χ²_D; a
+    walker beyond the 0.9999 quantile is stuck (a minor mode or a ridge it cannot leave),
+    not sampling. Done once, at the end of the burn-in that is then discarded, it does
+    not bias the kept chain.
+    """
+    from scipy.stats import chi2
+
+    lp = np.asarray(state.log_prob)
+    cut = np.max(lp) - 0.5 * chi2.ppf(0.9999, ndim)
+    bad = np.flatnonzero(~(lp >= cut))
+    good = np.flatnonzero(lp >= cut)
+    if bad.size == 0 or good.size < 2:
+        return state, 0
+    X = np.array(state.coords)
+    L = np.array(lp)
+    spread = np.std(X[good], axis=0)
+    pick = rng.choice(good, size=bad.size)
+    X[bad] = X[pick] + 1e-3 * spread * rng.standard_normal((bad.size, X.shape[1]))
+    L[bad] = np.nan  # recomputed by the caller
+    import emcee
+
+    return emcee.State(X, log_prob=L, random_state=state.random_state), int(bad.size)
+
+
 def sample_posterior(
     fit,
     *,
     n_walkers: int | None = None,
     n_steps: int | None = None,
     max_steps: int = 20000,
-    chunk: int = 500,
+    burn_in: int = 400,
+    chunk: int = 1000,
     seed: int = 0,
     progress: bool = False,
     likelihood: str = "auto",
     moves=None,
+    sigma_floor: float | None = None,
 ) -> PosteriorResult:
     """Run emcee from the least-squares optimum of ``fit``.
+
+    A burn-in of ``burn_in`` steps (walkers started from the Laplace approximation,
+    stranded walkers re-seeded at its end) is run and discarded; the kept chain then grows
+    in chunks until it is ``MIN_TAU_MULTIPLE`` integrated autocorrelation times long (τ
+    estimated on the kept chain), or for exactly ``n_steps`` steps.
 
     Parameters
     ----------
     fit:
         A :class:`~hdid.FitResult`.
     n_walkers:
-        Default ``max(32, 2·D + 2)`` (emcee needs at least twice the dimension).
+        Default ``max(32, 2·D)`` (emcee's red-blue moves need at least twice the dimension).
     n_steps:
-        Fixed chain length; default: run in chunks until the chain is at least
-        ``MIN_TAU_MULTIPLE`` integrated autocorrelation times long (or ``max_steps``).
+        Fixed length of the kept chain; default: adaptive (see above) up to ``max_steps``.
+    burn_in:
+        Steps run and discarded before the kept chain.
     seed:
-        Seed of the walkers' initial ball and of emcee's moves (reproducible).
+        Seed of the walkers' start and of emcee's moves (reproducible).
     progress:
         Show a progress bar (tqdm).
     likelihood:
         ``"interval"`` (quantization-aware), ``"gaussian"`` or ``"auto"`` (interval when
         the log is quantized).
     moves:
-        emcee moves (default: emcee's stretch move; a differential-evolution + snooker
-        mixture was not faster on the shipped example: τ_max 368 vs 312 steps).
+        emcee moves; default :func:`default_moves` (differential evolution).
+    sigma_floor:
+        Lower bound of the noise prior in encoder steps (default ``SIGMA_BOUNDS[0]``).
     """
     import emcee
 
     t0 = time.perf_counter()
     prob: Problem = fit.problem
     warnings: list[str] = []
-    quantized = likelihood == "interval" or (likelihood == "auto" and fit.resolution_known)
+    if likelihood not in ("auto", "gaussian", "interval"):
+        raise ValueError(f"likelihood must be 'auto', 'gaussian' or 'interval', not {likelihood!r}")
+    quantized = likelihood == "interval"
+    quant_var = float(prob.step) ** 2 / 12.0 if (not quantized and fit.resolution_known) else 0.0
     rho1 = residual_autocorrelation(fit)
     n_moving = int(np.sum(np.asarray(prob.weight) >= 1.0))
     temper = 1.0
@@ -314,40 +417,48 @@ def sample_posterior(
             f"fit residuals are autocorrelated (lag-1 r = {rho1:.2f}); the likelihood is "
             f"tempered by the effective-sample-size factor {temper:.2f}"
         )
+    bounds = (SIGMA_BOUNDS[0] if sigma_floor is None else float(sigma_floor), SIGMA_BOUNDS[1])
     centre = jnp.asarray(fit.u)
-    lp = LogPosterior(problem=prob, centre=centre, temper=jnp.asarray(temper), quantized=quantized)
+    lp = LogPosterior(problem=prob, centre=centre, temper=jnp.asarray(temper),
+                      quantized=quantized, sigma_bounds=bounds, quant_var=quant_var)
     D = lp.ndim
-    W = n_walkers or max(32, 2 * D + 2)
+    W = n_walkers or max(32, 2 * D)
     if W < 2 * D:
         raise ValueError(f"n_walkers = {W}: emcee needs at least 2 × {D} walkers; raise n_walkers")
-
-    rng = np.random.default_rng(seed)
-    std_u = np.sqrt(np.clip(np.diag(fit.covariance), 1e-12, 1.0))
-    sigma0 = math.log(max(fit.rms_residual_rad, 0.1 * float(prob.step)))
-    x0 = np.concatenate([np.asarray(fit.u), [sigma0]])
-    scale = np.concatenate([0.1 * std_u, [0.05]])
-    P0 = x0 + scale * rng.standard_normal((W, D))
-    lp0 = np.asarray(lp.batch(jnp.asarray(P0)))
-    for _ in range(50):  # pull starting walkers with zero posterior density back in
-        bad = ~np.isfinite(lp0)
-        if not bad.any():
-            break
-        P0[bad] = x0 + 0.3 * (P0[bad] - x0)
-        lp0 = np.asarray(lp.batch(jnp.asarray(P0)))
-    if not np.all(np.isfinite(lp0)):
-        raise RuntimeError("could not place the walkers where the posterior is positive")
 
     def log_prob(X):
         return np.asarray(lp.batch(jnp.asarray(X)))
 
+    rng = np.random.default_rng(seed)
+    q = float(prob.step)
+    x0 = np.concatenate([np.asarray(fit.u), [math.log(max(fit.rms_residual_rad, bounds[0] * q))]])
+    P0, lp0 = _laplace_start(
+        fit, x0, log_prob, W, rng, math.log(bounds[0] * q) + 0.05,
+        math.log(max(fit.rms_residual_rad, bounds[0] * q)),
+    )
+    if not np.all(np.isfinite(lp0)):
+        raise RuntimeError("could not place the walkers where the posterior is positive")
+
+    moves = default_moves() if moves is None else moves
     sampler = emcee.EnsembleSampler(W, D, log_prob, vectorize=True, moves=moves)
     # emcee draws its moves from the state's random state: seeding it makes runs repeatable.
     state = emcee.State(P0, log_prob=lp0, random_state=np.random.RandomState(seed).get_state())
+    n_reset = 0
+    if burn_in > 0:
+        state = sampler.run_mcmc(state, burn_in, progress=progress, skip_initial_state_check=True)
+        state, n_reset = _reset_outliers(state, rng, D)
+        if n_reset:
+            state.log_prob = log_prob(state.coords)
+        sampler.reset()
     total = n_steps or max_steps
     done = 0
     tau = np.full(D, np.nan)
     while done < total:
         step = min(chunk if n_steps is None else total, total - done)
+        if n_steps is None and done > 0 and np.all(np.isfinite(tau)):
+            # jump straight to the length the current τ asks for (plus 10 %)
+            need = int(1.1 * MIN_TAU_MULTIPLE * np.max(tau)) - done
+            step = int(min(max(step, need), total - done))
         state = sampler.run_mcmc(state, step, progress=progress, skip_initial_state_check=True)
         done += step
         tau = sampler.get_autocorr_time(tol=0)
@@ -355,23 +466,34 @@ def sample_posterior(
             break
     finite_tau = np.isfinite(tau)
     tau_max = float(np.max(tau[finite_tau])) if finite_tau.any() else float(done)
+    labels = unknown_labels(prob, _RunNames(fit)) + ["log_noise_sigma"]
     if not finite_tau.all():
         warnings.append(
             "the autocorrelation time could not be estimated for every quantity (a walker "
             "that never moves gives NaN); treat the intervals as unreliable"
         )
     if done < MIN_TAU_MULTIPLE * tau_max:
+        worst = labels[int(np.nanargmax(tau))] if finite_tau.any() else "?"
         warnings.append(
-            f"chain of {done} steps is shorter than {MIN_TAU_MULTIPLE} autocorrelation "
-            f"times ({MIN_TAU_MULTIPLE} × {tau_max:.0f}); intervals are rough — run longer"
+            f"NOT CONVERGED: the chain ({done} steps after {burn_in} burn-in) is only "
+            f"{done / tau_max:.1f} autocorrelation times long (τ_max = {tau_max:.0f} steps, "
+            f"{worst}); {MIN_TAU_MULTIPLE} τ are needed for reliable intervals — run longer "
+            f"(n_steps ≥ {int(MIN_TAU_MULTIPLE * tau_max)}, or raise max_steps)"
         )
     acc = sampler.acceptance_fraction
-    if np.any(acc < 0.05):
+    if n_reset:
         warnings.append(
-            f"{int(np.sum(acc < 0.05))} walker(s) accepted < 5 % of moves (stuck); "
-            "results may under-cover — check the chains"
+            f"{n_reset} walker(s) were stranded far below the bulk after the burn-in and "
+            "were restarted from good walkers (a minor mode may be under-represented)"
         )
-    burn = int(min(2 * tau_max, done // 2))
+    stuck = acc < 0.25 * np.median(acc)
+    if np.any(stuck) or np.any(acc < 0.01):
+        warnings.append(
+            f"STUCK WALKERS: {int(np.sum(stuck | (acc < 0.01)))} walker(s) accepted far fewer "
+            f"moves than the rest (min {np.min(acc):.3f}, median {np.median(acc):.3f}); "
+            "intervals may under-cover — check the chains (trace plot)"
+        )
+    burn = 0
     thin = max(1, int(tau_max / 2))
     chain = sampler.get_chain()
     draws = sampler.get_chain(discard=burn, thin=thin, flat=True)
@@ -388,7 +510,7 @@ def sample_posterior(
         samples=phys,
         derived=der,
         chain=chain,
-        labels=unknown_labels(prob, _RunNames(fit)) + ["log_noise_sigma"],
+        labels=labels,
         tau=np.asarray(tau),
         acceptance=np.asarray(acc),
         burn=burn,
@@ -400,6 +522,7 @@ def sample_posterior(
         residual_rho1=rho1,
         fit=fit,
         draws=draws,
+        burn_in=burn_in,
     )
 
 
