@@ -41,7 +41,7 @@ def fit_many(
         ``True`` for ``vectorize=False`` (as :func:`hdid.fit`). Without it the bracket
         columns are empty and ``band_bracket`` says so.
     lanes, threads:
-        Vectorised path: (log, start) lanes per compiled call (default 16) and threads
+        Vectorised path: (log, start) lanes per compiled call (default 6) and threads
         running calls concurrently (default: the CPU count, at most 8).
     client:
         A ``dask.distributed.Client``: the logs are split into chunks of ``chunk_size``

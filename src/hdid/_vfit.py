@@ -60,7 +60,7 @@ from ._simulate import simulate
 #: Lanes per compiled call. The forward-mode simulation is compute-bound from about 8–16
 #: lanes on a CPU core; wider calls wait longer for their slowest lane (measured in
 #: ``benchmarks/batch_speed.py``).
-DEFAULT_LANES = 16
+DEFAULT_LANES = 6
 #: Lanes per call of the grid's forward-only cost evaluation (cheap, vectorises well).
 GRID_LANES = 128
 #: Logs set up, fitted and analysed together; bounds the host memory of a batch.
@@ -144,6 +144,25 @@ def _clock() -> _CompileClock:
 def _lane_costs(problems: Problem, U):
     """χ² of each lane's candidate under its own log's problem (forward simulation only)."""
     return jax.vmap(lambda p, u: p.cost(u))(problems, U)
+
+
+@eqx.filter_jit
+def _lane_lengths(problems: Problem, U):
+    """Samples each lane's simulation runs before every run sticks (its cost in a call)."""
+
+    def one(p: Problem, u):
+        _, t_release, theta0_enc, offset = p.unpack(u)
+        model = p.model(u)
+        off = offset[p.setup_index]
+        _, _, stuck = jax.vmap(
+            lambda t, th0, tr, ai: simulate(
+                model, t, th0, tr, added_inertia=ai, max_substep=p.max_substep,
+                full_output=True,
+            )
+        )(p.times, theta0_enc - off, t_release, p.added_inertia)
+        return jax.numpy.max(jax.numpy.sum(~stuck, axis=1))
+
+    return jax.vmap(one)(problems, U)
 
 
 @eqx.filter_jit
@@ -314,6 +333,7 @@ def fit_batch(
     wave: int = DEFAULT_WAVE,
     bracket: bool = False,
     on_done: Callable[[int, Any], None] | None = None,
+    sort_lanes: bool = True,
     **options,
 ) -> tuple[list[Any], BatchTiming]:
     """Fit every log of ``items``, vectorised across logs.
@@ -339,7 +359,8 @@ def fit_batch(
     try:
         for start in range(0, len(items), max(int(wave), 1)):
             idx = list(range(start, min(start + wave, len(items))))
-            _fit_wave(items, idx, outcomes, runner, timing, lanes, bracket, on_done, options)
+            _fit_wave(items, idx, outcomes, runner, timing, lanes, bracket, on_done, options,
+                      sort_lanes)
     finally:
         if pool is not None:
             pool.shutdown()
@@ -350,7 +371,8 @@ def fit_batch(
     return outcomes, timing
 
 
-def _fit_wave(items, idx, outcomes, runner, timing, lanes, bracket, on_done, options):
+def _fit_wave(items, idx, outcomes, runner, timing, lanes, bracket, on_done, options,
+              sort_lanes=True):
     setup_opts = {k: options[k] for k in _SETUP_OPTIONS if k in options}
     n_starts = int(options.get("n_starts", 6))
     max_steps = int(options.get("max_steps", 300))
@@ -420,7 +442,7 @@ def _fit_wave(items, idx, outcomes, runner, timing, lanes, bracket, on_done, opt
     # -- phase 1: every start PHASE1_STEPS iterations ------------------------------------
     t = time.perf_counter()
     tasks = [(i, j, PHASE1_STEPS) for i, f in fits.items() for j in range(len(f.U))]
-    _solve_tasks(runner, fits, buckets, tasks, lanes, timing)
+    _solve_tasks(runner, fits, buckets, tasks, lanes, timing, sort=sort_lanes)
     for f in fits.values():
         f.active = np.zeros(len(f.U), dtype=bool)
         finite_costs = np.where(np.isfinite(f.costs), f.costs, np.inf)
@@ -438,7 +460,7 @@ def _fit_wave(items, idx, outcomes, runner, timing, lanes, bracket, on_done, opt
         if not tasks:
             break
         before = {i: f.active.copy() for i, f in fits.items() if "chunk" in f.extra}
-        _solve_tasks(runner, fits, buckets, tasks, lanes, timing, phase2=True)
+        _solve_tasks(runner, fits, buckets, tasks, lanes, timing, phase2=True, sort=sort_lanes)
         for i, act in before.items():
             f = fits[i]
             f.used += f.extra.pop("chunk")
@@ -517,18 +539,23 @@ def _run_lanes(runner: _Runner, key, fn, bucket: _Bucket, rows, arrays, width):
     return [jax.tree_util.tree_map(lambda x, m=m: np.asarray(x)[:m], o) for o, m in zip(outs, sizes)]
 
 
-def _solve_tasks(runner, fits, buckets, tasks, lanes, timing, phase2=False):
+def _solve_tasks(runner, fits, buckets, tasks, lanes, timing, phase2=False, sort=True):
     """Advance lanes ``(log, start, max_steps)``; lanes of similar χ² share a call."""
     by_bucket: dict[int, list] = {}
     for task in tasks:
         by_bucket.setdefault(fits[task[0]].bucket, []).append(task)
     for b, group in by_bucket.items():
-        # Starts in poor basins ring longest in the simulation and the vmapped loop waits
-        # for its slowest lane: sort by χ² so that they share calls.
-        group.sort(key=lambda t: fits[t[0]].costs[t[1]] if np.isfinite(fits[t[0]].costs[t[1]])
-                   else np.inf)
         rows = np.array([fits[i].row for i, _, _ in group])
         U = np.stack([fits[i].U[j] for i, j, _ in group])
+        if sort:
+            # A vmapped loop runs as long as its slowest lane, and a start that rings for
+            # the whole record costs ~10x one that sticks early: lanes of similar
+            # simulation length (at their current point, a cheap forward pass) share calls.
+            length = np.concatenate(_run_lanes(runner, "lengths", _lane_lengths, buckets[b],
+                                               rows, (U,), GRID_LANES))
+            order = np.argsort(-length, kind="stable")
+            group = [group[k] for k in order]
+            rows, U = rows[order], U[order]
         active = np.ones(len(group), dtype=bool)
         steps = np.array([s for _, _, s in group])
         outs = _run_lanes(runner, "solve", _lane_solve, buckets[b], rows,

@@ -1,0 +1,382 @@
+"""Batch speed: ``hdid.fit_many`` (vectorised) vs a Python loop over ``hdid.fit`` vs the scipy way.
+
+Run (≈ 15–25 min on 2 busy cores; ``--quick`` ≈ 6 min)::
+
+    python benchmarks/batch_speed.py [--quick]
+
+Measures, in one run (every configuration in its own subprocess, so that its peak memory —
+``resource.getrusage(RUSAGE_SELF).ru_maxrss`` — is its own; tracemalloc cannot see XLA's
+buffers):
+
+1. **logs/s for 1, 10, 100, 1000 synthetic 4-run logs** (paper design: ±0.157 rad, 250 Hz,
+   0.5 s per run, two set-ups; truths drawn around the CSF-8 values — k1, tau_c, tau_s, c_v
+   log-normal with 15 % sd — made once with ``data/synthetic/generate.py::make_log`` and
+   cached as CSV in ``--log-dir``):
+   (v) ``hdid.fit_many(paths)`` — vectorised, band bracket off (its default);
+   (a) a Python loop over ``hdid.fit`` (``fit_many(..., vectorize=False)``), measured on up to
+       100 logs and extrapolated (per-log rate) to 1000 — ``hdid.fit`` also computes the
+       band bracket, so (v) with ``band_bracket=True`` is measured on 100 logs too;
+   (b) the scipy way (``benchmarks/scipy_way.py::fit_scipy``: LSODA + least_squares, same
+       model, catalog start — see ``fit_speed.py``), measured on a few logs, per-log rate
+       extrapolated.
+   Every subprocess first fits 2 other logs (compiles, or reads the persistent cache), then
+   times the N logs; the compile time of that first call is reported separately.
+2. **Cost vs design** (20 logs each, vectorised): run length 0.25/0.5/1.0 s, 250 Hz vs 1 kHz,
+   2/4/8 runs.
+3. **Compile time**: the first vectorised call with an empty persistent cache and with the
+   populated cache (fresh processes).
+
+Writes ``benchmarks/results/batch_speed.md`` and ``.json``. ``--render JSON`` re-writes the
+markdown only.
+"""
+
+from __future__ import annotations
+
+import _common  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
+import argparse
+import datetime as _dt
+import importlib.util
+import json
+import os
+import platform
+import resource
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "benchmarks" / "results"
+GOAL_1000_S = 60.0
+GOAL_RATIO = 50.0
+#: Seed offsets: warm-up logs never overlap the timed ones.
+WARMUP = 2
+
+
+def _load(tag=""):
+    la = os.getloadavg()
+    return {"tag": tag, "load1": la[0], "load5": la[1], "load15": la[2],
+            "time": _dt.datetime.now().isoformat(timespec="seconds")}
+
+
+# ----------------------------------------------------------------------------- logs
+
+DESIGNS = {
+    # name: (amplitudes, fs, duration)
+    "paper": ([0.157, -0.157, 0.157, -0.157], 250.0, 0.5),
+    "short 0.25 s": ([0.157, -0.157, 0.157, -0.157], 250.0, 0.25),
+    "long 1.0 s": ([0.157, -0.157, 0.157, -0.157], 250.0, 1.0),
+    "1 kHz": ([0.157, -0.157, 0.157, -0.157], 1000.0, 0.5),
+    "2 runs": ([0.157, -0.157], 250.0, 0.5),
+    "8 runs": ([0.157, -0.157, 0.12, -0.12, 0.08, -0.08, 0.05, -0.05], 250.0, 0.5),
+}
+
+
+def make_logs(design: str, n: int, log_dir: Path) -> list[str]:
+    """``n`` logs of a design (cached): truths around the CSF-8 values, seeds 1000+i."""
+    import numpy as np
+
+    gen = _common.import_generate()
+    amps, fs, duration = DESIGNS[design]
+    d = log_dir / design.replace(" ", "_").replace(".", "p")
+    d.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for i in range(n):
+        p = d / f"log{i:04d}.csv"
+        if not p.exists():
+            rng = np.random.default_rng(1000 + i)
+            truth = dict(gen.TRUTH_CSF8)
+            for k in ("k1", "tau_c", "tau_s", "c_v"):
+                truth[k] *= float(np.exp(rng.normal(0.0, 0.15)))
+            truth["tau_s"] = max(truth["tau_s"], 1.2 * truth["tau_c"])
+            df = gen.make_log(truth, amplitudes=amps, fs=fs, duration=duration, hold=0.04,
+                              offsets_by_setup={"A": 0.012, "B": -0.020}, seed=1000 + i)
+            tmp = p.with_suffix(".tmp")
+            df.to_csv(tmp, index=False)
+            tmp.replace(p)
+        paths.append(str(p))
+    return paths
+
+
+# ----------------------------------------------------------------------------- worker
+
+
+def worker(cfg: dict) -> dict:
+    """One configuration, in its own process: warm up on 2 logs, then time N logs."""
+    t_imp = time.perf_counter()
+    import hdid
+
+    out = {"config": cfg, "load_before": _load("start")}
+    paths = cfg["paths"]
+    warm, timed = paths[:WARMUP], paths[WARMUP:]
+    if cfg["mode"] == "scipy":
+        import pandas as pd
+
+        from hdid._model import CATALOG_CSF8
+
+        spec = importlib.util.spec_from_file_location("_sw", ROOT / "benchmarks" / "scipy_way.py")
+        sw = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(sw)
+        per = []
+        t0 = time.perf_counter()
+        for p in timed:
+            runs = sw.runs_from_dataframe(pd.read_csv(p))
+            fit = sw.fit_scipy(runs, dict(CATALOG_CSF8), inertia=7e-7, ratio=100.0)
+            per.append(fit["wall_s"])
+        out["total_s"] = time.perf_counter() - t0
+        out["per_log_s"] = per
+    else:
+        opts = dict(vectorize=cfg["mode"] == "vectorized", band_bracket=cfg.get("bracket"))
+        if cfg.get("lanes"):
+            opts["lanes"] = cfg["lanes"]
+        if cfg.get("threads"):
+            opts["threads"] = cfg["threads"]
+        out["import_s"] = time.perf_counter() - t_imp
+        t = time.perf_counter()
+        first = hdid.fit_many(warm, **opts)
+        out["first_call_s"] = time.perf_counter() - t
+        out["first_call_timing"] = first.attrs["timing"]
+        t = time.perf_counter()
+        table = hdid.fit_many(timed, **opts)
+        out["total_s"] = time.perf_counter() - t
+        out["timing"] = table.attrs["timing"]
+        out["n_failed"] = int(table["error"].notna().sum())
+        out["errors"] = [e for e in table["error"] if isinstance(e, str)][:3]
+        cols = [c for c in ("k1", "tau_c", "rms_residual_counts") if c in table]
+        out["summary"] = {c: float(table[c].median()) for c in cols}
+    out["n"] = len(timed)
+    out["maxrss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    out["load_after"] = _load("end")
+    return out
+
+
+def run_worker(cfg: dict, cache_dir: Path, timeout: float = 3600) -> dict:
+    env = dict(os.environ, HDID_CACHE_DIR=str(cache_dir))
+    env.pop("HDID_NO_CACHE", None)
+    t = time.perf_counter()
+    p = subprocess.run([sys.executable, __file__, "--worker", json.dumps(cfg)], env=env,
+                       capture_output=True, text=True, cwd=ROOT / "benchmarks", timeout=timeout)
+    if p.returncode != 0:
+        raise RuntimeError(f"worker {cfg['label']} failed:\n{p.stdout[-3000:]}\n{p.stderr[-3000:]}")
+    res = json.loads(p.stdout.strip().splitlines()[-1])
+    res["process_s"] = time.perf_counter() - t
+    return res
+
+
+# ----------------------------------------------------------------------------- main
+
+
+def measure(args) -> dict:
+    log_dir = Path(args.log_dir)
+    cache = Path(tempfile.mkdtemp(prefix="hdid_batch_cache_"))
+    res = {"load_start": _load("script start"), "machine": _machine(), "quick": args.quick,
+           "runs": []}
+    t_script = time.perf_counter()
+    ns = [1, 10, 100] if args.quick else [1, 10, 100, 1000]
+    loop_ns = [1, 10] if args.quick else [1, 10, 100]
+    n_scipy = 1 if args.quick else 3
+    print("making logs ...", flush=True)
+    t = time.perf_counter()
+    paper = make_logs("paper", WARMUP + max(ns), log_dir)
+    res["log_generation_s"] = time.perf_counter() - t
+
+    def go(label, mode, n, design="paper", paths=None, **extra):
+        paths = paths or make_logs(design, WARMUP + n, log_dir)
+        cfg = {"label": label, "mode": mode, "design": design, "paths": paths[: WARMUP + n],
+               **extra}
+        print(f"{label} ...", flush=True)
+        r = run_worker(cfg, cache)
+        r["config"].pop("paths")
+        res["runs"].append(r)
+        print(f"  {r['n'] / r['total_s']:.2f} logs/s ({r['total_s']:.1f} s), "
+              f"rss {r['maxrss_mb']:.0f} MB, load {r['load_after']['load1']:.1f}", flush=True)
+        return r
+
+    # compile: empty cache, then populated (the first vectorised worker populates it)
+    go("vectorized, cold cache, 1 log", "vectorized", 1, paths=paper)
+    go("vectorized, warm cache, 1 log", "vectorized", 1, paths=paper)
+    for n in ns:
+        go(f"vectorized {n}", "vectorized", n, paths=paper)
+    go("vectorized 100, band bracket on", "vectorized", min(100, max(ns)), paths=paper,
+       bracket=True)
+    for n in loop_ns:
+        go(f"loop over fit() {n}", "loop", n, paths=paper)
+    go(f"scipy way {n_scipy}", "scipy", n_scipy, paths=paper)
+    # threads: one thread vs the default (one per core)
+    go("vectorized 100, 1 thread", "vectorized", min(100, max(ns)), paths=paper, threads=1)
+    for design in ("short 0.25 s", "long 1.0 s", "1 kHz", "2 runs", "8 runs"):
+        go(f"design {design}, 20 logs", "vectorized", 20, design=design)
+    go("design paper, 20 logs", "vectorized", 20, paths=paper)
+    res["script_s"] = time.perf_counter() - t_script
+    res["load_end"] = _load("script end")
+    shutil.rmtree(cache, ignore_errors=True)
+    return res
+
+
+def _machine():
+    import jax
+
+    return {"date": _dt.datetime.now().isoformat(timespec="seconds"), "nproc": os.cpu_count(),
+            "cpu": _common.cpu_model(), "python": platform.python_version(),
+            "jax": jax.__version__, "jax_backend": jax.default_backend(),
+            "src_fingerprint": _common.src_fingerprint()}
+
+
+# ----------------------------------------------------------------------------- report
+
+
+def _find(res, label):
+    for r in res["runs"]:
+        if r["config"]["label"] == label:
+            return r
+    return None
+
+
+def _rate(r):
+    return r["n"] / r["total_s"]
+
+
+def _ld(r):
+    return f"{r['load_before']['load1']:.1f}→{r['load_after']['load1']:.1f}"
+
+
+def write_report(res: dict, out_dir: Path) -> str:
+    L = ["# Batch speed: vectorised `fit_many` vs a loop over `fit` vs the scipy way\n"]
+    m = res["machine"]
+    L.append(f"Generated by `python benchmarks/batch_speed.py{' --quick' if res['quick'] else ''}`"
+             f" on {m['date']} (script {res['script_s']:.0f} s; src {m['src_fingerprint']}). "
+             f"Machine: {m['nproc']} cores ({m['cpu']}), python {m['python']}, jax {m['jax']} "
+             f"({m['jax_backend']}). Load average at start "
+             f"{res['load_start']['load1']:.1f}, at end {res['load_end']['load1']:.1f}: the 2 "
+             "cores are shared with other engineers' jobs, so every row gives the 1-min load "
+             "before→after it; a load above 2 means hdid got less than the 2 cores.\n")
+    L.append("Logs: paper design (4 runs ±0.157 rad, 250 Hz, 0.5 s per run, 125 samples), "
+             "truths k1, tau_c, tau_s, c_v drawn log-normal (sd 15 %) around the CSF-8 values, "
+             "made with `data/synthetic/generate.py::make_log`. Every configuration runs in a "
+             "fresh subprocess: it first fits 2 other logs (compile or persistent-cache read; "
+             "reported as *first call*), then the N timed logs; peak RSS is that process's.\n")
+
+    scipy = next(r for r in res["runs"] if r["config"]["mode"] == "scipy")
+    scipy_rate = _rate(scipy)
+    loops = [r for r in res["runs"] if r["config"]["mode"] == "loop"]
+    loop_rate = _rate(max(loops, key=lambda r: r["n"]))
+    vec = [r for r in res["runs"] if r["config"]["label"].startswith("vectorized ")
+           and r["config"]["label"].split()[1].isdigit() and "," not in r["config"]["label"]]
+
+    # goals
+    v1000 = _find(res, "vectorized 1000")
+    big = v1000 or max(vec, key=lambda r: r["n"])
+    L.append("## Goals\n")
+    L.append("| goal | measured | met? |\n|---|---|---|")
+    t1000 = big["total_s"] * 1000 / big["n"]
+    how = "measured" if v1000 else f"extrapolated from {big['n']} logs"
+    L.append(f"| 1000 logs ≤ 60 s on 2 cores | {t1000:.0f} s ({how}; load {_ld(big)}) | "
+             f"{'✓' if t1000 <= GOAL_1000_S else '✗'} |")
+    ratio = _rate(big) / scipy_rate
+    L.append(f"| ≥ 50× the scipy way | {ratio:.1f}× (vectorised {big['n']} logs vs scipy "
+             f"per-log rate on {scipy['n']} logs) | {'✓' if ratio >= GOAL_RATIO else '✗'} |")
+    L.append("")
+
+    L.append("## logs/s (4-run paper-design logs)\n")
+    L.append("| N logs | vectorised `fit_many` | loop over `hdid.fit` | scipy way | vectorised / "
+             "loop | vectorised / scipy | peak RSS (vectorised) | first call (compile) | "
+             "load |\n|---|---|---|---|---|---|---|---|---|")
+    for r in vec:
+        n = r["n"]
+        lp = next((x for x in loops if x["n"] == n), None)
+        lrate = _rate(lp) if lp else loop_rate
+        ltxt = f"{lrate:.2f}" + ("" if lp else f" (extrapolated from {max(x['n'] for x in loops)})")
+        L.append(f"| {n} | {_rate(r):.2f} ({r['total_s']:.1f} s) | {ltxt} | {scipy_rate:.3f} "
+                 f"(extrapolated from {scipy['n']}) | {_rate(r) / lrate:.1f}× | "
+                 f"{_rate(r) / scipy_rate:.0f}× | {r['maxrss_mb']:.0f} MB | "
+                 f"{r['first_call_s']:.1f} s | {_ld(r)} |")
+    L.append("")
+    for r in loops:
+        L.append(f"- loop over `hdid.fit`, {r['n']} logs: {r['total_s']:.1f} s "
+                 f"({_rate(r):.2f} logs/s), peak RSS {r['maxrss_mb']:.0f} MB, load {_ld(r)}.")
+    sp = scipy["per_log_s"]
+    L.append(f"- scipy way: {', '.join(f'{x:.1f} s' for x in sp)} per log "
+             f"({scipy_rate:.3f} logs/s), load {_ld(scipy)}.")
+    br = _find(res, "vectorized 100, band bracket on") or None
+    v100 = _find(res, f"vectorized {br['n']}") if br else None
+    if br and v100:
+        L.append(f"- vectorised with `band_bracket=True`, {br['n']} logs: {br['total_s']:.1f} s "
+                 f"({_rate(br):.2f} logs/s) vs {v100['total_s']:.1f} s without: the bracket "
+                 f"costs {(br['total_s'] - v100['total_s']) / br['n'] * 1e3:.0f} ms per log "
+                 f"(load {_ld(br)}). `hdid.fit` always computes it, so the loop's rate "
+                 "includes it.")
+    th = _find(res, "vectorized 100, 1 thread")
+    if th and v100:
+        L.append(f"- vectorised, 1 thread instead of one per core, {th['n']} logs: "
+                 f"{th['total_s']:.1f} s vs {v100['total_s']:.1f} s (load {_ld(th)}).")
+    L.append("")
+
+    L.append("## Where the vectorised time goes\n")
+    L.append("| N | total | compile | setup (read, prepare) | grid | LM (phases 1+2) | "
+             "analysis | LM lane-steps | ms per lane-step |\n|---|---|---|---|---|---|---|---|---|")
+    for r in vec:
+        t = r["timing"]
+        L.append(f"| {r['n']} | {t['total_s']:.2f} s | {t['compile_s']:.2f} s | "
+                 f"{t['setup_s']:.2f} s | {t['grid_s']:.2f} s | {t['solve_s']:.2f} s | "
+                 f"{t['analyse_s']:.2f} s | {t['lane_steps']} | "
+                 f"{1e3 * t['solve_s'] / max(t['lane_steps'], 1):.2f} |")
+    L.append("")
+
+    L.append("## Compile time (first call in a fresh process, 2 logs)\n")
+    L.append("| persistent cache | first call | of which compile (trace + lower + XLA / cache "
+             "read) | import |\n|---|---|---|---|")
+    for label, what in (("vectorized, cold cache, 1 log", "empty"),
+                        ("vectorized, warm cache, 1 log", "populated")):
+        r = _find(res, label)
+        if r:
+            L.append(f"| {what} | {r['first_call_s']:.1f} s | "
+                     f"{r['first_call_timing']['compile_s']:.1f} s | {r['import_s']:.1f} s |")
+    L.append("\nIn a warm process (the timed calls above) `compile_s` is 0: one compiled "
+             "program per bucket shape is reused for every log.\n")
+
+    L.append("## Cost vs design (20 logs each, vectorised)\n")
+    L.append("| design | samples per run | runs | logs/s | ms per log | first call | "
+             "peak RSS | load |\n|---|---|---|---|---|---|---|---|")
+    for design in ("paper", "short 0.25 s", "long 1.0 s", "1 kHz", "2 runs", "8 runs"):
+        r = _find(res, f"design {design}, 20 logs")
+        if not r:
+            continue
+        amps, fs, dur = DESIGNS[design]
+        L.append(f"| {design} | {round(fs * dur)} | {len(amps)} | {_rate(r):.2f} | "
+                 f"{1e3 / _rate(r):.0f} | {r['first_call_s']:.1f} s | {r['maxrss_mb']:.0f} MB | "
+                 f"{_ld(r)} |")
+    L.append("")
+    fails = [(r["config"]["label"], r.get("n_failed", 0), r.get("errors")) for r in res["runs"]
+             if r.get("n_failed")]
+    if fails:
+        L.append("Failed logs: " + "; ".join(f"{a}: {b} ({c})" for a, b, c in fails) + "\n")
+    text = "\n".join(L) + "\n"
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "batch_speed.md").write_text(text)
+    return text
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--log-dir", default=str(Path(tempfile.gettempdir()) / "hdid_batch_logs"))
+    ap.add_argument("--out-dir", type=Path, default=RESULTS)
+    ap.add_argument("--render", type=Path)
+    ap.add_argument("--worker")
+    args = ap.parse_args()
+    if args.worker:
+        print(json.dumps(worker(json.loads(args.worker))))
+        return
+    if args.render:
+        res = json.loads(args.render.read_text())
+    else:
+        res = measure(args)
+        args.out_dir.mkdir(parents=True, exist_ok=True)
+        (args.out_dir / "batch_speed.json").write_text(json.dumps(res, indent=2, default=str) + "\n")
+    print(write_report(res, args.out_dir))
+
+
+if __name__ == "__main__":
+    main()
