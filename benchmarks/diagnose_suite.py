@@ -8,7 +8,10 @@ diagnosed with all candidates. Writes ``results/diagnose_suite.{json,md}``: the 
 matrix (hidden effect × top-ranked candidate), verdicts, RMS before/after in quantization
 floors and ΔBIC.
 
-Run: ``python benchmarks/diagnose_suite.py [rich|paper ...]`` (about 20–40 min on 2 cores).
+Run: ``python benchmarks/diagnose_suite.py [rich|paper ...]`` (about 20–40 min on 2 cores),
+then ``python benchmarks/diagnose_suite.py --removed`` to add the rows where a base piece
+(viscous, Stribeck, the cubic term) is switched off in the *model* of a log with nothing
+hidden: its absence must be diagnosable too.
 """
 
 from __future__ import annotations
@@ -38,18 +41,34 @@ def _hidden_module():
     return mod
 
 
-def run_design(design_name: str, gen, hid, records: list, seed0: int) -> None:
+#: Base pieces switched off: the log has nothing hidden, the *model* lacks the piece.
+REMOVED = ("viscous", "stribeck", "stiffness")
+
+
+def _model_without(piece: str):
+    import hdid
+    from hdid.effects import LinearStiffness
+
+    m = hdid.Model.default()
+    if piece == "stiffness":  # the cubic term off: a linear spring
+        return m.with_effect(LinearStiffness(k1=940.0))
+    return m.without(piece)
+
+
+def run_design(design_name: str, gen, hid, records: list, seed0: int, removed: bool = False) -> None:
     from hdid._diagnose import diagnose
 
     design = dict(RICH if design_name == "rich" else gen.PAPER_DESIGN)
     truth = {k: v for k, v in gen.TRUTH_CSF8.items() if k != "ratio"}
-    for i, name in enumerate(["none", *hid.HIDDEN]):
+    names = [f"removed:{p}" for p in REMOVED] if removed else ["none", *hid.HIDDEN]
+    for i, name in enumerate(names):
         design["seed"] = seed0 + i
-        hidden = hid.reference_kwargs(name, truth) if name != "none" else None
+        hidden = hid.reference_kwargs(name, truth) if name in hid.HIDDEN else None
         df = gen.make_log(truth, **design, hidden=hidden)
+        model = _model_without(name.split(":")[1]) if removed else None
         t0 = time.perf_counter()
         try:
-            d = diagnose(df)
+            d = diagnose(df, model)
         except Exception as exc:  # record and go on: the suite reports failures too
             records.append({"design": design_name, "hidden": name, "error": repr(exc)})
             print(f"{design_name:5s} {name:20s} FAILED {exc!r}", flush=True)
@@ -59,7 +78,8 @@ def run_design(design_name: str, gen, hid, records: list, seed0: int) -> None:
         rec = {
             "design": design_name,
             "hidden": name,
-            "expected": "none" if name == "none" else hid.HIDDEN[name]["library"],
+            "expected": ("none" if name == "none" else name.split(":")[1] if removed
+                         else hid.HIDDEN[name]["library"]),
             "verdict": d.verdict,
             "top": top.key if top is not None and top.delta_bic < -10 else "none",
             "top_any": top.key if top is not None else None,
@@ -125,10 +145,14 @@ def write(records: list, meta: dict) -> None:
 
 
 def main(argv: list[str]) -> None:
-    designs = argv or ["rich", "paper"]
+    removed = "--removed" in argv
+    designs = [a for a in argv if not a.startswith("--")] or ["rich", "paper"]
     gen = import_generate()
     hid = _hidden_module()
     records: list = []
+    if removed and (OUT / "diagnose_suite.json").exists():  # add to the main suite's records
+        old = json.loads((OUT / "diagnose_suite.json").read_text())["records"]
+        records = [r for r in old if not str(r.get("hidden", "")).startswith("removed:")]
     meta = {
         "date": time.strftime("%Y-%m-%d %H:%M"),
         "cpu": cpu_model(),
@@ -137,7 +161,8 @@ def main(argv: list[str]) -> None:
         "src": src_fingerprint(),
     }
     for k, design in enumerate(designs):
-        run_design(design, gen, hid, records, seed0=7100 + 100 * k)
+        run_design(design, gen, hid, records, seed0=(7500 if removed else 7100) + 100 * k,
+                   removed=removed)
         write(records, meta)
     meta["load_end"] = " ".join(f"{x:.1f}" for x in os.getloadavg())
     write(records, meta)

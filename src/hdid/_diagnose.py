@@ -52,6 +52,7 @@ class Candidate:
     scanned: int = 0
     mark: str = ""
     experiment: str = ""
+    reset_shape: bool = True
 
 
 @dataclass
@@ -192,19 +193,41 @@ def _has(model, name, cls=None) -> bool:
     return cls is None or type(model.effect(name)) is cls
 
 
-def _library_variant(key: str):
+def _library_variant(key: str, starts: Callable | None = None):
+    """Variants adding library effect ``key``; ``starts(values) -> [overrides, ...]`` gives
+    several starting values for the new parameters (a multi-start, not a model choice:
+    the best is kept and no parameter is charged for it)."""
+
     def variants(model, values, hints):
         from .effects import library
 
-        return [(key, model.with_effect(library(values)[key]))]
+        overrides = starts(values) if starts is not None else [{}]
+        return [(key, model.with_effect(library({**values, **o})[key])) for o in overrides]
 
     return variants
+
+
+def _k_wg(values) -> float:
+    return values.get("k1", values.get("K1", 940.0)) / 1e4
+
+
+def _tau(values) -> float:
+    return values.get("tau_c", 3e-3)
+
+
+#: Orders (cycles per WG revolution) always scanned for a position-periodic torque: the
+#: WG mesh (2, 4) and common motor pole/slot cogging orders; the largest peak of the
+#: residual's periodogram against the WG angle is added to them.
+RIPPLE_ORDERS = (2.0, 4.0, 8.0, 12.0, 16.0, 24.0, 32.0, 48.0)
 
 
 def _ripple_variants(model, values, hints):
     from .effects import library
 
-    orders = hints.get("ripple_orders") or [24.0]
+    orders = list(RIPPLE_ORDERS)
+    for n in hints.get("ripple_orders") or []:
+        if all(abs(n - o) > 1 for o in orders):
+            orders.append(float(n))
     out = []
     for n in orders:
         eff = library({**values, "order": float(n)})["ripple"]
@@ -225,7 +248,8 @@ def default_candidates() -> list[Candidate]:
 
     return [
         Candidate(
-            "backlash", cubic, _library_variant("backlash"),
+            "backlash", cubic,
+            _library_variant("backlash", lambda v: [{"backlash": 0.005}, {"backlash": 0.02}]),
             mark="the approach to rest is too abrupt in the model — the gear coasts through a "
                  "dead zone without spring torque — and rest points spread wider than stiction "
                  "explains",
@@ -234,7 +258,10 @@ def default_candidates() -> list[Candidate]:
                        "but not the band",
         ),
         Candidate(
-            "hysteresis", lambda m: not _has(m, "hysteresis"), _library_variant("hysteresis"),
+            "hysteresis", lambda m: not _has(m, "hysteresis"),
+            _library_variant("hysteresis", lambda v: [
+                {"f_h": a * _tau(v), "sigma_h": b * _k_wg(v)} for a in (0.2, 0.5) for b in (0.5, 2.0)
+            ]),
             mark="after each reversal the gear decelerates more gently than Coulomb friction "
                  "allows and the rest point is pulled towards where it came from",
             experiment="releases of several amplitudes (the loop's rounded corners do not "
@@ -243,7 +270,7 @@ def default_candidates() -> list[Candidate]:
         ),
         Candidate(
             "asymmetric_friction", lambda m: _has(m, "stribeck", StribeckFriction),
-            _library_variant("asymmetric_friction"),
+            _library_variant("asymmetric_friction", lambda v: [{"asym": -0.25}, {"asym": 0.25}]),
             mark="rest points of + and − releases sit asymmetrically and part of the residual "
                  "does not flip with the velocity",
             experiment="a known spring zero (zero-torque reading with the servo on): without "
@@ -251,7 +278,9 @@ def default_candidates() -> list[Candidate]:
         ),
         Candidate(
             "load_friction", lambda m: not _has(m, "load_friction"),
-            _library_variant("load_friction"),
+            _library_variant("load_friction", lambda v: [
+                {"c_load": 0.02 * _k_wg(v)}, {"c_load": 0.1 * _k_wg(v)}
+            ]),
             mark="large swings lose more amplitude per half-cycle than small ones, so a "
                  "constant friction is too weak early and too strong late",
             experiment="releases from at least three amplitudes: the decrement per half-cycle "
@@ -259,6 +288,7 @@ def default_candidates() -> list[Candidate]:
         ),
         Candidate(
             "ripple", lambda m: not _has(m, "ripple"), _ripple_variants, scanned=1,
+            reset_shape=False,
             mark="the residual is periodic in the wave-generator angle, not in time, with the "
                  "same phase in every run",
             experiment="releases starting from different WG angles (shift the spring zero by "
@@ -266,7 +296,8 @@ def default_candidates() -> list[Candidate]:
                        "from stiffness",
         ),
         Candidate(
-            "soft_windup", cubic, _library_variant("soft_windup"),
+            "soft_windup", cubic,
+            _library_variant("soft_windup", lambda v: [{}, {"K1": 0.6 * v.get("k1", 940.0)}]),
             mark="the swing period near rest differs from the cubic model's: the phase error "
                  "grows as the amplitude decays",
             experiment="a small-amplitude release (inside the first catalog segment) measures "
@@ -298,6 +329,28 @@ def default_candidates() -> list[Candidate]:
                        "Coulomb (constant) losses",
         ),
     ]
+
+
+#: The catalog Stribeck shape, a second starting point for candidates when the base fit's
+#: shape is far from it (see :func:`_shape_is_unusual`).
+SHAPE_RESET = {"v_s": 3.0, "delta": 1.0}
+
+
+def _shape_reset(values) -> dict[str, float]:
+    """Catalog Stribeck shape, and tau_c/tau_s at the catalog ratio 1.5 around the base
+    fit's geometric mean (a bent shape usually comes with a stretched tau_s/tau_c)."""
+    out = {k: v for k, v in SHAPE_RESET.items() if k in values}
+    if "tau_c" in values and "tau_s" in values:
+        gm = math.sqrt(values["tau_c"] * values["tau_s"])
+        out["tau_c"], out["tau_s"] = gm / math.sqrt(1.5), gm * math.sqrt(1.5)
+    return out
+
+
+def _shape_is_unusual(values) -> bool:
+    """Stribeck shape more than a factor e from the catalog v_s or δ off by over 0.3."""
+    if "v_s" not in values or "delta" not in values:
+        return False
+    return abs(math.log(values["v_s"] / SHAPE_RESET["v_s"])) > 1.0 or abs(values["delta"] - 1.0) > 0.3
 
 
 # -- statistics --------------------------------------------------------------------
@@ -343,7 +396,7 @@ def _features_text(feat: dict[str, float]) -> str:
     return "; ".join(parts) if parts else "no single dominant pattern"
 
 
-def _ripple_orders(frame, top: int = 2) -> list[float]:
+def _ripple_orders(frame, top: int = 1) -> list[float]:
     """Orders (cycles per WG rev) of the largest peaks of the residual vs WG angle."""
     from scipy.signal import lombscargle
 
@@ -446,7 +499,14 @@ def diagnose(
             if not cand.applies(current.model):
                 continue
             best_variant = None
-            for label, m in cand.variants(current.model, values, hints):
+            bases = [(current.model, values)]
+            if cand.reset_shape and _shape_is_unusual(values):
+                # The base fit's Stribeck shape may be bent to mimic the missing effect:
+                # start the candidate from the catalog shape too.
+                reset = _shape_reset(values)
+                bases.append((current.model.replace(**reset), {**values, **reset}))
+            variants = [v for m0, v0 in bases for v in cand.variants(m0, v0, hints)]
+            for label, m in variants:
                 say(f"  + {label}")
                 opts = dict(fit_options)
                 if isinstance(fix, dict):
