@@ -169,13 +169,14 @@ class Diagnosis:
         names = [s["model"] for s in self.ladder]
         rms = [s["rms_rad"] / self.floor_rad for s in self.ladder]
         x = np.arange(len(names))
-        ax.plot(x, rms, "o-", label="RMS residual")
-        ax.axhline(1.0, color="0.5", ls="--", lw=1, label="quantization floor")
-        ax.set_xticks(x, names, rotation=20, ha="right", fontsize=8)
+        bars = ax.bar(x, rms, color="C0", alpha=0.8, label="RMS residual")
+        ax.axhline(1.0, color="0.3", ls="--", lw=1, label="quantization floor")
+        for b, step in zip(bars, self.ladder):
+            ax.annotate(f"BIC {step['bic']:.0f}", (b.get_x() + b.get_width() / 2, b.get_height()),
+                        ha="center", va="bottom", fontsize=8)
+        ax.set_xticks(x, names, rotation=15, ha="right", fontsize=8)
         ax.set_ylabel("RMS / quantization floor")
-        ax2 = ax.twinx()
-        ax2.plot(x, [s["bic"] for s in self.ladder], "s:", color="C1", label="BIC")
-        ax2.set_ylabel("BIC", color="C1")
+        ax.set_ylim(0, 1.15 * max(max(rms), 1.0))
         ax.legend(loc="upper right", fontsize=8)
         ax.set_title("model ladder")
         fig = fig or ax.figure
@@ -506,8 +507,8 @@ def diagnose(
                 reset = _shape_reset(values)
                 bases.append((current.model.replace(**reset), {**values, **reset}))
             variants = [v for m0, v0 in bases for v in cand.variants(m0, v0, hints)]
-            for label, m in variants:
-                say(f"  + {label}")
+            for i_v, (label, m) in enumerate(variants):
+                say(f"  + {label}" + (f" (start {i_v + 1}/{len(variants)})" if len(variants) > 1 else ""))
                 opts = dict(fit_options)
                 if isinstance(fix, dict):
                     opts["fix"] = {k: v for k, v in fix.items() if k in m.parameter_specs()}
