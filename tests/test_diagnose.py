@@ -117,3 +117,13 @@ def test_cli_diagnose_bad_candidate_is_a_one_line_error(tmp_path):
     r = CliRunner().invoke(main, ["diagnose", str(path), "--candidates", "gremlins"])
     assert r.exit_code == 2
     assert "gremlins" in r.output and "Traceback" not in r.output
+
+
+def test_cli_add_sets_ripple_order_and_rejects_bad_order():
+    from hdid.cli import _Fail, _build_model
+
+    m = _build_model(("ripple:12", "hysteresis"), (), ())
+    assert m.effect_names[-2:] == ("ripple", "hysteresis")
+    assert float(m.effect("ripple").order) == 12.0
+    with pytest.raises(_Fail, match="EFFECT:ORDER"):
+        _build_model(("ripple:x",), (), ())

@@ -74,7 +74,7 @@ def main():
 @click.option("--free-inertia", is_flag=True, help="Fit the inertia (needs --added-inertia runs or --inertia-prior).")
 @click.option("--inertia-prior", metavar="MEAN,REL", help="Log-normal prior on the inertia, e.g. 7e-7,0.3.")
 @click.option("--fix", multiple=True, metavar="NAME[=VALUE]", help="Hold a parameter fixed (repeatable).")
-@click.option("--add", "add_effects", multiple=True, metavar="EFFECT", help="Add a library effect (repeatable): asymmetric_friction, backlash, hysteresis, kinematic_error, linear_stiffness, load_friction, ripple, soft_windup, stiffness, stribeck, viscous.")
+@click.option("--add", "add_effects", multiple=True, metavar="EFFECT", help="Add a library effect (repeatable; ripple:ORDER sets the order): asymmetric_friction, backlash, hysteresis, kinematic_error, linear_stiffness, load_friction, ripple, soft_windup, stiffness, stribeck, viscous.")
 @click.option("--remove", "remove_effects", multiple=True, metavar="EFFECT", help="Remove an effect of the base model (repeatable), e.g. viscous.")
 @click.option("--effect-file", "effect_files", multiple=True, metavar="FILE.py", help="Your own effect: a Python file defining AbstractEffect instances (repeatable).")
 @click.option("--release-time", type=float, help="Known release instant [s] in each run's time axis.")
@@ -173,8 +173,15 @@ def _build_model(add, remove, files):
         if name not in model.effect_names:
             raise _Fail(f"--remove {name}: the model has {', '.join(model.effect_names)}")
         model = model.without(name)
-    lib = library(model.float_values())
-    for name in add:
+    for item in add:
+        name, _, order = item.partition(":")  # ripple:24, kinematic_error:2 (cycles per WG rev)
+        values = model.float_values()
+        if order:
+            try:
+                values["order"] = float(order)
+            except ValueError:
+                raise _Fail(f"--add {item}: expected EFFECT or EFFECT:ORDER, e.g. ripple:24") from None
+        lib = library(values)
         if name not in lib:
             raise _Fail(f"--add {name}: unknown effect; choose from {', '.join(sorted(lib))}")
         model = model.with_effect(lib[name])
