@@ -59,6 +59,9 @@ PRIOR_HALF_WIDTH = 7.0
 SIGMA_BOUNDS = (0.05, 20.0)
 #: Chains shorter than this many integrated autocorrelation times get a warning.
 MIN_TAU_MULTIPLE = 50
+#: A chain this far (log p) above the least-squares optimum has found another mode
+#: (Δχ² = 10 in the fit's units: beyond the 99.8 % point of χ²₁).
+MODE_GAP = 5.0
 
 
 def _log_interval(y, theta, half, sigma):
@@ -185,10 +188,13 @@ class PosteriorResult:
             "posterior_diagnostics": {
                 "n_walkers": int(self.chain.shape[1]),
                 "n_steps": int(self.chain.shape[0]),
+                "burn_in": self.burn_in,
                 "burn": self.burn,
                 "thin": self.thin,
+                "chain_in_tau_max": float(self.chain.shape[0] / np.nanmax(self.tau)),
+                "converged": bool(self.chain.shape[0] >= MIN_TAU_MULTIPLE * np.nanmax(self.tau)),
                 "n_draws": int(self.draws.shape[0]),
-                "tau_max": float(np.max(self.tau)),
+                "tau_max": float(np.nanmax(self.tau)),
                 "tau": {l: float(t) for l, t in zip(self.labels, self.tau)},
                 "acceptance_mean": float(np.mean(self.acceptance)),
                 "acceptance_min": float(np.min(self.acceptance)),
@@ -208,8 +214,9 @@ class PosteriorResult:
                 f"  [{s['ci95'][0]:.4g}, {s['ci95'][1]:.4g}]"
             )
         lines.append(
-            f"  {self.chain.shape[1]} walkers × {self.chain.shape[0]} steps, max τ "
-            f"{np.max(self.tau):.0f}, acceptance {np.mean(self.acceptance):.2f}, "
+            f"  {self.chain.shape[1]} walkers × {self.chain.shape[0]} steps (after "
+            f"{self.burn_in} burn-in), max τ {np.nanmax(self.tau):.0f} = chain / "
+            f"{self.chain.shape[0] / np.nanmax(self.tau):.1f}, acceptance {np.mean(self.acceptance):.2f}, "
             f"{self.draws.shape[0]} draws, {self.wall_time_s:.1f} s"
         )
         lines += [f"  warning: {w}" for w in self.warnings]
@@ -492,6 +499,18 @@ def sample_posterior(
             f"STUCK WALKERS: {int(np.sum(stuck | (acc < 0.01)))} walker(s) accepted far fewer "
             f"moves than the rest (min {np.min(acc):.3f}, median {np.median(acc):.3f}); "
             "intervals may under-cover — check the chains (trace plot)"
+        )
+    # A chain that climbs well above the least-squares optimum has found another mode: the
+    # fit is a local optimum and the posterior is multimodal (the reference is the best
+    # log-posterior at the fit's u over a grid of noise levels).
+    grid = np.linspace(math.log(bounds[0] * q), math.log(max(fit.rms_residual_rad, 2 * bounds[0] * q)) + 1.0, 25)
+    ref = float(np.max(log_prob(np.column_stack([np.tile(x0[:-1], (grid.size, 1)), grid]))))
+    best = float(np.max(sampler.get_log_prob()))
+    if best > ref + MODE_GAP:
+        warnings.append(
+            f"MULTIMODAL: the chain reached log p {best - ref:+.1f} above the least-squares "
+            "optimum — the fit is a local optimum and the posterior has another mode; "
+            "intervals from a chain that has not mixed between modes are unreliable"
         )
     burn = 0
     thin = max(1, int(tau_max / 2))
