@@ -82,7 +82,7 @@ def main():
 @click.option("--starts", type=click.IntRange(1, 32), help="Multi-starts (default: the library's, 6).")
 @click.option("--posterior", is_flag=True, help="Also sample the posterior with emcee (slow; see README).")
 @click.option("--steps", type=click.IntRange(100, 10**6), help="Posterior chain length (default: until 50 autocorrelation times, at most 20000).")
-@click.option("--walkers", type=click.IntRange(4, 4096), help="emcee walkers (default max(32, 2·dim+2)).")
+@click.option("--walkers", type=click.IntRange(4, 4096), help="emcee walkers (default max(32, 2·dim)).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Posterior seed.")
 @click.option("--chains", "chains_out", metavar="OUT.nc", help="Save the posterior chains (arviz NetCDF).")
 @click.option("--corner", "corner_out", metavar="OUT.png", help="Corner plot of the posterior.")
