@@ -103,3 +103,24 @@ def test_stranded_walker_is_reset_after_burn_in():
     assert n == 1
     assert np.all(np.abs(new.coords[5]) < 10)          # now on top of a good walker
     np.testing.assert_array_equal(np.delete(new.coords, 5, 0), np.delete(X, 5, 0))
+
+
+def test_cli_posterior_json_and_chains(tmp_path):
+    # `hdid fit --posterior --json` gains `posterior` (name -> median/ci68/ci95, band
+    # included) and the chains reopen with arviz. A short chain: only the plumbing is tested.
+    import json
+
+    import arviz as az
+    from click.testing import CliRunner
+
+    from hdid.cli import main
+
+    out, nc = tmp_path / "fit.json", tmp_path / "chains.nc"
+    res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "-q", "--posterior", "--steps", "100",
+                                    "--json", str(out), "--chains", str(nc)])
+    assert res.exit_code == 0, res.output
+    d = json.loads(out.read_text())
+    band = d["posterior"]["stick_band_halfwidth_rad"]
+    assert set(band) == {"median", "ci68", "ci95"} and band["ci95"][0] <= band["median"]
+    assert d["posterior_diagnostics"]["converged"] is False
+    assert "k1" in az.from_netcdf(str(nc)).posterior
