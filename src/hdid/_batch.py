@@ -138,6 +138,13 @@ def _fit_chunk(items, names, options):
     opts = dict(options)
     band_bracket = opts.pop("band_bracket")
     lanes, threads = opts.pop("lanes"), opts.pop("threads")
+    if threads is None:  # as many lane threads as the worker has task threads
+        try:
+            from distributed import get_worker
+
+            threads = get_worker().state.nthreads
+        except (ImportError, ValueError, AttributeError):
+            threads = None
     return _fit_vectorized(items, names, None, band_bracket, lanes, threads, opts)
 
 
