@@ -15,7 +15,7 @@ log (covariance, warnings, :class:`~hdid.FitResult`) uses its own, unpadded prob
 
 The JAX parts of the analysis (Jacobian, dense prediction, derived quantities) are also
 computed for many logs per call; the band bracket (event-driven reference simulation of
-every run, ~20 ms per log in NumPy/SciPy) is optional.
+every run, 40–60 ms of CPU per log in SciPy) is optional.
 
 Why the gain is modest on a CPU (``benchmarks/results/batch_speed.md``): a lane's cost is
 dominated by the forward-mode simulation, which is compute-bound already at a few lanes,
