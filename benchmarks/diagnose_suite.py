@@ -116,7 +116,9 @@ def write(records: list, meta: dict) -> None:
         "",
         "`top` is the best candidate if its ΔBIC < −10 (strong evidence), else `none`. "
         "RMS in units of the quantization floor (step/√12). `fixes` = the residual after "
-        "adding the top candidate is white (Ljung–Box p ≥ 0.01) and at the floor (≤ 1.3×).",
+        "adding the top candidate is white (Ljung–Box p ≥ 0.01) and at the floor (≤ 1.3×). "
+        "`ambiguous` = the runner-up is also strong and within ΔBIC 10 of the top: "
+        "`diagnose` then says the data cannot tell the two apart.",
         "",
     ]
     for design in ("rich", "paper"):
@@ -124,8 +126,8 @@ def write(records: list, meta: dict) -> None:
         if not rows:
             continue
         lines += [f"## {design} design", "",
-                  "| hidden | expected | verdict | top (ΔBIC<−10) | ΔBIC top | runner-up | RMS before | RMS after top | fixes | s |",
-                  "|---|---|---|---|---|---|---|---|---|---|"]
+                  "| hidden | expected | verdict | top (ΔBIC<−10) | ΔBIC top | runner-up | RMS before | RMS after top | fixes | ambiguous | s |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in rows:
             if "error" in r:
                 lines.append(f"| {r['hidden']} | | FAILED: {r['error']} | | | | | | | |")
@@ -133,11 +135,13 @@ def write(records: list, meta: dict) -> None:
             c = r["candidates"]
             c0 = c[0] if c else {}
             c1 = f"{c[1]['effect']} ({c[1]['delta_bic']:.0f})" if len(c) > 1 else ""
+            amb = (len(c) > 1 and c0.get("delta_bic", 0) < -10 and c[1]["delta_bic"] < -10
+                   and c[1]["delta_bic"] - c0["delta_bic"] < 10)
             lines.append(
                 f"| {r['hidden']} | {r['expected']} | {r['verdict']} | {r['top']} | "
                 f"{c0.get('delta_bic', float('nan')):.1f} | {c1} | {r['rms_before_floor']:.2f} | "
                 f"{c0.get('rms_after_floor', float('nan')):.2f} | {c0.get('adequate_after')} | "
-                f"{r['seconds']:.0f} |"
+                f"{'yes' if amb else ''} | {r['seconds']:.0f} |"
             )
         right = sum(1 for r in rows if "error" not in r and r["top"] == r["expected"])
         lines += ["", f"Right effect ranked first (or `none` for nothing hidden): {right}/{len(rows)}.", ""]
@@ -145,6 +149,10 @@ def write(records: list, meta: dict) -> None:
 
 
 def main(argv: list[str]) -> None:
+    if "--report" in argv:  # rewrite the markdown from the JSON
+        doc = json.loads((OUT / "diagnose_suite.json").read_text())
+        write(doc["records"], doc["meta"])
+        return
     removed = "--removed" in argv
     designs = [a for a in argv if not a.startswith("--")] or ["rich", "paper"]
     gen = import_generate()

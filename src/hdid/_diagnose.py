@@ -19,9 +19,9 @@ import numpy as np
 
 #: ΔBIC below this is "very strong" evidence (Kass & Raftery 1995: |ΔBIC| > 10).
 STRONG_DBIC = -10.0
-#: Two candidates whose BIC differ by less than this explain the data equally well
-#: ("positive" evidence starts at 2, "strong" at 6 on the Kass–Raftery scale).
-AMBIGUOUS_DBIC = 6.0
+#: Two candidates whose BIC differ by less than this explain the data about equally well:
+#: the evidence between them is not "very strong" on the Kass–Raftery scale (> 10).
+AMBIGUOUS_DBIC = 10.0
 
 
 @dataclass(frozen=True)
