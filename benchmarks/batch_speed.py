@@ -256,8 +256,11 @@ NOTES = """## What limits it (read with the tables)
   ordered by their current simulation length (a cheap forward pass), threads over calls.
   The gain over the loop comes from sharing the grid evaluation, skipping the per-log
   band bracket and the per-call overheads, not from wider SIMD.
-- Threads: 1 vs 2 threads made no measurable difference here because the other jobs kept
-  both cores busy; the CPU-time projection assumes they would scale.
+- Threads: 1 vs 2 threads made no measurable difference in this run because the other jobs
+  kept both cores busy. A separate in-process check when the load had dropped to 2.4–3.7
+  (40 paper logs after a warm-up, 2026-11-22 05:01): 1 thread 2.35 logs/s (CPU 423 ms per
+  log), 2 threads 3.2–3.4 logs/s (CPU 293–313 ms per log; CPU ≈ wall, i.e. still only about
+  one core's worth was free) — about 300 s per 1000 logs in that state.
 - **Cost vs design** (CPU per log, 20 logs each): it follows the simulated time per run
   (RK4 substeps of ≤ 0.5 ms until every start sticks) more than the number of samples:
   1 kHz (4× the samples of 250 Hz) costs ≈ 1.7×, a 1.0 s record ≈ 1.9× and a 0.25 s one
