@@ -67,6 +67,8 @@ def main():
 @main.command("fit")
 @click.argument("logs", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @click.option("--summary", "summary_out", metavar="OUT.csv", help="Several logs: one row per log (parameters, std, band, RMS, warnings, error).")
+@click.option("--band-bracket/--no-band-bracket", default=None, help="Several logs: also compute the model-free stick-band bracket (an event-driven SciPy simulation per run; off by default in batch mode).")
+@click.option("--dask", "dask_address", metavar="ADDRESS", help="Several logs: fit on a dask.distributed scheduler at ADDRESS (pip install 'hdid[dask]').")
 @click.option("--json", "json_out", metavar="OUT.json", help="Write the results as JSON.")
 @click.option("--plot", "plot_out", metavar="OUT.png", help="Measured vs model, residuals below.")
 @click.option("--inertia", type=float, help="Total WG inertia [kg m^2] (default 7e-7, CSF-8 + small Maxon rotor).")
@@ -90,7 +92,7 @@ def main():
 def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_inertia,
             inertia_prior, fix, add_effects, remove_effects, effect_files, release_time,
             counts_per_rev, starts, posterior, steps, walkers, seed, chains_out, corner_out,
-            quiet):
+            quiet, band_bracket, dask_address):
     """Fit stiffness, friction (and inertia) jointly to all runs of LOG.csv.
 
     LOG.csv has a header with columns time [s] and theta [rad, WG/motor angle]; optional
@@ -101,7 +103,7 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
     if len(logs) > 1 or summary_out:
         return _fit_batch(logs, summary_out, json_out, plot_out, inertia, fix, release_time,
                           counts_per_rev, starts, quiet, posterior or chains_out or corner_out,
-                          model)
+                          model, band_bracket, dask_address)
     log_path = Path(logs[0])
     _check_output(json_out, [log_path], "--json")
     _check_output(plot_out, [log_path], "--plot")
@@ -213,7 +215,8 @@ def _load_effect_file(path: Path, base):
 
 
 def _fit_batch(logs, summary_out, json_out, plot_out, inertia, fix, release_time,
-               counts_per_rev, starts, quiet, posterior, model):
+               counts_per_rev, starts, quiet, posterior, model, band_bracket=None,
+               dask_address=None):
     paths = [Path(p) for p in logs]
     if plot_out or posterior:
         raise _Fail("--plot and --posterior take one log; fit the logs one by one for those")
@@ -222,9 +225,21 @@ def _fit_batch(logs, summary_out, json_out, plot_out, inertia, fix, release_time
     fixed = _parse_fix(fix)
     from ._batch import fit_many
 
+    client = None
+    if dask_address:
+        try:
+            from distributed import Client
+        except ImportError:
+            raise _Fail("--dask needs dask.distributed: pip install 'hdid[dask]'") from None
+        try:
+            client = Client(dask_address, timeout="10s")
+        except OSError as exc:
+            raise _Fail(f"--dask {dask_address}: cannot reach the scheduler ({exc})") from None
     table = fit_many(
         [str(p) for p in paths],
         progress=not quiet,
+        band_bracket=band_bracket,
+        client=client,
         model=model,
         inertia=inertia,
         fix={k: v for k, v in fixed.items()} or None,
@@ -233,6 +248,15 @@ def _fit_batch(logs, summary_out, json_out, plot_out, inertia, fix, release_time
         **({"n_starts": starts} if starts else {}),
     )
     flat = table.drop(columns=["result"])
+    timing = table.attrs.get("timing", {})
+    if not quiet and "total_s" in timing:
+        compile_s = timing.get("compile_s")
+        click.echo(
+            f"{len(flat)} log(s) in {timing['total_s']:.1f} s"
+            + (f" (compile {compile_s:.1f} s, run {timing['run_s']:.1f} s)"
+               if compile_s is not None else ""),
+            err=True,
+        )
     if not quiet:
         cols = [c for c in ("log", "k1", "k1_std", "tau_c", "tau_s", "stick_band_halfwidth_rad",
                             "rms_residual_counts", "n_warnings", "error") if c in flat]
