@@ -143,8 +143,28 @@ def write(records: list, meta: dict) -> None:
                 f"{c0.get('rms_after_floor', float('nan')):.2f} | {c0.get('adequate_after')} | "
                 f"{'yes' if amb else ''} | {r['seconds']:.0f} |"
             )
-        right = sum(1 for r in rows if "error" not in r and r["top"] == r["expected"])
-        lines += ["", f"Right effect ranked first (or `none` for nothing hidden): {right}/{len(rows)}.", ""]
+        ok = [r for r in rows if "error" not in r]
+        lib = [r for r in ok if r["expected"] not in ("none", None) and not r["hidden"].startswith("removed:")]
+        removed = [r for r in ok if r["hidden"].startswith("removed:")]
+        clean = [r for r in ok if r["hidden"] == "none"]
+        outside = [r for r in ok if r["expected"] is None]
+        fixed = [r for r in lib if r["top"] == r["expected"]
+                 and r["candidates"][0]["rms_after_floor"] <= 1.3]
+        lines += [
+            "",
+            f"- hidden library effect ranked first: {sum(r['top'] == r['expected'] for r in lib)}/{len(lib)}"
+            f"; ranked first *and* RMS after ≤ 1.3× floor: {len(fixed)}/{len(lib)}",
+            f"- nothing hidden, verdict `adequate` (no false alarm): "
+            f"{sum(r['verdict'] == 'adequate' for r in clean)}/{len(clean)}",
+            "- outside the library: " + ", ".join(
+                f"{r['hidden']} → {r['verdict']}"
+                + (f" ({r['top']}, RMS after {r['candidates'][0]['rms_after_floor']:.2f}× floor)"
+                   if r["verdict"] == "missing_effect" else "") for r in outside),
+        ]
+        if removed:
+            lines.append(f"- base piece switched off in the model, found again: "
+                         f"{sum(r['top'] == r['expected'] for r in removed)}/{len(removed)}")
+        lines.append("")
     (OUT / "diagnose_suite.md").write_text("\n".join(lines) + "\n")
 
 

@@ -7,9 +7,7 @@ set keeps the compile count (one per model structure) small.
 
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,18 +17,8 @@ import hdid
 from hdid._diagnose import STRONG_DBIC, bic
 from hdid.cli import main
 
-ROOT = Path(__file__).resolve().parents[1]
+from synthetic import GEN, HID, ROOT
 
-
-def _load(name, path):
-    spec = importlib.util.spec_from_file_location(name, path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-GEN = _load("hdid_gen_diag", ROOT / "data" / "synthetic" / "generate.py")
-HID = _load("hdid_hidden_diag", ROOT / "data" / "synthetic" / "hidden.py")
 TRUTH = {k: v for k, v in GEN.TRUTH_CSF8.items() if k != "ratio"}
 # Two amplitudes at 1 kHz: a small "rich" design (the benchmark uses four amplitudes).
 DESIGN = dict(amplitudes=[0.157, -0.157, 0.08, -0.08], fs=1000.0, duration=0.25, hold=0.02,

@@ -7,9 +7,6 @@ the effect must reproduce the reference trajectory: this checks both codes at on
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -17,18 +14,8 @@ import hdid
 from hdid.effects import AbstractEffect, library
 from hdid.reference import simulate_reference
 
-ROOT = Path(__file__).resolve().parents[1]
+from synthetic import GEN, HID, ROOT
 
-
-def _load(name, path):
-    spec = importlib.util.spec_from_file_location(name, path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-GEN = _load("hdid_gen_effects", ROOT / "data" / "synthetic" / "generate.py")
-HID = _load("hdid_hidden_effects", ROOT / "data" / "synthetic" / "hidden.py")
 TRUTH = {k: v for k, v in GEN.TRUTH_CSF8.items() if k not in ("ratio", "inertia")}
 INERTIA = GEN.TRUTH_CSF8["inertia"]
 STEP = 2 * np.pi / 4000

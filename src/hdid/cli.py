@@ -23,6 +23,12 @@ class _Fail(click.ClickException):
     def show(self, file=None):
         click.echo(f"hdid: error: {self.format_message()}", err=True, file=file)
 
+    @classmethod
+    def from_error(cls, exc: Exception) -> _Fail:
+        """The library's error as one line (a KeyError's message without its quotes)."""
+        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
+        return cls(str(msg).replace("\n", " "))
+
 
 def _parse_floats(text: str | None, what: str) -> list[float] | None:
     if text is None:
@@ -134,8 +140,7 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
             **({"n_starts": starts} if starts else {}),
         )
     except (HdidError, ValueError, KeyError) as exc:
-        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
-        raise _Fail(str(msg).replace("\n", " ")) from None
+        raise _Fail.from_error(exc) from None
     if not quiet:
         click.echo(result.report())
     summary = result.to_dict()
@@ -353,8 +358,7 @@ def diagnose_cmd(log, json_out, plot_out, residuals_out, candidates, steps, iner
             release_time=release_time,
         )
     except (HdidError, ValueError, KeyError) as exc:
-        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
-        raise _Fail(str(msg).replace("\n", " ")) from None
+        raise _Fail.from_error(exc) from None
     if not quiet:
         click.echo(result.report())
     if json_out:
@@ -410,8 +414,7 @@ def simulate_cmd(out, amplitudes, rate, duration, hold, offset, counts_per_rev, 
             as_counts=counts, overwrite=overwrite,
         )
     except (HdidError, ValueError, KeyError) as exc:
-        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
-        raise _Fail(str(msg).replace("\n", " ")) from None
+        raise _Fail.from_error(exc) from None
     click.echo(f"wrote {out}: {len(amps)} run(s) at {rate:g} Hz")
 
 
