@@ -216,18 +216,22 @@ def _tau(values) -> float:
     return values.get("tau_c", 3e-3)
 
 
-#: Orders (cycles per WG revolution) always scanned for a position-periodic torque: the
-#: WG mesh (2, 4) and common motor pole/slot cogging orders; the largest peak of the
-#: residual's periodogram against the WG angle is added to them.
+#: Orders (cycles per WG revolution) scanned for a position-periodic torque: the WG mesh
+#: (2, 4) and common motor pole/slot cogging orders; the largest peak of the residual's
+#: periodogram against the WG angle is added to them. Only orders with at least one full
+#: period over the logged swing are tried: a fraction of a period is a smooth bend that
+#: a stiffness law (or the offset) fits just as well, so it cannot be told apart.
 RIPPLE_ORDERS = (2.0, 4.0, 8.0, 12.0, 16.0, 24.0, 32.0, 48.0)
 
 
 def _ripple_variants(model, values, hints):
     from .effects import library
 
-    orders = list(RIPPLE_ORDERS)
+    swing = hints.get("swing_rad", math.inf)
+    shortest = 2 * math.pi / swing if swing > 0 else math.inf  # one period over the swing
+    orders = [n for n in RIPPLE_ORDERS if n >= shortest]
     for n in hints.get("ripple_orders") or []:
-        if all(abs(n - o) > 1 for o in orders):
+        if n >= shortest and all(abs(n - o) > 1 for o in orders):
             orders.append(float(n))
     out = []
     for n in orders:
@@ -506,7 +510,9 @@ def diagnose(
         white = whiteness(current)
         frame = residual_frame(current)
         feat = residual_features(frame)
-        hints = {"ripple_orders": _ripple_orders(frame)}
+        moving = frame.loc[frame["phase"] == "moving", "theta_wg"]
+        swing = float(np.ptp(moving)) if len(moving) else math.inf
+        hints = {"ripple_orders": _ripple_orders(frame), "swing_rad": swing}
         values = current.model.float_values()
         results: list[CandidateResult] = []
         fix = fit_options.get("fix")
