@@ -180,7 +180,8 @@ def main(argv: list[str]) -> None:
     records: list = []
     if removed and (OUT / "diagnose_suite.json").exists():  # add to the main suite's records
         old = json.loads((OUT / "diagnose_suite.json").read_text())["records"]
-        records = [r for r in old if not str(r.get("hidden", "")).startswith("removed:")]
+        records = [r for r in old if not (str(r.get("hidden", "")).startswith("removed:")
+                                          and r["design"] in designs)]
     meta = {
         "date": time.strftime("%Y-%m-%d %H:%M"),
         "cpu": cpu_model(),
