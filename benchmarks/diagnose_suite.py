@@ -190,6 +190,11 @@ def main(argv: list[str]) -> None:
         "src": src_fingerprint(),
     }
     for k, design in enumerate(designs):
+        # Compiled programs of the previous design are not needed again; a long process
+        # that keeps them all ran out of memory mappings (LLVM "Cannot allocate memory").
+        import jax
+
+        jax.clear_caches()
         run_design(design, gen, hid, records, seed0=(7500 if removed else 7100) + 100 * k,
                    removed=removed)
         write(records, meta)
