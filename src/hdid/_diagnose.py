@@ -19,6 +19,10 @@ import numpy as np
 
 #: ΔBIC below this is "very strong" evidence (Kass & Raftery 1995: |ΔBIC| > 10).
 STRONG_DBIC = -10.0
+#: A current fit with RMS above this many quantization floors is a poor warm start ...
+FAR_FROM_FLOOR = 3.0
+#: ... so its candidates get as many grid starts as a fresh fit.
+FULL_GRID_STARTS = 6
 #: Two candidates whose BIC differ by less than this explain the data about equally well:
 #: the evidence between them is not "very strong" on the Kass–Raftery scale (> 10).
 AMBIGUOUS_DBIC = 10.0
@@ -514,6 +518,10 @@ def diagnose(
         swing = float(np.ptp(moving)) if len(moving) else math.inf
         hints = {"ripple_orders": _ripple_orders(frame), "swing_rad": swing}
         values = current.model.float_values()
+        # Far from the floor, the current fit is no trustworthy warm start (e.g. a model
+        # without static friction that never sticks): give candidates the full grid.
+        far = current.rms_residual_rad > FAR_FROM_FLOOR * current.quantization_floor_rad
+        starts_here = max(n_starts, FULL_GRID_STARTS) if far else n_starts
         results: list[CandidateResult] = []
         fix = fit_options.get("fix")
         for key in wanted:
@@ -536,7 +544,7 @@ def diagnose(
                 elif fix is not None:
                     opts["fix"] = [k for k in fix if k in m.parameter_specs()]
                 try:
-                    r = fit(log, m, start_from_model=True, n_starts=n_starts, **opts)
+                    r = fit(log, m, start_from_model=True, n_starts=starts_here, **opts)
                 except Exception as exc:  # one candidate failing must not stop the others
                     cr = CandidateResult(key, label, current.rms_residual_rad, math.nan,
                                          math.inf, 0, None, "", {}, None,
