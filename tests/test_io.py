@@ -574,9 +574,10 @@ def _corrupt(lines: list[str], data: st.DataObject) -> list[str]:
         names = lines[0].split(",")
         c = names.index("time") if "time" in names else col
         r1, r2 = data.draw(st.integers(1, rows - 1)), data.draw(st.integers(1, rows - 1))
-        v1, v2 = lines[r1].split(",")[c], lines[r2].split(",")[c]
-        put(r1, c, v2)
-        put(r2, c, v1)
+        cells1, cells2 = lines[r1].split(","), lines[r2].split(",")
+        if c < len(cells1) and c < len(cells2):  # an earlier "truncate" may have cut a row
+            put(r1, c, cells2[c])
+            put(r2, c, cells1[c])
     elif kind == "drop_col":
         lines = [",".join(x for i, x in enumerate(line.split(",")) if i != col) for line in lines]
     elif kind == "dup_row":
