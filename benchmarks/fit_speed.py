@@ -138,17 +138,9 @@ def _import_scipy_way():
 
 def _union(spans):
     """Total length of the union of (start, end) intervals (nested jit traces overlap)."""
-    total, cur_s, cur_e = 0.0, None, None
-    for s, e in sorted(spans):
-        if cur_e is None or s > cur_e:
-            if cur_e is not None:
-                total += cur_e - cur_s
-            cur_s, cur_e = s, e
-        else:
-            cur_e = max(cur_e, e)
-    if cur_e is not None:
-        total += cur_e - cur_s
-    return total
+    from hdid._vfit import union_length
+
+    return union_length(spans)
 
 
 class _FitPhases:

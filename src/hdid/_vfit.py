@@ -114,18 +114,23 @@ class _CompileClock:
 
     def since(self, mark: int) -> float:
         with self.lock:
-            spans = sorted(self.spans[mark:])
-        total, cur_s, cur_e = 0.0, None, None
-        for s, e in spans:
-            if cur_e is None or s > cur_e:
-                if cur_e is not None:
-                    total += cur_e - cur_s
-                cur_s, cur_e = s, e
-            else:
-                cur_e = max(cur_e, e)
-        if cur_e is not None:
-            total += cur_e - cur_s
-        return total
+            spans = list(self.spans[mark:])
+        return union_length(spans)
+
+
+def union_length(spans) -> float:
+    """Total length of the union of ``(start, end)`` intervals (nested traces overlap)."""
+    total, cur_s, cur_e = 0.0, None, None
+    for s, e in sorted(spans):
+        if cur_e is None or s > cur_e:
+            if cur_e is not None:
+                total += cur_e - cur_s
+            cur_s, cur_e = s, e
+        else:
+            cur_e = max(cur_e, e)
+    if cur_e is not None:
+        total += cur_e - cur_s
+    return total
 
 
 _CLOCK: _CompileClock | None = None
