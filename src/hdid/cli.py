@@ -63,6 +63,24 @@ def _check_output(path: str | None, inputs: list[Path], option: str) -> None:
         raise _Fail(f"{option} {path}: folder {p.parent} does not exist")
 
 
+# Options shared by `fit` and `diagnose`.
+_FIX = click.option("--fix", multiple=True, metavar="NAME[=VALUE]", help="Hold a parameter fixed (repeatable).")
+_RELEASE_TIME = click.option("--release-time", type=float, help="Known release instant [s] in each run's time axis.")
+_COUNTS_PER_REV = click.option("--counts-per-rev", type=float, help="theta holds raw encoder counts with this many per revolution.")
+_QUIET = click.option("--quiet", "-q", is_flag=True, help="No report on stdout.")
+
+
+def _MODEL_OPTIONS(fn):
+    """--add / --remove / --effect-file: the model to start from."""
+    for opt in reversed((
+        click.option("--add", "add_effects", multiple=True, metavar="EFFECT", help="Add a library effect (repeatable; ripple:ORDER sets the order): asymmetric_friction, backlash, hysteresis, kinematic_error, linear_stiffness, load_friction, ripple, soft_windup, stiffness, stribeck, viscous."),
+        click.option("--remove", "remove_effects", multiple=True, metavar="EFFECT", help="Remove an effect of the base model (repeatable), e.g. viscous."),
+        click.option("--effect-file", "effect_files", multiple=True, metavar="FILE.py", help="Your own effect: a Python file defining AbstractEffect instances (repeatable)."),
+    )):
+        fn = opt(fn)
+    return fn
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="hdid")
 def main():
@@ -81,12 +99,10 @@ def main():
 @click.option("--added-inertia", metavar="I1,I2,...", help="Known inertia added per run [kg m^2], in run order (or an added_inertia column).")
 @click.option("--free-inertia", is_flag=True, help="Fit the inertia (needs --added-inertia runs or --inertia-prior).")
 @click.option("--inertia-prior", metavar="MEAN,REL", help="Log-normal prior on the inertia, e.g. 7e-7,0.3.")
-@click.option("--fix", multiple=True, metavar="NAME[=VALUE]", help="Hold a parameter fixed (repeatable).")
-@click.option("--add", "add_effects", multiple=True, metavar="EFFECT", help="Add a library effect (repeatable; ripple:ORDER sets the order): asymmetric_friction, backlash, hysteresis, kinematic_error, linear_stiffness, load_friction, ripple, soft_windup, stiffness, stribeck, viscous.")
-@click.option("--remove", "remove_effects", multiple=True, metavar="EFFECT", help="Remove an effect of the base model (repeatable), e.g. viscous.")
-@click.option("--effect-file", "effect_files", multiple=True, metavar="FILE.py", help="Your own effect: a Python file defining AbstractEffect instances (repeatable).")
-@click.option("--release-time", type=float, help="Known release instant [s] in each run's time axis.")
-@click.option("--counts-per-rev", type=float, help="theta holds raw encoder counts with this many per revolution.")
+@_FIX
+@_MODEL_OPTIONS
+@_RELEASE_TIME
+@_COUNTS_PER_REV
 @click.option("--starts", type=click.IntRange(1, 32), help="Multi-starts (default: the library's, 6).")
 @click.option("--posterior", is_flag=True, help="Also sample the posterior with emcee (slow; see README).")
 @click.option("--steps", type=click.IntRange(100, 10**6), help="Posterior chain length (default: until 50 autocorrelation times, at most 20000).")
@@ -94,7 +110,7 @@ def main():
 @click.option("--seed", type=int, default=0, show_default=True, help="Posterior seed.")
 @click.option("--chains", "chains_out", metavar="OUT.nc", help="Save the posterior chains (arviz NetCDF).")
 @click.option("--corner", "corner_out", metavar="OUT.png", help="Corner plot of the posterior.")
-@click.option("--quiet", "-q", is_flag=True, help="No report on stdout.")
+@_QUIET
 def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_inertia,
             inertia_prior, fix, add_effects, remove_effects, effect_files, release_time,
             counts_per_rev, starts, posterior, steps, walkers, seed, chains_out, corner_out,
@@ -318,13 +334,11 @@ def _finite(obj):
 @click.option("--candidates", metavar="A,B,...", help="Only these candidates (default: every library effect that applies).")
 @click.option("--steps", type=click.IntRange(1, 5), default=1, show_default=True, help="Forward-selection steps (add the best, diagnose again).")
 @click.option("--inertia", type=float, help="Total WG inertia [kg m^2] (default 7e-7).")
-@click.option("--fix", multiple=True, metavar="NAME[=VALUE]", help="Hold a parameter fixed (repeatable).")
-@click.option("--add", "add_effects", multiple=True, metavar="EFFECT", help="Start from the base model plus this library effect (repeatable).")
-@click.option("--remove", "remove_effects", multiple=True, metavar="EFFECT", help="Start from the base model without this effect (repeatable).")
-@click.option("--effect-file", "effect_files", multiple=True, metavar="FILE.py", help="Your own effect in the starting model (repeatable).")
-@click.option("--release-time", type=float, help="Known release instant [s] in each run's time axis.")
-@click.option("--counts-per-rev", type=float, help="theta holds raw encoder counts with this many per revolution.")
-@click.option("--quiet", "-q", is_flag=True, help="No report on stdout.")
+@_FIX
+@_MODEL_OPTIONS
+@_RELEASE_TIME
+@_COUNTS_PER_REV
+@_QUIET
 def diagnose_cmd(log, json_out, plot_out, residuals_out, candidates, steps, inertia, fix,
                  add_effects, remove_effects, effect_files, release_time, counts_per_rev, quiet):
     """Fit the model to LOG.csv, then rank the effects that could be missing.
