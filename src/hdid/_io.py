@@ -1,4 +1,4 @@
-"""Reading, validating and writing free-motion encoder logs.
+"""Reading, validating and writing encoder logs: free-motion and driven.
 
 A free-motion test twists the wave generator (the motor side of the harmonic
 drive) by about ±0.157 rad, releases it and logs its encoder at a constant rate
@@ -20,6 +20,29 @@ line and the columns
     Known inertia added at the wave generator for this run [kg m^2] (an inertia
     mounted at the output counts divided by N²), ``>= 0`` and constant within a run
     (default 0).
+
+Driven logs (paper eqs. 8–9: the motor drives the gear, the output turns against a
+load) add the columns
+
+``motor_torque`` (driven logs)
+    Motor torque at the wave generator [N m], zero-order hold: the value of row
+    ``k`` acts from ``time[k]`` until ``time[k+1]`` (a digital drive's command).
+``motor_current`` (instead of ``motor_torque``)
+    Motor current [A]; needs ``torque_constant`` (N m/A) and is converted to
+    ``motor_torque = torque_constant * motor_current``. Both columns at once is an
+    error.
+``theta_out`` (optional, driven logs only)
+    Output-shaft angle [rad, output encoder's frame], or raw output encoder counts
+    when ``output_counts_per_rev`` is given (``output_counts`` is accepted as an
+    alias in that case).
+``load_torque`` (optional, driven logs only)
+    External torque applied on the output shaft [N m, output side], linearly
+    interpolated between samples (a measured signal); absent means zero load.
+
+A log is driven when it has a motor-torque column; then every run must have it
+(a log mixing driven and free-motion runs is an error) and every cell of a driven
+column must be filled. ``theta_out`` and ``load_torque`` without a motor torque
+are errors. A driven run need not show motion (it may stay stuck).
 
 Column names are matched case-insensitively after stripping whitespace; other
 columns are ignored. :func:`read_log` checks everything and raises
@@ -54,6 +77,29 @@ _TIME, _THETA, _COUNTS, _RUN, _SETUP, _INERTIA = (
     "setup",
     "added_inertia",
 )
+#: Driven-log columns (paper eqs. 8–9).
+_MOTOR_TORQUE, _MOTOR_CURRENT, _THETA_OUT, _OUTPUT_COUNTS, _LOAD_TORQUE = (
+    "motor_torque",
+    "motor_current",
+    "theta_out",
+    "output_counts",
+    "load_torque",
+)
+#: Key under which the motor-torque column (torque or current) is indexed.
+_MOTOR = "<motor>"
+_KNOWN_COLUMNS = (
+    _TIME,
+    _THETA,
+    _COUNTS,
+    _RUN,
+    _SETUP,
+    _INERTIA,
+    _MOTOR_TORQUE,
+    _MOTOR_CURRENT,
+    _THETA_OUT,
+    _OUTPUT_COUNTS,
+    _LOAD_TORQUE,
+)
 #: ``|theta|`` above this cannot be radians in a ±0.157 rad test.
 _COUNTS_LOOKING_MAX = 20.0
 #: Tolerance for "is an integer" on raw encoder counts (relative, >= absolute).
@@ -65,9 +111,14 @@ _NA_TOKENS = frozenset(
     {"nan", "-nan", "+nan", "na", "n/a", "#n/a", "null", "none", "nat", "-", "?"}
 )
 _COUNTS_HINT = "pass --counts-per-rev N (e.g. 4000)"
+_OUTPUT_COUNTS_HINT = "pass output_counts_per_rev=N (e.g. 524288 = 2**19)"
+_MOTOR_HINT = (
+    "a driven log needs 'motor_torque' [N m] (or 'motor_current' [A] with torque_constant)"
+)
 _EXPECTED_COLUMNS = (
     "'time' and 'theta' (or 'counts' with --counts-per-rev); optional 'run', "
-    "'setup', 'added_inertia'"
+    "'setup', 'added_inertia'; driven logs: 'motor_torque' (or 'motor_current'), "
+    "'theta_out' (or 'output_counts'), 'load_torque'"
 )
 
 
@@ -103,10 +154,20 @@ class Run:
     first_row : int, default 0
         CSV line number of the run's first sample (header is line 1); 0 when the
         run was not read from a file.
+    motor_torque : numpy.ndarray or None, default None
+        Driven runs: motor torque at the wave generator [N m] per sample, held
+        from each sample to the next (zero-order hold). ``None`` for a
+        free-motion run.
+    theta_out : numpy.ndarray or None, default None
+        Driven runs: output angle [rad, output encoder's frame], or ``None``.
+    load_torque : numpy.ndarray or None, default None
+        Driven runs: external torque on the output [N m, output side], linear
+        between samples; ``None`` means zero load.
 
     Notes
     -----
-    The arrays are copied to read-only float64 arrays. Runs compare by
+    The arrays are copied to read-only float64 arrays. ``theta_out`` and
+    ``load_torque`` need ``motor_torque`` (``ValueError`` otherwise). Runs compare by
     identity (``eq=False``) because element-wise array equality has no single
     truth value.
     """
@@ -117,6 +178,9 @@ class Run:
     setup: str = "1"
     added_inertia: float = 0.0
     first_row: int = 0
+    motor_torque: np.ndarray | None = None
+    theta_out: np.ndarray | None = None
+    load_torque: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         time = _frozen_float_array(self.time, "time")
@@ -125,6 +189,21 @@ class Run:
             raise ValueError(
                 f"Run {self.name!r}: time has {time.size} samples but theta has {theta.size}"
             )
+        for key in ("motor_torque", "theta_out", "load_torque"):
+            value = getattr(self, key)
+            if value is None:
+                continue
+            arr = _frozen_float_array(value, key)
+            if arr.shape != time.shape:
+                raise ValueError(
+                    f"Run {self.name!r}: time has {time.size} samples but {key} has {arr.size}"
+                )
+            if key != "motor_torque" and self.motor_torque is None:
+                raise ValueError(
+                    f"Run {self.name!r}: {key} is given without motor_torque — a driven run "
+                    "needs the motor torque"
+                )
+            object.__setattr__(self, key, arr)
         object.__setattr__(self, "name", str(self.name))
         object.__setattr__(self, "setup", str(self.setup))
         object.__setattr__(self, "added_inertia", float(self.added_inertia))
@@ -137,10 +216,15 @@ class Run:
         """Number of samples in the run."""
         return int(self.time.size)
 
+    @property
+    def is_driven(self) -> bool:
+        """Whether the run has a motor torque (a driven run, paper eqs. 8–9)."""
+        return self.motor_torque is not None
+
 
 @dataclass(frozen=True)
 class Log:
-    """A validated free-motion log: one or more runs at a common sample rate.
+    """A validated log: one or more runs at a common sample rate.
 
     Parameters
     ----------
@@ -156,6 +240,19 @@ class Log:
         data do not look quantized.
     counts_per_rev : float or None
         Encoder counts per revolution if the log held raw counts.
+    output_resolution : float or None
+        Output encoder step [rad]: ``2*pi/output_counts_per_rev`` when that was
+        given, else estimated from ``theta_out`` like ``resolution``; ``None``
+        without ``theta_out`` or when it does not look quantized.
+    output_counts_per_rev : float or None
+        Output encoder counts per revolution if the log held raw output counts.
+    torque_constant : float or None
+        Motor torque constant [N m/A] if the log held ``motor_current``.
+
+    Raises
+    ------
+    ValueError
+        If some runs are driven and others not.
     """
 
     source: str
@@ -163,9 +260,25 @@ class Log:
     sample_period: float
     resolution: float | None
     counts_per_rev: float | None = None
+    output_resolution: float | None = None
+    output_counts_per_rev: float | None = None
+    torque_constant: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "runs", tuple(self.runs))
+        kinds = {run.is_driven for run in self.runs}
+        if len(kinds) > 1:
+            free = next(run.name for run in self.runs if not run.is_driven)
+            driven = next(run.name for run in self.runs if run.is_driven)
+            raise ValueError(
+                f"run {free!r} is free-motion but run {driven!r} is driven — a log must be "
+                "all driven or all free-motion"
+            )
+
+    @property
+    def is_driven(self) -> bool:
+        """Whether every run has a motor torque (a driven log); False for no runs."""
+        return bool(self.runs) and all(run.is_driven for run in self.runs)
 
     @property
     def setups(self) -> tuple[str, ...]:
@@ -436,6 +549,19 @@ class _Cells:
 # ----------------------------------------------------------------------- reading
 
 
+def _positive_arg(path, value, what: str, hint: str) -> float | None:
+    """``float(value)`` if it is a positive finite number, None for None, else a LogError."""
+    if value is None:
+        return None
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = float("nan")
+    if isinstance(value, bool) or not (math.isfinite(number) and number > 0):
+        raise LogError(f"{what} must be a positive number, got {value!r} — {hint}", path=path)
+    return number
+
+
 def _check_args(path, counts_per_rev, period_tolerance, min_samples_per_run) -> float | None:
     if counts_per_rev is not None:
         try:
@@ -467,13 +593,23 @@ def _check_args(path, counts_per_rev, period_tolerance, min_samples_per_run) -> 
     return counts_per_rev
 
 
-def _find_columns(table: _Table, counts_per_rev: float | None) -> dict[str, int]:
-    """Map canonical names to column indices, or raise a LogError."""
+def _find_columns(
+    table: _Table,
+    counts_per_rev: float | None,
+    output_counts_per_rev: float | None = None,
+    torque_constant: float | None = None,
+) -> dict[str, int]:
+    """Map canonical names to column indices, or raise a LogError.
+
+    The motor-torque column (``motor_torque``, or ``motor_current`` with a torque
+    constant) is mapped under ``_MOTOR``; ``output_counts`` (with
+    ``output_counts_per_rev``) under ``_THETA_OUT``.
+    """
     path = table.path
     index: dict[str, int] = {}
     for i, name in enumerate(table.names):
         key = name.lower()
-        if key not in (_TIME, _THETA, _COUNTS, _RUN, _SETUP, _INERTIA):
+        if key not in _KNOWN_COLUMNS:
             continue
         if key in index:
             raise LogError(
@@ -497,6 +633,7 @@ def _find_columns(table: _Table, counts_per_rev: float | None) -> dict[str, int]
                 column=table.names[index[_COUNTS]],
             )
         index[_THETA] = index[_COUNTS]
+    _find_driven_columns(table, index, output_counts_per_rev, torque_constant)
     missing = [name for name in (_TIME, _THETA) if name not in index]
     if missing:
         found = ", ".join(_show(n, 30) for n in table.names) or "none"
@@ -515,6 +652,86 @@ def _find_columns(table: _Table, counts_per_rev: float | None) -> dict[str, int]
             path=path,
         )
     return index
+
+
+def _find_driven_columns(
+    table: _Table,
+    index: dict[str, int],
+    output_counts_per_rev: float | None,
+    torque_constant: float | None,
+) -> None:
+    """Resolve the driven-log columns in `index` (in place), or raise a LogError."""
+    path = table.path
+
+    def fail(message: str, key: str | None = None) -> LogError:
+        return LogError(message, path=path, column=None if key is None else table.names[index[key]])
+
+    # -- motor torque: 'motor_torque' [N m] or 'motor_current' [A] * torque_constant
+    if _MOTOR_TORQUE in index and _MOTOR_CURRENT in index:
+        raise fail(
+            "both 'motor_torque' and 'motor_current' columns are present — keep only one",
+            _MOTOR_CURRENT,
+        )
+    if _MOTOR_CURRENT in index:
+        if torque_constant is None:
+            raise fail(
+                "motor current [A] needs the motor's torque constant — pass "
+                "torque_constant=KT (N m/A), or give 'motor_torque' [N m] instead",
+                _MOTOR_CURRENT,
+            )
+        index[_MOTOR] = index[_MOTOR_CURRENT]
+    elif torque_constant is not None:
+        if _MOTOR_TORQUE in index:
+            raise fail(
+                "torque_constant is given but the log holds 'motor_torque' in N m already — "
+                "drop torque_constant",
+                _MOTOR_TORQUE,
+            )
+        raise fail(
+            "torque_constant is given but the log has no 'motor_current' column — drop "
+            "torque_constant or add the column"
+        )
+    elif _MOTOR_TORQUE in index:
+        index[_MOTOR] = index[_MOTOR_TORQUE]
+
+    # -- output angle: 'theta_out' [rad] or raw counts with output_counts_per_rev
+    if _THETA_OUT in index and _OUTPUT_COUNTS in index and output_counts_per_rev is not None:
+        raise fail(
+            "both 'theta_out' and 'output_counts' columns are present — keep only one",
+            _OUTPUT_COUNTS,
+        )
+    if _THETA_OUT not in index and _OUTPUT_COUNTS in index:
+        if output_counts_per_rev is None:
+            raise fail(
+                f"looks like raw output encoder counts; {_OUTPUT_COUNTS_HINT}", _OUTPUT_COUNTS
+            )
+        index[_THETA_OUT] = index[_OUTPUT_COUNTS]
+    if output_counts_per_rev is not None and _THETA_OUT not in index:
+        raise fail(
+            "output_counts_per_rev is given but the log has no 'theta_out' or "
+            "'output_counts' column — drop output_counts_per_rev or add the column"
+        )
+
+    # -- what needs a motor torque
+    if _MOTOR not in index:
+        for key, what in ((_THETA_OUT, "an output angle"), (_LOAD_TORQUE, "a load torque")):
+            if key in index:
+                raise fail(
+                    f"{what} is given but no motor torque — {_MOTOR_HINT}; drop this column "
+                    "for a free-motion log",
+                    key,
+                )
+
+
+def _missing_cells(column) -> np.ndarray:
+    """Mask of cells that are empty or hold a missing-value token (e.g. 'nan', 'NA')."""
+    if isinstance(column, pd.Series) and pd.api.types.is_numeric_dtype(column.dtype):
+        return column.isna().to_numpy()
+    raw = np.asarray(column, dtype=object)
+    codes, uniques = pd.factorize(raw, use_na_sentinel=False)
+    text = [_cell_text(u).lower() for u in uniques]
+    flags = np.array([t == "" or t in _NA_TOKENS for t in text], dtype=bool)
+    return flags[codes] if flags.size else np.zeros(raw.shape, dtype=bool)
 
 
 def _looks_numeric(text: str) -> bool:
@@ -538,8 +755,10 @@ def read_log(
     counts_per_rev: float | None = None,
     period_tolerance: float = 0.02,
     min_samples_per_run: int = 8,
+    output_counts_per_rev: float | None = None,
+    torque_constant: float | None = None,
 ) -> Log:
-    """Read and validate a free-motion log.
+    """Read and validate a free-motion or driven log.
 
     Parameters
     ----------
@@ -556,6 +775,14 @@ def read_log(
         step.
     min_samples_per_run : int, default 8
         Fewest samples a run may have (at least 2).
+    output_counts_per_rev : float, optional
+        Output encoder counts per revolution (driven logs). When given,
+        ``theta_out`` (or ``output_counts``) holds raw integer counts and is
+        converted to radians with ``2*pi/output_counts_per_rev``, which is also
+        the output resolution.
+    torque_constant : float, optional
+        Motor torque constant [N m/A]; required with a ``motor_current`` column
+        (and an error without one): ``motor_torque = torque_constant * current``.
 
     Returns
     -------
@@ -579,6 +806,12 @@ def read_log(
     a run; each run has enough samples; the sampling is uniform and shared by
     all runs; each run shows motion (at least 2 encoder steps, or 1e-9 rad when
     the resolution is unknown). Fully blank lines are skipped.
+
+    Driven logs (a ``motor_torque`` or ``motor_current`` column) are checked
+    further: the torque / counts arguments match the columns; no run lacks the
+    motor torque while others have it; every driven cell is filled and finite;
+    raw output counts are whole numbers. The motion check is skipped for driven
+    logs (a driven run may stay stuck).
     """
     if isinstance(source, pd.DataFrame):
         path = None
@@ -589,8 +822,15 @@ def read_log(
             f"read_log expects a path or a pandas DataFrame, got {type(source).__name__}"
         )
     cpr = _check_args(path, counts_per_rev, period_tolerance, min_samples_per_run)
+    out_cpr = _positive_arg(
+        path, output_counts_per_rev, "output counts per revolution", _OUTPUT_COUNTS_HINT
+    )
+    kt = _positive_arg(
+        path, torque_constant, "torque constant", "pass the motor's torque constant in N m/A"
+    )
     table = _load_frame(source) if path is None else _load_csv(path)
-    cols = _find_columns(table, cpr)
+    cols = _find_columns(table, cpr, out_cpr, kt)
+    driven = _MOTOR in cols
     n = int(table.lines.size)
     if n == 0:
         raise LogError(
@@ -616,7 +856,14 @@ def read_log(
     time = cells.numbers(cols[_TIME])
     theta = cells.numbers(cols[_THETA])
     inertia = cells.numbers(cols[_INERTIA]) if _INERTIA in cols else None
+    motor = cells.numbers(cols[_MOTOR]) if driven else None
+    theta_out = cells.numbers(cols[_THETA_OUT]) if _THETA_OUT in cols else None
+    load = cells.numbers(cols[_LOAD_TORQUE]) if _LOAD_TORQUE in cols else None
+    if driven and run_labels is not None:
+        _check_not_mixed(table, cols[_MOTOR], run_labels)
     cells.raise_first()
+    if motor is not None and kt is not None:
+        motor = motor * kt
 
     # -- counts vs. radians ------------------------------------------------
     integral = np.abs(theta - np.rint(theta)) <= _INTEGER_TOL * np.maximum(1.0, np.abs(theta))
@@ -635,6 +882,27 @@ def read_log(
         if integral.all() and float(np.max(np.abs(theta))) > _COUNTS_LOOKING_MAX:
             raise fail(f"looks like raw encoder counts; {_COUNTS_HINT}", _THETA)
         resolution = None
+
+    output_resolution: float | None = None
+    if theta_out is not None:
+        integral_out = np.abs(theta_out - np.rint(theta_out)) <= _INTEGER_TOL * np.maximum(
+            1.0, np.abs(theta_out)
+        )
+        if out_cpr is not None:
+            pos = _first(~integral_out)
+            if pos is not None:
+                raise fail(
+                    f"value {theta_out[pos]:.9g} is not a whole number of output encoder counts "
+                    "— drop output_counts_per_rev if theta_out is already in radians",
+                    _THETA_OUT,
+                    pos,
+                )
+            output_resolution = 2.0 * math.pi / out_cpr
+            theta_out = np.rint(theta_out) * output_resolution
+        elif integral_out.all() and float(np.max(np.abs(theta_out))) > _COUNTS_LOOKING_MAX:
+            raise fail(
+                f"looks like raw output encoder counts; {_OUTPUT_COUNTS_HINT}", _THETA_OUT
+            )
 
     if inertia is not None:
         pos = _first(inertia < 0)
@@ -760,6 +1028,9 @@ def read_log(
     if resolution is None:
         offsets = np.repeat(theta[starts], lengths)
         resolution = estimate_resolution(theta - offsets)
+    if theta_out is not None and output_resolution is None:
+        offsets = np.repeat(theta_out[starts], lengths)
+        output_resolution = estimate_resolution(theta_out - offsets)
     spans = np.maximum.reduceat(theta, starts) - np.minimum.reduceat(theta, starts)
     if resolution is not None:
         still = spans < (2.0 - 1e-6) * resolution
@@ -767,7 +1038,7 @@ def read_log(
     else:
         still = spans < _MIN_MOTION_UNQUANTIZED
         why = f"less than {_MIN_MOTION_UNQUANTIZED:g} rad"
-    r = _first(still)
+    r = None if driven else _first(still)
     if r is not None:
         raise fail(
             f"run {_show(names[r])} shows no motion (theta spans {spans[r]:.6g} rad, {why}) — "
@@ -775,6 +1046,9 @@ def read_log(
             _THETA,
             int(starts[r]),
         )
+
+    def part(values: np.ndarray | None, k: int) -> np.ndarray | None:
+        return None if values is None else values[starts[k] : ends[k]]
 
     runs = tuple(
         Run(
@@ -784,6 +1058,9 @@ def read_log(
             setup="1" if setups is None else str(setups[starts[k]]),
             added_inertia=0.0 if inertia is None else float(inertia[starts[k]]),
             first_row=int(table.lines[starts[k]]),
+            motor_torque=part(motor, k),
+            theta_out=part(theta_out, k),
+            load_torque=part(load, k),
         )
         for k in range(len(starts))
     )
@@ -793,7 +1070,31 @@ def read_log(
         sample_period=period,
         resolution=resolution,
         counts_per_rev=cpr,
+        output_resolution=output_resolution,
+        output_counts_per_rev=out_cpr,
+        torque_constant=kt,
     )
+
+
+def _check_not_mixed(table: _Table, col: int, run_labels: np.ndarray) -> None:
+    """Raise a LogError if some runs have no motor torque at all and others have it."""
+    missing = _missing_cells(table.columns[col])
+    if not missing.any() or missing.all():
+        return
+    starts = np.concatenate(([0], np.flatnonzero(run_labels[1:] != run_labels[:-1]) + 1))
+    empty = np.logical_and.reduceat(missing, starts)
+    full = ~np.logical_or.reduceat(missing, starts)
+    if empty.any() and (full | ~empty).any():
+        b = int(np.argmax(empty))
+        other = int(np.argmax(~empty))
+        raise LogError(
+            f"run {_show(run_labels[starts[b]])} has no motor torque but run "
+            f"{_show(run_labels[starts[other]])} has — a log must be all driven or all "
+            "free-motion; split it into two files",
+            path=table.path,
+            column=table.names[col],
+            row=int(table.lines[starts[b]]),
+        )
 
 
 # ----------------------------------------------------------------------- writing
@@ -805,12 +1106,15 @@ def write_log(
     *,
     counts_per_rev: float | None = None,
     overwrite: bool = False,
+    output_counts_per_rev: float | None = None,
 ) -> None:
     """Write runs as a CSV log readable by :func:`read_log`.
 
     The columns are ``run,setup,time,theta`` plus ``added_inertia`` when any
-    run has a nonzero added inertia. Floats are written with full (round-trip)
-    precision.
+    run has a nonzero added inertia, and for driven runs ``motor_torque``,
+    ``load_torque`` (when any run has one; a run without it gets zeros) and
+    ``theta_out`` (when the runs have it). Floats are written with full
+    (round-trip) precision.
 
     Parameters
     ----------
@@ -824,13 +1128,17 @@ def write_log(
         file back with the same ``counts_per_rev``.
     overwrite : bool, default False
         Replace an existing file. Otherwise an existing file is an error.
+    output_counts_per_rev : float, optional
+        Likewise for ``theta_out``: written as integer output encoder counts;
+        read back with the same ``output_counts_per_rev``.
 
     Raises
     ------
     LogError
         If the file exists (and `overwrite` is false), cannot be written, or the
         runs are not writable (no runs, empty or non-finite arrays, repeated or
-        empty run names, labels with line breaks, bad `counts_per_rev`).
+        empty run names, labels with line breaks, bad `counts_per_rev`, driven
+        and free-motion runs mixed, ``theta_out`` in some runs only).
     """
     if isinstance(runs, Log):
         runs = runs.runs
@@ -838,10 +1146,11 @@ def write_log(
     err = lambda message, **kw: LogError(message, path=path, **kw)  # noqa: E731
     if not runs:
         raise err("no runs to write — pass at least one Run")
-    if counts_per_rev is not None:
-        cpr = float(counts_per_rev)
-        if not (math.isfinite(cpr) and cpr > 0):
-            raise err(f"counts per revolution must be a positive number, got {counts_per_rev!r}")
+    for what, value in (("", counts_per_rev), ("output ", output_counts_per_rev)):
+        if value is not None:
+            cpr = float(value)
+            if not (math.isfinite(cpr) and cpr > 0):
+                raise err(f"{what}counts per revolution must be a positive number, got {value!r}")
     seen: set[str] = set()
     for run in runs:
         if not isinstance(run, Run):
@@ -862,6 +1171,18 @@ def write_log(
             raise err(f"{label} has non-finite time or theta values")
         if not (math.isfinite(run.added_inertia) and run.added_inertia >= 0):
             raise err(f"{label} has an invalid added inertia {run.added_inertia!r}")
+        for key in ("motor_torque", "theta_out", "load_torque"):
+            value = getattr(run, key)
+            if value is not None and not np.all(np.isfinite(value)):
+                raise err(f"{label} has non-finite {key} values")
+    for key, what in (("motor_torque", "driven and free-motion runs"), ("theta_out", "theta_out")):
+        have = [getattr(r, key) is not None for r in runs]
+        if any(have) and not all(have):
+            lacking = runs[have.index(False)].name
+            raise err(
+                f"run {_show(lacking)} has no {key} but other runs have — cannot write "
+                f"{what} in one log; write them to separate files"
+            )
 
     columns: dict[str, object] = {
         _RUN: np.concatenate([np.full(r.n_samples, r.name, dtype=object) for r in runs]),
@@ -877,6 +1198,19 @@ def write_log(
         columns[_INERTIA] = np.concatenate(
             [np.full(r.n_samples, r.added_inertia, dtype=np.float64) for r in runs]
         )
+    if runs[0].motor_torque is not None:
+        columns[_MOTOR_TORQUE] = np.concatenate([r.motor_torque for r in runs])
+        if any(r.load_torque is not None for r in runs):
+            columns[_LOAD_TORQUE] = np.concatenate(
+                [np.zeros(r.n_samples) if r.load_torque is None else r.load_torque for r in runs]
+            )
+        if runs[0].theta_out is not None:
+            out = np.concatenate([r.theta_out for r in runs])
+            if output_counts_per_rev is not None:
+                step = 2.0 * math.pi / float(output_counts_per_rev)
+                columns[_THETA_OUT] = np.rint(out / step).astype(np.int64)
+            else:
+                columns[_THETA_OUT] = out
     text = pd.DataFrame(columns).to_csv(index=False, lineterminator="\n")
     try:
         with open(path, "w" if overwrite else "x", encoding="utf-8", newline="") as fh:
