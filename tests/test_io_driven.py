@@ -94,6 +94,12 @@ def test_free_motion_log_is_not_driven():
     assert log.output_resolution is None and log.torque_constant is None
     assert all(r.motor_torque is None and r.theta_out is None and r.load_torque is None
                for r in log.runs)
+    # the driven-only arguments are ignored for a free-motion log (joint fits read both
+    # logs with one set of arguments)
+    same = read_log(FREE, torque_constant=KT, output_counts_per_rev=OUT_CPR)
+    assert not same.is_driven and same.torque_constant is None
+    for a, b in zip(log.runs, same.runs):
+        np.testing.assert_array_equal(a.theta, b.theta)
 
 
 # --------------------------------------------------------------- conversions

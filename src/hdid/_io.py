@@ -660,8 +660,16 @@ def _find_driven_columns(
     output_counts_per_rev: float | None,
     torque_constant: float | None,
 ) -> None:
-    """Resolve the driven-log columns in `index` (in place), or raise a LogError."""
+    """Resolve the driven-log columns in `index` (in place), or raise a LogError.
+
+    A log without any driven column is a free-motion log: `output_counts_per_rev` and
+    `torque_constant` are ignored there, so that one set of arguments reads both logs of
+    a joint (free-motion + driven) fit.
+    """
     path = table.path
+    driven_keys = (_MOTOR_TORQUE, _MOTOR_CURRENT, _THETA_OUT, _OUTPUT_COUNTS, _LOAD_TORQUE)
+    if not any(key in index for key in driven_keys):
+        return
 
     def fail(message: str, key: str | None = None) -> LogError:
         return LogError(message, path=path, column=None if key is None else table.names[index[key]])
@@ -782,7 +790,10 @@ def read_log(
         the output resolution.
     torque_constant : float, optional
         Motor torque constant [N m/A]; required with a ``motor_current`` column
-        (and an error without one): ``motor_torque = torque_constant * current``.
+        (``motor_torque = torque_constant * current``) and an error for a driven
+        log without one. ``output_counts_per_rev`` and ``torque_constant`` are
+        ignored for a free-motion log (no driven column), so that one set of
+        arguments reads both logs of a joint fit.
 
     Returns
     -------
@@ -831,6 +842,8 @@ def read_log(
     table = _load_frame(source) if path is None else _load_csv(path)
     cols = _find_columns(table, cpr, out_cpr, kt)
     driven = _MOTOR in cols
+    if not driven:  # a free-motion log: the driven-only arguments do not apply
+        out_cpr = kt = None
     n = int(table.lines.size)
     if n == 0:
         raise LogError(
