@@ -1,0 +1,305 @@
+"""Results of driven and joint fits: report, JSON summary, plots (lmfit style)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._result import ParameterEstimate
+from ._transforms import derivative
+
+#: Correlations above this are listed in the report.
+HIGH_CORRELATION = 0.95
+
+
+@dataclass
+class DrivenFitResult:
+    """Outcome of :func:`hdid.fit_driven` / :func:`hdid.fit_joint`.
+
+    ``joint`` is the fitted :class:`~hdid.DrivenJoint` (its ``model`` the WG-side
+    :class:`~hdid.Model`). :meth:`report` gives text, :meth:`to_dict` JSON,
+    :meth:`plot` measured-vs-model WG angles and :meth:`plot_kinematic_error` the
+    paper's Fig. 3 (output kinematic error split into positional and flexibility parts).
+    """
+
+    source: str
+    kind: str
+    joint: Any
+    parameters: dict[str, ParameterEstimate]
+    positional: dict[str, Any]
+    rms: dict[str, float]
+    correlation: dict[tuple[str, str], float]
+    warnings: list[str]
+    notes: list[str]
+    data: Any = field(repr=False)
+    problem: Any = field(repr=False)
+    u: np.ndarray = field(repr=False)
+    covariance: np.ndarray = field(repr=False)
+    labels: list[str] = field(repr=False)
+    order_bic: dict[int, float] | None = None
+    chi2_reduced: float = float("nan")
+    wall_time_s: float = float("nan")
+
+    @property
+    def values(self) -> dict[str, float]:
+        return {n: p.value for n, p in self.parameters.items()}
+
+    @property
+    def model(self):
+        return self.joint.model
+
+    # -- curves ---------------------------------------------------------------------
+    def _driven_problem(self):
+        p = self.problem
+        return (p.parts[0], np.asarray(self.u)[np.asarray(p.index[0])]) if hasattr(p, "parts") else (p, self.u)
+
+    def curves(self) -> dict[str, np.ndarray]:
+        """Per-run arrays ``(R, T)``: measured and simulated WG angle, measured kinematic
+        error and its modelled positional and flexibility parts, and the weight mask."""
+        problem, u = self._driven_problem()
+        joint, sim = _simulate(problem, jnp.asarray(u))
+        N = joint.ratio
+        theta = np.asarray(problem.theta)
+        out = {
+            "time": np.asarray(problem.times),
+            "theta": theta,
+            "theta_model": np.asarray(sim["theta"]),
+            "weight": np.asarray(problem.weight),
+        }
+        if problem.has_output:
+            out["kinematic_error"] = np.asarray(problem.theta_out) + theta / N
+            out["positional"] = np.asarray(joint.positional(theta))
+            out["flexibility"] = np.asarray(
+                joint.flexibility_error(problem.load_torque, sim["output_direction"])
+            )
+        return out
+
+    # -- text -----------------------------------------------------------------------
+    def report(self) -> str:
+        lines = [f"hdid {self.kind} fit: {self.source}", ""]
+        lines.append(f"{'parameter':<11} {'value':>12} {'std':>10}  unit")
+        for p in self.parameters.values():
+            if p.fixed:
+                std = "fixed"
+            elif math.isinf(p.std):
+                std = "undetermined"
+            else:
+                std = f"{p.std:.3g}"
+            lines.append(f"{p.name:<11} {p.value:>12.5g} {std:>10}  {p.unit}")
+        pe = self.positional
+        if pe:
+            lines += ["", f"positional error (eq. 3): order {pe['order']}"
+                      + (" (chosen by BIC)" if self.order_bic else "")
+                      + f", peak-to-peak {pe['peak_to_peak_rad']:.3g} rad (output)"]
+            for name, c in pe["coefficients"].items():
+                std = "fixed" if c["std"] is None else f"{c['std']:.2g}"
+                lines.append(f"  {name:<8} {c['value']:>12.4g} ± {std}")
+            if self.order_bic:
+                best = min(self.order_bic.values())
+                lines.append("  ΔBIC by order: " + ", ".join(
+                    f"{k}: {v - best:+.1f}" for k, v in self.order_bic.items()))
+        lines += ["", "residual RMS:"]
+        for k, v in self.rms.items():
+            lines.append(f"  {k:<28} {v:.3g}")
+        if self.correlation:
+            lines += ["", "high correlations: " + ", ".join(
+                f"{a}~{b} {c:+.3f}" for (a, b), c in self.correlation.items())]
+        for w in self.warnings:
+            lines.append(f"WARNING: {w}")
+        for n in self.notes:
+            lines.append(f"note: {n}")
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "source": self.source,
+            "kind": self.kind,
+            "parameters": {n: p.to_dict() for n, p in self.parameters.items()},
+            "positional_error": self.positional or None,
+            "rms": dict(self.rms),
+            "chi2_reduced": self.chi2_reduced,
+            "correlations": {f"{a}~{b}": c for (a, b), c in self.correlation.items()},
+            "warnings": list(self.warnings),
+            "notes": list(self.notes),
+            "wall_time_s": self.wall_time_s,
+        }
+
+    # -- plots ----------------------------------------------------------------------
+    def plot(self, ax=None):
+        """Measured and simulated WG angle of every driven run (one axes)."""
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            _, ax = plt.subplots(figsize=(8, 4))
+        c = self.curves()
+        for i, name in enumerate(self.data.run_names):
+            m = c["weight"][i] > 0
+            line, = ax.plot(c["time"][i][m], c["theta"][i][m], ".", ms=3, label=f"run {name}")
+            ax.plot(c["time"][i][m], c["theta_model"][i][m], "-", lw=1, color=line.get_color())
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("WG angle [rad]")
+        ax.set_title("driven runs: logged (dots) and simulated from the motor torque")
+        ax.legend(fontsize=7)
+        return ax
+
+    def plot_kinematic_error(self, ax=None, run: int = 0):
+        """Paper Fig. 3: the output kinematic error ``θ_out + θ/N`` of one run, split into
+        the positional error ``θ̃_p(θ)`` and the flexibility-induced error
+        ``T_k⁻¹(τ_l + τ_fout)``."""
+        import matplotlib.pyplot as plt
+
+        c = self.curves()
+        if "kinematic_error" not in c:
+            raise ValueError(f"{self.source}: the log has no output angle, so no kinematic error")
+        if ax is None:
+            _, ax = plt.subplots(figsize=(8, 4))
+        m = c["weight"][run] > 0
+        t = c["time"][run][m]
+        ax.plot(t, c["kinematic_error"][run][m], ".", ms=3, color="0.5", label="logged θ_out + θ/N")
+        ax.plot(t, c["positional"][run][m], "-", lw=1, label="positional error θ̃_p")
+        ax.plot(t, c["flexibility"][run][m], "-", lw=1, label="flexibility T_k⁻¹(τ_l+τ_fout)")
+        ax.plot(t, (c["positional"] + c["flexibility"])[run][m], "k-", lw=0.8, label="model total")
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("output kinematic error [rad]")
+        ax.set_title(f"run {self.data.run_names[run]}: kinematic error = positional + flexibility")
+        ax.legend(fontsize=7)
+        return ax
+
+
+@eqx.filter_jit
+def _simulate(problem, u):
+    return problem.simulate(u)
+
+
+@eqx.filter_jit
+def _predict(problem, u):
+    return problem.predict(u)
+
+
+@eqx.filter_jit
+def _res_jac(problem, u):
+    return problem.residuals_and_jacobian(u)
+
+
+def analyse_driven(
+    problem, u, *, data, notes, order_bic=None, free_preps=(), extra_names=(),
+) -> DrivenFitResult:
+    """Covariance (Gauss–Newton, null directions undetermined), estimates, RMS, flags."""
+    from ._identifiability import _covariance, _undetermined
+
+    u = np.asarray(u, dtype=float)
+    joint_problem = hasattr(problem, "parts")
+    dproblem = problem.parts[0] if joint_problem else problem
+    du = u[np.asarray(problem.index[0])] if joint_problem else u
+    joint = dproblem.joint(jnp.asarray(du))
+    r, J = map(np.asarray, _res_jac(problem, jnp.asarray(u)))
+    n_rows = int(np.sum(np.abs(r) > 0))
+    dof = max(n_rows - u.size, 1)
+    chi2_red = float(r @ r) / dof
+    fisher = J.T @ J
+    cov, null = _covariance(fisher)
+    inflate = max(1.0, chi2_red)
+    specs = joint.parameter_specs()
+    values = joint.float_values()
+    where = {n: i for i, n in enumerate(dproblem.free)}
+    if joint_problem:
+        for j, n in enumerate(extra_names):
+            where[n] = dproblem.n_unknowns + j
+        values.update(_extra_values(problem, u, extra_names))
+    stds, grads = {}, {}
+    for n, k in where.items():
+        g = np.zeros(u.size)
+        g[k] = float(derivative(specs[n], u[k]))
+        grads[n] = g
+        stds[n] = math.inf if _undetermined(g, null) else math.sqrt(max(g @ cov @ g, 0.0) * inflate)
+    params = {}
+    for n, spec in specs.items():
+        if n.startswith("pos_"):
+            continue
+        fixed = n not in where
+        params[n] = ParameterEstimate(
+            name=n, value=values[n], std=0.0 if fixed else stds[n], unit=spec.unit,
+            fixed=fixed, doc=spec.doc,
+            note="not determined by the data" if not fixed and math.isinf(stds[n]) else "",
+        )
+    positional = {}
+    if dproblem.has_output:
+        coeffs = {
+            n: {"value": values[n], "std": stds.get(n) if n in where else None}
+            for n in joint.positional.names()
+        }
+        positional = {
+            "order": joint.positional.order,
+            "coefficients": coeffs,
+            "peak_to_peak_rad": float(joint.positional.peak_to_peak()),
+            "bic": {int(k): float(v) for k, v in (order_bic or {}).items()},
+        }
+    corr = {}
+    names = list(where)
+    for a_i, a in enumerate(names):
+        for b in names[a_i + 1:]:
+            va, vb = grads[a] @ cov @ grads[a], grads[b] @ cov @ grads[b]
+            if math.isinf(stds[a]) or math.isinf(stds[b]) or va <= 0 or vb <= 0:
+                continue
+            c = float(grads[a] @ cov @ grads[b] / math.sqrt(va * vb))
+            if abs(c) > HIGH_CORRELATION:
+                corr[(a, b)] = c
+    rms = _rms(problem, u, data, dproblem, du)
+    warnings = []
+    if rms["wg_rad"] > 3 * rms["wg_floor_rad"]:
+        warnings.append(
+            f"the WG residual RMS is {rms['wg_rad'] / rms['wg_floor_rad']:.1f}× the "
+            "quantization floor: the model misses part of the driven motion (see plot())"
+        )
+    if "kinematic_rad" in rms and rms["kinematic_rad"] > 3 * rms["kinematic_floor_rad"]:
+        warnings.append(
+            f"the kinematic-error RMS is {rms['kinematic_rad'] / rms['kinematic_floor_rad']:.1f}× "
+            "its floor: see plot_kinematic_error()"
+        )
+    labels = dproblem.labels(data.run_names) + list(extra_names)
+    return DrivenFitResult(
+        source=data.source if not joint_problem else " + ".join(
+            [data.source] + [p.source for p in free_preps]),
+        kind="joint" if joint_problem else "driven",
+        joint=joint.replace(**{n: values[n] for n in extra_names}) if extra_names else joint,
+        parameters=params, positional=positional, rms=rms, correlation=corr,
+        warnings=warnings, notes=list(notes), data=data, problem=problem, u=u,
+        covariance=cov * inflate, labels=labels, order_bic=order_bic, chi2_reduced=chi2_red,
+    )
+
+
+def _extra_values(problem, u, extra_names):
+    out = {}
+    for part, idx in zip(problem.parts[1:], problem.index[1:]):
+        vals = part.values_np(u[np.asarray(idx)])
+        out.update({n: vals[n] for n in extra_names if n in vals})
+    return out
+
+
+def _rms(problem, u, data, dproblem, du) -> dict[str, float]:
+    joint, sim = _simulate(dproblem, jnp.asarray(du))
+    w = np.asarray(dproblem.weight) > 0
+    N = joint.ratio
+    err = (np.asarray(sim["theta"]) - np.asarray(dproblem.theta))[w]
+    out = {"wg_rad": float(np.sqrt(np.mean(err**2))), "wg_floor_rad": data.sigma}
+    if dproblem.has_output:
+        theta = np.asarray(dproblem.theta)
+        kin = np.asarray(dproblem.theta_out) + theta / N - np.asarray(
+            joint.kinematic_error(dproblem.theta, dproblem.load_torque, sim["output_direction"]))
+        out["kinematic_rad"] = float(np.sqrt(np.mean(kin[w] ** 2)))
+        out["kinematic_floor_rad"] = data.sigma_kinematic
+    if hasattr(problem, "parts"):
+        for i, (part, idx) in enumerate(zip(problem.parts[1:], problem.index[1:])):
+            pu = jnp.asarray(np.asarray(u)[np.asarray(idx)])
+            pred = np.asarray(_predict(part, pu))
+            m = np.asarray(part.weight) > 0
+            out[f"free_motion[{i}]_rad"] = float(
+                np.sqrt(np.mean((pred - np.asarray(part.theta))[m] ** 2)))
+            out[f"free_motion[{i}]_floor_rad"] = float(part.step) / math.sqrt(12)
+    return out
