@@ -43,6 +43,12 @@ _LAZY = {
     "diagnose": "._diagnose",
     "Diagnosis": "._diagnose",
     "model_ladder": "._diagnose",
+    "fit_driven": "._driven_fit",
+    "fit_joint": "._driven_fit",
+    "DrivenFitResult": "._driven_result",
+    "DrivenJoint": "._driven",
+    "simulate_driven": "._driven",
+    "PositionalError": "._positional",
 }
 
 __all__ = sorted(_LAZY)
@@ -66,6 +72,10 @@ if TYPE_CHECKING:  # pragma: no cover
     from ._errors import FitError, HdidError, LogError
     from ._batch import fit_many
     from ._diagnose import Diagnosis, diagnose, model_ladder
+    from ._driven import DrivenJoint, simulate_driven
+    from ._driven_fit import fit_driven, fit_joint
+    from ._driven_result import DrivenFitResult
+    from ._positional import PositionalError
     from ._fit import fit
     from ._io import Log, Run, read_log, write_log
     from ._model import DEFAULT_INERTIA, DEFAULT_RATIO, Model

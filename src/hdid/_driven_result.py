@@ -202,8 +202,7 @@ def analyse_driven(
     n_rows = int(np.sum(np.abs(r) > 0))
     dof = max(n_rows - u.size, 1)
     chi2_red = float(r @ r) / dof
-    fisher = J.T @ J
-    cov, null = _covariance(fisher)
+    cov, null = _scaled_covariance(J.T @ J, _covariance)
     inflate = max(1.0, chi2_red)
     specs = joint.parameter_specs()
     values = joint.float_values()
@@ -272,6 +271,24 @@ def analyse_driven(
         warnings=warnings, notes=list(notes), data=data, problem=problem, u=u,
         covariance=cov * inflate, labels=labels, order_bic=order_bic, chi2_reduced=chi2_red,
     )
+
+
+def _scaled_covariance(fisher: np.ndarray, covariance):
+    """:func:`hdid._identifiability._covariance` after Jacobi scaling.
+
+    The unknowns of a driven or joint fit differ in sensitivity by ~10 orders (the
+    inertia of a driven log against an output-friction sign flip), so an eigenvalue cut
+    relative to the largest would call well-measured directions null. Scaling by the
+    diagonal first makes the cut about correlation, not units; unknowns the data do not
+    touch at all (the velocity of a window that starts at rest) stay exactly null.
+    """
+    d = np.sqrt(np.clip(np.diag(fisher), 0.0, None))
+    d = np.where(d > 0, d, 1.0)
+    cov_s, null_s = covariance(fisher / np.outer(d, d))
+    cov = cov_s / np.outer(d, d)
+    null = null_s / d[:, None]
+    norms = np.linalg.norm(null, axis=0)
+    return cov, null / np.where(norms > 0, norms, 1.0)
 
 
 def _extra_values(problem, u, extra_names):

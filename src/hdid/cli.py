@@ -110,18 +110,41 @@ def main():
 @click.option("--seed", type=int, default=0, show_default=True, help="Posterior seed.")
 @click.option("--chains", "chains_out", metavar="OUT.nc", help="Save the posterior chains (arviz NetCDF).")
 @click.option("--corner", "corner_out", metavar="OUT.png", help="Corner plot of the posterior.")
+@click.option("--torque-constant", type=float, help="Driven log with a motor_current column: motor torque constant [N m/A].")
+@click.option("--output-counts-per-rev", type=float, help="Driven log: theta_out/output_counts holds raw output-encoder counts with this many per revolution.")
+@click.option("--order", type=click.IntRange(0, 32), help="Driven log: positional-error order (default: chosen by BIC up to 6).")
+@click.option("--joint", is_flag=True, help="Several logs of ONE gear (a driven log and free-motion logs): one set of physical parameters for all.")
 @_QUIET
 def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_inertia,
             inertia_prior, fix, add_effects, remove_effects, effect_files, release_time,
             counts_per_rev, starts, posterior, steps, walkers, seed, chains_out, corner_out,
-            quiet, band_bracket, dask_address):
+            quiet, band_bracket, dask_address, torque_constant, output_counts_per_rev,
+            order, joint):
     """Fit stiffness, friction (and inertia) jointly to all runs of LOG.csv.
 
     LOG.csv has a header with columns time [s] and theta [rad, WG/motor angle]; optional
-    run, setup, added_inertia. With several logs (or --summary) each is fitted on its own
-    and tabulated; a bad file is reported in its row and the others complete.
+    run, setup, added_inertia. A log with a motor_torque (or motor_current) column is a
+    driven (input/output) log: the fit then also identifies the output friction and,
+    with a theta_out column, the stiffness from the twist and the positional error
+    (paper eqs. 3, 8, 9). With several logs (or --summary) each is fitted on its own and
+    tabulated; a bad file is reported in its row and the others complete. With --joint,
+    a driven log and free-motion logs of one gear share one set of parameters.
     """
     model = _build_model(add_effects, remove_effects, effect_files)
+    driven_options = {"torque_constant": torque_constant,
+                      "output_counts_per_rev": output_counts_per_rev}
+    if joint:
+        if len(logs) < 2:
+            raise _Fail("--joint: give a driven log and at least one free-motion log of the same gear")
+        if posterior or chains_out or corner_out or summary_out:
+            raise _Fail("--joint: --posterior/--chains/--corner/--summary are not available for joint fits")
+        return _fit_driven([Path(p) for p in logs], model, json_out, plot_out, fix,
+                           counts_per_rev, driven_options, order, release_time, quiet)
+    if len(logs) == 1 and not summary_out and _is_driven(Path(logs[0])):
+        if posterior or chains_out or corner_out:
+            raise _Fail(f"{logs[0]}: --posterior is not available for driven logs yet; fit without it")
+        return _fit_driven([Path(logs[0])], model, json_out, plot_out, fix, counts_per_rev,
+                           driven_options, order, release_time, quiet)
     if len(logs) > 1 or summary_out:
         return _fit_batch(logs, summary_out, json_out, plot_out, inertia, fix, release_time,
                           counts_per_rev, starts, quiet, posterior or chains_out or corner_out,
@@ -180,6 +203,63 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
             click.echo(f"\nwrote {json_out}")
     if plot_out:
         result.plot(plot_out)
+        if not quiet:
+            click.echo(f"wrote {plot_out}")
+
+
+def _is_driven(path: Path) -> bool:
+    """Does the CSV's header name a motor-torque column? (cheap: reads one line)."""
+    try:
+        with open(path, newline="") as fh:
+            header = fh.readline()
+    except OSError:
+        return False  # read_log gives the proper one-line error
+    names = {c.strip().strip('"').lower() for c in header.split(",")}
+    return bool(names & {"motor_torque", "motor_current"})
+
+
+def _fit_driven(paths, model, json_out, plot_out, fix, counts_per_rev, driven_options,
+                order, release_time, quiet):
+    for option, out in (("--json", json_out), ("--plot", plot_out)):
+        _check_output(out, paths, option)
+    fixed = _parse_fix(fix)
+    from . import _driven_fit, _io
+    from ._errors import HdidError
+
+    fix_arg = {k: v for k, v in fixed.items() if v is not None} | {
+        k: None for k, v in fixed.items() if v is None} or None
+    try:
+        logs = [_io.read_log(p, counts_per_rev=counts_per_rev,
+                             **{k: v for k, v in driven_options.items() if v is not None})
+                for p in paths]
+        if len(logs) == 1:
+            result = _driven_fit.fit_driven(logs[0], model, order=order, fix=fix_arg)
+        else:
+            result = _driven_fit.fit_joint(logs, model, order=order, fix=fix_arg,
+                                           release_time=release_time)
+    except (HdidError, ValueError, KeyError) as exc:
+        raise _Fail.from_error(exc) from None
+    if not quiet:
+        click.echo(result.report())
+    if json_out:
+        Path(json_out).write_text(json.dumps(_finite(result.to_dict()), indent=2) + "\n")
+        if not quiet:
+            click.echo(f"\nwrote {json_out}")
+    if plot_out:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        has_kin = result.data.has_output
+        fig, axes = plt.subplots(2 if has_kin else 1, 1, figsize=(9, 7 if has_kin else 4),
+                                 squeeze=False)
+        result.plot(ax=axes[0, 0])
+        if has_kin:
+            result.plot_kinematic_error(ax=axes[1, 0])
+        fig.tight_layout()
+        fig.savefig(plot_out, dpi=120)
+        plt.close(fig)
         if not quiet:
             click.echo(f"wrote {plot_out}")
 
