@@ -40,7 +40,7 @@ from jaxtyping import Array, ArrayLike, Float
 from . import _config  # noqa: F401
 from ._model import Model
 from ._positional import PositionalError
-from ._simulate import DEFAULT_MAX_SUBSTEP
+from ._simulate import DEFAULT_MAX_SUBSTEP, _safe_div, crossing_fraction, rk4
 from .effects import AbstractEffect, Motion, Parameter
 
 TAU_FOUT_PARAMETER = Parameter(
@@ -190,23 +190,6 @@ class DrivenJoint(eqx.Module):
 # ----------------------------------------------------------------------------- simulator
 
 
-def _rk4(f, theta, omega, t, h):
-    a1 = f(theta, omega, t)
-    v2 = omega + 0.5 * h * a1
-    a2 = f(theta + 0.5 * h * omega, v2, t + 0.5 * h)
-    v3 = omega + 0.5 * h * a2
-    a3 = f(theta + 0.5 * h * v2, v3, t + 0.5 * h)
-    v4 = omega + h * a3
-    a4 = f(theta + h * v3, v4, t + h)
-    theta_new = theta + h / 6.0 * (omega + 2.0 * v2 + 2.0 * v3 + v4)
-    omega_new = omega + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
-    return theta_new, omega_new, a1
-
-
-def _safe_div(num, den, ok):
-    return jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0)
-
-
 def _substep(joint: DrivenJoint, wg: Model, inertia, ext0, ext_rate, carry, t, h):
     """One substep of length ``h`` starting at local time ``t`` of the sample interval.
 
@@ -228,20 +211,12 @@ def _substep(joint: DrivenJoint, wg: Model, inertia, ext0, ext_rate, carry, t, h
         return wg.torque(m, states) + ext0 + ext_rate * tt, wg.holding_torque(m, states) + f_out
 
     sliding = direction != 0
-    theta1, omega1, acc0 = _rk4(accel_dir(direction), theta, omega, t, h)
+    theta1, omega1, acc0 = rk4(accel_dir(direction), theta, omega, t, h)
 
     # -- sliding: does the velocity cross zero inside the substep? ----------------------
     crossed = sliding & (direction * omega1 <= 0) & (omega1 != omega)
-    alpha_lin = jnp.clip(_safe_div(omega, omega - omega1, crossed), 0.0, 1.0)
-    b = acc0 * h
-    c = omega1 - omega - b
-    v_at = omega + b * alpha_lin + c * alpha_lin**2
-    dv = b + 2.0 * c * alpha_lin
-    newton_ok = crossed & (jnp.abs(dv) > 0)
-    alpha_nt = alpha_lin - _safe_div(v_at, dv, newton_ok)
-    alpha = jnp.where(newton_ok & (alpha_nt >= 0) & (alpha_nt <= 1), alpha_nt, alpha_lin)
-    alpha = jnp.where(crossed, alpha, 0.0)
-    theta_a, omega_a, _ = _rk4(accel_dir(direction), theta, omega, t, alpha * h)
+    alpha = crossing_fraction(omega, omega1, acc0, h, crossed)
+    theta_a, omega_a, _ = rk4(accel_dir(direction), theta, omega, t, alpha * h)
     acc_stop = accel_dir(direction)(theta_a, omega_a, t + alpha * h)
     dt_gap = _safe_div(-omega_a, acc_stop, crossed & (acc_stop != 0))
     theta_cross = theta_a + 0.5 * omega_a * dt_gap
@@ -265,7 +240,7 @@ def _substep(joint: DrivenJoint, wg: Model, inertia, ext0, ext_rate, carry, t, h
     frac = jnp.where(crossed, alpha, beta)
     theta_r = jnp.where(crossed, theta_cross, theta)
     dir_r = jnp.where(crossed, jnp.sign(net_c), dir_break)
-    theta2, omega2, _ = _rk4(accel_dir(dir_r), theta_r, jnp.zeros(()), t + frac * h, (1.0 - frac) * h)
+    theta2, omega2, _ = rk4(accel_dir(dir_r), theta_r, jnp.zeros(()), t + frac * h, (1.0 - frac) * h)
 
     go = from_cross | from_stuck
     theta_n = jnp.where(go, theta2, jnp.where(crossed, theta_cross, jnp.where(sliding, theta1, theta)))

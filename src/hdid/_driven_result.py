@@ -100,6 +100,13 @@ class DrivenFitResult:
             for name, c in pe["coefficients"].items():
                 std = "fixed" if c["std"] is None else f"{c['std']:.2g}"
                 lines.append(f"  {name:<8} {c['value']:>12.4g} ± {std}")
+            ks = self.kinematic_split
+            if ks:
+                lines.append(
+                    f"kinematic error split (Fig. 3): positional RMS {ks['positional_rms_rad']:.3g} rad, "
+                    f"flexibility-induced {ks['flexibility_min_rad']:.3g} … "
+                    f"{ks['flexibility_max_rad']:.3g} rad (RMS {ks['flexibility_rms_rad']:.3g}), "
+                    f"left over {ks['residual_rms_rad']:.3g} rad")
             if self.order_bic:
                 best = min(self.order_bic.values())
                 lines.append("  ΔBIC by order: " + ", ".join(
@@ -116,12 +123,32 @@ class DrivenFitResult:
             lines.append(f"note: {n}")
         return "\n".join(lines)
 
+    @property
+    def kinematic_split(self) -> dict[str, float]:
+        """Sizes of the two parts of the output kinematic error over the log (paper Fig. 3):
+        the positional error ``θ̃_p(θ)`` and the flexibility-induced ``T_k⁻¹(τ_l+τ_fout)``."""
+        if not self.positional:
+            return {}
+        c = self.curves()
+        w = c["weight"] > 0
+        pos = c["positional"][w] - np.mean(c["positional"][w])
+        flex = c["flexibility"][w]
+        left = (c["kinematic_error"] - c["positional"] - c["flexibility"])[w]
+        return {
+            "positional_rms_rad": float(np.sqrt(np.mean(pos**2))),
+            "flexibility_min_rad": float(flex.min()),
+            "flexibility_max_rad": float(flex.max()),
+            "flexibility_rms_rad": float(np.sqrt(np.mean(flex**2))),
+            "residual_rms_rad": float(np.sqrt(np.mean(left**2))),
+        }
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "source": self.source,
             "kind": self.kind,
             "parameters": {n: p.to_dict() for n, p in self.parameters.items()},
             "positional_error": self.positional or None,
+            "kinematic_error_split": self.kinematic_split or None,
             "rms": dict(self.rms),
             "chi2_reduced": self.chi2_reduced,
             "correlations": {f"{a}~{b}": c for (a, b), c in self.correlation.items()},

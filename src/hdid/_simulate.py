@@ -42,21 +42,46 @@ def _accel(model: Model, inertia, theta, omega, direction, states):
     return model.torque(motion, states) / inertia
 
 
-def _rk4(model, inertia, theta, omega, direction, states, h):
-    a1 = _accel(model, inertia, theta, omega, direction, states)
+def rk4(f, theta, omega, t, h):
+    """One classical RK4 step of ``θ̈ = f(θ, θ̇, t)``; returns ``(θ, θ̇, f at the start)``."""
+    a1 = f(theta, omega, t)
     v2 = omega + 0.5 * h * a1
-    a2 = _accel(model, inertia, theta + 0.5 * h * omega, v2, direction, states)
+    a2 = f(theta + 0.5 * h * omega, v2, t + 0.5 * h)
     v3 = omega + 0.5 * h * a2
-    a3 = _accel(model, inertia, theta + 0.5 * h * v2, v3, direction, states)
+    a3 = f(theta + 0.5 * h * v2, v3, t + 0.5 * h)
     v4 = omega + h * a3
-    a4 = _accel(model, inertia, theta + h * v3, v4, direction, states)
+    a4 = f(theta + h * v3, v4, t + h)
     theta_new = theta + h / 6.0 * (omega + 2.0 * v2 + 2.0 * v3 + v4)
     omega_new = omega + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
     return theta_new, omega_new, a1
 
 
+def _rk4(model, inertia, theta, omega, direction, states, h):
+    def f(th, om, _t):
+        return _accel(model, inertia, th, om, direction, states)
+
+    return rk4(f, theta, omega, 0.0, h)
+
+
 def _safe_div(num, den, ok):
     return jnp.where(ok, num / jnp.where(ok, den, 1.0), 0.0)
+
+
+def crossing_fraction(omega0, omega1, acc0, h, crossed):
+    """Fraction α of a substep at which the velocity reaches zero (0 where not ``crossed``).
+
+    Linear estimate refined by one Newton step on the quadratic
+    ``v(α) ≈ ω0 + b·α + c·α²`` through ``(ω0, a0·h)`` and ``ω1``.
+    """
+    alpha_lin = jnp.clip(_safe_div(omega0, omega0 - omega1, crossed), 0.0, 1.0)
+    b = acc0 * h
+    c = omega1 - omega0 - b
+    v_at = omega0 + b * alpha_lin + c * alpha_lin**2
+    dv = b + 2.0 * c * alpha_lin
+    newton_ok = crossed & (jnp.abs(dv) > 0)
+    alpha_nt = alpha_lin - _safe_div(v_at, dv, newton_ok)
+    alpha = jnp.where(newton_ok & (alpha_nt >= 0) & (alpha_nt <= 1), alpha_nt, alpha_lin)
+    return jnp.where(crossed, alpha, 0.0)
 
 
 def _substep(model: Model, inertia, carry, h):
@@ -65,17 +90,7 @@ def _substep(model: Model, inertia, carry, h):
 
     sliding = direction != 0
     crossed = sliding & (direction * omega1 <= 0) & (omega1 != omega)
-    # Crossing fraction: linear estimate refined by one Newton step on the quadratic
-    # v(α) ≈ ω0 + b·α + c·α² through (ω0, a0·h) and ω1.
-    alpha_lin = jnp.clip(_safe_div(omega, omega - omega1, crossed), 0.0, 1.0)
-    b = acc0 * h
-    c = omega1 - omega - b
-    v_at = omega + b * alpha_lin + c * alpha_lin**2
-    dv = b + 2.0 * c * alpha_lin
-    newton_ok = crossed & (jnp.abs(dv) > 0)
-    alpha_nt = alpha_lin - _safe_div(v_at, dv, newton_ok)
-    alpha = jnp.where(newton_ok & (alpha_nt >= 0) & (alpha_nt <= 1), alpha_nt, alpha_lin)
-    alpha = jnp.where(crossed, alpha, 0.0)
+    alpha = crossing_fraction(omega, omega1, acc0, h, crossed)
 
     # Re-integrate up to the crossing: on [0, α·h] the velocity keeps its sign, so the
     # friction law is smooth there and RK4 keeps its order (integrating across the kink
