@@ -76,6 +76,10 @@ def recovery(seeds: int) -> list[dict]:
                 if c is not None:
                     row["positional"][n] = {"value": c["value"], "std": c["std"], "truth": v,
                                             "z": (c["value"] - v) / c["std"]}
+            truth_pos = _pos_truth(p)
+            row["extra_harmonics"] = {
+                n: c for n, c in r.positional["coefficients"].items() if n not in truth_pos
+            }
             rows.append(row)
             print(label, f"{wall:.0f} s", "order", row["order"], flush=True)
     return rows
@@ -146,6 +150,12 @@ def write(rec, nar, meta):
             f"| {r['log']} | {r['order']} | {zs} | {zf:.1f} | "
             f"{rms['wg_rad'] / rms['wg_floor_rad']:.2f} | "
             f"{rms['kinematic_rad'] / rms['kinematic_floor_rad']:.2f} | {r['wall_s']:.0f} |")
+    extra = [f"{r['log']}: " + ", ".join(
+        f"{n} = {c['value']:.2g} ± {c['std']:.1g}" for n, c in r["extra_harmonics"].items())
+        for r in rec if r["extra_harmonics"]]
+    if extra:
+        lines += ["", "Harmonics above the true order where BIC chose more (truth 0):", ""]
+        lines += [f"- {e}" for e in extra]
     lines += ["", "Relative errors of the shipped log's fit:", "",
               "| parameter | truth | fit | rel. error | rel. std |", "|---|---|---|---|---|"]
     r0 = rec[0]
