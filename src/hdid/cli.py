@@ -207,6 +207,16 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
             click.echo(f"wrote {plot_out}")
 
 
+def _emit(report: str, summary: dict, json_out: str | None, quiet: bool) -> None:
+    """Print the report (unless quiet) and write the JSON summary (if asked)."""
+    if not quiet:
+        click.echo(report)
+    if json_out:
+        Path(json_out).write_text(json.dumps(_finite(summary), indent=2) + "\n")
+        if not quiet:
+            click.echo(f"\nwrote {json_out}")
+
+
 def _is_driven(path: Path) -> bool:
     """Does the CSV's header name a motor-torque column? (cheap: reads one line)."""
     try:
@@ -239,12 +249,7 @@ def _fit_driven(paths, model, json_out, plot_out, fix, counts_per_rev, driven_op
                                            release_time=release_time)
     except (HdidError, ValueError, KeyError) as exc:
         raise _Fail.from_error(exc) from None
-    if not quiet:
-        click.echo(result.report())
-    if json_out:
-        Path(json_out).write_text(json.dumps(_finite(result.to_dict()), indent=2) + "\n")
-        if not quiet:
-            click.echo(f"\nwrote {json_out}")
+    _emit(result.report(), result.to_dict(), json_out, quiet)
     if plot_out:
         import matplotlib
 
@@ -453,12 +458,7 @@ def diagnose_cmd(log, json_out, plot_out, residuals_out, candidates, steps, iner
         )
     except (HdidError, ValueError, KeyError) as exc:
         raise _Fail.from_error(exc) from None
-    if not quiet:
-        click.echo(result.report())
-    if json_out:
-        Path(json_out).write_text(json.dumps(_finite(result.to_dict()), indent=2) + "\n")
-        if not quiet:
-            click.echo(f"\nwrote {json_out}")
+    _emit(result.report(), result.to_dict(), json_out, quiet)
     if plot_out:
         result.plot_ladder(plot_out)
         if not quiet:
