@@ -59,8 +59,24 @@ class DrivenFitResult:
         p = self.problem
         return (p.parts[0], np.asarray(self.u)[np.asarray(p.index[0])]) if hasattr(p, "parts") else (p, self.u)
 
+    def curves_by_run(self) -> list[dict[str, np.ndarray]]:
+        """:meth:`curves` with each run's windows joined back, padding dropped: one dict
+        of 1-D arrays per run, in log order."""
+        c = self.curves()
+        runs = np.asarray(self.data.run_of_window)
+        out = []
+        for i in range(len(self.data.run_names)):
+            rows = np.nonzero(runs == i)[0]
+            joined = {}
+            for k, v in c.items():
+                if k == "weight":
+                    continue
+                joined[k] = np.concatenate([v[w][c["weight"][w] > 0] for w in rows])
+            out.append(joined)
+        return out
+
     def curves(self) -> dict[str, np.ndarray]:
-        """Per-run arrays ``(R, T)``: measured and simulated WG angle, measured kinematic
+        """Per-window arrays ``(W, T)``: measured and simulated WG angle, measured kinematic
         error and its modelled positional and flexibility parts, and the weight mask."""
         problem, u = self._driven_problem()
         joint, sim = _simulate(problem, jnp.asarray(u))
@@ -164,11 +180,9 @@ class DrivenFitResult:
 
         if ax is None:
             _, ax = plt.subplots(figsize=(8, 4))
-        c = self.curves()
-        for i, name in enumerate(self.data.run_names):
-            m = c["weight"][i] > 0
-            line, = ax.plot(c["time"][i][m], c["theta"][i][m], ".", ms=3, label=f"run {name}")
-            ax.plot(c["time"][i][m], c["theta_model"][i][m], "-", lw=1, color=line.get_color())
+        for name, c in zip(self.data.run_names, self.curves_by_run()):
+            line, = ax.plot(c["time"], c["theta"], ".", ms=3, label=f"run {name}")
+            ax.plot(c["time"], c["theta_model"], "-", lw=1, color=line.get_color())
         ax.set_xlabel("time [s]")
         ax.set_ylabel("WG angle [rad]")
         ax.set_title("driven runs: logged (dots) and simulated from the motor torque")
@@ -181,17 +195,16 @@ class DrivenFitResult:
         ``T_k⁻¹(τ_l + τ_fout)``."""
         import matplotlib.pyplot as plt
 
-        c = self.curves()
-        if "kinematic_error" not in c:
+        if not self.data.has_output:
             raise ValueError(f"{self.source}: the log has no output angle, so no kinematic error")
+        c = self.curves_by_run()[run]
         if ax is None:
             _, ax = plt.subplots(figsize=(8, 4))
-        m = c["weight"][run] > 0
-        t = c["time"][run][m]
-        ax.plot(t, c["kinematic_error"][run][m], ".", ms=3, color="0.5", label="logged θ_out + θ/N")
-        ax.plot(t, c["positional"][run][m], "-", lw=1, label="positional error θ̃_p")
-        ax.plot(t, c["flexibility"][run][m], "-", lw=1, label="flexibility T_k⁻¹(τ_l+τ_fout)")
-        ax.plot(t, (c["positional"] + c["flexibility"])[run][m], "k-", lw=0.8, label="model total")
+        t = c["time"]
+        ax.plot(t, c["kinematic_error"], ".", ms=3, color="0.5", label="logged θ_out + θ/N")
+        ax.plot(t, c["positional"], "-", lw=1, label="positional error θ̃_p")
+        ax.plot(t, c["flexibility"], "-", lw=1, label="flexibility T_k⁻¹(τ_l+τ_fout)")
+        ax.plot(t, c["positional"] + c["flexibility"], "k-", lw=0.8, label="model total")
         ax.set_xlabel("time [s]")
         ax.set_ylabel("output kinematic error [rad]")
         ax.set_title(f"run {self.data.run_names[run]}: kinematic error = positional + flexibility")
