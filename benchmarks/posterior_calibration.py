@@ -158,7 +158,8 @@ def truth_check(gen, df, fit):
             "free_band_rad": float(fit.stick_band_halfwidth_rad)}
 
 
-def run_one(gen, design_name, design, seed, post_seed, n_steps, noise_steps, do_truth=True):
+def run_one(gen, design_name, design, seed, post_seed, n_steps, noise_steps, do_truth=True,
+            post_kwargs=None):
     import numpy as np
 
     import hdid
@@ -180,8 +181,12 @@ def run_one(gen, design_name, design, seed, post_seed, n_steps, noise_steps, do_
         out["truth_check"] = truth_check(gen, df, fit)
         out["truth_check_s"] = time.perf_counter() - t2
     t1 = time.perf_counter()
-    post = sample_posterior(fit, n_steps=n_steps, seed=post_seed)
+    post = sample_posterior(fit, n_steps=n_steps, seed=post_seed, **(post_kwargs or {}))
     out["posterior_s"] = time.perf_counter() - t1
+    out["mode_search_s"] = float(post.mode_search_s)
+    diag = post.to_dict()["posterior_diagnostics"]
+    out["modes"] = diag["modes"]
+    out["tau_max_emcee"] = diag["tau_max_emcee"]
     out["load_end"] = _load()
 
     truth, check = _truths(gen, fit, info)
@@ -331,12 +336,18 @@ def render(res: dict) -> str:
              f"quantized to 4000 counts/rev, added noise {o['noise_steps']} counts "
              f"(the shipped files have none).")
     L.append(f"- `hdid.fit(log, inertia=7e-7)` (true inertia, fixed), then "
-             f"`sample_posterior(fit, n_steps=N, seed=i)` with the default walkers "
+             f"`sample_posterior(fit, n_steps=N, seed=i, likelihood={o.get('likelihood', 'auto')!r}, "
+             f"modes={o.get('modes', 'fit')!r}, linear_prior={o.get('linear_prior', '')!r})` "
+             f"with the default walkers "
              f"(max(32, 2·D): {', '.join(map(str, agg['pooled']['n_walkers']))}); "
              f"N = {o['paper_steps']} (paper) / {o['rich_steps']} (rich) kept steps. Sampler: "
-             f"differential-evolution moves, walkers from the Laplace approximation, 400 "
-             f"discarded burn-in steps; intervals: central 68 % / 95 % of the kept draws "
-             f"thinned by τ_max/2.")
+             + ("differential-evolution moves plus independence Metropolis–Hastings from a "
+                "t-mixture over the optima found by `find_modes` (walkers seeded over them by "
+                "Laplace mass), adapted in a 400-step burn-in that is discarded"
+                if o.get("modes", "fit") == "auto" else
+                "differential-evolution moves, walkers from the Laplace approximation, 400 "
+                "discarded burn-in steps")
+             + "; intervals: central 68 % / 95 % of the kept draws thinned by τ_max/2.")
     if res.get("stopped_early"):
         L.append(f"- **Stopped early** by the budget guard: {res['stopped_early']}")
     if failed:
@@ -360,9 +371,21 @@ def render(res: dict) -> str:
                  f"{a['acceptance_median']:.2f} | {a['temper_range'][0]:.2f}–"
                  f"{a['temper_range'][1]:.2f} | {a['logs_with_stuck_walkers']} | "
                  f"{a['posterior_s_median']:.0f} s |")
-    L.append("\nτ is emcee's estimate from these short chains (tol = 0): with a chain of only a "
-             "few τ it is biased low, so the true chain length in τ units is smaller still. "
-             "`sample_posterior` asks for ≥ 50 τ; these chains are far shorter (budget).\n")
+    L.append("\nτ is the larger of emcee's estimate (tol = 0; each walker about its own mean) and "
+             "the pooled estimate about the ensemble mean (`tau_pooled`, which also sees walkers "
+             "that stay in different modes). A chain of only a few τ biases both low. "
+             "`sample_posterior` asks for ≥ 50 τ.\n")
+    mrows = [r for r in logs if r.get("modes")]
+    if mrows:
+        L.append("### Modes found per log (`find_modes`)\n")
+        L.append("| design | seed | optima: cost (Laplace weight → share of draws) | band median [mrad] |"
+                 "\n|---|---|---|---|")
+        for r in mrows:
+            L.append(f"| {r['design']} | {r['seed']} | " + "; ".join(
+                f"{m['cost']:.1f} ({m['weight']:.2f} → {m['share_of_draws']:.2f})"
+                for m in r["modes"]) + f" | "
+                f"{1e3 * r['quantities']['stick_band_halfwidth_rad']['median']:.1f} |")
+        L.append("")
 
     L.append("## Coverage per quantity\n")
     L.append("Cells: covered/logs = fraction [exact 95 % Clopper–Pearson interval]. Binomial SE "
@@ -508,6 +531,10 @@ def main(argv=None):
     ap.add_argument("--augment", type=Path,
                     help="add the truth-fixed fits to the logs of this JSON (no sampling), "
                          "re-aggregate and re-render")
+    ap.add_argument("--likelihood", default="auto", help="sample_posterior(likelihood=)")
+    ap.add_argument("--modes", default="auto", help="sample_posterior(modes=): auto or fit")
+    ap.add_argument("--linear-prior", default="",
+                    help="comma-separated parameters with a prior flat in the value")
     ap.add_argument("--interpretation", type=Path,
                     help="markdown file whose text is added as the Interpretation section")
     args = ap.parse_args(argv)
@@ -566,6 +593,8 @@ def main(argv=None):
     out_json = args.out_dir / "posterior_calibration.json"
     per_design_time: dict[str, list[float]] = {"paper": [], "rich": []}
     budget = 60.0 * args.budget_min
+    post_kwargs = {"likelihood": args.likelihood, "modes": args.modes,
+                   "linear_prior": tuple(n for n in args.linear_prior.split(",") if n)}
     for k, (g, i) in enumerate(_schedule(args.paper_logs, args.rich_logs)):
         design, n_steps, s0 = designs[g]
         elapsed = time.perf_counter() - t_script
@@ -580,7 +609,7 @@ def main(argv=None):
         t0 = time.perf_counter()
         try:
             r = run_one(gen, g, design, s0 + i, i, n_steps, args.noise_steps,
-                        do_truth=not args.no_truth_fit)
+                        do_truth=not args.no_truth_fit, post_kwargs=post_kwargs)
         except Exception:  # keep going: a failed log is reported, not fatal
             r = {"design": g, "seed": s0 + i, "error": traceback.format_exc()}
         dt = time.perf_counter() - t0

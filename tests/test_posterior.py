@@ -14,7 +14,15 @@ import pytest
 from scipy.stats import norm
 
 import hdid
-from hdid._posterior import LogPosterior, _log_interval, _reset_outliers, sample_posterior
+from hdid._posterior import (
+    LogPosterior,
+    MixtureProposal,
+    _log_interval,
+    _reset_outliers,
+    find_modes,
+    sample_posterior,
+    tau_pooled,
+)
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "data" / "synthetic" / "csf8_paper.csv"
 
@@ -51,8 +59,8 @@ def test_vectorised_log_prob_equals_per_walker(fit):
 
 
 def test_short_chain_is_reproducible_and_summarised(fit):
-    a = sample_posterior(fit, n_steps=150, burn_in=50, seed=3)
-    b = sample_posterior(fit, n_steps=150, burn_in=50, seed=3)
+    a = sample_posterior(fit, n_steps=100, burn_in=40, seed=3)
+    b = sample_posterior(fit, n_steps=100, burn_in=40, seed=3)
     np.testing.assert_array_equal(a.chain, b.chain)
     s = a.to_dict()
     assert set(s["posterior"]) >= {"k1", "tau_c", "stick_band_halfwidth_rad", "natural_frequency_hz"}
@@ -61,7 +69,10 @@ def test_short_chain_is_reproducible_and_summarised(fit):
     # 150 steps is far below 50 autocorrelation times: the sampler must say so.
     assert any("NOT CONVERGED" in w and "autocorrelation" in w
                for w in s["posterior_diagnostics"]["warnings"])
-    assert a.chain.shape[0] == 150 and a.burn_in == 50  # burn-in run and discarded
+    assert a.chain.shape[0] == 100 and a.burn_in == 40  # burn-in run and discarded
+    # the walkers started from the optima find_modes kept; their shares are reported
+    assert len(a.modes) >= 1 and a.mode_share.sum() == pytest.approx(1.0)
+    assert len(s["posterior_diagnostics"]["modes"]) == len(a.modes)
 
 
 def test_too_short_chain_does_not_crash(fit):
@@ -124,3 +135,59 @@ def test_cli_posterior_json_and_chains(tmp_path):
     assert set(band) == {"median", "ci68", "ci95"} and band["ci95"][0] <= band["median"]
     assert d["posterior_diagnostics"]["converged"] is False
     assert "k1" in az.from_netcdf(str(nc)).posterior
+
+
+def test_find_modes_keeps_the_fit_and_weights_sum_to_one(fit):
+    modes = find_modes(fit, n_random=0)
+    assert modes and sum(m.weight for m in modes) == pytest.approx(1.0)
+    # no optimum it keeps is worse than the fit by more than the cut, and the best is at
+    # least as good as the fit (the fit's optimum is one of the restarts)
+    best = min(m.cost for m in modes)
+    assert best <= float(fit.problem.cost(jnp.asarray(fit.u))) + 1e-6
+    for m in modes:
+        assert np.all(np.isfinite(m.cov)) and np.all(np.linalg.eigvalsh(m.cov) > 0)
+
+
+def test_mixture_proposal_density_and_hastings_factor():
+    # two well separated t components: sampled shares follow the weights, logpdf
+    # integrates to one (Monte Carlo), and the factor is log q(x) − log q(x').
+    rng = np.random.RandomState(0)
+    means = np.array([[0.0, 0.0], [10.0, -5.0]])
+    covs = np.array([np.eye(2), np.diag([4.0, 0.25])])
+    mix = MixtureProposal(means, covs, [0.3, 0.7], nu=8.0)
+    X = mix.sample(20000, rng)
+    assert np.mean(X[:, 1] < -2.5) == pytest.approx(0.7, abs=0.015)
+    box = np.random.default_rng(1).uniform([-15, -15], [25, 10], (200000, 2))
+    integral = np.mean(np.exp(mix.logpdf(box))) * 40 * 25
+    assert integral == pytest.approx(1.0, abs=0.02)
+    x0 = np.zeros((3, 2))
+    new, f = mix(x0, np.random.RandomState(2))
+    np.testing.assert_allclose(f, mix.logpdf(x0) - mix.logpdf(new))
+    # refit on draws from the mixture itself recovers it
+    re = mix.refit(X, shrink=1.0)
+    np.testing.assert_allclose(re.weights, [0.3, 0.7], atol=0.02)
+    np.testing.assert_allclose(re.means, means, atol=0.1)
+
+
+def test_pooled_tau_sees_walkers_that_never_change_mode():
+    # walkers in two modes that never swap: per-walker τ (emcee) is small, the pooled one
+    # (about the ensemble mean) is as long as the chain.
+    import emcee
+
+    rng = np.random.default_rng(0)
+    S, W = 2000, 20
+    x = np.zeros((S, W, 1))
+    for w in range(W):
+        e = rng.standard_normal(S)
+        ar = np.empty(S)
+        ar[0] = e[0]
+        for t in range(1, S):
+            ar[t] = 0.5 * ar[t - 1] + e[t]
+        x[:, w, 0] = ar + (20.0 if w % 2 else 0.0)
+    per_walker = emcee.autocorr.integrated_time(x, tol=0)[0]
+    pooled = tau_pooled(x)[0]
+    assert per_walker < 5 and pooled > 50 * per_walker
+    # one mode only: the two agree
+    y = x.copy()
+    y[:, 1::2, 0] -= 20.0
+    assert tau_pooled(y)[0] == pytest.approx(emcee.autocorr.integrated_time(y, tol=0)[0], rel=0.1)

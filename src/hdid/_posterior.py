@@ -17,7 +17,9 @@ gives, the log-likelihood is tempered by the effective-sample-size factor
 Priors (documented defaults, all in the sampled space):
 - physical parameters: flat in the transformed space (flat in log for positive ones)
   within ``± PRIOR_HALF_WIDTH`` of the least-squares value, times the parameters' own
-  weak priors (``v_s``, ``delta``) and the inertia prior when the inertia is free;
+  weak priors (``v_s``, ``delta``) and the inertia prior when the inertia is free; the
+  coefficients of terms that may vanish (``LINEAR_PRIOR``: ``k2``, ``c_v``) are flat in
+  their value instead (same box);
 - release instant: uniform on its bracket between samples; start angle flat within
   ±5 encoder steps of its least-squares value; offset flat;
 - ``σ_n``: log-uniform between ``0.05 q`` (the simulator's accuracy) and ``20 q``.
@@ -26,9 +28,13 @@ Priors (documented defaults, all in the sampled space):
 variance ``q²/12`` (Widrow): Gaussian with ``σ² = σ_n² + q²/12``, never below the
 quantization floor.
 
-Sampling: emcee with differential-evolution moves (:func:`default_moves`), walkers started
-from the least-squares (Laplace) approximation, a discarded burn-in, and a kept chain grown
-until it is ``MIN_TAU_MULTIPLE`` integrated autocorrelation times long.
+Sampling: emcee. :func:`find_modes` restarts the local fit around the least-squares optimum
+and keeps every distinct optimum with its Laplace mass; walkers start spread over them, and
+the moves (:func:`default_moves`) are differential evolution plus an independence
+Metropolis–Hastings proposal from a t-mixture over the modes (:class:`MixtureProposal`,
+adapted during a discarded burn-in), which moves walkers between modes exactly. The kept
+chain grows until it is ``MIN_TAU_MULTIPLE`` integrated autocorrelation times long (τ about
+the ensemble mean as well as per walker, :func:`tau_pooled`).
 """
 
 from __future__ import annotations
@@ -57,6 +63,14 @@ PRIOR_HALF_WIDTH = 7.0
 #: (benchmarks/results/simulator_schemes.md); a smaller σ_n would claim the model reproduces
 #: readings more exactly than it can compute them.
 SIGMA_BOUNDS = (0.05, 20.0)
+#: Log-transformed parameters whose default prior is flat in the *value*, not in its log:
+#: coefficients of terms that may be absent. A prior flat in log k2 (or log c_v) gives the
+#: "no cubic stiffness" ("no viscous friction") end an unbounded volume as the box widens —
+#: on the paper design that volume, not the data, pulled the posterior to k2 → 0 and a
+#: 92 mrad band (benchmarks/results/posterior_calibration.md).
+LINEAR_PRIOR = ("k2", "c_v")
+#: The burn-in is run in this many stages, the proposal adapted after each.
+BURN_IN_STAGES = 4
 #: Chains shorter than this many integrated autocorrelation times get a warning.
 MIN_TAU_MULTIPLE = 50
 #: A chain this far (log p) above the least-squares optimum has found another mode
@@ -87,6 +101,8 @@ class LogPosterior(eqx.Module):
     quantized: bool = eqx.field(static=True)
     sigma_bounds: tuple[float, float] = SIGMA_BOUNDS
     quant_var: float = 0.0
+    #: 1.0 at log-transformed parameters whose prior is flat in the value, not its log
+    linear_prior: jax.Array | None = None
 
     @property
     def ndim(self) -> int:
@@ -115,6 +131,9 @@ class LogPosterior(eqx.Module):
         p = self.problem
         P, R = p.n_physical, p.n_runs
         lp = -0.5 * jnp.sum(p.prior_residuals(u) ** 2)
+        if self.linear_prior is not None:
+            # flat in x = exp(u): density in u is ∝ exp(u)
+            lp += jnp.sum(self.linear_prior * (u[:P] - self.centre[:P]))
         outside = jnp.any(jnp.abs(u[:P] - self.centre[:P]) > PRIOR_HALF_WIDTH)
         q = p.step
         lo, hi = jnp.log(self.sigma_bounds[0] * q), jnp.log(self.sigma_bounds[1] * q)
@@ -167,6 +186,11 @@ class PosteriorResult:
     fit: Any = field(repr=False)
     draws: np.ndarray = field(repr=False)    # (draws, D) sampled space, after burn/thin
     burn_in: int = 0                         # steps run and discarded before ``chain``
+    modes: list = field(default_factory=list)  # Mode: the optima the walkers started from
+    mode_share: np.ndarray | None = None     # share of the kept chain nearest each mode
+    tau_emcee: np.ndarray | None = None      # emcee's τ (walkers about their own means)
+    mode_search_s: float = 0.0
+    move_acceptance: dict = field(default_factory=dict)  # per move, kept chain only
 
     def summary(self) -> dict[str, dict[str, Any]]:
         """Median and central 68 % / 95 % intervals of every parameter and derived quantity."""
@@ -196,6 +220,14 @@ class PosteriorResult:
                 "n_draws": int(self.draws.shape[0]),
                 "tau_max": float(np.nanmax(self.tau)),
                 "tau": {l: float(t) for l, t in zip(self.labels, self.tau)},
+                "move_acceptance": dict(self.move_acceptance),
+                "tau_max_emcee": (float(np.nanmax(self.tau_emcee))
+                                  if self.tau_emcee is not None else None),
+                "modes": [
+                    {**m.to_dict(), "share_of_draws": (float(self.mode_share[i])
+                                                      if self.mode_share is not None else None)}
+                    for i, m in enumerate(self.modes)
+                ],
                 "acceptance_mean": float(np.mean(self.acceptance)),
                 "acceptance_min": float(np.min(self.acceptance)),
                 "residual_lag1_autocorrelation": self.residual_rho1,
@@ -219,6 +251,9 @@ class PosteriorResult:
             f"{self.chain.shape[0] / np.nanmax(self.tau):.1f}, acceptance {np.mean(self.acceptance):.2f}, "
             f"{self.draws.shape[0]} draws, {self.wall_time_s:.1f} s"
         )
+        if self.move_acceptance:
+            lines.append("  acceptance per move: " + ", ".join(
+                f"{k} {v:.3f}" for k, v in self.move_acceptance.items()))
         lines += [f"  warning: {w}" for w in self.warnings]
         return "\n".join(lines)
 
@@ -289,51 +324,395 @@ def residual_autocorrelation(fit) -> float:
     return num / den if den > 0 else 0.0
 
 
-def default_moves():
-    """emcee moves used by default: differential evolution, with snooker and mode jumps.
+def default_moves(proposal=None):
+    """emcee moves used by default: differential evolution (+ snooker, mode jumps) and,
+    given a :class:`MixtureProposal`, independence Metropolis–Hastings from it.
 
     Measured on an 18-D Gaussian with the shipped log's least-squares covariance (36
     walkers, 20000 steps): emcee's default stretch move has τ ≈ 250–290 steps, the
     differential-evolution mixture ≈ 65 — the stretch move's efficiency falls with the
-    dimension, and at 18 unknowns it alone cannot reach 50 τ in a minute. ``γ = 1`` DE
-    steps (ter Braak 2006) let walkers jump between separated modes (the paper design's
-    stick band can be bimodal).
+    dimension. DE only undoes *linear* correlations and moves walkers locally; the
+    paper design's posterior has several modes and curved ridges
+    (benchmarks/results/posterior_geometry.md), which the independence proposal
+    crosses in one step (benchmarks/results/posterior_speed.md).
     """
     import emcee
 
+    if proposal is None:
+        return [
+            (emcee.moves.DEMove(), 0.7),
+            (emcee.moves.DEMove(gamma0=1.0), 0.1),
+            (emcee.moves.DESnookerMove(), 0.2),
+        ]
     return [
-        (emcee.moves.DEMove(), 0.7),
-        (emcee.moves.DEMove(gamma0=1.0), 0.1),
+        (emcee.moves.DEMove(), 0.4),
+        (emcee.moves.DEMove(gamma0=1.0), 0.05),
         (emcee.moves.DESnookerMove(), 0.2),
+        (emcee.moves.MHMove(proposal), 0.35),
     ]
 
 
-def _laplace_start(fit, x0, lp_batch, W, rng, sigma_lo, sigma_hi, scale=0.5):
-    """Walkers drawn from the least-squares (Laplace) approximation, scaled by ``scale``.
+# ----------------------------------------------------------------------------- modes
 
-    The interval likelihood is sharper than the ``q/√12`` Gaussian the fit's covariance
-    assumes (posterior spreads are 0.4–1× the least-squares ones on the shipped log), so
-    half the Laplace width starts the ensemble inside the bulk yet spread over it; the
-    noise ``log σ_n`` starts uniform between its prior floor and the fit's RMS. Walkers
-    with zero prior density are pulled back towards the optimum.
+#: Local optima more than this far above the best (χ² in the fit's q/√12 units) carry
+#: a posterior mass ``exp(−Δχ²/2) < 1e-13`` of the best one's: ignored.
+MODE_DCHI2_MAX = 60.0
+#: Two optima joined by a straight path whose cost rises less than this above the worse
+#: of the two are one mode (a flat, curved valley on which the optimiser stopped twice).
+MODE_BARRIER = 4.0
+#: Variance of the flat ±PRIOR_HALF_WIDTH prior, added as a ridge to the Gauss–Newton
+#: precision so that directions the data cannot see get the prior's width, not infinity.
+_BOX_PRECISION = 12.0 / (2 * PRIOR_HALF_WIDTH) ** 2
+
+
+@dataclass
+class Mode:
+    """One local optimum of the least-squares cost and its Laplace approximation."""
+
+    u: np.ndarray            # unknowns (the fit's space)
+    cost: float              # Σ r² (data and weak-prior rows) in q/√12 units
+    cov: np.ndarray          # Laplace covariance of u (Gauss–Newton, prior ridge)
+    log_evidence: float      # −cost/2 + ½ log det(2π cov): relative Laplace mass
+    weight: float = 1.0      # normalised share of the posterior mass (Laplace)
+    values: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"cost": self.cost, "weight": self.weight, "log_evidence": self.log_evidence,
+                "values": dict(self.values)}
+
+
+@eqx.filter_jit
+def _rj(problem: Problem, u):
+    return problem.residuals_and_jacobian(u)
+
+
+@eqx.filter_jit
+def _path_costs(problem: Problem, U):
+    return jax.vmap(problem.cost)(U)
+
+
+def _laplace(problem: Problem, u) -> tuple[float, np.ndarray, float]:
+    r, J = map(np.asarray, _rj(problem, jnp.asarray(u)))
+    cost = float(np.sum(r**2))
+    # cost = Σ r² ⇒ −log p = cost/2, Gauss–Newton Hessian JᵀJ.
+    H = J.T @ J + _BOX_PRECISION * np.eye(J.shape[1])
+    w, V = np.linalg.eigh(0.5 * (H + H.T))
+    w = np.clip(w, _BOX_PRECISION, None)
+    cov = (V / w) @ V.T
+    logdet_cov = -float(np.sum(np.log(w)))
+    return cost, cov, -0.5 * cost + 0.5 * logdet_cov + 0.5 * w.size * math.log(2 * math.pi)
+
+
+def _restart_candidates(fit, rng, n_random: int) -> np.ndarray:
+    """Starting vectors around ``fit``: the fit's own starts, Stribeck-shape variants, a
+    k1 shift of ±2 sd, and draws from the widened Laplace approximation."""
+    prob: Problem = fit.problem
+    u0 = np.asarray(fit.u, dtype=float)
+    free = list(prob.free)
+    specs = prob.base.parameter_specs()
+    from ._transforms import to_unconstrained
+
+    def with_values(vals):
+        u = u0.copy()
+        for n, v in vals.items():
+            if n in free and np.isfinite(v) and v > 0:
+                u[free.index(n)] = float(to_unconstrained(specs[n], v))
+        return u
+
+    cands = [u0]
+    st = fit.starts
+    for i in range(len(st.costs)):
+        if np.isfinite(st.costs[i]) and st.costs[i] - st.costs[st.best] < 1e3 and i != st.best:
+            cands.append(with_values({n: float(v[i]) for n, v in st.values.items()}))
+    vals = fit.values
+    for fs, fv, fk in ((1.6, 0.2, 1.0), (1.6, 0.2, 0.1), (1.6, 1.0, 1.0), (0.75, 4.0, 1.0),
+                       (1.0, 4.0, 1.5), (1.0, 0.2, 1.0), (1.3, 0.5, 0.3)):
+        v = {}
+        if "tau_s" in vals and "tau_c" in vals:
+            v["tau_s"] = max(fs * vals["tau_s"], 1.05 * vals["tau_c"])
+        if "v_s" in vals:
+            v["v_s"] = fv * vals["v_s"]
+        if "k2" in vals:
+            v["k2"] = fk * vals["k2"]
+        cands.append(with_values(v))
+    if "k1" in free:
+        j = free.index("k1")
+        sd = math.sqrt(max(float(fit.covariance[j, j]), 0.0))
+        if np.isfinite(sd) and sd > 0:
+            for t in (-2.0, 2.0):
+                u = u0.copy()
+                u[j] += t * sd
+                cands.append(u)
+    if n_random:
+        _, cov, _ = _laplace(prob, u0)
+        P = prob.n_physical
+        L = np.linalg.cholesky(cov + 1e-12 * np.eye(cov.shape[0]))
+        z = rng.standard_normal((n_random, u0.size))
+        U = u0 + 1.5 * z @ L.T
+        U[:, P:] = u0[P:]  # nuisances stay; the physical part explores
+        lim = u0[:P] + np.clip(U[:, :P] - u0[:P], -3.0, 3.0)
+        U[:, :P] = lim
+        cands += list(U)
+    return np.array(cands)
+
+
+def find_modes(fit, *, n_random: int = 6, seed: int = 0, max_steps: int = 150,
+               dchi2_max: float = MODE_DCHI2_MAX) -> list[Mode]:
+    """Distinct local optima of the fit's cost near ``fit`` and their Laplace masses.
+
+    Local Levenberg–Marquardt fits (hdid's own, vmapped) are started from the fit's
+    optimum, the other starts of the fit's multi-start, Stribeck-shape variants (static
+    friction ×0.75–1.6, Stribeck velocity ×0.2–4, k2 ×0.1–1.5), k1 ± 2 sd and
+    ``n_random`` draws from the widened Laplace approximation. Optima within
+    ``dchi2_max`` of the best are merged when a straight path between them rises less
+    than ``MODE_BARRIER``, and each remaining one is weighted by its Laplace evidence.
+    Sorted by weight, largest first.
     """
-    D = x0.size
-    cov = np.asarray(fit.covariance, dtype=float)
-    cov = 0.5 * (cov + cov.T)
-    w, V = np.linalg.eigh(cov)
-    L = V * np.sqrt(np.clip(w, 0.0, None))
-    z = rng.standard_normal((W, D - 1))
+    from . import _fit as fitmod
+
+    prob: Problem = fit.problem
+    rng = np.random.default_rng(seed)
+    U0 = _restart_candidates(fit, rng, n_random)
+    U, costs, ok, _ = map(np.asarray, fitmod._solve_many(
+        prob, jnp.asarray(U0), jnp.ones(len(U0), dtype=bool), jnp.asarray(fitmod.PHASE1_STEPS)))
+    U, costs = np.array(U), np.array(costs)
+    costs[~np.isfinite(costs)] = np.inf
+    active = (costs - np.min(costs) < 10 * dchi2_max) & ~ok
+    used = fitmod.PHASE1_STEPS
+    while active.any() and used < max_steps:
+        U2, c2, d2, _ = map(np.asarray, fitmod._solve_many(
+            prob, jnp.asarray(U), jnp.asarray(active), jnp.asarray(fitmod.PHASE2_CHUNK)))
+        U[active], costs[active] = U2[active], np.where(np.isfinite(c2[active]), c2[active], np.inf)
+        used += fitmod.PHASE2_CHUNK
+        active = active & ~d2 & (costs - np.min(costs) < dchi2_max)
+    # the fit's own optimum is always a candidate at its own cost
+    keep = np.flatnonzero(costs - np.min(costs) < dchi2_max)
+    keep = keep[np.argsort(costs[keep])]
+    modes: list[Mode] = []
+    for i in keep:
+        u = U[i]
+        cost, cov, logz = _laplace(prob, u)
+        merged = False
+        for m in modes:
+            path = m.u + np.linspace(0.0, 1.0, 9)[:, None] * (u - m.u)
+            pc = np.asarray(_path_costs(prob, jnp.asarray(path)))
+            if np.all(np.isfinite(pc)) and np.max(pc) - max(cost, m.cost) < MODE_BARRIER:
+                merged = True
+                break
+        if not merged:
+            modes.append(Mode(u=u, cost=cost, cov=cov, log_evidence=logz,
+                              values=prob.values_np(u)))
+    lz = np.array([m.log_evidence for m in modes])
+    w = np.exp(lz - lz.max())
+    w /= w.sum()
+    for m, wi in zip(modes, w):
+        m.weight = float(wi)
+    return sorted(modes, key=lambda m: -m.weight)
+
+
+
+# ----------------------------------------------------------------------------- proposal
+
+
+class MixtureProposal:
+    """Independence Metropolis–Hastings proposal: a mixture of multivariate t's.
+
+    One component per posterior mode (mean, covariance, weight); used through
+    ``emcee.moves.MHMove(proposal)``. It proposes every walker afresh from the mixture,
+    wherever it is, so walkers jump between modes (and across a curved ridge) in one
+    step; the Hastings factor ``log q(x) − log q(x')`` keeps the chain exact for any
+    mixture, so a poor one costs acceptance, never correctness. Student-t tails
+    (``nu`` degrees of freedom) are heavier than the posterior's, which keeps the
+    importance ratio bounded. Adapt it (:meth:`refit`) during the burn-in only.
+    """
+
+    def __init__(self, means, covs, weights, nu: float = 8.0):
+        self.means = np.atleast_2d(np.asarray(means, dtype=float))
+        self.covs = np.asarray(covs, dtype=float).reshape(len(self.means), *self.means.shape[1:] * 2)
+        w = np.clip(np.asarray(weights, dtype=float), 1e-12, None)
+        self.weights = w / w.sum()
+        self.nu = float(nu)
+        D = self.means.shape[1]
+        self.chols = np.array([np.linalg.cholesky(c + 1e-12 * np.trace(c) / D * np.eye(D))
+                               for c in self.covs])
+        from scipy.special import gammaln
+
+        self._lognorm = (gammaln(0.5 * (self.nu + D)) - gammaln(0.5 * self.nu)
+                         - 0.5 * D * math.log(self.nu * math.pi)
+                         - np.sum(np.log(np.diagonal(self.chols, axis1=1, axis2=2)), axis=1))
+
+    @property
+    def ndim(self) -> int:
+        return self.means.shape[1]
+
+    def component_logpdf(self, X) -> np.ndarray:
+        """``(N, K)``: log weight + log density of each component."""
+        from scipy.linalg import solve_triangular
+
+        X = np.atleast_2d(X)
+        D = self.ndim
+        out = np.empty((X.shape[0], len(self.weights)))
+        for k in range(len(self.weights)):
+            z = solve_triangular(self.chols[k], (X - self.means[k]).T, lower=True)
+            m = np.sum(z * z, axis=0)
+            out[:, k] = (math.log(self.weights[k]) + self._lognorm[k]
+                         - 0.5 * (self.nu + D) * np.log1p(m / self.nu))
+        return out
+
+    def logpdf(self, X) -> np.ndarray:
+        from scipy.special import logsumexp
+
+        return logsumexp(self.component_logpdf(X), axis=1)
+
+    def sample(self, n: int, random) -> np.ndarray:
+        k = random.choice(len(self.weights), size=n, p=self.weights)
+        z = random.standard_normal((n, self.ndim))
+        g = random.chisquare(self.nu, size=n) / self.nu
+        return self.means[k] + np.einsum("nij,nj->ni", self.chols[k], z) / np.sqrt(g)[:, None]
+
+    def __call__(self, coords, random):
+        new = self.sample(coords.shape[0], random)
+        return new, self.logpdf(coords) - self.logpdf(new)
+
+    def refit(self, X, shrink: float = 20.0, iterations: int = 3) -> MixtureProposal:
+        """A mixture fitted to draws ``X`` (EM from this one; covariances shrunk towards
+        the current ones with ``shrink`` pseudo-draws; weights kept if a component gets
+        no draws)."""
+        X = np.asarray(X, dtype=float)
+        means, covs, weights = self.means.copy(), self.covs.copy(), self.weights.copy()
+        cur = self
+        for _ in range(iterations):
+            lg = cur.component_logpdf(X)
+            r = np.exp(lg - lg.max(axis=1, keepdims=True))
+            r /= r.sum(axis=1, keepdims=True)
+            nk = r.sum(axis=0)
+            for k in range(len(weights)):
+                if nk[k] < 2.0:
+                    continue
+                mu = (r[:, k] @ X) / nk[k]
+                d = X - mu
+                S = (r[:, k, None] * d).T @ d / nk[k]
+                covs[k] = (nk[k] * S + shrink * self.covs[k]) / (nk[k] + shrink)
+                means[k] = mu
+            total = nk.sum()
+            if total > 0:
+                weights = np.where(nk >= 2.0, nk / total, self.weights * 0.5)
+            cur = MixtureProposal(means, covs, weights, self.nu)
+        return cur
+
+
+def tau_pooled(chain: np.ndarray, c: float = 5.0) -> np.ndarray:
+    """Integrated autocorrelation time per dimension with the ACF about the *ensemble*
+    mean (emcee centres each walker on its own mean, which hides walkers that sit in
+    different modes and never swap: this estimate does not).
+
+    ``chain`` is ``(steps, walkers, D)``; Sokal's automatic window as in emcee.
+    """
+    n = chain.shape[0]
+    m = 1 << (2 * n - 1).bit_length()
+    out = np.empty(chain.shape[2])
+    for d in range(chain.shape[2]):
+        x = chain[:, :, d] - np.mean(chain[:, :, d])
+        f = np.fft.rfft(x, n=m, axis=0)
+        acov = np.fft.irfft(f * np.conjugate(f), n=m, axis=0)[:n].mean(axis=1)
+        if not acov[0] > 0:
+            out[d] = np.nan
+            continue
+        taus = 2.0 * np.cumsum(acov / acov[0]) - 1.0
+        # Sokal's window: the first lag m ≥ c·τ(m); none (emcee would return lag 0): the
+        # correlations outlast the chain, τ is at least the whole estimate.
+        closed = np.flatnonzero(np.arange(n) >= c * taus)
+        out[d] = taus[closed[0]] if closed.size else taus[-1]
+    return out
+
+
+def _mode_start(modes, lp_batch, W, rng, sigma_lo, sigma_hi, scale=0.5):
+    """Walkers drawn from each mode's Laplace approximation (``scale`` × its width), as
+    many per mode as its Laplace weight asks for (largest remainder, at least one for a
+    mode of weight ≥ 1/W).
+
+    The posterior is sharper than the Laplace approximation along its ridges (see
+    ``posterior_geometry.md``), so half the width starts the ensemble inside the bulk yet
+    spread over it; the noise ``log σ_n`` starts uniform between its prior floor and the
+    fit's RMS. Walkers with zero prior density are pulled back towards their mode.
+    """
+    w = np.array([m.weight for m in modes])
+    share = w * W
+    n = np.floor(share).astype(int)
+    n[(n == 0) & (share >= 1.0)] = 1
+    while n.sum() < W:
+        n[int(np.argmax(share - n))] += 1
+    while n.sum() > W:
+        n[int(np.argmax(n))] -= 1
+    rows, centres = [], []
+    for m, k in zip(modes, n):
+        if k == 0:
+            continue
+        cov = 0.5 * (m.cov + m.cov.T)
+        ev, V = np.linalg.eigh(cov)
+        L = V * np.sqrt(np.clip(ev, 0.0, None))
+        z = rng.standard_normal((k, m.u.size))
+        rows.append(m.u + scale * z @ L.T)
+        centres.append(np.tile(m.u, (k, 1)))
+    D = modes[0].u.size + 1
     P0 = np.empty((W, D))
-    P0[:, :-1] = x0[:-1] + scale * z @ L.T
+    P0[:, :-1] = np.concatenate(rows)
+    C = np.concatenate(centres)
     P0[:, -1] = rng.uniform(sigma_lo, max(sigma_hi, sigma_lo + 0.5), W)
     lp0 = lp_batch(P0)
     for _ in range(60):
         bad = ~np.isfinite(lp0)
         if not bad.any():
             break
-        P0[bad, :-1] = x0[:-1] + 0.7 * (P0[bad, :-1] - x0[:-1])
+        P0[bad, :-1] = C[bad] + 0.7 * (P0[bad, :-1] - C[bad])
         lp0[bad] = lp_batch(P0[bad])
     return P0, lp0
+
+
+def _fit_mode(fit) -> Mode:
+    """The fit's own optimum as the only mode (``modes="fit"``)."""
+    cost, cov, logz = _laplace(fit.problem, np.asarray(fit.u, dtype=float))
+    return Mode(u=np.asarray(fit.u, dtype=float), cost=cost, cov=cov, log_evidence=logz,
+                weight=1.0, values=fit.problem.values_np(fit.u))
+
+
+class _Counted:
+    """An emcee move that counts its proposals and acceptances (per-move diagnostics)."""
+
+    def __init__(self, move, name: str):
+        self.move, self.name = move, name
+        self.proposed = 0
+        self.accepted = 0
+
+    def propose(self, model, state):
+        state, accepted = self.move.propose(model, state)
+        self.proposed += int(np.size(accepted))
+        self.accepted += int(np.sum(accepted))
+        return state, accepted
+
+    @property
+    def rate(self) -> float:
+        return self.accepted / self.proposed if self.proposed else float("nan")
+
+
+def _move_name(move) -> str:
+    import emcee
+
+    if isinstance(move, emcee.moves.MHMove) and isinstance(move.get_proposal, _Adaptive):
+        return "independence (mixture)"
+    if isinstance(move, emcee.moves.DEMove) and move.gamma0 == 1.0:
+        return "DE gamma=1"
+    return type(move).__name__
+
+
+class _Adaptive:
+    """Holds the current :class:`MixtureProposal`; swapped between burn-in stages."""
+
+    def __init__(self, mix: MixtureProposal):
+        self.mix = mix
+
+    def __call__(self, coords, random):
+        return self.mix(coords, random)
 
 
 def _reset_outliers(state, rng, ndim):
@@ -376,13 +755,26 @@ def sample_posterior(
     likelihood: str = "auto",
     moves=None,
     sigma_floor: float | None = None,
+    modes="auto",
+    linear_prior: tuple[str, ...] = LINEAR_PRIOR,
 ) -> PosteriorResult:
-    """Run emcee from the least-squares optimum of ``fit``.
+    """Run emcee from the least-squares optimum (or optima) of ``fit``.
 
-    A burn-in of ``burn_in`` steps (walkers started from the Laplace approximation,
-    stranded walkers re-seeded at its end) is run and discarded; the kept chain then grows
-    in chunks until it is ``MIN_TAU_MULTIPLE`` integrated autocorrelation times long (τ
-    estimated on the kept chain), or for exactly ``n_steps`` steps.
+    Modes: with ``modes="auto"`` (default) :func:`find_modes` restarts the local fit
+    around ``fit`` and keeps every distinct optimum with its Laplace mass; the walkers
+    start spread over them in proportion to that mass, and an independence proposal (a
+    mixture of multivariate t's centred on them, :class:`MixtureProposal`) lets walkers
+    move between modes with the exact Metropolis–Hastings correction, so the final
+    proportions are the posterior's, not the Laplace guesses. ``modes="fit"`` uses the
+    fit's optimum only; a list of :class:`Mode` is used as given.
+
+    A burn-in of ``burn_in`` steps is run in two halves; after each the mixture is
+    refitted to the walkers' positions (adaptation happens only here) and stranded
+    walkers are re-seeded; it is then discarded. The kept chain grows in chunks until it
+    is ``MIN_TAU_MULTIPLE`` integrated autocorrelation times long, or runs exactly
+    ``n_steps`` steps. τ is the larger of emcee's estimate (each walker about its own
+    mean) and :func:`tau_pooled` (about the ensemble mean, which also sees walkers
+    that do not move between modes).
 
     Parameters
     ----------
@@ -395,16 +787,18 @@ def sample_posterior(
     burn_in:
         Steps run and discarded before the kept chain.
     seed:
-        Seed of the walkers' start and of emcee's moves (reproducible).
+        Seed of the mode search, the walkers' start and emcee's moves (reproducible).
     progress:
         Show a progress bar (tqdm).
     likelihood:
-        ``"interval"`` (quantization-aware), ``"gaussian"`` or ``"auto"`` (interval when
-        the log is quantized).
+        ``"interval"`` (quantization-aware), ``"gaussian"`` or ``"auto"`` (Gaussian with
+        the ``q²/12`` rounding variance added when the encoder step is known).
     moves:
-        emcee moves; default :func:`default_moves` (differential evolution).
+        emcee moves; default :func:`default_moves` with the mixture proposal.
     sigma_floor:
         Lower bound of the noise prior in encoder steps (default ``SIGMA_BOUNDS[0]``).
+    modes:
+        ``"auto"``, ``"fit"`` or a list of :class:`Mode` (see above).
     """
     import emcee
 
@@ -426,8 +820,12 @@ def sample_posterior(
         )
     bounds = (SIGMA_BOUNDS[0] if sigma_floor is None else float(sigma_floor), SIGMA_BOUNDS[1])
     centre = jnp.asarray(fit.u)
+    specs = prob.base.parameter_specs()
+    lin = np.array([1.0 if (n in linear_prior and specs[n].transform == "log") else 0.0
+                    for n in prob.free])
     lp = LogPosterior(problem=prob, centre=centre, temper=jnp.asarray(temper),
-                      quantized=quantized, sigma_bounds=bounds, quant_var=quant_var)
+                      quantized=quantized, sigma_bounds=bounds, quant_var=quant_var,
+                      linear_prior=jnp.asarray(lin) if lin.any() else None)
     D = lp.ndim
     W = n_walkers or max(32, 2 * D)
     if W < 2 * D:
@@ -438,28 +836,79 @@ def sample_posterior(
 
     rng = np.random.default_rng(seed)
     q = float(prob.step)
-    x0 = np.concatenate([np.asarray(fit.u), [math.log(max(fit.rms_residual_rad, bounds[0] * q))]])
-    P0, lp0 = _laplace_start(
-        fit, x0, log_prob, W, rng, math.log(bounds[0] * q) + 0.05,
-        math.log(max(fit.rms_residual_rad, bounds[0] * q)),
-    )
+    t_modes = time.perf_counter()
+    if isinstance(modes, str):
+        if modes == "auto":
+            found = find_modes(fit, seed=seed)
+        elif modes == "fit":
+            found = [_fit_mode(fit)]
+        else:
+            raise ValueError(f"modes must be 'auto', 'fit' or a list of Mode, not {modes!r}")
+    else:
+        found = list(modes)
+    t_modes = time.perf_counter() - t_modes
+    # Modes outside the prior box around the fit (±PRIOR_HALF_WIDTH) cannot be sampled.
+    P = prob.n_physical
+    found = [m for m in found if np.all(np.abs(m.u[:P] - np.asarray(fit.u)[:P]) < PRIOR_HALF_WIDTH)]
+    if not found:
+        found = [_fit_mode(fit)]
+    # Laplace weights under the sampled prior (the fit's cost has the log-flat one).
+    lz = np.array([m.log_evidence + float(lin @ (m.u[:P] - np.asarray(fit.u)[:P])) for m in found])
+    wz = np.exp(lz - lz.max())
+    for m, wi in zip(found, wz / wz.sum()):
+        m.weight = float(wi)
+    log_lo = math.log(bounds[0] * q)
+    log_rms = math.log(max(fit.rms_residual_rad, bounds[0] * q))
+    P0, lp0 = _mode_start(found, log_prob, W, rng, log_lo + 0.05, log_rms)
     if not np.all(np.isfinite(lp0)):
         raise RuntimeError("could not place the walkers where the posterior is positive")
 
-    moves = default_moves() if moves is None else moves
-    sampler = emcee.EnsembleSampler(W, D, log_prob, vectorize=True, moves=moves)
+    # Independence proposal: one t component per mode; log σ_n from the start spread.
+    s_mid, s_sd = 0.5 * (log_lo + max(log_rms, log_lo + 0.5)), 0.6
+    means = np.array([np.concatenate([m.u, [s_mid]]) for m in found])
+    covs = np.zeros((len(found), D, D))
+    for k, m in enumerate(found):
+        covs[k, :-1, :-1] = 0.25 * m.cov  # the posterior is narrower than Laplace (ridges)
+        covs[k, -1, -1] = s_sd**2
+    proposal = _Adaptive(MixtureProposal(means, covs, [m.weight for m in found]))
+    moves = default_moves(proposal) if moves is None else moves
+    if not isinstance(moves, list):
+        moves = [(moves, 1.0)]
+    moves = [m if isinstance(m, tuple) else (m, 1.0) for m in moves]
+    counted = [(_Counted(m, _move_name(m)), w) for m, w in moves]
+    sampler = emcee.EnsembleSampler(W, D, log_prob, vectorize=True, moves=counted)
     # emcee draws its moves from the state's random state: seeding it makes runs repeatable.
     state = emcee.State(P0, log_prob=lp0, random_state=np.random.RandomState(seed).get_state())
     n_reset = 0
     if burn_in > 0:
-        state = sampler.run_mcmc(state, burn_in, progress=progress, skip_initial_state_check=True)
-        state, n_reset = _reset_outliers(state, rng, D)
-        if n_reset:
-            state.log_prob = log_prob(state.coords)
-        sampler.reset()
+        # Burn-in in stages; after each: re-seed stranded walkers, refit the mixture to the
+        # walkers' positions, and scale the local DE step towards ~25 % acceptance (emcee's
+        # 2.38/√(2D) is tuned for a Gaussian; on this thin curved ridge it accepts < 1 %).
+        n_stage = BURN_IN_STAGES if burn_in >= 40 * BURN_IN_STAGES else 1
+        sizes = [burn_in // n_stage] * n_stage
+        sizes[-1] += burn_in - sum(sizes)
+        for h in sizes:
+            state = sampler.run_mcmc(state, h, progress=progress, skip_initial_state_check=True)
+            state, nr = _reset_outliers(state, rng, D)
+            n_reset += nr
+            if nr:
+                state.log_prob = log_prob(state.coords)
+            burn_chain = sampler.get_chain()[h // 2 :].reshape(-1, D)
+            proposal.mix = proposal.mix.refit(burn_chain)
+            for m, _ in counted:
+                inner = m.move
+                if (isinstance(inner, emcee.moves.DEMove) and inner.gamma0 != 1.0
+                        and m.proposed > 0):
+                    g = inner.gamma0 if inner.gamma0 is not None else 2.38 / math.sqrt(2 * D)
+                    inner.gamma0 = g * float(np.clip(m.rate / 0.25, 0.2, 1.5))
+                m.proposed = m.accepted = 0
+            sampler.reset()
+        for m, _ in counted:
+            m.proposed = m.accepted = 0
     total = n_steps or max_steps
     done = 0
     tau = np.full(D, np.nan)
+    tau_e = np.full(D, np.nan)
     while done < total:
         step = min(chunk if n_steps is None else total, total - done)
         if n_steps is None and done > 0 and np.all(np.isfinite(tau)):
@@ -468,7 +917,9 @@ def sample_posterior(
             step = int(min(max(step, need), total - done))
         state = sampler.run_mcmc(state, step, progress=progress, skip_initial_state_check=True)
         done += step
-        tau = sampler.get_autocorr_time(tol=0)
+        with np.errstate(invalid="ignore", divide="ignore"):  # a walker that never moved
+            tau_e = sampler.get_autocorr_time(tol=0)
+        tau = np.fmax(tau_e, tau_pooled(sampler.get_chain()))
         if n_steps is None and np.all(np.isfinite(tau)) and done >= MIN_TAU_MULTIPLE * np.max(tau):
             break
     finite_tau = np.isfinite(tau)
@@ -490,7 +941,7 @@ def sample_posterior(
     acc = sampler.acceptance_fraction
     if n_reset:
         warnings.append(
-            f"{n_reset} walker(s) were stranded far below the bulk after the burn-in and "
+            f"{n_reset} walker(s) were stranded far below the bulk during the burn-in and "
             "were restarted from good walkers (a minor mode may be under-represented)"
         )
     stuck = acc < 0.25 * np.median(acc)
@@ -500,22 +951,31 @@ def sample_posterior(
             f"moves than the rest (min {np.min(acc):.3f}, median {np.median(acc):.3f}); "
             "intervals may under-cover — check the chains (trace plot)"
         )
-    # A chain that climbs well above the least-squares optimum has found another mode: the
-    # fit is a local optimum and the posterior is multimodal (the reference is the best
-    # log-posterior at the fit's u over a grid of noise levels).
-    grid = np.linspace(math.log(bounds[0] * q), math.log(max(fit.rms_residual_rad, 2 * bounds[0] * q)) + 1.0, 25)
-    ref = float(np.max(log_prob(np.column_stack([np.tile(x0[:-1], (grid.size, 1)), grid]))))
-    best = float(np.max(sampler.get_log_prob()))
-    if best > ref + MODE_GAP:
-        warnings.append(
-            f"MULTIMODAL: the chain reached log p {best - ref:+.1f} above the least-squares "
-            "optimum — the fit is a local optimum and the posterior has another mode; "
-            "intervals from a chain that has not mixed between modes are unreliable"
-        )
     burn = 0
     thin = max(1, int(tau_max / 2))
     chain = sampler.get_chain()
     draws = sampler.get_chain(discard=burn, thin=thin, flat=True)
+    # Share of the kept draws in each mode (nearest mixture component).
+    comp = np.argmax(proposal.mix.component_logpdf(chain.reshape(-1, D)), axis=1)
+    share = np.bincount(comp, minlength=len(found)) / comp.size
+    if len(found) > 1:
+        warnings.append(
+            f"MULTIMODAL: {len(found)} separate optima of the fit's cost (Laplace weights "
+            + ", ".join(f"{m.weight:.2f}" for m in found)
+            + "; share of the draws " + ", ".join(f"{s:.2f}" for s in share)
+            + "); the chain samples all of them — see `modes` for their parameters"
+        )
+    # A chain that climbs well above the best mode found has found yet another one.
+    grid = np.linspace(log_lo, max(log_rms, log_lo + math.log(2.0)) + 1.0, 25)
+    ref = max(float(np.max(log_prob(np.column_stack([np.tile(m.u, (grid.size, 1)), grid]))))
+              for m in found)
+    best = float(np.max(sampler.get_log_prob()))
+    if best > ref + MODE_GAP:
+        warnings.append(
+            f"MULTIMODAL: the chain reached log p {best - ref:+.1f} above the best optimum "
+            "found — the posterior has a mode the search missed; intervals from a chain "
+            "that has not mixed between modes are unreliable"
+        )
     phys = _to_physical(prob, draws)
     # Fixed parameters appear with their constant value so every name is present.
     values = fit.model.float_values()
@@ -542,6 +1002,11 @@ def sample_posterior(
         fit=fit,
         draws=draws,
         burn_in=burn_in,
+        modes=found,
+        mode_share=share,
+        tau_emcee=np.asarray(tau_e),
+        mode_search_s=t_modes,
+        move_acceptance={m.name: m.rate for m, _ in counted},
     )
 
 
