@@ -199,3 +199,20 @@ def test_cli_driven_current_without_torque_constant_is_one_line(tmp_path):
     )
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1 and "torque" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_without_load_variation_the_spring_is_reported_undetermined():
+    """With no load torque the twist only flips by ±T_k⁻¹(tau_fout): the data fix
+    tau_fout/k1 and tau_c + tau_fout/N, not k1, tau_fout or tau_c each. The fit must say
+    so (infinite std and a note), not print a confident k1."""
+    import copy
+
+    design = copy.deepcopy(DRV.DESIGN)
+    for run in design["runs"]:
+        run["load"] = (0.0,) + tuple(run["load"][1:])
+    df, _ = DRV.make_driven_log(DRV.TRUTH_DRIVEN_CSF8, design)
+    r = hdid.fit_driven(df, order=3)
+    for name in ("k1", "tau_fout", "tau_c"):
+        assert np.isinf(r.parameters[name].std), name
+    assert np.isfinite(r.parameters["inertia"].std)  # still fixed by the known torque
+    assert any("spring is not determined" in n for n in r.notes)

@@ -231,7 +231,7 @@ def analyse_driven(
     problem, u, *, data, notes, order_bic=None, free_preps=(), extra_names=(),
 ) -> DrivenFitResult:
     """Covariance (Gauss–Newton, null directions undetermined), estimates, RMS, flags."""
-    from ._identifiability import _covariance, _undetermined
+    from ._identifiability import _covariance
 
     u = np.asarray(u, dtype=float)
     joint_problem = hasattr(problem, "parts")
@@ -242,7 +242,7 @@ def analyse_driven(
     n_rows = int(np.sum(np.abs(r) > 0))
     dof = max(n_rows - u.size, 1)
     chi2_red = float(r @ r) / dof
-    cov, null = _scaled_covariance(J.T @ J, _covariance)
+    cov, null_s, scale = _scaled_covariance(J.T @ J, _covariance)
     inflate = max(1.0, chi2_red)
     specs = joint.parameter_specs()
     values = joint.float_values()
@@ -256,7 +256,8 @@ def analyse_driven(
         g = np.zeros(u.size)
         g[k] = float(derivative(specs[n], u[k]))
         grads[n] = g
-        stds[n] = math.inf if _undetermined(g, null) else math.sqrt(max(g @ cov @ g, 0.0) * inflate)
+        stds[n] = (math.inf if _undetermined_scaled(g, null_s, scale)
+                   else math.sqrt(max(g @ cov @ g, 0.0) * inflate))
     params = {}
     for n, spec in specs.items():
         if n.startswith("pos_"):
@@ -301,7 +302,15 @@ def analyse_driven(
             f"the kinematic-error RMS is {rms['kinematic_rad'] / rms['kinematic_floor_rad']:.1f}× "
             "its floor: see plot_kinematic_error()"
         )
-    labels = dproblem.labels(data.run_names) + list(extra_names)
+    spring = [p.name for p in joint.spring.parameters]
+    if dproblem.has_output and any(n in where and math.isinf(stds[n]) for n in spring):
+        notes = list(notes) + [
+            "the spring is not determined: the twist T_k⁻¹(τ_l + τ_fout) only flips with the "
+            "output friction unless the load torque varies, which fixes tau_fout/k1 and "
+            "tau_c + tau_fout/N but not each; log a varying load_torque, or fit jointly with "
+            "a free-motion log (hdid fit FREE.csv DRIVEN.csv --joint)"
+        ]
+    labels = dproblem.labels(data.window_names) + list(extra_names)
     return DrivenFitResult(
         source=data.source if not joint_problem else " + ".join(
             [data.source] + [p.source for p in free_preps]),
@@ -325,10 +334,17 @@ def _scaled_covariance(fisher: np.ndarray, covariance):
     d = np.sqrt(np.clip(np.diag(fisher), 0.0, None))
     d = np.where(d > 0, d, 1.0)
     cov_s, null_s = covariance(fisher / np.outer(d, d))
-    cov = cov_s / np.outer(d, d)
-    null = null_s / d[:, None]
-    norms = np.linalg.norm(null, axis=0)
-    return cov, null / np.where(norms > 0, norms, 1.0)
+    return cov_s / np.outer(d, d), null_s, d
+
+
+def _undetermined_scaled(g: np.ndarray, null_s: np.ndarray, d: np.ndarray) -> bool:
+    """Whether a quantity with gradient ``g`` (optimiser space) has a component along a
+    null direction — tested in the scaled space, where the null basis is orthonormal
+    (in the original space a null direction's physical components can be 1e-5 of its
+    nuisance components and would slip under any threshold)."""
+    from ._identifiability import _undetermined
+
+    return _undetermined(g / d, null_s)
 
 
 def _extra_values(problem, u, extra_names):
