@@ -74,10 +74,21 @@ DESIGNS = {
 }
 
 
-def make_logs(design: str, n: int, log_dir: Path) -> list[str]:
-    """``n`` logs of a design (cached): truths around the CSF-8 values, seeds 1000+i."""
+def truth_of(i: int, gen=None) -> dict:
+    """The truth of log ``i`` (seed 1000+i)."""
     import numpy as np
 
+    gen = gen or _common.import_generate()
+    rng = np.random.default_rng(1000 + i)
+    truth = dict(gen.TRUTH_CSF8)
+    for k in ("k1", "tau_c", "tau_s", "c_v"):
+        truth[k] *= float(np.exp(rng.normal(0.0, 0.15)))
+    truth["tau_s"] = max(truth["tau_s"], 1.2 * truth["tau_c"])
+    return truth
+
+
+def make_logs(design: str, n: int, log_dir: Path) -> list[str]:
+    """``n`` logs of a design (cached): truths around the CSF-8 values, seeds 1000+i."""
     gen = _common.import_generate()
     amps, fs, duration = DESIGNS[design]
     d = log_dir / design.replace(" ", "_").replace(".", "p")
@@ -86,11 +97,7 @@ def make_logs(design: str, n: int, log_dir: Path) -> list[str]:
     for i in range(n):
         p = d / f"log{i:04d}.csv"
         if not p.exists():
-            rng = np.random.default_rng(1000 + i)
-            truth = dict(gen.TRUTH_CSF8)
-            for k in ("k1", "tau_c", "tau_s", "c_v"):
-                truth[k] *= float(np.exp(rng.normal(0.0, 0.15)))
-            truth["tau_s"] = max(truth["tau_s"], 1.2 * truth["tau_c"])
+            truth = truth_of(i, gen)
             df = gen.make_log(truth, amplitudes=amps, fs=fs, duration=duration, hold=0.04,
                               offsets_by_setup={"A": 0.012, "B": -0.020}, seed=1000 + i)
             tmp = p.with_suffix(".tmp")
@@ -156,6 +163,24 @@ def worker(cfg: dict) -> dict:
         out["errors"] = [e for e in table["error"] if isinstance(e, str)][:3]
         cols = [c for c in ("k1", "tau_c", "rms_residual_counts") if c in table]
         out["summary"] = {c: float(table[c].median()) for c in cols}
+        # Quality per log: best χ² (to compare the vectorised fit with fit() on the same
+        # logs) and, for the paper design, the error against the truth in standard errors.
+        per = []
+        for path, r in zip(timed, table.itertuples()):
+            res = r.result
+            if res is None:
+                per.append(None)
+                continue
+            i = int(Path(path).stem[3:])
+            row = {"log": i, "chi2": float(res.starts.costs[res.starts.best])}
+            if cfg["design"] == "paper":
+                truth = truth_of(i)
+                for k in ("k1", "tau_c", "tau_s", "c_v"):
+                    if k in res.parameters:
+                        p = res.parameters[k]
+                        row[f"z_{k}"] = float((p.value - truth[k]) / p.std)
+            per.append(row)
+        out["per_log"] = per
     out["n"] = len(timed)
     out["maxrss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     out["load_after"] = _load("end")
@@ -216,6 +241,7 @@ def measure(args) -> dict:
     go(f"scipy way {n_scipy}", "scipy", n_scipy, paths=paper)
     # threads: one thread vs the default (one per core)
     go("vectorized 100, 1 thread", "vectorized", min(100, max(ns)), paths=paper, threads=1)
+    go("vectorized 100, 6 lanes", "vectorized", min(100, max(ns)), paths=paper, lanes=6)
     for design in ("short 0.25 s", "long 1.0 s", "1 kHz", "2 runs", "8 runs"):
         go(f"design {design}, 20 logs", "vectorized", 20, design=design)
     go("design paper, 20 logs", "vectorized", 20, paths=paper)
@@ -382,17 +408,54 @@ def write_report(res: dict, out_dir: Path) -> str:
     if th and v100:
         L.append(f"- vectorised, 1 thread instead of one per core, {th['n']} logs: "
                  f"{th['total_s']:.1f} s vs {v100['total_s']:.1f} s (load {_ld(th)}).")
+
+    lanes6 = _find(res, "vectorized 100, 6 lanes")
+    if lanes6 and v100:
+        L.append(f"- vectorised, 6 lanes per call instead of 1, {lanes6['n']} logs: "
+                 f"{lanes6['total_s']:.1f} s (CPU {_cpu_per_log(lanes6) * 1e3:.0f} ms per log) vs "
+                 f"{v100['total_s']:.1f} s (CPU {_cpu_per_log(v100) * 1e3:.0f} ms per log) "
+                 f"(load {_ld(lanes6)}).")
+    L.append("")
+
+    L.append("## Same fits: vectorised vs `hdid.fit`, and against the truth\n")
+    lp100 = max(loops, key=lambda r: r["n"])
+    vq = _find(res, f"vectorized {lp100['n']}")
+    if vq and vq.get("per_log") and lp100.get("per_log"):
+        a = {x["log"]: x["chi2"] for x in vq["per_log"] if x}
+        b = {x["log"]: x["chi2"] for x in lp100["per_log"] if x}
+        common = sorted(set(a) & set(b))
+        d = [abs(a[k] - b[k]) for k in common]
+        L.append(f"- best χ² of the vectorised fit vs `hdid.fit`, same {len(common)} logs: "
+                 f"max |Δχ²| = {max(d):.2g}, logs with |Δχ²| > 0.1: "
+                 f"{sum(x > 0.1 for x in d)} (χ² in units of the quantization variance).")
+    if big.get("per_log"):
+        rows = [x for x in big["per_log"] if x]
+        L.append(f"- vectorised, {big['n']} logs, error against the truth in standard errors "
+                 "(z = (fit − truth)/std):\n")
+        L.append("| parameter | median abs(z) | share abs(z) < 2 | share abs(z) < 3 |\n|---|---|---|---|")
+        for k in ("k1", "tau_c", "tau_s", "c_v"):
+            z = [abs(x[f"z_{k}"]) for x in rows if f"z_{k}" in x]
+            if z:
+                z.sort()
+                L.append(f"| {k} | {z[len(z) // 2]:.2f} | {sum(v < 2 for v in z) / len(z):.0%} | "
+                         f"{sum(v < 3 for v in z) / len(z):.0%} |")
     L.append("")
 
     L.append("## Where the vectorised time goes\n")
+    L.append("Wall seconds, and CPU seconds (process time, both threads) in brackets.\n")
     L.append("| N | total | compile | setup (read, prepare) | grid | LM (phases 1+2) | "
-             "analysis | LM lane-steps | ms per lane-step |\n|---|---|---|---|---|---|---|---|---|")
+             "analysis | LM lane-steps | CPU µs per lane-step |\n|---|---|---|---|---|---|---|---|---|")
     for r in vec:
         t = r["timing"]
+
+        def both(k, t=t):
+            c = t.get(f"{k}_cpu_s")
+            return f"{t[f'{k}_s']:.2f} s" + (f" ({c:.2f})" if c is not None else "")
+
         L.append(f"| {r['n']} | {t['total_s']:.2f} s | {t['compile_s']:.2f} s | "
-                 f"{t['setup_s']:.2f} s | {t['grid_s']:.2f} s | {t['solve_s']:.2f} s | "
-                 f"{t['analyse_s']:.2f} s | {t['lane_steps']} | "
-                 f"{1e3 * t['solve_s'] / max(t['lane_steps'], 1):.2f} |")
+                 f"{both('setup')} | {both('grid')} | {both('solve')} | "
+                 f"{both('analyse')} | {t['lane_steps']} | "
+                 f"{1e6 * t.get('solve_cpu_s', t['solve_s']) / max(t['lane_steps'], 1):.0f} |")
     L.append("")
 
     L.append("## Compile time (first call in a fresh process, 2 logs)\n")

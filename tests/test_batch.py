@@ -116,9 +116,9 @@ def test_vectorized_band_bracket_and_diverged_rows(batch_logs, monkeypatch):
 
     solve = _vfit._lane_solve
 
-    def diverging(problems, U, active, max_steps):
-        u, cost, done, k = solve(problems, U, active, max_steps)
-        return u, cost * float("nan"), done, k
+    def diverging(problems, U, active, max_steps, *state):
+        u, cost, done, k, *state = solve(problems, U, active, max_steps, *state)
+        return (u, cost * float("nan"), done, k, *state)
 
     monkeypatch.setattr(_vfit, "_lane_solve", diverging)
     table = hdid.fit_many(batch_logs, n_starts=1, max_steps=1)

@@ -37,11 +37,11 @@ def fit_many(
     band_bracket:
         Compute each log's model-free stick-band bracket (``stick_band_bracket_*``
         columns) with the event-driven reference simulator. Default: ``False`` when
-        vectorised (per-log SciPy work: 40–60 ms of CPU per log, ~15 % of the batch),
+        vectorised (per-log SciPy work: 40–60 ms of CPU per log, ~30 % of the batch),
         ``True`` for ``vectorize=False`` (as :func:`hdid.fit`). Without it the bracket
         columns are empty and ``band_bracket`` says so.
     lanes, threads:
-        Vectorised path: (log, start) lanes per compiled call (default 6) and threads
+        Vectorised path: (log, start) lanes per compiled call (default 1) and threads
         running calls concurrently (default: the CPU count, at most 8).
     client:
         A ``dask.distributed.Client``: the logs are split into chunks of ``chunk_size``

@@ -1,13 +1,12 @@
-"""Vectorised batch fit: the multi-start fits of many logs as vmapped lanes.
+"""Vectorised batch fit: the multi-start fits of many logs as lanes of shared programs.
 
-:func:`hdid.fit` runs its starts as lanes of one vmapped Levenberg–Marquardt program. Here
-the lanes of *many* logs share those programs: logs whose problems have the same structure
-and shape (runs × samples after padding, free parameters, set-ups) form a *bucket*; each
-compiled call advances ``lanes`` (log, start) pairs at once, each lane with its own log's
-arrays. The schedule is exactly :func:`hdid.fit`'s — grid, phase 1 (every start
-``PHASE1_STEPS`` iterations), phase 2 (the best ``CONTINUED_STARTS`` in chunks of
-``PHASE2_CHUNK``, lanes far behind their log's best dropped) — so every log gets the fit it
-would get alone: lanes never interact, only share the vector instructions.
+:func:`hdid.fit` runs its starts as lanes of one Levenberg–Marquardt program
+(:func:`hdid._fit._lm_lanes`). Here the lanes of *many* logs share compiled programs: logs
+whose problems have the same structure and shape (runs × samples after padding, free
+parameters, set-ups) form a *bucket*; each call advances ``lanes`` (log, start) pairs, each
+lane with its own log's arrays. The schedule is :func:`hdid.fit`'s own
+(:class:`hdid._fit._Schedule`: grid, phase 1, phase 2 in chunks, lanes far behind their
+log's best dropped), so every log gets the fit it would get alone: lanes never interact.
 
 Samples are padded (repeated last sample, weight 0: zero-length intervals and zero
 residuals) so that logs of slightly different lengths share a bucket; the analysis of each
@@ -17,12 +16,16 @@ The JAX parts of the analysis (Jacobian, dense prediction, derived quantities) a
 computed for many logs per call; the band bracket (event-driven reference simulation of
 every run, 40–60 ms of CPU per log in SciPy) is optional.
 
-Why the gain is modest on a CPU (``benchmarks/results/batch_speed.md``): a lane's cost is
-dominated by the forward-mode simulation, which is compute-bound already at a few lanes,
-and a vmapped ``while_loop`` runs as long as its slowest lane (a start that rings for the
-whole record holds up the others). Lanes are therefore ordered by their current
-simulation length (a cheap forward pass) so that long ones share calls, calls are narrow
-(``DEFAULT_LANES``), and they run on ``threads`` threads.
+Where the time goes and why the calls are one lane wide on a CPU
+(``benchmarks/results/batch_speed.md``): a lane's cost is the stick-exact simulation,
+which is compute-bound already at one lane, and the LM's control flow is per call — in a
+one-lane program a rejected trial costs one forward pass and the forward-mode Jacobian
+(≈ 3× a forward pass) is computed only for accepted trials; a wider call computes it when
+*any* of its lanes needs it and runs as long as its slowest lane. Width 1 was the
+cheapest in CPU time per log (and ``threads`` keep the cores busy). The Jacobian and
+residuals at the end of a lane's call are carried to its next call. The grid's forward
+passes are wide (``GRID_LANES``), with candidates ordered by how long they ring so that a
+call's lanes stop at similar times.
 """
 
 from __future__ import annotations
@@ -43,14 +46,12 @@ import numpy as np
 from . import _config  # noqa: F401
 from ._errors import HdidError
 from ._fit import (
-    CONTINUED_STARTS,
-    DROP_DCHI2,
-    PHASE1_STEPS,
-    PHASE2_CHUNK,
     _choose_starts,
     _finish,
     _grid_candidates,
-    _levenberg_marquardt,
+    LMState,
+    _lm_lanes,
+    _Schedule,
     _Setup,
     _setup,
 )
@@ -58,12 +59,14 @@ from ._identifiability import derived_quantities
 from ._problem import Problem
 from ._simulate import simulate
 
-#: Lanes per compiled call. The forward-mode simulation is compute-bound from a few lanes
-#: on a CPU core and wider calls wait longer for their slowest lane: on 32 logs (2 shared
-#: cores) 4–6 lanes took 1.3–1.5 ms per lane-step, 16 lanes 2.9 ms, 32 lanes 4.0 ms.
-DEFAULT_LANES = 6
+#: Lanes per compiled call of the Levenberg–Marquardt program. One: the LM's Jacobian is
+#: then computed only where its lane needs it (module docstring). Measured on 40 paper
+#: logs (2 shared cores): CPU per log 146–152 ms at 1 lane, ≈ 440 ms at 6 lanes.
+DEFAULT_LANES = 1
 #: Lanes per call of the grid's forward-only cost evaluation (cheap, vectorises well).
 GRID_LANES = 128
+#: Lanes per call of the analysis (one pass per log, no LM control flow).
+ANALYSIS_LANES = 8
 #: Logs set up, fitted and analysed together; bounds the host memory of a batch.
 DEFAULT_WAVE = 256
 #: Samples are padded up to a multiple of this, so that logs of nearly equal length share
@@ -172,9 +175,19 @@ def _lane_lengths(problems: Problem, U):
 
 
 @eqx.filter_jit
-def _lane_solve(problems: Problem, U, active, max_steps):
-    """:func:`hdid._fit._levenberg_marquardt` for each lane, with its own log and budget."""
-    return jax.vmap(_levenberg_marquardt)(problems, U, active, max_steps)
+def _lane_solve(problems: Problem, U, active, max_steps, *state):
+    """:func:`hdid._fit._lm_lanes` over lanes, each with its own log and budget.
+
+    ``state`` (the fields of :class:`hdid._fit.LMState`) carries each lane's residuals,
+    Jacobian and damping from its previous call, so a call does not start by recomputing
+    them. Returns ``(U, cost, done, iterations, *state)``.
+    """
+    u, cost, done, k, st = _lm_lanes(
+        lambda V: jax.vmap(lambda p, u: p.residuals(u))(problems, V),
+        lambda V: jax.vmap(lambda p, u: p.residuals_and_jacobian(u))(problems, V),
+        U, active, max_steps, LMState(*state),
+    )
+    return (u, cost, done, k, *st)
 
 
 @eqx.filter_jit
@@ -238,6 +251,9 @@ class _Bucket:
         self.treedef = leaves[0][1]
         self.stacked = [np.stack([np.asarray(lv[0][i]) for lv in leaves]) for i in
                         range(len(leaves[0][0]))]
+        p = problems[0]
+        #: residual rows per lane (data, then priors)
+        self.n_residuals = int(np.prod(p.times.shape)) + p.n_physical
 
     def gather(self, index: np.ndarray) -> Problem:
         """The problems of logs ``index`` (one per lane), stacked."""
@@ -258,10 +274,9 @@ class _LogFit:
     costs: np.ndarray | None = None
     ok: np.ndarray | None = None
     steps: np.ndarray | None = None
-    active: np.ndarray | None = None
-    used: int = 0
-    done: bool = False
-    extra: dict = field(default_factory=dict)
+    sched: _Schedule | None = None
+    #: per start, the fields of its LMState after its last call
+    lm: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -278,6 +293,11 @@ class BatchTiming:
     grid_s: float = 0.0
     solve_s: float = 0.0
     analyse_s: float = 0.0
+    #: CPU (process) time of each part, all threads: less sensitive to other jobs.
+    setup_cpu_s: float = 0.0
+    grid_cpu_s: float = 0.0
+    solve_cpu_s: float = 0.0
+    analyse_cpu_s: float = 0.0
     n_logs: int = 0
     n_failed: int = 0
     n_buckets: int = 0
@@ -291,12 +311,13 @@ class BatchTiming:
 
     def add(self, other: BatchTiming) -> None:
         for k in ("total_s", "compile_s", "setup_s", "grid_s", "solve_s", "analyse_s",
-                  "n_logs", "n_failed", "lane_steps"):
+                  "setup_cpu_s", "grid_cpu_s", "solve_cpu_s", "analyse_cpu_s", "n_logs", "n_failed", "lane_steps"):
             setattr(self, k, getattr(self, k) + getattr(other, k))
         self.n_buckets = max(self.n_buckets, other.n_buckets)
 
     def to_dict(self) -> dict[str, Any]:
-        keys = ("total_s", "compile_s", "setup_s", "grid_s", "solve_s", "analyse_s", "n_logs",
+        keys = ("total_s", "compile_s", "setup_s", "grid_s", "solve_s", "analyse_s",
+                "setup_cpu_s", "grid_cpu_s", "solve_cpu_s", "analyse_cpu_s", "n_logs",
                 "n_failed", "n_buckets", "lane_steps", "lanes", "threads")
         return {**{k: getattr(self, k) for k in keys}, "run_s": self.run_s}
 
@@ -390,7 +411,7 @@ def _fit_wave(items, idx, outcomes, runner, timing, lanes, bracket, on_done, opt
             on_done(i, exc)
 
     # -- set up and bucket --------------------------------------------------------------
-    t = time.perf_counter()
+    t, tc = time.perf_counter(), time.process_time()
     fits: dict[int, _LogFit] = {}
     keys: dict = {}
     members: list[list[Problem]] = []
@@ -413,9 +434,10 @@ def _fit_wave(items, idx, outcomes, runner, timing, lanes, bracket, on_done, opt
     buckets = [_Bucket(m, k) for m, k in zip(members, bucket_keys)]
     timing.n_buckets = max(timing.n_buckets, len(buckets))
     timing.setup_s += time.perf_counter() - t
+    timing.setup_cpu_s += time.process_time() - tc
 
     # -- grid -----------------------------------------------------------------------------
-    t = time.perf_counter()
+    t, tc = time.perf_counter(), time.process_time()
     cand: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     for i, f in list(fits.items()):
         try:
@@ -429,8 +451,11 @@ def _fit_wave(items, idx, outcomes, runner, timing, lanes, bracket, on_done, opt
             continue
         rows = np.array([fits[i].row for i, _ in lane_log])
         U = np.stack([cand[i][0][j] for i, j in lane_log])
-        costs = _run_lanes(runner, "grid", _lane_costs, bucket, rows, (U,), GRID_LANES)
+        order = _ring_order(fits[lane_log[0][0]].setup.problem, U)
+        costs = _run_lanes(runner, "grid", _lane_costs, bucket, rows[order], (U[order],),
+                           GRID_LANES)
         costs = np.concatenate([np.asarray(c) for c in costs])
+        costs = costs[np.argsort(order)]
         pos = 0
         for i, f in fits.items():
             if f.bucket != b:
@@ -444,38 +469,36 @@ def _fit_wave(items, idx, outcomes, runner, timing, lanes, bracket, on_done, opt
             f.steps = np.zeros(len(U0), dtype=int)
             f.ok = np.zeros(len(U0), dtype=bool)
     timing.grid_s += time.perf_counter() - t
+    timing.grid_cpu_s += time.process_time() - tc
 
-    # -- phase 1: every start PHASE1_STEPS iterations ------------------------------------
-    t = time.perf_counter()
-    tasks = [(i, j, PHASE1_STEPS) for i, f in fits.items() for j in range(len(f.U))]
-    _solve_tasks(runner, fits, buckets, tasks, lanes, timing, sort=sort_lanes)
+    # -- phases 1 and 2 (fit()'s _Schedule per log): each round advances every live lane
+    # of every log to its log's next check ----------------------------------------------
     for f in fits.values():
-        f.active = np.zeros(len(f.U), dtype=bool)
-        finite_costs = np.where(np.isfinite(f.costs), f.costs, np.inf)
-        f.active[np.argsort(finite_costs)[:CONTINUED_STARTS]] = True
-        f.ok = np.zeros(len(f.U), dtype=bool)
-
-    # -- phase 2: the best starts in chunks, lanes far behind their log's best dropped ---
+        f.sched = _Schedule(len(f.U), max_steps)
+        f.lm = {}
     while True:
         tasks = []
         for i, f in fits.items():
-            if f.active.any() and f.used < max_steps:
-                chunk = min(PHASE2_CHUNK, max_steps - f.used)
-                tasks.extend((i, j, chunk) for j in np.flatnonzero(f.active))
-                f.extra["chunk"] = chunk
+            task = f.sched.next()
+            if task is None:
+                continue
+            active, k, fresh = task
+            tasks.extend((i, j, k, fresh) for j in np.flatnonzero(active))
         if not tasks:
             break
-        before = {i: f.active.copy() for i, f in fits.items() if "chunk" in f.extra}
-        _solve_tasks(runner, fits, buckets, tasks, lanes, timing, phase2=True, sort=sort_lanes)
-        for i, act in before.items():
+        results = _solve_tasks(runner, fits, buckets, tasks, lanes, timing, sort=sort_lanes)
+        for i, (c2, done2, s2) in results.items():
             f = fits[i]
-            f.used += f.extra.pop("chunk")
-            best_now = np.min(np.where(np.isfinite(f.costs), f.costs, np.inf))
-            f.active = act & ~f.extra.pop("done2") & (f.costs - best_now < DROP_DCHI2)
+            f.sched.update(c2, done2, s2)
+            f.lm = {j: v for j, v in f.lm.items() if f.sched.active[j]}
+    for f in fits.values():
+        f.costs, f.ok, f.steps = f.sched.costs, f.sched.ok, f.sched.steps
+        f.lm = {}
     timing.solve_s += time.perf_counter() - t
+    timing.solve_cpu_s += time.process_time() - tc
 
     # -- analysis ---------------------------------------------------------------------------
-    t = time.perf_counter()
+    t, tc = time.perf_counter(), time.process_time()
     for b, bucket in enumerate(buckets):
         logs = [i for i, f in fits.items() if f.bucket == b]
         best = {}
@@ -487,7 +510,8 @@ def _fit_wave(items, idx, outcomes, runner, timing, lanes, bracket, on_done, opt
         if good:
             rows = np.array([fits[i].row for i in good])
             U = np.stack([fits[i].U[best[i]] for i in good])
-            outs = _run_lanes(runner, "analysis", _lane_analysis, bucket, rows, (U,), lanes)
+            outs = _run_lanes(runner, "analysis", _lane_analysis, bucket, rows, (U,),
+                              ANALYSIS_LANES)
             flat = jax.tree_util.tree_map(lambda *xs: np.concatenate(xs), *outs)
             for k, i in enumerate(good):
                 pre[i] = _unpad(jax.tree_util.tree_map(lambda x: x[k], flat),
@@ -506,6 +530,19 @@ def _fit_wave(items, idx, outcomes, runner, timing, lanes, bracket, on_done, opt
             if on_done is not None:
                 on_done(i, res)
     timing.analyse_s += time.perf_counter() - t
+    timing.analyse_cpu_s += time.process_time() - tc
+
+
+def _ring_order(problem: Problem, U: np.ndarray) -> np.ndarray:
+    """Lane order by how long each candidate rings (longest first), so that a call's lanes
+    run for similar lengths: Coulomb friction stops the swing after ≈ k·θ0/(2·tau_c)
+    half-cycles of length ∝ 1/√k, i.e. a time ∝ √k1/tau_c."""
+    free = problem.free
+    specs = problem.base.parameter_specs()
+    if not {"k1", "tau_c"} <= set(free) or any(specs[n].transform != "log" for n in ("k1", "tau_c")):
+        return np.arange(len(U))
+    key = 0.5 * U[:, free.index("k1")] - U[:, free.index("tau_c")]
+    return np.argsort(-key, kind="stable")
 
 
 def _check_finite(res) -> None:
@@ -545,15 +582,17 @@ def _run_lanes(runner: _Runner, key, fn, bucket: _Bucket, rows, arrays, width):
     return [jax.tree_util.tree_map(lambda x, m=m: np.asarray(x)[:m], o) for o, m in zip(outs, sizes)]
 
 
-def _solve_tasks(runner, fits, buckets, tasks, lanes, timing, phase2=False, sort=True):
-    """Advance lanes ``(log, start, max_steps)``; lanes of similar χ² share a call."""
+def _solve_tasks(runner, fits, buckets, tasks, lanes, timing, sort=True):
+    """Advance lanes ``(log, start, iterations, fresh)``; returns, per log, the cost, done
+    flag and iterations of every start (only the advanced ones are meaningful)."""
     by_bucket: dict[int, list] = {}
     for task in tasks:
         by_bucket.setdefault(fits[task[0]].bucket, []).append(task)
+    out: dict[int, tuple] = {}
     for b, group in by_bucket.items():
-        rows = np.array([fits[i].row for i, _, _ in group])
-        U = np.stack([fits[i].U[j] for i, j, _ in group])
-        if sort:
+        rows = np.array([fits[i].row for i, *_ in group])
+        U = np.stack([fits[i].U[j] for i, j, *_ in group])
+        if sort and lanes > 1:
             # A vmapped loop runs as long as its slowest lane, and a start that rings for
             # the whole record costs ~10x one that sticks early: lanes of similar
             # simulation length (at their current point, a cheap forward pass) share calls.
@@ -562,18 +601,27 @@ def _solve_tasks(runner, fits, buckets, tasks, lanes, timing, phase2=False, sort
             order = np.argsort(-length, kind="stable")
             group = [group[k] for k in order]
             rows, U = rows[order], U[order]
-        active = np.ones(len(group), dtype=bool)
-        steps = np.array([s for _, _, s in group])
+        L = len(group)
+        m, n = buckets[b].n_residuals, U.shape[1]
+        st = LMState.empty(L, m, n)
+        for k, (i, j, _, fresh) in enumerate(group):
+            prev = fits[i].lm.get(j)
+            if prev is not None:
+                for field_, v in zip(LMState._fields, prev):
+                    getattr(st, field_)[k] = v
+            st.fresh[k] = fresh
+        active = np.ones(L, dtype=bool)
+        steps = np.array([k for _, _, k, _ in group])
         outs = _run_lanes(runner, "solve", _lane_solve, buckets[b], rows,
-                          (U, active, steps), lanes)
-        U2, c2, done2, s2 = (np.concatenate(x) for x in zip(*outs))
+                          (U, active, steps, *st), lanes)
+        U2, c2, done2, s2, *st2 = (np.concatenate(x) for x in zip(*outs))
         timing.lane_steps += int(s2.sum())
-        for k, (i, j, _) in enumerate(group):
+        for k, (i, j, _, _) in enumerate(group):
             f = fits[i]
-            f.U[j], f.costs[j], f.steps[j] = U2[k], c2[k], f.steps[j] + s2[k]
-            if phase2:
-                f.ok[j] = done2[k]
-                f.extra.setdefault("done2", np.zeros(len(f.U), dtype=bool))[j] = done2[k]
-        if phase2:
-            for i in {t[0] for t in group}:
-                fits[i].extra.setdefault("done2", np.zeros(len(fits[i].U), dtype=bool))
+            f.U[j] = U2[k]
+            f.lm[j] = tuple(x[k] for x in st2)
+            if i not in out:
+                nst = len(f.U)
+                out[i] = (np.full(nst, np.inf), np.zeros(nst, dtype=bool), np.zeros(nst, dtype=int))
+            out[i][0][j], out[i][1][j], out[i][2][j] = c2[k], done2[k], s2[k]
+    return out
