@@ -216,3 +216,11 @@ def test_without_load_variation_the_spring_is_reported_undetermined():
         assert np.isinf(r.parameters[name].std), name
     assert np.isfinite(r.parameters["inertia"].std)  # still fixed by the known torque
     assert any("spring is not determined" in n for n in r.notes)
+
+
+def test_free_motion_fit_refuses_a_driven_log_with_a_pointer():
+    with pytest.raises(hdid.LogError, match="driven log"):
+        hdid.fit(DRIVEN)
+    table = hdid.fit_many([FREE, DRIVEN], vectorize=False)
+    assert "driven log" in str(table["error"].iloc[1])
+    assert not isinstance(table["error"].iloc[0], str)

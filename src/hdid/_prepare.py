@@ -87,6 +87,12 @@ class Prepared:
 
 def prepare(log: Log, release_time: float | None = None) -> Prepared:
     """Pad the runs, find holds, releases and rest points, and build weights."""
+    if getattr(log, "is_driven", False):
+        raise LogError(
+            f"{log.source}: this is a driven log (it has a motor torque column), not a "
+            "free-motion log; fit it with hdid.fit_driven() or `hdid fit LOG` on its own, "
+            "or together with a free-motion log via hdid.fit_joint() / --joint"
+        )
     step = log.resolution if log.resolution else DEFAULT_RESOLUTION
     dt = log.sample_period
     runs = log.runs
