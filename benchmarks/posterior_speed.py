@@ -415,9 +415,11 @@ def render(res: dict) -> str:
              f"for this log (32 < 2·D is refused: emcee's red-blue moves need W ≥ 2·D). "
              f"Sampler: `find_modes` (local fits restarted around the least-squares optimum; "
              f"distinct optima with their Laplace masses), walkers seeded over the modes, "
-             f"`default_moves(proposal)`: differential evolution 0.6 + independence "
-             f"Metropolis–Hastings from a t-mixture over the modes 0.4, adapted in the 400 "
-             f"discarded burn-in steps (not in the step counts). τ is the larger of emcee's "
+             f"`default_moves(proposal)`: differential evolution 0.4 (its step scaled "
+             f"towards 25 % acceptance during the burn-in) + DE with γ = 1 0.05 + DE-snooker "
+             f"0.2 + independence Metropolis–Hastings from a t-mixture over the modes 0.35 "
+             f"(refitted after each quarter of the 400 discarded burn-in steps, not in the step "
+             f"counts). τ is the larger of emcee's "
              f"per-walker estimate and the pooled one about the ensemble mean "
              f"(`tau_pooled`). Priors flat in k2 and c_v (`LINEAR_PRIOR`).\n")
     L.append("## Machine and load\n")

@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import equinox as eqx
@@ -845,7 +845,7 @@ def sample_posterior(
         else:
             raise ValueError(f"modes must be 'auto', 'fit' or a list of Mode, not {modes!r}")
     else:
-        found = list(modes)
+        found = [replace(m) for m in modes]  # weights are re-set below: leave the caller's
     t_modes = time.perf_counter() - t_modes
     # Modes outside the prior box around the fit (±PRIOR_HALF_WIDTH) cannot be sampled.
     P = prob.n_physical
@@ -870,7 +870,8 @@ def sample_posterior(
     for k, m in enumerate(found):
         covs[k, :-1, :-1] = 0.25 * m.cov  # the posterior is narrower than Laplace (ridges)
         covs[k, -1, -1] = s_sd**2
-    proposal = _Adaptive(MixtureProposal(means, covs, [m.weight for m in found]))
+    laplace_mix = MixtureProposal(means, covs, [m.weight for m in found])
+    proposal = _Adaptive(laplace_mix)
     moves = default_moves(proposal) if moves is None else moves
     if not isinstance(moves, list):
         moves = [(moves, 1.0)]
@@ -955,15 +956,17 @@ def sample_posterior(
     thin = max(1, int(tau_max / 2))
     chain = sampler.get_chain()
     draws = sampler.get_chain(discard=burn, thin=thin, flat=True)
-    # Share of the kept draws in each mode (nearest mixture component).
-    comp = np.argmax(proposal.mix.component_logpdf(chain.reshape(-1, D)), axis=1)
+    # Share of the kept draws in each mode: the mode whose (weighted) Laplace density is
+    # highest at the draw (the adapted mixture's components drift, so not those).
+    comp = np.argmax(laplace_mix.component_logpdf(chain.reshape(-1, D)), axis=1)
     share = np.bincount(comp, minlength=len(found)) / comp.size
     if len(found) > 1:
         warnings.append(
             f"MULTIMODAL: {len(found)} separate optima of the fit's cost (Laplace weights "
             + ", ".join(f"{m.weight:.2f}" for m in found)
             + "; share of the draws " + ", ".join(f"{s:.2f}" for s in share)
-            + "); the chain samples all of them — see `modes` for their parameters"
+            + "); the walkers started in all of them and the independence move lets them "
+            "change mode — see `modes` for their parameters"
         )
     # A chain that climbs well above the best mode found has found yet another one.
     grid = np.linspace(log_lo, max(log_rms, log_lo + math.log(2.0)) + 1.0, 25)
