@@ -537,6 +537,7 @@ class MixtureProposal:
                                for c in self.covs])
         from scipy.special import gammaln
 
+        self._linv = np.array([np.linalg.inv(L) for L in self.chols])
         self._lognorm = (gammaln(0.5 * (self.nu + D)) - gammaln(0.5 * self.nu)
                          - 0.5 * D * math.log(self.nu * math.pi)
                          - np.sum(np.log(np.diagonal(self.chols, axis1=1, axis2=2)), axis=1))
@@ -547,22 +548,18 @@ class MixtureProposal:
 
     def component_logpdf(self, X) -> np.ndarray:
         """``(N, K)``: log weight + log density of each component."""
-        from scipy.linalg import solve_triangular
-
         X = np.atleast_2d(X)
         D = self.ndim
-        out = np.empty((X.shape[0], len(self.weights)))
-        for k in range(len(self.weights)):
-            z = solve_triangular(self.chols[k], (X - self.means[k]).T, lower=True)
-            m = np.sum(z * z, axis=0)
-            out[:, k] = (math.log(self.weights[k]) + self._lognorm[k]
-                         - 0.5 * (self.nu + D) * np.log1p(m / self.nu))
-        return out
+        # (X − μ_k) L_k⁻ᵀ for every component at once (plain matmuls: this runs at every
+        # independence step, so no per-call scipy overhead)
+        Z = np.einsum("kij,nkj->nki", self._linv, X[:, None, :] - self.means[None])
+        m = np.sum(Z * Z, axis=2)
+        return (np.log(self.weights) + self._lognorm)[None] - 0.5 * (self.nu + D) * np.log1p(m / self.nu)
 
     def logpdf(self, X) -> np.ndarray:
-        from scipy.special import logsumexp
-
-        return logsumexp(self.component_logpdf(X), axis=1)
+        c = self.component_logpdf(X)
+        top = np.max(c, axis=1)
+        return top + np.log(np.sum(np.exp(c - top[:, None]), axis=1))
 
     def sample(self, n: int, random) -> np.ndarray:
         k = random.choice(len(self.weights), size=n, p=self.weights)
