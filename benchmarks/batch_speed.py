@@ -262,45 +262,106 @@ def _machine():
 
 # ----------------------------------------------------------------------------- report
 
-NOTES = """## What limits it (read with the tables)
+NOTES = """## Before → after (issue 6, second pass)
 
-- **Both goals are missed.** The vectorised path is about 1.2–2× the loop over `hdid.fit` by
-  wall time and about 2–3× by CPU time per log, and about 25× the scipy way — not 50×; 1000
-  logs took minutes, not 60 s. On a machine with the 2 cores to itself the CPU-time
-  projection (goals table) is still about 3× over 60 s.
-- **The Levenberg–Marquardt lanes are the cost** (≈ 83 % of the vectorised time for 1000 logs, ≈ 190
-  lane-steps per log: 6 starts × 12 iterations, then the best 3 to convergence — exactly
-  `hdid.fit`'s schedule, so that every log gets the fit it would get alone). Each
-  lane-step is a forward-mode (10 tangents) stick-exact RK4 simulation of every run.
-- **Batching across logs buys little on a CPU.** Measured while developing (32 logs, load
-  ≈ 5, so absolute numbers are inflated): the residual+Jacobian cost per lane stops
-  falling from about 8–16 lanes (the forward-mode simulation is compute-bound, not
-  dispatch-bound), and wider calls were *slower* per lane-step (4 lanes 1.3–1.5 ms, 16
-  lanes 2.9 ms, 32 lanes 4.0 ms) because a vmapped `while_loop` runs until its slowest
-  lane is done: a start in a wrong basin (too little friction) rings for the whole record,
-  ~10–20× longer than one that sticks after a few samples. Hence 6 lanes per call, lanes
-  ordered by their current simulation length (a cheap forward pass), threads over calls.
-  The gain over the loop comes from sharing the grid evaluation, skipping the per-log
-  band bracket and the per-call overheads, not from wider SIMD.
-- Threads: 1 vs 2 threads made no measurable difference in this run because the other jobs
-  kept both cores busy. A separate in-process check when the load had dropped to 2.4–3.7
-  (40 paper logs after a warm-up, 2026-11-22 05:01): 1 thread 2.35 logs/s (CPU 423 ms per
-  log), 2 threads 3.2–3.4 logs/s (CPU 293–313 ms per log; CPU ≈ wall, i.e. still only about
-  one core's worth was free) — about 300 s per 1000 logs in that state.
-- **Cost vs design** (CPU per log, 20 logs each): it follows the simulated time per run
-  (RK4 substeps of ≤ 0.5 ms until every start sticks) more than the number of samples:
-  1 kHz (4× the samples of 250 Hz) costs ≈ 1.7×, a 1.0 s record ≈ 1.9× and a 0.25 s one
-  ≈ 0.7× the 0.5 s paper design (starts that ring run on to the end of the record); 2 runs
-  ≈ 0.7×, 8 runs ≈ 1.3× (see the next point). In the 8-run design the ±0.05 rad releases of some truths lie
-  inside the stick band (no motion at all), so those logs fail in their rows at once,
-  which makes that row's per-log rate look better than it is.
-- **Memory**: peak RSS grows slowly with N (≈ 0.45 GB for 1 log — mostly JAX/XLA — to
-  ≈ 1 GB for 1000, i.e. ≈ 0.5 MB per log held: prepared arrays and `FitResult`s); logs are
-  set up, fitted and analysed in waves of 256, and each call holds 6 lanes' Jacobians.
-- **Compile**: a fresh process compiles 4 programs per bucket shape (grid cost, lane
-  lengths, LM, analysis); the persistent cache removes the XLA part, tracing remains.
-- Not measured: dask beyond the 2-worker `LocalCluster` test (one 2-core machine cannot
-  show scaling), and a GPU (none available).
+| | before (2026-11-22 04:27, load 7.7→5.8) | after (2026-11-22 07:28, load 6.7→5.6) |
+|---|---|---|
+| 1000 logs, wall (measured, shared cores) | 521 s (1.92 logs/s) | 187 s (5.34 logs/s) |
+| CPU per log, vectorised | 305–369 ms | 174 ms (1000 logs), 187 ms (100) |
+| vectorised / scipy, CPU per log | 26× | 56× |
+| vectorised / scipy, wall | 25.5× | 54× |
+| 1000 logs on 2 free cores, CPU/2 | 184 s | 87 s |
+| vectorised / loop over `hdid.fit`, CPU | 1.9× (683 vs 369 ms) | 3.5× (601 vs 174 ms) |
+| LM lane-steps per log | 187 | 186 (same schedule, same fits) |
+| cold / warm-cache first call | 40 s / 15 s | 56 s / 21 s |
+
+**What changed** (every log gets exactly the fit it got before — same starts, same
+Levenberg–Marquardt path, same stopping; `hdid.fit` and `fit_many` agree):
+
+- **Levenberg–Marquardt stepped by hand** (`hdid._fit._lm_lanes`). It reproduces
+  optimistix's `LevenbergMarquardt` (normal-equations Cholesky, `ClassicalTrustRegion`
+  damping update, re-initialised at every call as before), so every lane follows the same
+  path (40 logs, old vs new code, same settings: max |Δχ²| 2e-8, k1 equal to 1e-11; the
+  "same fits" section compares with `hdid.fit` in this run: one log of 100 differs by
+  0.017 — rounding of differently batched programs carried along one path). What differs is
+  the cost: optimistix evaluates every trial point with its forward-mode Jacobian (10
+  tangents, ≈ 3× a forward pass), but a third of the trials are rejected (56 % in phase 1,
+  22 % in phase 2). The hand-stepped loop evaluates a trial after a rejection with a
+  forward pass only and computes the Jacobian only if it is accepted; after an accepted
+  trial the next is evaluated with its Jacobian at once (it is usually accepted too).
+- **One lane per compiled call** (`DEFAULT_LANES = 1`): the LM's control flow is per
+  call, so only in a one-lane program is a skipped Jacobian really skipped (a wider call
+  computes it when any lane needs it, and runs as long as its slowest lane).
+  Alternating in-process runs, 60 logs, load ≈ 5: 1 lane 158–166 ms CPU per log,
+  3 lanes 187, 6 lanes 176–205. (The benchmark's single 6-lane row above was taken at a
+  lower load than the 1-lane row; wall times at load 5–7 are not comparable across rows.)
+- **Residuals and Jacobian carried between calls**: a phase-2 chunk starts from the
+  Jacobian its lane ended the previous call with, instead of recomputing it (≈ 5 %).
+- **Grid candidates ordered by how long they ring** (time to stop ∝ √k1 / tau_c): a wide
+  forward-only call then holds candidates that stop at similar times; the grid's CPU per
+  log fell from ≈ 47 ms to ≈ 17 ms.
+- **`hdid.fit` uses the same loop and the same `_Schedule`**, so single fits are faster as
+  well (loop over `hdid.fit` above) and the two paths cannot drift apart.
+- CPU (process) time is now recorded per part of the batch (table above).
+
+**Goals.** ≥ 50× the scipy way is met (by wall and by CPU time, measured in the same run;
+the scipy rate rests on 3 logs that took 4.5–14 s each, so the ratio is uncertain by
+±30 %). 1000 logs in ≤ 60 s on 2 cores is **not** met: ≈ 175 ms CPU per log gives
+≈ 87 s if two threads scaled perfectly on two free cores (CPU time / 2), ≈ 97 s with
+the 1.8 cores' worth of scaling seen in the one check at load 0.4 (06:46, 40 logs:
+CPU 12.3 s, wall 6.8 s, older code). In this run hdid got about one core (CPU ≈ wall).
+
+**Tried and not kept** (40–80 paper logs each, best χ² per log compared with the
+unchanged fit; χ² in units of the quantization variance):
+
+- The fit is *multimodal*: starts end in different minima tens of χ² apart, and which
+  start wins is often the 2nd or 3rd after phase 1 (16/13/11 of 40). Any change of the LM
+  path re-draws the basins on ~20 % of logs, so every path-changing idea below made some
+  logs worse by more than the Δχ² ≈ 0.1 guard, even where as many got better:
+  - Nielsen's damping update (identity scaling): 13 % fewer iterations; 11 of 80 logs
+    worse (up to +130), 7 better.
+  - Marquardt scaling (λ·diag JᵀJ, running max): stalls far from the minima, 19 of 40 worse.
+  - Phase 1 of 8 iterations instead of 12: 14 % fewer; 13 of 80 worse, 9 better.
+  - Stall threshold 0.03 instead of 0.01: 11 % fewer; 22 of 80 worse by 0.1–0.6 (the last
+    iterations still lower χ² by tenths).
+  - The Δχ² > 50 drop checked every 5 phase-2 iterations instead of 25: 20 % fewer; 7 of
+    40 worse (a lane 50 behind early often wins later).
+  - Stopping phase-1 starts early whose χ² is over 3× the 3rd best after 4 iterations:
+    7 % fewer, 1 of 80 worse (+0.2); at 30× nothing is saved.
+  - Dropping a phase-2 lane that has reached another lane's point (Δuᵀ JᵀJ Δu < D at a
+    chunk end): saves 1 % of iterations harmlessly (D = 0.1), 3–10 % with 1–4 logs worse.
+  - Continuing 4 starts instead of 3 does not recover the logs a changed LM path loses.
+- `--xla_cpu_use_thunk_runtime=false`: no longer supported by this jaxlib.
+
+**Next**, in order of expected gain: (1) Broyden rank-one updates of the Jacobian on some
+accepted steps (an accepted trial would cost one forward pass) — changes the path, so it
+needs the basin study above on ≥ 200 logs; (2) the simulator: the forward-mode pass is
+≈ 0.9 ms per lane-step of CPU, i.e. the stick-exact RK4 with its three RK4 evaluations per
+substep (re-integration to the crossing and the slide-on are computed every substep, used
+only at crossings) — a cheaper substep is the largest single lever left; (3) a GPU run
+(not tried; the device tool was not used in this pass).
+
+## What limits it (read with the tables)
+
+- **The Levenberg–Marquardt lanes are the cost** (≈ 94 % of the CPU time for 1000 logs,
+  ≈ 186 lane-steps per log: 6 starts × 12 iterations, then the best 3 to convergence).
+  Each accepted lane-step is a forward-mode (10 tangents) stick-exact RK4 simulation of
+  every run; each rejected one a forward pass.
+- **Cost vs design** (CPU per log, 20 logs each, relative to the paper design): it follows
+  the simulated time per run more than the number of samples: 1 kHz ≈ 1.25×, a 1.0 s
+  record ≈ 1.2×, a 0.25 s one ≈ 0.7×; 2 runs ≈ 0.55×, 8 runs ≈ 0.8× — in the 8-run design
+  the ±0.05 rad releases of some truths lie inside the stick band (no motion at all), so 8
+  of 20 logs fail in their rows at once, which makes that row look cheaper than it is.
+- **Memory**: peak RSS ≈ 0.55 GB for 1 log (mostly JAX/XLA) to ≈ 1.3 GB for 1000 (was
+  0.95 GB): logs are set up, fitted and analysed in waves of 256, and each live lane now
+  keeps its residuals and Jacobian between calls (521 × 17 doubles per lane).
+- **Compile**: the LM program now holds the forward pass and the forward-mode Jacobian in
+  separate branches (three traced simulations instead of one), so a cold first call
+  compiles longer than before (compile table; before: 40 s cold, 15 s with the cache).
+  The persistent cache removes the XLA part; tracing remains.
+- Threads: CPU ≈ wall in most rows — the other jobs left hdid about one core, so the
+  2-thread scaling could not be measured here.
+- Not measured: dask beyond the 2-worker `LocalCluster` test, and a GPU.
 """
 
 
@@ -402,8 +463,10 @@ def write_report(res: dict, out_dir: Path) -> str:
         L.append(f"- vectorised with `band_bracket=True`, {br['n']} logs: {br['total_s']:.1f} s "
                  f"({_rate(br):.2f} logs/s) vs {v100['total_s']:.1f} s without (load {_ld(br)}; "
                  f"difference {(br['total_s'] - v100['total_s']) / br['n'] * 1e3:+.0f} ms per "
-                 "log — within the noise of the shared machine when it is small). `hdid.fit` "
-                 "always computes the bracket, so the loop's rate includes it.")
+                 "log of wall time"
+                 + (f", {(_cpu_per_log(br) - _cpu_per_log(v100)) * 1e3:+.0f} ms of CPU"
+                    if _cpu_per_log(br) and _cpu_per_log(v100) else "")
+                 + "). `hdid.fit` always computes the bracket, so the loop's rate includes it.")
     th = _find(res, "vectorized 100, 1 thread")
     if th and v100:
         L.append(f"- vectorised, 1 thread instead of one per core, {th['n']} logs: "

@@ -37,7 +37,8 @@ def fit_many(
     band_bracket:
         Compute each log's model-free stick-band bracket (``stick_band_bracket_*``
         columns) with the event-driven reference simulator. Default: ``False`` when
-        vectorised (per-log SciPy work: 40–60 ms of CPU per log, ~30 % of the batch),
+        vectorised (per-log SciPy work: ≈ 90 ms of CPU per log measured, about half of
+        the vectorised fit's CPU),
         ``True`` for ``vectorize=False`` (as :func:`hdid.fit`). Without it the bracket
         columns are empty and ``band_bracket`` says so.
     lanes, threads:
