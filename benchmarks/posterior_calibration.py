@@ -337,7 +337,8 @@ def render(res: dict) -> str:
              f"(the shipped files have none).")
     L.append(f"- `hdid.fit(log, inertia=7e-7)` (true inertia, fixed), then "
              f"`sample_posterior(fit, n_steps=N, seed=i, likelihood={o.get('likelihood', 'auto')!r}, "
-             f"modes={o.get('modes', 'fit')!r}, linear_prior={o.get('linear_prior', '')!r})` "
+             f"modes={o.get('modes', 'fit')!r}, linear_prior="
+             f"{tuple(res.get('linear_prior_effective', ()))!r})` "
              f"with the default walkers "
              f"(max(32, 2·D): {', '.join(map(str, agg['pooled']['n_walkers']))}); "
              f"N = {o['paper_steps']} (paper) / {o['rich_steps']} (rich) kept steps. Sampler: "
@@ -534,7 +535,8 @@ def main(argv=None):
     ap.add_argument("--likelihood", default="auto", help="sample_posterior(likelihood=)")
     ap.add_argument("--modes", default="auto", help="sample_posterior(modes=): auto or fit")
     ap.add_argument("--linear-prior", default="",
-                    help="comma-separated parameters with a prior flat in the value")
+                    help="comma-separated parameters with a prior flat in the value "
+                         "(default: sample_posterior's LINEAR_PRIOR; 'none' for none)")
     ap.add_argument("--interpretation", type=Path,
                     help="markdown file whose text is added as the Interpretation section")
     args = ap.parse_args(argv)
@@ -593,8 +595,13 @@ def main(argv=None):
     out_json = args.out_dir / "posterior_calibration.json"
     per_design_time: dict[str, list[float]] = {"paper": [], "rich": []}
     budget = 60.0 * args.budget_min
-    post_kwargs = {"likelihood": args.likelihood, "modes": args.modes,
-                   "linear_prior": tuple(n for n in args.linear_prior.split(",") if n)}
+    from hdid._posterior import LINEAR_PRIOR
+
+    post_kwargs = {"likelihood": args.likelihood, "modes": args.modes}
+    if args.linear_prior:  # otherwise sample_posterior's default (LINEAR_PRIOR)
+        post_kwargs["linear_prior"] = tuple(
+            n for n in args.linear_prior.split(",") if n and n != "none")
+    res["linear_prior_effective"] = list(post_kwargs.get("linear_prior", LINEAR_PRIOR))
     for k, (g, i) in enumerate(_schedule(args.paper_logs, args.rich_logs)):
         design, n_steps, s0 = designs[g]
         elapsed = time.perf_counter() - t_script
