@@ -80,9 +80,9 @@ def test_short_chain_is_reproducible_and_summarised(fit, modes):
     assert len(s["posterior_diagnostics"]["modes"]) == len(a.modes)
 
 
-def test_too_short_chain_does_not_crash(fit):
+def test_too_short_chain_does_not_crash(fit, modes):
     # 5 steps: some walkers never move, τ is NaN; the sampler must warn, not crash.
-    post = sample_posterior(fit, n_steps=5, burn_in=0, seed=1)
+    post = sample_posterior(fit, n_steps=5, burn_in=0, seed=1, modes=modes)
     assert post.draws.shape[0] > 0
     assert post.warnings
 
