@@ -84,140 +84,43 @@ def crossing_fraction(omega0, omega1, acc0, h, crossed):
     return jnp.where(crossed, alpha, 0.0)
 
 
-# Phases of the substep state machine (see ``_advance``).
-_STEP, _TO_CROSSING, _GAP, _AT_REST, _REMAINDER = 0, 1, 2, 3, 4
-
-
-def _rk4_torque(model, inertia, theta, omega, direction, states, h):
-    """:func:`rk4` of the model's dynamics; also returns the torque at the start."""
-    tau1 = model.torque(
-        Motion(theta=theta, omega=omega, direction=direction, ratio=model.ratio), states
-    )
-    a1 = tau1 / inertia
-    first = [True]
-
-    def f(th, om, _t):
-        if first[0]:  # the start's acceleration is already known
-            first[0] = False
-            return a1
-        return _accel(model, inertia, th, om, direction, states)
-
-    theta_new, omega_new, _ = rk4(f, theta, omega, 0.0, h)
-    return theta_new, omega_new, a1, tau1
-
-
-def _advance(model: Model, inertia, carry, h, n_sub):
-    """``n_sub`` substeps of length ``h`` from ``carry = (θ, θ̇, direction, states)``.
-
-    Every iteration of the loop runs exactly one RK4 step (under ``vmap`` a branch would
-    cost as much as the taken one), and a small state machine reuses it for the rare
-    events, so an ordinary substep costs one RK4 instead of three:
-
-    * ``_STEP`` (sliding): RK4 over ``h``. Accepted unless the velocity crosses zero; then
-      the crossing fraction α is stored and the step is redone in pieces:
-    * ``_TO_CROSSING``: RK4 from the same state over ``α·h`` (the velocity keeps its sign
-      there, so the friction law is smooth and RK4 keeps its order; integrating across
-      the kink of the Stribeck curve at ω = 0 would make the stop position only second
-      order);
-    * ``_GAP``: the acceleration at the end of that piece (the first stage of an RK4
-      started there) closes the small remaining gap to ω = 0 with a quadratic in time:
-      the stop lies ``dt = −ω_a/a`` later, at ``θ_stop = θ_a + ω_a·dt/2``; motion that
-      slides on resumes from that corrected instant ``α·h + dt``, which keeps the scheme
-      high-order after reversals (benchmarks/results/simulator_schemes.md);
-    * ``_AT_REST`` (also where a substep starts at rest): the net torque at rest (the
-      first stage of an RK4 started there with ω = 0, direction 0) against the holding
-      torque: if it can be held the wave generator stays exactly put — no creep — and the
-      substep ends there, else it slides on in the direction of the net torque:
-    * ``_REMAINDER``: RK4 from rest over the rest ``(1 − α)·h`` of the substep.
-
-    The arithmetic is that of the former all-branches substep, step for step. The effect
-    states are updated once per substep, from its start to its end, and the torques inside
-    a substep use the states at its start, as before.
-    """
-    theta, omega, direction, states = carry
-    zero = jnp.zeros(())
-    ratio = model.ratio
-
-    def phase_for(d):
-        return jnp.where(d == 0, _AT_REST, _STEP)
-
-    init = (
-        jnp.zeros((), dtype=int), phase_for(direction), theta, omega, direction, states,
-        zero, theta, zero, zero,
-    )
-
-    def cond(c):
-        return c[0] < n_sub
-
-    def body(c):
-        j, ph, th, om, d, st, alpha, th_x, om_x, d_new = c
-        step, to_cross, gap, at_rest, rem = (ph == p for p in range(5))
-        from_state = step | to_cross
-        resting = at_rest | rem
-        th_in = jnp.where(from_state, th, th_x)
-        om_in = jnp.where(from_state, om, jnp.where(resting, 0.0, om_x))
-        d_in = jnp.where(at_rest, 0.0, jnp.where(rem, d_new, d))
-        h_in = jnp.where(
-            step, h, jnp.where(to_cross, alpha * h, jnp.where(rem, (1.0 - alpha) * h, 0.0))
-        )
-        th1, om1, a1, tau1 = _rk4_torque(model, inertia, th_in, om_in, d_in, st, h_in)
-
-        # _STEP: accept, or find the crossing.
-        crossed = step & (d * om1 <= 0) & (om1 != om)
-        alpha_step = crossing_fraction(om, om1, a1, h, crossed)
-        # _GAP: a1 is the acceleration at the end of the piece up to the crossing.
-        dt_gap = _safe_div(-om_x, a1, gap & (a1 != 0))
-        th_cross = th_x + 0.5 * om_x * dt_gap
-        alpha_gap = jnp.clip(alpha + dt_gap / h, 0.0, 1.0)
-        # _AT_REST: tau1 is the net torque at rest at th_x.
-        rest = Motion(theta=th_x, omega=zero, direction=zero, ratio=ratio)
-        stick = jnp.abs(tau1) <= model.holding_torque(rest, st)
-
-        accept = (step & ~crossed) | (at_rest & stick) | rem
-        th_acc = jnp.where(at_rest, th_x, th1)
-        om_acc = jnp.where(at_rest, 0.0, om1)
-        d_acc = jnp.where(at_rest, 0.0, jnp.where(rem, d_new, d))
-        st_acc = model.update_state(st, th, th_acc)
-
-        ph_next = jnp.where(
-            accept,
-            phase_for(d_acc),
-            jnp.where(
-                step, _TO_CROSSING,
-                jnp.where(to_cross, _GAP, jnp.where(gap, _AT_REST, _REMAINDER)),
-            ),
-        )
-        # Carried for the phases to come: α (α' after the gap), the crossing/rest point
-        # (θ_a, ω_a after _TO_CROSSING), the direction to slide on.
-        alpha_n = jnp.where(
-            accept, 0.0, jnp.where(step, alpha_step, jnp.where(gap, alpha_gap, alpha))
-        )
-        th_x_n = jnp.where(
-            accept, th_acc, jnp.where(to_cross, th1, jnp.where(gap, th_cross, th_x))
-        )
-        om_x_n = jnp.where(to_cross, om1, om_x)
-        d_new_n = jnp.where(at_rest, jnp.sign(tau1), d_new)
-
-        def keep(new, old):
-            return jnp.where(accept, new, old)
-
-        return (
-            j + accept.astype(j.dtype), ph_next,
-            keep(th_acc, th), keep(om_acc, om), keep(d_acc, d),
-            jax.tree_util.tree_map(keep, st_acc, st),
-            alpha_n, th_x_n, om_x_n, d_new_n,
-        )
-
-    _, _, theta, omega, direction, states, *_ = jax.lax.while_loop(cond, body, init)
-    return theta, omega, direction, states
-
-
 def _substep(model: Model, inertia, carry, h):
-    """One substep of length ``h`` from ``carry = (θ, θ̇, direction, states)``."""
-    return _advance(model, inertia, carry, h, 1)
+    theta, omega, direction, states = carry
+    theta1, omega1, acc0 = _rk4(model, inertia, theta, omega, direction, states, h)
 
+    sliding = direction != 0
+    crossed = sliding & (direction * omega1 <= 0) & (omega1 != omega)
+    alpha = crossing_fraction(omega, omega1, acc0, h, crossed)
 
-_DEFAULT_SUBSTEP = _substep
+    # Re-integrate up to the crossing: on [0, α·h] the velocity keeps its sign, so the
+    # friction law is smooth there and RK4 keeps its order (integrating across the kink
+    # of the Stribeck curve at ω = 0 would make the stop position only second order).
+    theta_a, omega_a, _ = _rk4(model, inertia, theta, omega, direction, states, alpha * h)
+    # Close the small remaining gap to ω = 0 with a quadratic in time: the stop lies
+    # dt = −ω_a/a later, at θ_stop = θ_a + ω_a·dt/2; motion that slides on resumes from
+    # that corrected instant (α·h + dt), which keeps the scheme high-order after
+    # reversals (benchmarks/results/simulator_schemes.md).
+    acc_stop = _accel(model, inertia, theta_a, omega_a, direction, states)
+    dt_gap = _safe_div(-omega_a, acc_stop, crossed & (acc_stop != 0))
+    theta_cross = theta_a + 0.5 * omega_a * dt_gap
+    alpha = jnp.where(crossed, jnp.clip(alpha + dt_gap / h, 0.0, 1.0), alpha)
+
+    event = crossed | ~sliding
+    theta_c = jnp.where(crossed, theta_cross, theta)
+
+    rest = Motion(theta=theta_c, omega=jnp.zeros(()), direction=jnp.zeros(()), ratio=model.ratio)
+    net = model.torque(rest, states)
+    stick = jnp.abs(net) <= model.holding_torque(rest, states)
+    new_direction = jnp.sign(net)
+    theta2, omega2, _ = _rk4(
+        model, inertia, theta_c, jnp.zeros(()), new_direction, states, (1.0 - alpha) * h
+    )
+
+    theta_n = jnp.where(event, jnp.where(stick, theta_c, theta2), theta1)
+    omega_n = jnp.where(event, jnp.where(stick, 0.0, omega2), omega1)
+    direction_n = jnp.where(event, jnp.where(stick, 0.0, new_direction), direction)
+    states_n = model.update_state(states, theta, theta_n)
+    return theta_n, omega_n, direction_n, states_n
 
 
 def simulate(
@@ -285,12 +188,7 @@ def simulate(
         dt = intervals[k]
         n_sub = jnp.maximum(substeps, jnp.ceil(dt / h_max - 1e-9)).astype(int)
         h = dt / n_sub
-        if _substep is _DEFAULT_SUBSTEP:
-            state = _advance(model, inertia, state, h, n_sub)
-        else:  # a candidate scheme swapped in (benchmarks/simulator_schemes.py)
-            state = jax.lax.fori_loop(
-                0, n_sub, lambda _, c: _substep(model, inertia, c, h), state
-            )
+        state = jax.lax.fori_loop(0, n_sub, lambda _, c: _substep(model, inertia, c, h), state)
         theta, omega, direction, _ = state
         out = tuple(o.at[k].set(v) for o, v in zip(out, (theta, omega, direction == 0)))
         return k + 1, state, out
