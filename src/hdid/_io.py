@@ -750,6 +750,28 @@ def _looks_numeric(text: str) -> bool:
     return True
 
 
+def _to_radians(values, cpr, fail, column: str, encoder: str, option: str, hint: str):
+    """Raw counts (with ``cpr``) to radians and the resolution; radians pass through.
+
+    Non-integer counts, or radians that look like raw counts, raise ``fail(...)``.
+    """
+    integral = np.abs(values - np.rint(values)) <= _INTEGER_TOL * np.maximum(1.0, np.abs(values))
+    if cpr is not None:
+        pos = _first(~integral)
+        if pos is not None:
+            raise fail(
+                f"value {values[pos]:.9g} is not a whole number of {encoder} counts — drop "
+                f"{option} if {column} is already in radians",
+                column,
+                pos,
+            )
+        resolution = 2.0 * math.pi / cpr
+        return np.rint(values) * resolution, resolution
+    if integral.all() and float(np.max(np.abs(values))) > _COUNTS_LOOKING_MAX:
+        raise fail(f"looks like raw {encoder} counts; {hint}", column)
+    return values, None
+
+
 def _first(mask: np.ndarray) -> int | None:
     """Index of the first True in `mask`, or None."""
     if mask.size and mask.any():
@@ -879,43 +901,15 @@ def read_log(
         motor = motor * kt
 
     # -- counts vs. radians ------------------------------------------------
-    integral = np.abs(theta - np.rint(theta)) <= _INTEGER_TOL * np.maximum(1.0, np.abs(theta))
-    if cpr is not None:
-        pos = _first(~integral)
-        if pos is not None:
-            raise fail(
-                f"value {theta[pos]:.9g} is not a whole number of encoder counts — drop "
-                "--counts-per-rev if theta is already in radians",
-                _THETA,
-                pos,
-            )
-        resolution: float | None = 2.0 * math.pi / cpr
-        theta = np.rint(theta) * resolution
-    else:
-        if integral.all() and float(np.max(np.abs(theta))) > _COUNTS_LOOKING_MAX:
-            raise fail(f"looks like raw encoder counts; {_COUNTS_HINT}", _THETA)
-        resolution = None
-
+    theta, resolution = _to_radians(
+        theta, cpr, fail, _THETA, "encoder", "--counts-per-rev", _COUNTS_HINT
+    )
     output_resolution: float | None = None
     if theta_out is not None:
-        integral_out = np.abs(theta_out - np.rint(theta_out)) <= _INTEGER_TOL * np.maximum(
-            1.0, np.abs(theta_out)
+        theta_out, output_resolution = _to_radians(
+            theta_out, out_cpr, fail, _THETA_OUT, "output encoder",
+            "output_counts_per_rev", _OUTPUT_COUNTS_HINT,
         )
-        if out_cpr is not None:
-            pos = _first(~integral_out)
-            if pos is not None:
-                raise fail(
-                    f"value {theta_out[pos]:.9g} is not a whole number of output encoder counts "
-                    "— drop output_counts_per_rev if theta_out is already in radians",
-                    _THETA_OUT,
-                    pos,
-                )
-            output_resolution = 2.0 * math.pi / out_cpr
-            theta_out = np.rint(theta_out) * output_resolution
-        elif integral_out.all() and float(np.max(np.abs(theta_out))) > _COUNTS_LOOKING_MAX:
-            raise fail(
-                f"looks like raw output encoder counts; {_OUTPUT_COUNTS_HINT}", _THETA_OUT
-            )
 
     if inertia is not None:
         pos = _first(inertia < 0)
