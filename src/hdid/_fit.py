@@ -566,10 +566,31 @@ def _lm_lanes(residuals, residuals_and_jacobian, U0, active, max_steps, state: L
     return out["U"], out["cost"], out["done"] & active, out["k"], new_state
 
 
+def lanes_vmap(fn, *, shared: int = 0):
+    """``jax.vmap(fn)`` over a leading lane axis, but a single lane is not vmapped.
+
+    The simulator's event branch is a ``lax.cond`` that runs only in the substeps that
+    need it (:func:`hdid._simulate.simulate_runs`); under ``vmap`` it becomes a select
+    that runs every branch. One-lane programs (the batch fit's) keep the ``cond``.
+    The first ``shared`` arguments are not batched.
+    """
+
+    def mapped(*args):
+        lanes = jax.tree_util.tree_leaves(args[shared:])[0].shape[0]
+        if lanes == 1:
+            one = [jax.tree_util.tree_map(lambda x: x[0], a) for a in args[shared:]]
+            out = fn(*args[:shared], *one)
+            return jax.tree_util.tree_map(lambda x: x[None], out)
+        axes = (None,) * shared + (0,) * (len(args) - shared)
+        return jax.vmap(fn, in_axes=axes)(*args)
+
+    return mapped
+
+
 @eqx.filter_jit
 def _solve_lanes(problem: Problem, U0, active, max_steps, state: LMState):
     """:func:`_lm_lanes` for the starts of one log."""
     return _lm_lanes(
-        jax.vmap(problem.residuals), jax.vmap(problem.residuals_and_jacobian), U0, active,
+        lanes_vmap(problem.residuals), lanes_vmap(problem.residuals_and_jacobian), U0, active,
         max_steps, state,
     )

@@ -33,17 +33,7 @@ def _jacobian(problem: Problem, u):
 
 @eqx.filter_jit
 def _dense(problem: Problem, u, times):
-    values, t_release, theta0_enc, offset = problem.unpack(u)
-    model = problem.model(u)
-    from ._simulate import simulate
-
-    off = offset[problem.setup_index]
-    run = jax.vmap(
-        lambda t, th0, tr, ai: simulate(
-            model, t, th0, tr, added_inertia=ai, max_substep=problem.max_substep, full_output=True
-        )
-    )
-    return run(times, theta0_enc - off, t_release, problem.added_inertia)
+    return problem.simulate(u, times, full_output=True)
 
 
 def unknown_labels(problem: Problem, prep: Prepared) -> list[str]:

@@ -11,7 +11,7 @@ from jaxtyping import Array, Float
 from . import _config  # noqa: F401
 from ._model import Model
 from ._prepare import Prepared
-from ._simulate import simulate
+from ._simulate import simulate_runs
 from ._transforms import from_unconstrained, interval_from_u
 
 #: Scale of the per-set-up offset in the optimiser's space [rad].
@@ -111,18 +111,20 @@ class Problem(eqx.Module):
         return self.base.replace(**values) if values else self.base
 
     # -- forward model ----------------------------------------------------------------
+    def simulate(self, u, times=None, full_output: bool = False):
+        """Simulated WG angle of every run ``(R, T)``, spring-zero frame (no offset)."""
+        _, t_release, theta0_enc, offset = self.unpack(u)
+        return simulate_runs(
+            per_run(self.model(u), self.n_runs), self.times if times is None else times,
+            theta0_enc - offset[self.setup_index], t_release,
+            added_inertia=self.added_inertia, max_substep=self.max_substep,
+            full_output=full_output,
+        )
+
     def predict(self, u, times=None):
         """Predicted encoder readings ``(R, T)`` (or at ``times`` ``(R, T')``)."""
-        values, t_release, theta0_enc, offset = self.unpack(u)
-        model = self.base.replace(**values) if values else self.base
-        off = offset[self.setup_index]
-        times = self.times if times is None else times
-        sim = jax.vmap(
-            lambda t, th0, tr, ai: simulate(
-                model, t, th0, tr, added_inertia=ai, max_substep=self.max_substep
-            )
-        )
-        return sim(times, theta0_enc - off, t_release, self.added_inertia) + off[:, None]
+        *_, offset = self.unpack(u)
+        return self.simulate(u, times) + offset[self.setup_index][:, None]
 
     def data_residuals(self, u):
         return (self.weight * (self.predict(u) - self.theta) / self.sigma).ravel()
@@ -149,40 +151,44 @@ class Problem(eqx.Module):
         phys = jnp.broadcast_to(u[:P], (R, P))
         return jnp.concatenate([phys, tr[:, None], th0[:, None], off[:, None]], axis=1)
 
-    def _run_residuals(self, local, times, theta, weight, hold, lo, hi, added, offset0):
-        P = self.n_physical
+    def _runs_residuals(self, local):
+        """Data residuals ``(R, T)`` from per-run unknowns ``local`` ``(R, P+3)``."""
+        P, R = self.n_physical, self.n_runs
         specs = self.base.parameter_specs()
-        values = {n: from_unconstrained(specs[n], local[k]) for k, n in enumerate(self.free)}
-        model = self.base.replace(**values) if values else self.base
-        t_release = interval_from_u(local[P], lo, hi) if self.release_free else lo
-        theta0_enc = hold + self.step * local[P + 1]
-        off = offset0 + OFFSET_SCALE * local[P + 2]
-        pred = simulate(
-            model, times, theta0_enc - off, t_release, added_inertia=added,
-            max_substep=self.max_substep,
+        values = {n: from_unconstrained(specs[n], local[:, k]) for k, n in enumerate(self.free)}
+        models = per_run(self.base, R)
+        models = models.replace(**values) if values else models
+        if self.release_free:
+            t_release = interval_from_u(local[:, P], self.release_lo, self.release_hi)
+        else:
+            t_release = self.release_lo
+        theta0_enc = self.hold + self.step * local[:, P + 1]
+        off = self.offset0[self.setup_index] + OFFSET_SCALE * local[:, P + 2]
+        pred = simulate_runs(
+            models, self.times, theta0_enc - off, t_release,
+            added_inertia=self.added_inertia, max_substep=self.max_substep,
         )
-        return weight * (pred + off - theta) / self.sigma
+        return self.weight * (pred + off[:, None] - self.theta) / self.sigma
 
     def data_residuals_and_jacobian(self, u):
         """Data residuals ``(R·T,)`` and their Jacobian ``(R·T, n_unknowns)``.
 
         Each run depends only on the shared physical parameters and its own release,
-        start angle and set-up offset: forward-mode over those ``P + 3`` local unknowns
-        per run (vmapped over runs), scattered into the full matrix — instead of
-        carrying every unknown's tangent through every run's simulation.
+        start angle and set-up offset: forward mode over those ``P + 3`` local unknowns,
+        the tangent of local unknown ``j`` set in every run at once (runs do not
+        interact, so run ``r``'s output tangent is its derivative by its own ``j``),
+        then scattered into the full matrix — instead of carrying every unknown's
+        tangent through every run's simulation.
         """
-        P, R, S = self.n_physical, self.n_runs, self.n_setups
+        P, R = self.n_physical, self.n_runs
         T = self.times.shape[1]
-        args = (
-            self.times, self.theta, self.weight, self.hold, self.release_lo,
-            self.release_hi, self.added_inertia, self.offset0[self.setup_index],
-        )
-
-        def one(local, *a):
-            r = self._run_residuals(local, *a)
-            return r, r
-
-        jac_local, r = jax.vmap(jax.jacfwd(one, has_aux=True))(self._local(u), *args)
+        local = self._local(u)
+        L = local.shape[1]
+        basis = jnp.broadcast_to(jnp.eye(L)[:, None, :], (L, R, L))
+        r, tangents = jax.vmap(
+            lambda t: jax.jvp(self._runs_residuals, (local,), (t,)), out_axes=(None, 0)
+        )(basis)
+        jac_local = jnp.moveaxis(tangents, 0, -1)  # (R, T, P+3)
         idx = jnp.arange(R)
         rel = P if self.release_free else None
         th0 = P + (R if self.release_free else 0)
@@ -193,7 +199,6 @@ class Problem(eqx.Module):
             J = J.at[idx, :, rel + idx].set(jac_local[:, :, P])
         J = J.at[idx, :, th0 + idx].set(jac_local[:, :, P + 1])
         J = J.at[idx, :, off + self.setup_index].add(jac_local[:, :, P + 2])
-        del S
         return r.reshape(-1), J.reshape(R * T, self.n_unknowns)
 
     def residuals_and_jacobian(self, u):
@@ -204,6 +209,11 @@ class Problem(eqx.Module):
             jnp.diag(jnp.where(self.prior_on, 1.0 / self.prior_sd, 0.0))
         )
         return jnp.concatenate([r, rp]), jnp.concatenate([J, Jp], axis=0)
+
+
+def per_run(model: Model, n_runs: int) -> Model:
+    """``model`` with a leading run axis on every leaf (one copy per run)."""
+    return jax.tree_util.tree_map(lambda x: jnp.broadcast_to(x, (n_runs,) + jnp.shape(x)), model)
 
 
 def build_problem(

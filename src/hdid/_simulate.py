@@ -13,6 +13,12 @@ slides on in the direction of the net torque for the rest of the substep.
 The release instant ``t_release`` may lie anywhere between samples: each sample interval
 is integrated over its part after the release, ``[max(t_{k−1} − t_r, 0), max(t_k − t_r, 0)]``,
 which is continuous (and piecewise smooth) in ``t_r``.
+
+Cost: most substeps need one RK4 step; the crossing and the stick/slip decision need three
+more. :func:`simulate_runs` integrates all runs of a log in one loop and puts the split
+behind a ``lax.cond`` on "any run has an event here", so it runs only where it is needed
+(2× faster for a residual Jacobian than ``vmap`` over runs, which must run every branch at
+every substep; the results are the same to rounding, benchmarks/results/batch_speed.md).
 """
 
 from __future__ import annotations
@@ -84,12 +90,28 @@ def crossing_fraction(omega0, omega1, acc0, h, crossed):
     return jnp.where(crossed, alpha, 0.0)
 
 
-def _substep(model: Model, inertia, carry, h):
+def _full_step(model: Model, inertia, carry, h):
+    """One RK4 substep with the friction direction frozen: ``(θ1, ω1, θ̈ at the start)``."""
     theta, omega, direction, states = carry
-    theta1, omega1, acc0 = _rk4(model, inertia, theta, omega, direction, states, h)
+    return _rk4(model, inertia, theta, omega, direction, states, h)
 
+
+def _crossed(carry, omega1):
+    """Whether the velocity of a sliding wave generator reaches zero in the substep."""
+    _, omega, direction, _ = carry
+    return (direction != 0) & (direction * omega1 <= 0) & (omega1 != omega)
+
+
+def _event_step(model: Model, inertia, carry, h, full):
+    """The substep from ``carry`` given its frozen-direction RK4 result ``full``.
+
+    Where the velocity crosses zero the step is split at the crossing; at rest the
+    set-valued friction decides between sticking and sliding off (module docstring).
+    """
+    theta, omega, direction, states = carry
+    theta1, omega1, acc0 = full
     sliding = direction != 0
-    crossed = sliding & (direction * omega1 <= 0) & (omega1 != omega)
+    crossed = _crossed(carry, omega1)
     alpha = crossing_fraction(omega, omega1, acc0, h, crossed)
 
     # Re-integrate up to the crossing: on [0, α·h] the velocity keeps its sign, so the
@@ -121,6 +143,26 @@ def _substep(model: Model, inertia, carry, h):
     direction_n = jnp.where(event, jnp.where(stick, 0.0, new_direction), direction)
     states_n = model.update_state(states, theta, theta_n)
     return theta_n, omega_n, direction_n, states_n
+
+
+def _substep(model: Model, inertia, carry, h):
+    """One complete substep of one run (the plain and the event case in one)."""
+    return _event_step(model, inertia, carry, h, _full_step(model, inertia, carry, h))
+
+
+def _plain_step(model: Model, carry, full):
+    """The substep where nothing happens: sliding goes on, rest stays rest."""
+    theta, omega, direction, states = carry
+    theta1, omega1, _ = full
+    sliding = direction != 0
+    theta_n = jnp.where(sliding, theta1, theta)
+    omega_n = jnp.where(sliding, omega1, omega)
+    return theta_n, omega_n, direction, model.update_state(states, theta, theta_n)
+
+
+def _where_run(mask, a, b):
+    """``where`` with a per-run mask over leaves with a leading run axis."""
+    return jnp.where(mask.reshape(mask.shape + (1,) * (a.ndim - 1)), a, b)
 
 
 def simulate(
@@ -161,47 +203,112 @@ def simulate(
     -------
     theta, or ``(theta, omega, stuck)`` with ``full_output``: arrays of shape ``(T,)``.
     """
+    model = jax.tree_util.tree_map(lambda x: jnp.asarray(x)[None], model)
+    out = simulate_runs(
+        model,
+        jnp.asarray(times, dtype=float)[None],
+        jnp.asarray(theta0, dtype=float)[None],
+        jnp.asarray(t_release, dtype=float)[None],
+        added_inertia=jnp.asarray(added_inertia, dtype=float)[None],
+        max_substep=max_substep,
+        substeps=substeps,
+        full_output=True,
+    )
+    theta, omega, stuck = (o[0] for o in out)
+    return (theta, omega, stuck) if full_output else theta
+
+
+def simulate_runs(
+    models: Model,
+    times: Float[ArrayLike, "R T"],
+    theta0: Float[ArrayLike, " R"],
+    t_release: Float[ArrayLike, " R"],
+    *,
+    added_inertia: Float[ArrayLike, " R"] = 0.0,
+    max_substep: float = None,
+    substeps: int = 1,
+    full_output: bool = False,
+):
+    """:func:`simulate` for ``R`` runs at once, in one loop.
+
+    ``models`` is a :class:`~hdid.Model` whose every array leaf has a leading axis of
+    length ``R`` (one model per run, e.g. ``jax.tree_util.tree_map(lambda x:
+    jnp.broadcast_to(x, (R,) + jnp.shape(x)), model)`` for a shared one); the other
+    arguments are per run. Results are those of :func:`simulate` run by run.
+
+    Why one loop and not ``vmap(simulate)``: a substep in which no run reaches zero
+    velocity (most of them) needs one RK4 step; the crossing and the stick/slip
+    decision need three more. Here that branch is a ``lax.cond`` on "any run has an
+    event" (a scalar, also under forward-mode tangents), so it runs only when needed;
+    under ``vmap`` every branch of every lane would run at every substep. Under an
+    outer ``vmap`` (several fits in lockstep) it becomes a select, no worse than before.
+    """
     times = jnp.asarray(times, dtype=float)
     theta0 = jnp.asarray(theta0, dtype=float)
-    t_release = jnp.asarray(t_release, dtype=float)
-    inertia = jnp.asarray(model.inertia, dtype=float) + added_inertia
+    R, n = times.shape
+    t_release = jnp.broadcast_to(jnp.asarray(t_release, dtype=float), (R,))
+    inertia = jnp.asarray(models.inertia, dtype=float) + added_inertia
     if not isinstance(inertia, jax.core.Tracer) and not bool(jnp.all(inertia > 0)):
         raise ValueError(
             f"inertia + added_inertia = {inertia}: must be > 0 kg m^2; check both values"
         )
+    inertia = jnp.broadcast_to(inertia, (R,))
     h_max = DEFAULT_MAX_SUBSTEP if max_substep is None else max_substep
-    n = times.shape[0]
-    elapsed = jnp.maximum(times - t_release, 0.0)
-    intervals = jnp.diff(elapsed, prepend=0.0)
+    elapsed = jnp.maximum(times - t_release[:, None], 0.0)
+    intervals = jnp.diff(elapsed, axis=1, prepend=0.0)
+    full_step = jax.vmap(_full_step)
+    event_step = jax.vmap(_event_step)
+    plain_step = jax.vmap(_plain_step)
 
-    # The dynamics are autonomous and effect state changes only when θ moves, so once
-    # the wave generator sticks it stays stuck: integrate from the first sample after
-    # the release until it sticks (forward-differentiable while_loop), then hold.
-    first = jnp.sum(elapsed <= 0.0)
+    # The dynamics are autonomous and effect state changes only when θ moves, so once a
+    # run sticks it stays stuck: each run is integrated from the first sample after its
+    # release until it sticks at a sample (then held); the loop (forward-differentiable
+    # while_loop) ends when every run has.
+    first = jnp.sum(elapsed <= 0.0, axis=1)
+
+    def running(k, direction):
+        return (k == first) | ((k > first) & (direction != 0))
 
     def cond(carry):
         k, (_, _, direction, _), _ = carry
-        return (k < n) & ((direction != 0) | (k == first))
+        return (k < n) & jnp.any(running(k, direction) | (k < first))
 
     def body(carry):
         k, state, out = carry
-        dt = intervals[k]
+        active = running(k, state[2])
+        dt = intervals[:, k]
         n_sub = jnp.maximum(substeps, jnp.ceil(dt / h_max - 1e-9)).astype(int)
-        h = dt / n_sub
-        state = jax.lax.fori_loop(0, n_sub, lambda _, c: _substep(model, inertia, c, h), state)
+        h_run = dt / n_sub
+
+        def substep(j, state):
+            h = jnp.where(j < n_sub, h_run, 0.0)
+            full = full_step(models, inertia, state, h)
+            plain = plain_step(models, state, full)
+            # Runs not integrated at this sample (before their release, or stuck at a
+            # sample already) and the padding substeps of a shorter interval keep the
+            # plain step, which leaves a run at rest where it is.
+            event = active & (j < n_sub) & (_crossed(state, full[1]) | (state[2] == 0))
+
+            def split():
+                stepped = event_step(models, inertia, state, h, full)
+                return jax.tree_util.tree_map(lambda a, b: _where_run(event, a, b), stepped, plain)
+
+            return jax.lax.cond(jnp.any(event), split, lambda: plain)
+
+        state = jax.lax.fori_loop(0, jnp.max(jnp.where(active, n_sub, 0)), substep, state)
         theta, omega, direction, _ = state
-        out = tuple(o.at[k].set(v) for o, v in zip(out, (theta, omega, direction == 0)))
+        out = tuple(o.at[:, k].set(v) for o, v in zip(out, (theta, omega, direction == 0)))
         return k + 1, state, out
 
     # Before release the wave generator rests at θ0 (held by the servo, not friction).
-    state0 = (theta0, jnp.zeros(()), jnp.zeros(()), model.init_state(theta0))
-    out0 = (jnp.full((n,), theta0), jnp.zeros((n,)), jnp.zeros((n,), dtype=bool))
+    state0 = (theta0, jnp.zeros(R), jnp.zeros(R), jax.vmap(lambda m, t: m.init_state(t))(models, theta0))
+    out0 = (jnp.broadcast_to(theta0[:, None], (R, n)), jnp.zeros((R, n)), jnp.zeros((R, n), dtype=bool))
     k, (theta_end, _, _, _), (theta, omega, stuck) = jax.lax.while_loop(
-        cond, body, (first, state0, out0)
+        cond, body, (jnp.min(first), state0, out0)
     )
     idx = jnp.arange(n)
-    theta = jnp.where(idx >= k, theta_end, theta)
-    stuck = jnp.where(idx >= k, True, stuck) & (idx >= first)
+    theta = jnp.where(idx >= k, theta_end[:, None], theta)
+    stuck = jnp.where(idx >= k, True, stuck) & (idx >= first[:, None])
     if full_output:
         return theta, omega, stuck
     return theta

@@ -51,13 +51,13 @@ from ._fit import (
     _grid_candidates,
     LMState,
     _lm_lanes,
+    lanes_vmap,
     _Schedule,
     _Setup,
     _setup,
 )
 from ._identifiability import derived_quantities
 from ._problem import Problem
-from ._simulate import simulate
 
 #: Lanes per compiled call of the Levenberg–Marquardt program. One: the LM's Jacobian is
 #: then computed only where its lane needs it (module docstring). Measured on 40 paper
@@ -160,15 +160,7 @@ def _lane_lengths(problems: Problem, U):
     """Samples each lane's simulation runs before every run sticks (its cost in a call)."""
 
     def one(p: Problem, u):
-        _, t_release, theta0_enc, offset = p.unpack(u)
-        model = p.model(u)
-        off = offset[p.setup_index]
-        _, _, stuck = jax.vmap(
-            lambda t, th0, tr, ai: simulate(
-                model, t, th0, tr, added_inertia=ai, max_substep=p.max_substep,
-                full_output=True,
-            )
-        )(p.times, theta0_enc - off, t_release, p.added_inertia)
+        _, _, stuck = p.simulate(u, full_output=True)
         return jax.numpy.max(jax.numpy.sum(~stuck, axis=1))
 
     return jax.vmap(one)(problems, U)
@@ -183,8 +175,8 @@ def _lane_solve(problems: Problem, U, active, max_steps, *state):
     them. Returns ``(U, cost, done, iterations, *state)``.
     """
     u, cost, done, k, st = _lm_lanes(
-        lambda V: jax.vmap(lambda p, u: p.residuals(u))(problems, V),
-        lambda V: jax.vmap(lambda p, u: p.residuals_and_jacobian(u))(problems, V),
+        lambda V: lanes_vmap(lambda p, u: p.residuals(u))(problems, V),
+        lambda V: lanes_vmap(lambda p, u: p.residuals_and_jacobian(u))(problems, V),
         U, active, max_steps, LMState(*state),
     )
     return (u, cost, done, k, *st)
@@ -196,15 +188,7 @@ def _lane_analysis(problems: Problem, U):
 
     def one(p: Problem, u):
         r, J = p.data_residuals_and_jacobian(u)
-        _, t_release, theta0_enc, offset = p.unpack(u)
-        model = p.model(u)
-        off = offset[p.setup_index]
-        dense = jax.vmap(
-            lambda t, th0, tr, ai: simulate(
-                model, t, th0, tr, added_inertia=ai, max_substep=p.max_substep,
-                full_output=True,
-            )
-        )(p.times, theta0_enc - off, t_release, p.added_inertia)
+        dense = p.simulate(u, full_output=True)
         P = p.n_physical
 
         def quantities(up):
