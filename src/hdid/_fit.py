@@ -255,22 +255,22 @@ def _grid_candidates(problem: Problem, prep: Prepared, model: Model, from_model:
         levels = np.concatenate([
             k_wg * decrement / (2 * GRID_HALF_CYCLES), GRID_COULOMB_FRACTIONS * k_wg * amp
         ])
-        for tau_c in np.maximum(levels, 1e-3 * k_wg * amp):
-            vals = {
-                "k1": k_wg * N**2,
-                "k2": k_wg * N**2 * k2_ratio,
-                "tau_c": tau_c,
-                "tau_s": max(1.3 * tau_c, 1.05 * k_wg * rest_max),
-                "c_v": 0.05 * 2 * math.sqrt(k_wg * med_inertia),
-            }
-            vals = {n: v for n, v in vals.items() if n in free}
-            full = {**current, **vals}
-            # Release instant: invert the first half-cycle θ = θ_eq + (θ0 − θ_eq)·cos(ω τ).
-            eq = -d * full.get("tau_c", 0.0) / k_wg
-            c = np.clip((y1 - eq) / (theta0 - eq), -1.0, 1.0)
-            tr = np.clip(t1 - np.arccos(c) / wr, prep.release_lo, prep.release_hi)
-            cands.append(pack(full, tr))
-            keys.append(f)
+        tau_c = np.maximum(levels, 1e-3 * k_wg * amp)  # one candidate per level
+        vals = {
+            "k1": np.full_like(tau_c, k_wg * N**2),
+            "k2": np.full_like(tau_c, k_wg * N**2 * k2_ratio),
+            "tau_c": tau_c,
+            "tau_s": np.maximum(1.3 * tau_c, 1.05 * k_wg * rest_max),
+            "c_v": np.full_like(tau_c, 0.05 * 2 * math.sqrt(k_wg * med_inertia)),
+        }
+        vals = {n: v for n, v in vals.items() if n in free}
+        full = {**{n: np.full_like(tau_c, v) for n, v in current.items()}, **vals}
+        # Release instant: invert the first half-cycle θ = θ_eq + (θ0 − θ_eq)·cos(ω τ).
+        eq = -d * full.get("tau_c", np.zeros_like(tau_c))[:, None] / k_wg
+        c = np.clip((y1 - eq) / (theta0 - eq), -1.0, 1.0)
+        tr = np.clip(t1 - np.arccos(c) / wr, prep.release_lo, prep.release_hi)
+        cands.extend(pack(full, tr))
+        keys.extend([f] * len(tau_c))
     return np.array(cands), np.array(keys)
 
 
@@ -308,11 +308,17 @@ def _packer(problem: Problem, specs):
     spec_list = [specs[n] for n in free]
 
     def pack(values, t_release):
-        parts = [np.array([to_unconstrained(sp, values[n]) for sp, n in zip(spec_list, free)])]
+        """One candidate (scalar values, ``t_release (R,)``) or several (``(L,)`` values,
+        ``(L, R)``): the unknown vector(s)."""
+        t_release = np.asarray(t_release, dtype=float)
+        lead = t_release.shape[:-1]
+        parts = [np.stack([np.broadcast_to(np.asarray(to_unconstrained(sp, values[n]),
+                                                      dtype=float), lead)
+                           for sp, n in zip(spec_list, free)], axis=-1)]
         if release_free:
             parts.append(interval_to_u(t_release, lo, hi))
-        parts.append(tail)
-        return np.concatenate(parts)
+        parts.append(np.broadcast_to(tail, lead + tail.shape))
+        return np.concatenate(parts, axis=-1)
 
     return pack
 

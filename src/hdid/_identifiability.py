@@ -327,7 +327,7 @@ def _release_std(problem: Problem, u, std_u, i: int) -> float:
     if not problem.release_free:
         return 0.0
     j = problem.n_physical + i
-    lo, hi = float(problem.release_lo[i]), float(problem.release_hi[i])
+    lo, hi = float(np.asarray(problem.release_lo)[i]), float(np.asarray(problem.release_hi)[i])
     s = 1.0 / (1.0 + math.exp(-float(u[j])))
     return float((hi - lo) * s * (1 - s) * std_u[j])
 

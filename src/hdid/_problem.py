@@ -101,6 +101,15 @@ class Problem(eqx.Module):
         offset = np.asarray(self.offset0) + OFFSET_SCALE * u[i : i + self.n_setups]
         return values, t_release, theta0_enc, offset
 
+    def free_values_np(self, U) -> dict[str, np.ndarray]:
+        """Free physical parameter values of each row of ``U`` ``(L, n)``: name → ``(L,)``."""
+        U = np.atleast_2d(np.asarray(U, dtype=float))
+        specs = self.base.parameter_specs()
+        return {
+            n: np.asarray(from_unconstrained(specs[n], U[:, i], np), dtype=float)
+            for i, n in enumerate(self.free)
+        }
+
     def values_np(self, u) -> dict[str, float]:
         """All parameter values (fixed and fitted) at ``u``, as floats."""
         fixed = {k: float(v) for k, v in self.base.values().items()}

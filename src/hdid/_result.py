@@ -60,8 +60,7 @@ class StartSummary:
 
     @classmethod
     def from_solutions(cls, problem, U, costs, ok, steps, best) -> StartSummary:
-        rows = [problem.values_np(u) for u in U]
-        values = {n: np.array([r[n] for r in rows]) for n in problem.free}
+        values = problem.free_values_np(U)
         return cls(np.asarray(costs), np.asarray(ok), np.asarray(steps), values, int(best))
 
     def same_minimum(self, dchi2: float = 1.0) -> np.ndarray:
