@@ -142,6 +142,8 @@ def worker(cfg: dict) -> dict:
         out["total_s"] = time.perf_counter() - t0
         out["cpu_s"] = _cpu() - c0
         out["per_log_s"] = per
+    elif cfg["mode"] == "workers":
+        out.update(_workers_run(cfg, warm, timed, t_imp))
     else:
         opts = dict(vectorize=cfg["mode"] == "vectorized", band_bracket=cfg.get("bracket"))
         if cfg.get("lanes"):
@@ -159,31 +161,79 @@ def worker(cfg: dict) -> dict:
         out["total_s"] = time.perf_counter() - t
         out["cpu_s"] = _cpu() - c0
         out["timing"] = table.attrs["timing"]
-        out["n_failed"] = int(table["error"].notna().sum())
-        out["errors"] = [e for e in table["error"] if isinstance(e, str)][:3]
-        cols = [c for c in ("k1", "tau_c", "rms_residual_counts") if c in table]
-        out["summary"] = {c: float(table[c].median()) for c in cols}
-        # Quality per log: best χ² (to compare the vectorised fit with fit() on the same
-        # logs) and, for the paper design, the error against the truth in standard errors.
-        per = []
-        for path, r in zip(timed, table.itertuples()):
-            res = r.result
-            if res is None:
-                per.append(None)
-                continue
-            i = int(Path(path).stem[3:])
-            row = {"log": i, "chi2": float(res.starts.costs[res.starts.best])}
-            if cfg["design"] == "paper":
-                truth = truth_of(i)
-                for k in ("k1", "tau_c", "tau_s", "c_v"):
-                    if k in res.parameters:
-                        p = res.parameters[k]
-                        row[f"z_{k}"] = float((p.value - truth[k]) / p.std)
-            per.append(row)
-        out["per_log"] = per
+        out.update(_quality(cfg, timed, table))
     out["n"] = len(timed)
-    out["maxrss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    out["maxrss_mb"] = max(out.get("maxrss_mb", 0.0),
+                           resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
     out["load_after"] = _load("end")
+    return out
+
+
+def _quality(cfg: dict, timed: list, table) -> dict:
+    """Failures, medians, and per log the best χ² and (paper design) z against the truth."""
+    out = {"n_failed": int(table["error"].notna().sum()),
+           "errors": [e for e in table["error"] if isinstance(e, str)][:3]}
+    cols = [c for c in ("k1", "tau_c", "rms_residual_counts") if c in table]
+    out["summary"] = {c: float(table[c].median()) for c in cols}
+    # Quality per log: best χ² (to compare the vectorised fit with fit() on the same
+    # logs) and, for the paper design, the error against the truth in standard errors.
+    per = []
+    for path, r in zip(timed, table.itertuples()):
+        res = r.result
+        if res is None:
+            per.append(None)
+            continue
+        i = int(Path(path).stem[3:])
+        row = {"log": i, "chi2": float(res.starts.costs[res.starts.best])}
+        if cfg["design"] == "paper":
+            truth = truth_of(i)
+            for k in ("k1", "tau_c", "tau_s", "c_v"):
+                if k in res.parameters:
+                    p = res.parameters[k]
+                    row[f"z_{k}"] = float((p.value - truth[k]) / p.std)
+        per.append(row)
+    out["per_log"] = per
+    return out
+
+
+def _worker_usage():
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    return ru.ru_utime + ru.ru_stime, ru.ru_maxrss / 1024
+
+
+def _workers_run(cfg: dict, warm: list, timed: list, t_imp: float) -> dict:
+    """``fit_many`` on a warm LocalCluster of ``cfg['workers']`` single-threaded processes.
+
+    First call: start the cluster and fit the 2 warm-up logs on *every* worker (each traces
+    and compiles, or reads the persistent cache). Timed: ``fit_many(client=…)`` with about
+    4 chunks per worker. CPU is the sum over the workers and this process.
+    """
+    import hdid
+    from distributed import Client, LocalCluster
+
+    W = int(cfg["workers"])
+    out = {"import_s": time.perf_counter() - t_imp}
+    t = time.perf_counter()
+    cluster = LocalCluster(n_workers=W, threads_per_worker=1, processes=True,
+                           dashboard_address=None)
+    client = Client(cluster)
+    try:
+        client.run(lambda: hdid.fit_many(warm) is not None)
+        out["first_call_s"] = time.perf_counter() - t
+        out["first_call_timing"] = {"compile_s": float("nan")}
+        before = client.run(_worker_usage)
+        c0 = _cpu()
+        t = time.perf_counter()
+        table = hdid.fit_many(timed, client=client, chunk_size=max(1, -(-len(timed) // (4 * W))))
+        out["total_s"] = time.perf_counter() - t
+        after = client.run(_worker_usage)
+        out["cpu_s"] = (_cpu() - c0) + sum(after[k][0] - before[k][0] for k in after)
+        out["maxrss_mb"] = max(v[1] for v in after.values())
+        out["timing"] = table.attrs["timing"]
+        out.update(_quality(cfg, timed, table))
+    finally:
+        client.close()
+        cluster.close()
     return out
 
 
@@ -239,8 +289,10 @@ def measure(args) -> dict:
     for n in loop_ns:
         go(f"loop over fit() {n}", "loop", n, paths=paper)
     go(f"scipy way {n_scipy}", "scipy", n_scipy, paths=paper)
-    # threads: one thread vs the default (one per core)
-    go("vectorized 100, 1 thread", "vectorized", min(100, max(ns)), paths=paper, threads=1)
+    # several cores: worker processes (threads in one process do not add cores)
+    for n in ns[-2:]:
+        go(f"workers 2, {n}", "workers", n, paths=paper, workers=2)
+    go("vectorized 100, 2 threads", "vectorized", min(100, max(ns)), paths=paper, threads=2)
     go("vectorized 100, 6 lanes", "vectorized", min(100, max(ns)), paths=paper, lanes=6)
     for design in ("short 0.25 s", "long 1.0 s", "1 kHz", "2 runs", "8 runs"):
         go(f"design {design}, 20 logs", "vectorized", 20, design=design)
@@ -410,15 +462,25 @@ def write_report(res: dict, out_dir: Path) -> str:
     # goals
     v1000 = _find(res, "vectorized 1000")
     big = v1000 or max(vec, key=lambda r: r["n"])
+    wk = [r for r in res["runs"] if r["config"]["mode"] == "workers"]
+    wbig = max(wk, key=lambda r: r["n"]) if wk else None
     L.append("## Goals\n")
     L.append("| goal | measured | met? |\n|---|---|---|")
+    if wbig:
+        tw = wbig["total_s"] * 1000 / wbig["n"]
+        how = "measured" if wbig["n"] == 1000 else f"extrapolated from {wbig['n']} logs"
+        L.append(f"| 1000 logs ≤ 60 s on 2 cores | **{tw:.0f} s** with `workers=2` (2 processes "
+                 f"on a warm LocalCluster; {how}; load {_ld(wbig)}) | "
+                 f"{'✓' if tw <= GOAL_1000_S else '✗'} |")
     t1000 = big["total_s"] * 1000 / big["n"]
     how = "measured" if v1000 else f"extrapolated from {big['n']} logs"
-    L.append(f"| 1000 logs ≤ 60 s on 2 cores | {t1000:.0f} s ({how}; load {_ld(big)}) | "
-             f"{'✓' if t1000 <= GOAL_1000_S else '✗'} |")
-    ratio = _rate(big) / scipy_rate
-    L.append(f"| ≥ 50× the scipy way | {ratio:.1f}× (wall; vectorised {big['n']} logs vs scipy "
-             f"per-log rate on {scipy['n']} logs) | {'✓' if ratio >= GOAL_RATIO else '✗'} |")
+    L.append(f"| … in one process (one core: JAX runs one CPU program at a time per process) | "
+             f"{t1000:.0f} s ({how}; load {_ld(big)}) | — |")
+    fastest = wbig if wbig and _rate(wbig) > _rate(big) else big
+    ratio = _rate(fastest) / scipy_rate
+    L.append(f"| ≥ 50× the scipy way | {ratio:.1f}× (wall; '{fastest['config']['label']}' vs "
+             f"the scipy per-log rate on {scipy['n']} logs, one process) | "
+             f"{'✓' if ratio >= GOAL_RATIO else '✗'} |")
     with_cpu = [r for r in res["runs"] if r["config"]["mode"] == "vectorized"
                 and r["config"]["design"] == "paper" and r.get("cpu_s") and r["n"] >= 10]
     cref = max(with_cpu, key=lambda r: r["n"]) if with_cpu else None
@@ -427,11 +489,21 @@ def write_report(res: dict, out_dir: Path) -> str:
         L.append(f"| … by CPU time per log (less sensitive to the other jobs; vectorised: "
                  f"'{cref['config']['label']}') | {cs / cb:.1f}× "
                  f"({cs:.2f} s vs {cb * 1e3:.0f} ms) | {'✓' if cs / cb >= GOAL_RATIO else '✗'} |")
-        proj = cb * 1000 / 2
-        L.append(f"| … 1000 logs if both cores were ours: CPU time / 2 (projection, assumes the "
-                 f"2 threads scale; not measured) | {proj:.0f} s | "
-                 f"{'✓' if proj <= GOAL_1000_S else '✗'} |")
     L.append("")
+    if wk:
+        L.append("Several cores (`fit_many(workers=2)` / `hdid fit --workers 2`): logs are split "
+                 "into about 4 chunks per worker process; the timed call runs on a cluster whose "
+                 "workers have each fitted 2 logs already (*first call*: cluster start plus every "
+                 "worker's trace/compile or cache read).\n")
+        L.append("| N logs | wall | logs/s | CPU per log (all processes) | speed-up vs one "
+                 "process | first call | peak RSS (a worker) | load |\n|---|---|---|---|---|---|---|---|")
+        for r in sorted(wk, key=lambda r: r["n"]):
+            one = _find(res, f"vectorized {r['n']}")
+            up = f"{_rate(r) / _rate(one):.2f}×" if one else "—"
+            L.append(f"| {r['n']} | {r['total_s']:.1f} s | {_rate(r):.2f} | "
+                     f"{(_cpu_per_log(r) or float('nan')) * 1e3:.0f} ms | {up} | "
+                     f"{r['first_call_s']:.1f} s | {r['maxrss_mb']:.0f} MB | {_ld(r)} |")
+        L.append("")
 
     L.append("## logs/s (4-run paper-design logs)\n")
     L.append("| N logs | vectorised `fit_many` | loop over `hdid.fit` | scipy way | vectorised / "
@@ -467,10 +539,12 @@ def write_report(res: dict, out_dir: Path) -> str:
                  + (f", {(_cpu_per_log(br) - _cpu_per_log(v100)) * 1e3:+.0f} ms of CPU"
                     if _cpu_per_log(br) and _cpu_per_log(v100) else "")
                  + "). `hdid.fit` always computes the bracket, so the loop's rate includes it.")
-    th = _find(res, "vectorized 100, 1 thread")
+    th = _find(res, "vectorized 100, 2 threads")
     if th and v100:
-        L.append(f"- vectorised, 1 thread instead of one per core, {th['n']} logs: "
-                 f"{th['total_s']:.1f} s vs {v100['total_s']:.1f} s (load {_ld(th)}).")
+        L.append(f"- vectorised, 2 threads issuing calls instead of 1, {th['n']} logs: "
+                 f"{th['total_s']:.1f} s (CPU {_cpu_per_log(th) * 1e3:.0f} ms per log) vs "
+                 f"{v100['total_s']:.1f} s (CPU {_cpu_per_log(v100) * 1e3:.0f} ms per log) "
+                 f"(load {_ld(th)}): a second thread does not add a core.")
 
     lanes6 = _find(res, "vectorized 100, 6 lanes")
     if lanes6 and v100:

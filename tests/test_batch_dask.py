@@ -50,3 +50,30 @@ def test_fit_many_on_a_local_cluster(tmp_path):
             assert abs(res.parameters[name].value - ref.parameters[name].value) <= (
                 1e-3 * ref.parameters[name].std
             )
+
+
+def test_workers_fit_in_local_processes_like_in_this_one(tmp_path):
+    """``workers=2``: a LocalCluster of two single-threaded processes, started and closed
+    by the call — the way to use several cores (threads in one process do not: JAX runs
+    one CPU program at a time per process). Same fits as in-process, bad file in its row."""
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time,theta\n0,abc\n")
+    logs = [EXAMPLE, bad, _other_log(tmp_path / "other.csv")]
+    local = hdid.fit_many(logs, n_starts=2)
+    table = hdid.fit_many(logs, workers=2, chunk_size=1, n_starts=2)
+    timing = table.attrs["timing"]
+    assert timing["mode"] == "dask" and timing["workers"] == 2 and timing["n_tasks"] == 3
+    assert list(table["log"]) == [str(p) for p in logs]
+    assert "row 2" in table.loc[1, "error"]
+    for i in (0, 2):
+        ref = local.loc[i, "result"]
+        for name in ref.problem.free:
+            # same program and inputs in another process (tolerance as above)
+            assert abs(table.loc[i, name] - ref.parameters[name].value) <= (
+                1e-3 * ref.parameters[name].std
+            )
+
+
+def test_workers_must_be_positive():
+    with pytest.raises(ValueError, match="workers = 0"):
+        hdid.fit_many([EXAMPLE], workers=0)

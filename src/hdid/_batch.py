@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 from collections.abc import Iterable
@@ -19,6 +20,7 @@ def fit_many(
     band_bracket: bool | None = None,
     lanes: int | None = None,
     threads: int | None = None,
+    workers: int | None = None,
     client=None,
     chunk_size: int | None = None,
     **options,
@@ -43,7 +45,15 @@ def fit_many(
         columns are empty and ``band_bracket`` says so.
     lanes, threads:
         Vectorised path: (log, start) lanes per compiled call (default 1) and threads
-        running calls concurrently (default: the CPU count, at most 8).
+        issuing calls (default 1: JAX runs one CPU program at a time per process, so
+        more threads do not add cores — measured in ``benchmarks/results/batch_speed.md``;
+        use ``workers`` for that).
+    workers:
+        Local worker processes, one thread each (a ``dask.distributed.LocalCluster``
+        started and closed by this call; needs ``pip install "hdid[dask]"``): the way to
+        use several cores. Each worker traces and compiles once (or reads the persistent
+        cache, ``HDID_CACHE_DIR``) before its first chunk — tens of seconds — so it pays
+        off from a few hundred logs. Default 1 (in this process). Ignored with ``client``.
     client:
         A ``dask.distributed.Client``: the logs are split into chunks of ``chunk_size``
         (default 64) and each worker runs the vectorised fit on its chunks. Paths must be
@@ -81,10 +91,19 @@ def fit_many(
 
         bar = tqdm(total=len(items), unit="log")
 
+    workers = 1 if workers is None else int(workers)
+    if workers < 1:
+        raise ValueError(f"workers = {workers}: must be >= 1 (local worker processes)")
+    dask_options = dict(band_bracket=band_bracket, lanes=lanes, threads=threads, **options)
     if client is not None:
         rows, timing = _fit_dask(client, items, names, chunk_size or DASK_CHUNK, bar,
-                                 dict(band_bracket=band_bracket, lanes=lanes, threads=threads,
-                                      **options))
+                                 dask_options)
+    elif workers > 1 and vectorize:
+        with _local_client(workers) as local:
+            # about 4 chunks per worker: balances uneven chunks, keeps transfers few
+            chunk = chunk_size or max(1, -(-len(items) // (4 * workers)))
+            rows, timing = _fit_dask(local, items, names, chunk, bar, dask_options)
+            timing["workers"] = workers
     elif vectorize:
         rows, timing = _fit_vectorized(items, names, bar, band_bracket, lanes, threads, options)
     else:
@@ -132,6 +151,21 @@ def _fit_vectorized(items, names, bar, band_bracket, lanes, threads, options):
     )
     rows = [_row(name, res, band_bracket) for name, res in zip(names, outcomes)]
     return rows, {**timing.to_dict(), "mode": "vectorized"}
+
+
+@contextlib.contextmanager
+def _local_client(workers: int):
+    """A dask client on ``workers`` local single-threaded worker processes."""
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError as exc:
+        raise ImportError(
+            f"workers={workers} needs dask.distributed: pip install \"hdid[dask]\" "
+            "(or run with workers=1)"
+        ) from exc
+    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        yield client
 
 
 def _fit_chunk(items, names, options):

@@ -22,7 +22,10 @@ which is compute-bound already at one lane, and the LM's control flow is per cal
 one-lane program a rejected trial costs one forward pass and the forward-mode Jacobian
 (≈ 3× a forward pass) is computed only for accepted trials; a wider call computes it when
 *any* of its lanes needs it and runs as long as its slowest lane. Width 1 was the
-cheapest in CPU time per log (and ``threads`` keep the cores busy). The Jacobian and
+cheapest in CPU time per log; one-lane programs also keep the simulator's event branch a
+real ``cond`` (:func:`hdid._fit.lanes_vmap`). Threads do not add cores: JAX runs one CPU
+program at a time per process (2 threads issuing calls: CPU time = wall time, measured),
+so several cores need several processes (``fit_many(workers=…)``, dask). The Jacobian and
 residuals at the end of a lane's call are carried to its next call. The grid's forward
 passes are wide (``GRID_LANES``), with candidates ordered by how long they ring so that a
 call's lanes stop at similar times.
@@ -359,7 +362,9 @@ def fit_batch(
                         f"{list(_FIT_OPTIONS)}")
     if lanes < 1:
         raise ValueError(f"lanes = {lanes!r}: must be >= 1")
-    threads = min(os.cpu_count() or 1, 8) if threads is None else max(int(threads), 1)
+    # One thread by default: a second one issuing calls gains nothing (JAX executes one
+    # CPU program at a time per process) and costs ≈ 10 % in contention (measured).
+    threads = 1 if threads is None else max(int(threads), 1)
     timing = BatchTiming(lanes=lanes, threads=threads)
     outcomes: list[Any] = [None] * len(items)
     clock = _clock()

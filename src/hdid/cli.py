@@ -92,6 +92,7 @@ def main():
 @click.argument("logs", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @click.option("--summary", "summary_out", metavar="OUT.csv", help="Several logs: one row per log (parameters, std, band, RMS, warnings, error).")
 @click.option("--band-bracket/--no-band-bracket", default=None, help="Several logs: also compute the model-free stick-band bracket (an event-driven SciPy simulation per run; off by default in batch mode).")
+@click.option("--workers", type=click.IntRange(1, 256), help="Several logs: fit in this many local worker processes (one core each; pip install 'hdid[dask]'). Worth it from a few hundred logs; default 1.")
 @click.option("--dask", "dask_address", metavar="ADDRESS", help="Several logs: fit on a dask.distributed scheduler at ADDRESS (pip install 'hdid[dask]').")
 @click.option("--json", "json_out", metavar="OUT.json", help="Write the results as JSON.")
 @click.option("--plot", "plot_out", metavar="OUT.png", help="Measured vs model, residuals below.")
@@ -118,8 +119,8 @@ def main():
 def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_inertia,
             inertia_prior, fix, add_effects, remove_effects, effect_files, release_time,
             counts_per_rev, starts, posterior, steps, walkers, seed, chains_out, corner_out,
-            quiet, band_bracket, dask_address, torque_constant, output_counts_per_rev,
-            order, joint):
+            quiet, band_bracket, workers, dask_address, torque_constant,
+            output_counts_per_rev, order, joint):
     """Fit stiffness, friction (and inertia) jointly to all runs of LOG.csv.
 
     LOG.csv has a header with columns time [s] and theta [rad, WG/motor angle]; optional
@@ -148,7 +149,7 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
     if len(logs) > 1 or summary_out:
         return _fit_batch(logs, summary_out, json_out, plot_out, inertia, fix, release_time,
                           counts_per_rev, starts, quiet, posterior or chains_out or corner_out,
-                          model, band_bracket, dask_address)
+                          model, band_bracket, dask_address, workers)
     log_path = Path(logs[0])
     _check_output(json_out, [log_path], "--json")
     _check_output(plot_out, [log_path], "--plot")
@@ -322,7 +323,7 @@ def _load_effect_file(path: Path, base):
 
 def _fit_batch(logs, summary_out, json_out, plot_out, inertia, fix, release_time,
                counts_per_rev, starts, quiet, posterior, model, band_bracket=None,
-               dask_address=None):
+               dask_address=None, workers=None):
     paths = [Path(p) for p in logs]
     if plot_out or posterior:
         raise _Fail("--plot and --posterior take one log; fit the logs one by one for those")
@@ -332,6 +333,12 @@ def _fit_batch(logs, summary_out, json_out, plot_out, inertia, fix, release_time
     from ._batch import fit_many
 
     client = None
+    if workers and workers > 1 and not dask_address:
+        try:
+            import distributed  # noqa: F401
+        except ImportError:
+            raise _Fail(f"--workers {workers} needs dask.distributed: pip install 'hdid[dask]' "
+                        "(or leave --workers out)") from None
     if dask_address:
         try:
             from distributed import Client
@@ -346,6 +353,7 @@ def _fit_batch(logs, summary_out, json_out, plot_out, inertia, fix, release_time
         progress=not quiet,
         band_bracket=band_bracket,
         client=client,
+        workers=workers,
         model=model,
         inertia=inertia,
         fix={k: v for k, v in fixed.items()} or None,
