@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib.util
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -65,6 +66,10 @@ def test_workers_fit_in_local_processes_like_in_this_one(tmp_path):
     assert timing["mode"] == "dask" and timing["workers"] == 2 and timing["n_tasks"] == 3
     assert list(table["log"]) == [str(p) for p in logs]
     assert "row 2" in table.loc[1, "error"]
+    # a result that came back from a worker still works (its problem travels as NumPy)
+    back = table.loc[0, "result"].residuals()
+    np.testing.assert_allclose(back["residual_rad"], local.loc[0, "result"].residuals()["residual_rad"],
+                               rtol=0, atol=1e-9 * float(table.loc[0, "result"].resolution_rad))
     for i in (0, 2):
         ref = local.loc[i, "result"]
         for name in ref.problem.free:
