@@ -93,6 +93,9 @@ def _run_cli(*args: str) -> subprocess.CompletedProcess:
         (None, ["fit", str(EXAMPLE), "--json", str(EXAMPLE)], "overwrite"),
         (None, ["fit", str(EXAMPLE), "--fix", "k9=1"], "k9"),
         (None, ["fit", str(EXAMPLE), "--inertia-prior", "7e-7"], "MEAN,REL"),
+        # click's own usage errors are one line too, with the command's --help to read
+        (None, ["fit", str(EXAMPLE), str(EXAMPLE), "--workers", "0"], "--workers"),
+        (None, ["fit", str(EXAMPLE), "--no-such-option"], "fit --help"),
     ],
 )
 def test_bad_input_is_one_line_exit_2(tmp_path, make, args, fragment):

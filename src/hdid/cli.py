@@ -81,7 +81,28 @@ def _MODEL_OPTIONS(fn):
     return fn
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class _Group(click.Group):
+    """Usage errors (unknown option, value out of range, …) as one line, exit status 2."""
+
+    def make_context(self, info_name, args, parent=None, **extra):
+        try:
+            return super().make_context(info_name, args, parent=parent, **extra)
+        except click.UsageError as exc:
+            raise _usage_fail(exc) from None
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except click.UsageError as exc:
+            raise _usage_fail(exc) from None
+
+
+def _usage_fail(exc: click.UsageError) -> _Fail:
+    where = exc.ctx.command_path if exc.ctx is not None else "hdid"
+    return _Fail(f"{exc.format_message()} (see '{where} --help')")
+
+
+@click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="hdid")
 def main():
     """hdid — identify harmonic-drive physics (stiffness, Stribeck friction, stick band,
