@@ -181,7 +181,13 @@ def run_one(gen, design_name, design, seed, post_seed, n_steps, noise_steps, do_
         out["truth_check"] = truth_check(gen, df, fit)
         out["truth_check_s"] = time.perf_counter() - t2
     t1 = time.perf_counter()
-    post = sample_posterior(fit, n_steps=n_steps, seed=post_seed, **(post_kwargs or {}))
+    kw = dict(post_kwargs or {})
+    if n_steps < 0:  # adaptive: grow to 50 τ, at most |n_steps| kept steps
+        kw["max_steps"] = -n_steps
+        post = sample_posterior(fit, seed=post_seed, **kw)
+    else:
+        post = sample_posterior(fit, n_steps=n_steps, seed=post_seed, **kw)
+    out["steps_run"] = int(post.chain.shape[0])
     out["posterior_s"] = time.perf_counter() - t1
     out["mode_search_s"] = float(post.mode_search_s)
     diag = post.to_dict()["posterior_diagnostics"]
@@ -198,7 +204,7 @@ def run_one(gen, design_name, design, seed, post_seed, n_steps, noise_steps, do_
     out["tau_max"] = float(np.nanmax(tau))
     out["tau_max_label"] = post.labels[int(np.nanargmax(tau))]
     out["tau_phys"] = {lab: float(t) for lab, t in zip(post.labels, tau) if lab in PHYS}
-    out["chain_in_tau_max"] = n_steps / out["tau_max"]
+    out["chain_in_tau_max"] = out["steps_run"] / out["tau_max"]
     out["acceptance_mean"] = float(np.mean(post.acceptance))
     out["acceptance_min"] = float(np.min(post.acceptance))
     out["n_draws"] = int(post.draws.shape[0])
@@ -284,6 +290,7 @@ def aggregate(logs):
         a["chain_in_tau_max_range"] = [float(min(ch)), float(max(ch))]
         a["tau_max_median"] = float(np.median([r["tau_max"] for r in rows]))
         a["n_steps"] = sorted({r["n_steps"] for r in rows})
+        a["steps_run_median"] = float(np.median([r.get("steps_run", r["n_steps"]) for r in rows]))
         a["n_walkers"] = sorted({r["n_walkers"] for r in rows})
         a["draws_median"] = float(np.median([r["n_draws"] for r in rows]))
         a["acceptance_median"] = float(np.median([r["acceptance_mean"] for r in rows]))
@@ -338,7 +345,10 @@ def render(res: dict) -> str:
     L.append(f"- `hdid.fit(log, inertia=7e-7)` (true inertia, fixed), then "
              f"`sample_posterior(fit, n_steps=N, seed=i, likelihood={o.get('likelihood', 'auto')!r}, "
              f"modes={o.get('modes', 'fit')!r}, linear_prior="
-             f"{tuple(res.get('linear_prior_effective', ()))!r})` "
+             f"{tuple(res.get('linear_prior_effective', ()))!r}"
+             + "".join(f", {k}={v!r}" for k, v in res.get("post_kwargs", {}).items()
+                       if k not in ("likelihood", "modes", "linear_prior"))
+             + ")` "
              f"with the default walkers "
              f"(max(32, 2·D): {', '.join(map(str, agg['pooled']['n_walkers']))}); "
              f"N = {o['paper_steps']} (paper) / {o['rich_steps']} (rich) kept steps. Sampler: "
@@ -365,7 +375,9 @@ def render(res: dict) -> str:
         if g not in agg:
             continue
         a = agg[g]
-        L.append(f"| {g} | {a['n_logs']} | {'/'.join(map(str, a['n_steps']))} × "
+        steps = "/".join(f"≤{-n} (adaptive, median {a.get('steps_run_median', 0):.0f})" if n < 0
+                         else str(n) for n in a["n_steps"])
+        L.append(f"| {g} | {a['n_logs']} | {steps} × "
                  f"{'/'.join(map(str, a['n_walkers']))} | {a['tau_max_median']:.0f} | "
                  f"**{a['chain_in_tau_max_median']:.1f}** ({a['chain_in_tau_max_range'][0]:.1f}–"
                  f"{a['chain_in_tau_max_range'][1]:.1f}) | {a['draws_median']:.0f} | "
@@ -517,8 +529,9 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--paper-logs", type=int, default=16)
     ap.add_argument("--rich-logs", type=int, default=8)
-    ap.add_argument("--paper-steps", type=int, default=4000)
-    ap.add_argument("--rich-steps", type=int, default=3000)
+    ap.add_argument("--paper-steps", type=int, default=4000,
+                    help="kept steps (paper); negative: adaptive to 50 τ with at most |N| steps")
+    ap.add_argument("--rich-steps", type=int, default=3000, help="as --paper-steps (rich)")
     ap.add_argument("--noise-steps", type=float, default=0.0,
                     help="Gaussian noise before quantization, in encoder counts (default 0)")
     ap.add_argument("--seed0", type=int, default=1000,
@@ -537,6 +550,8 @@ def main(argv=None):
     ap.add_argument("--linear-prior", default="",
                     help="comma-separated parameters with a prior flat in the value "
                          "(default: sample_posterior's LINEAR_PRIOR; 'none' for none)")
+    ap.add_argument("--post", action="append", default=[], metavar="KEY=VALUE",
+                    help="extra sample_posterior keyword (int/float/str), e.g. mixture_split=4")
     ap.add_argument("--interpretation", type=Path,
                     help="markdown file whose text is added as the Interpretation section")
     args = ap.parse_args(argv)
@@ -598,10 +613,19 @@ def main(argv=None):
     from hdid._posterior import LINEAR_PRIOR
 
     post_kwargs = {"likelihood": args.likelihood, "modes": args.modes}
+    for item in args.post:
+        k, _, v = item.partition("=")
+        for conv in (int, float, str):
+            try:
+                post_kwargs[k] = conv(v)
+                break
+            except ValueError:
+                continue
     if args.linear_prior:  # otherwise sample_posterior's default (LINEAR_PRIOR)
         post_kwargs["linear_prior"] = tuple(
             n for n in args.linear_prior.split(",") if n and n != "none")
     res["linear_prior_effective"] = list(post_kwargs.get("linear_prior", LINEAR_PRIOR))
+    res["post_kwargs"] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in post_kwargs.items()}
     for k, (g, i) in enumerate(_schedule(args.paper_logs, args.rich_logs)):
         design, n_steps, s0 = designs[g]
         elapsed = time.perf_counter() - t_script
