@@ -205,8 +205,8 @@ def _workers_run(cfg: dict, warm: list, timed: list, t_imp: float) -> dict:
     """``fit_many`` on a warm LocalCluster of ``cfg['workers']`` single-threaded processes.
 
     First call: start the cluster and fit the 2 warm-up logs on *every* worker (each traces
-    and compiles, or reads the persistent cache). Timed: ``fit_many(client=…)`` with about
-    4 chunks per worker. CPU is the sum over the workers and this process.
+    and compiles, or reads the persistent cache). Timed: ``fit_many(client=…)`` with the
+    chunks ``fit_many(workers=W)`` makes. CPU is the sum over the workers and this process.
     """
     import hdid
     from distributed import Client, LocalCluster
@@ -224,7 +224,10 @@ def _workers_run(cfg: dict, warm: list, timed: list, t_imp: float) -> dict:
         before = client.run(_worker_usage)
         c0 = _cpu()
         t = time.perf_counter()
-        table = hdid.fit_many(timed, client=client, chunk_size=max(1, -(-len(timed) // (4 * W))))
+        from hdid._batch import CHUNKS_PER_WORKER
+
+        chunk = max(1, -(-len(timed) // (CHUNKS_PER_WORKER * W)))  # as fit_many(workers=W)
+        table = hdid.fit_many(timed, client=client, chunk_size=chunk)
         out["total_s"] = time.perf_counter() - t
         after = client.run(_worker_usage)
         out["cpu_s"] = (_cpu() - c0) + sum(after[k][0] - before[k][0] for k in after)
@@ -268,6 +271,10 @@ def measure(args) -> dict:
     res["log_generation_s"] = time.perf_counter() - t
 
     def go(label, mode, n, design="paper", paths=None, **extra):
+        if args.only and not any(label.startswith(o) for o in args.only):
+            return None
+        if args.skip and any(label.startswith(o) for o in args.skip):
+            return None
         paths = paths or make_logs(design, WARMUP + n, log_dir)
         cfg = {"label": label, "mode": mode, "design": design, "paths": paths[: WARMUP + n],
                **extra}
@@ -446,6 +453,11 @@ def write_report(res: dict, out_dir: Path) -> str:
              f"{res['load_start']['load1']:.1f}, at end {res['load_end']['load1']:.1f}: the 2 "
              "cores are shared with other engineers' jobs, so every row gives the 1-min load "
              "before→after it; a load above 2 means hdid got less than the 2 cores.\n")
+    for rr in res.get("reruns", []):
+        L.append(f"Re-measured with `--only {' '.join(repr(o) for o in rr['only'])}` on "
+                 f"{rr['machine']['date']} (src {rr['machine']['src_fingerprint']}, load "
+                 f"{rr['load_start']['load1']:.1f} → {rr['load_end']['load1']:.1f}): those rows "
+                 "replace the first run's.\n")
     L.append("Logs: paper design (4 runs ±0.157 rad, 250 Hz, 0.5 s per run, 125 samples), "
              "truths k1, tau_c, tau_s, c_v drawn log-normal (sd 15 %) around the CSF-8 values, "
              "made with `data/synthetic/generate.py::make_log`. Every configuration runs in a "
@@ -492,7 +504,7 @@ def write_report(res: dict, out_dir: Path) -> str:
     L.append("")
     if wk:
         L.append("Several cores (`fit_many(workers=2)` / `hdid fit --workers 2`): logs are split "
-                 "into about 4 chunks per worker process; the timed call runs on a cluster whose "
+                 "into about 8 chunks per worker process (as `workers=2` does); the timed call runs on a cluster whose "
                  "workers have each fitted 2 logs already (*first call*: cluster start plus every "
                  "worker's trace/compile or cache read).\n")
         L.append("| N logs | wall | logs/s | CPU per log (all processes) | speed-up vs one "
@@ -638,6 +650,12 @@ def main():
     ap.add_argument("--out-dir", type=Path, default=RESULTS)
     ap.add_argument("--render", type=Path)
     ap.add_argument("--worker")
+    ap.add_argument("--only", nargs="+", metavar="LABEL",
+                    help="measure only the configurations whose label starts with one of "
+                         "these (e.g. 'workers 2'), replacing them in --out-dir's JSON")
+    ap.add_argument("--skip", nargs="+", metavar="LABEL",
+                    help="leave out the configurations whose label starts with one of these "
+                         "(to be measured later with --only, e.g. on free cores)")
     args = ap.parse_args()
     if args.worker:
         print(json.dumps(worker(json.loads(args.worker))))
@@ -646,6 +664,15 @@ def main():
         res = json.loads(args.render.read_text())
     else:
         res = measure(args)
+        if args.only:  # merge into the previous full run, replacing rows by label
+            prev = json.loads((args.out_dir / "batch_speed.json").read_text())
+            new = {r["config"]["label"]: r for r in res["runs"]}
+            prev["runs"] = [new.pop(r["config"]["label"], r) for r in prev["runs"]]
+            prev["runs"] += list(new.values())
+            prev.setdefault("reruns", []).append(
+                {"only": args.only, "load_start": res["load_start"], "load_end": res["load_end"],
+                 "machine": res["machine"], "script_s": res["script_s"]})
+            res = prev
         args.out_dir.mkdir(parents=True, exist_ok=True)
         (args.out_dir / "batch_speed.json").write_text(json.dumps(res, indent=2, default=str) + "\n")
     print(write_report(res, args.out_dir))

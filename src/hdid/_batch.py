@@ -10,6 +10,8 @@ from typing import Any
 
 #: Logs per dask task (each worker runs the vectorised batch fit on its chunk).
 DASK_CHUNK = 64
+#: ``workers=N``: the logs are cut into about this many chunks per worker process.
+CHUNKS_PER_WORKER = 8
 
 
 def fit_many(
@@ -100,8 +102,9 @@ def fit_many(
                                  dask_options)
     elif workers > 1 and vectorize:
         with _local_client(workers) as local:
-            # about 4 chunks per worker: balances uneven chunks, keeps transfers few
-            chunk = chunk_size or max(1, -(-len(items) // (4 * workers)))
+            # about 8 chunks per worker: the last chunks finish close together (the idle
+            # tail is at most one chunk), and a chunk is still wide enough for the grid
+            chunk = chunk_size or max(1, -(-len(items) // (CHUNKS_PER_WORKER * workers)))
             rows, timing = _fit_dask(local, items, names, chunk, bar, dask_options)
             timing["workers"] = workers
     elif vectorize:
