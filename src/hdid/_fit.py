@@ -501,6 +501,11 @@ def _lm_lanes(residuals, residuals_and_jacobian, U0, active, max_steps, state: L
     Returns ``(U, cost, done, iterations, state)``.
     """
     L, n = U0.shape
+    # Each function is called at two or three places below; as inner jits they are traced
+    # once each (JAX caches the trace per function), not once per call site — the
+    # stick-exact simulation is the slow part of tracing a cold `hdid fit`.
+    residuals = jax.jit(residuals)
+    residuals_and_jacobian = jax.jit(residuals_and_jacobian)
     max_steps = jnp.broadcast_to(jnp.asarray(max_steps), (L,))
     fresh = state.fresh & active
     R0, J0 = jax.lax.cond(
