@@ -312,9 +312,11 @@ def _packer(problem: Problem, specs):
         ``(L, R)``): the unknown vector(s)."""
         t_release = np.asarray(t_release, dtype=float)
         lead = t_release.shape[:-1]
+        # (…, P) physical part; P = 0 when every physical parameter is fixed
         parts = [np.stack([np.broadcast_to(np.asarray(to_unconstrained(sp, values[n]),
                                                       dtype=float), lead)
-                           for sp, n in zip(spec_list, free)], axis=-1)]
+                           for sp, n in zip(spec_list, free)], axis=-1)
+                 if free else np.zeros(lead + (0,))]
         if release_free:
             parts.append(interval_to_u(t_release, lo, hi))
         parts.append(np.broadcast_to(tail, lead + tail.shape))
