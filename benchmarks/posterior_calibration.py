@@ -346,8 +346,10 @@ def render(res: dict) -> str:
              f"`sample_posterior(fit, n_steps=N, seed=i, likelihood={o.get('likelihood', 'auto')!r}, "
              f"modes={o.get('modes', 'fit')!r}, linear_prior="
              f"{tuple(res.get('linear_prior_effective', ()))!r}"
+             + (f", sample_linear={tuple(res['sample_linear_effective'])!r}"
+                if "sample_linear_effective" in res else "")
              + "".join(f", {k}={v!r}" for k, v in res.get("post_kwargs", {}).items()
-                       if k not in ("likelihood", "modes", "linear_prior"))
+                       if k not in ("likelihood", "modes", "linear_prior", "sample_linear"))
              + ")` "
              f"with the default walkers "
              f"(max(32, 2·D): {', '.join(map(str, agg['pooled']['n_walkers']))}); "
@@ -550,6 +552,9 @@ def main(argv=None):
     ap.add_argument("--linear-prior", default="",
                     help="comma-separated parameters with a prior flat in the value "
                          "(default: sample_posterior's LINEAR_PRIOR; 'none' for none)")
+    ap.add_argument("--sample-linear", default="",
+                    help="comma-separated parameters sampled in their value (default: "
+                         "sample_posterior's SAMPLE_LINEAR; 'none' for the fit's coordinates)")
     ap.add_argument("--post", action="append", default=[], metavar="KEY=VALUE",
                     help="extra sample_posterior keyword (int/float/str), e.g. mixture_split=4")
     ap.add_argument("--interpretation", type=Path,
@@ -610,7 +615,7 @@ def main(argv=None):
     out_json = args.out_dir / "posterior_calibration.json"
     per_design_time: dict[str, list[float]] = {"paper": [], "rich": []}
     budget = 60.0 * args.budget_min
-    from hdid._posterior import LINEAR_PRIOR
+    from hdid._posterior import LINEAR_PRIOR, SAMPLE_LINEAR
 
     post_kwargs = {"likelihood": args.likelihood, "modes": args.modes}
     for item in args.post:
@@ -624,7 +629,11 @@ def main(argv=None):
     if args.linear_prior:  # otherwise sample_posterior's default (LINEAR_PRIOR)
         post_kwargs["linear_prior"] = tuple(
             n for n in args.linear_prior.split(",") if n and n != "none")
+    if args.sample_linear:  # otherwise sample_posterior's default (SAMPLE_LINEAR)
+        post_kwargs["sample_linear"] = tuple(
+            n for n in args.sample_linear.split(",") if n and n != "none")
     res["linear_prior_effective"] = list(post_kwargs.get("linear_prior", LINEAR_PRIOR))
+    res["sample_linear_effective"] = list(post_kwargs.get("sample_linear", SAMPLE_LINEAR))
     res["post_kwargs"] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in post_kwargs.items()}
     for k, (g, i) in enumerate(_schedule(args.paper_logs, args.rich_logs)):
         design, n_steps, s0 = designs[g]

@@ -352,6 +352,13 @@ def measure(args) -> dict:
         fn = batch if vec else (lambda x: float(single_j(jnp.asarray(x))))
         from hdid._posterior import default_moves
 
+        # warm-up, untimed: the moves call the log-prob on sub-ensembles of several sizes
+        # (18 for DE, 9 for the snooker move), and each new size compiles once; a timed
+        # run that includes those compiles measured vectorize=True at 0.5× (2026-11-22).
+        warm = emcee.EnsembleSampler(W, D, fn, vectorize=vec, moves=default_moves())
+        warm.run_mcmc(emcee.State(pos.copy(), log_prob=lp0.copy(),
+                                  random_state=np.random.RandomState(8).get_state()),
+                      50, skip_initial_state_check=True)
         sampler = emcee.EnsembleSampler(W, D, fn, vectorize=vec, moves=default_moves())
         state = emcee.State(pos.copy(), log_prob=lp0.copy(),
                             random_state=np.random.RandomState(7).get_state())

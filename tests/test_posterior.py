@@ -58,6 +58,31 @@ def test_vectorised_log_prob_equals_per_walker(fit):
     assert np.all(np.isfinite(batch))
 
 
+def test_value_coordinates_carry_the_jacobian(fit):
+    """Sampling k1, k2, tau_c, c_v in their value (``sample_linear``) changes the
+    coordinates, not the posterior: ``log p_y(y) = log p_u(u) + log|du/dy|`` with
+    ``u = centre + log y``, exactly (same floating-point path up to rounding); the
+    conversions are inverse; a non-positive value has zero density."""
+    prob = fit.problem
+    names = ("k1", "k2", "tau_c", "c_v")
+    mask = jnp.asarray([1.0 if n in names else 0.0 for n in prob.free])
+    kw = dict(problem=prob, centre=jnp.asarray(fit.u), temper=jnp.asarray(1.0), quantized=False,
+              quant_var=float(prob.step) ** 2 / 12)
+    lp_u = LogPosterior(**kw)
+    lp_y = LogPosterior(**kw, sample_linear=mask)
+    rng = np.random.default_rng(1)
+    x0 = np.concatenate([fit.u, [np.log(0.3 * fit.resolution_rad)]])
+    U = x0 + 0.02 * rng.standard_normal((5, x0.size))
+    Y = lp_y.to_sampled_np(U)
+    np.testing.assert_allclose(lp_y.from_sampled_np(Y), U, rtol=0, atol=1e-12)
+    on = np.flatnonzero(np.asarray(mask) > 0)
+    assert on.size == 4 and np.all(Y[:, on] > 0) and np.allclose(Y[:, ~np.isin(np.arange(x0.size), on)], np.delete(U, on, axis=1))
+    want = np.asarray(lp_u.batch(jnp.asarray(U))) - np.sum(np.log(Y[:, on]), axis=1)
+    np.testing.assert_allclose(np.asarray(lp_y.batch(jnp.asarray(Y))), want, rtol=1e-11)
+    Y[0, on[0]] = -Y[0, on[0]]
+    assert np.asarray(lp_y.batch(jnp.asarray(Y)))[0] == -np.inf
+
+
 @pytest.fixture(scope="module")
 def modes(fit):
     return find_modes(fit, n_random=2)
@@ -78,6 +103,33 @@ def test_short_chain_is_reproducible_and_summarised(fit, modes):
     # the walkers started from the optima find_modes kept; their shares are reported
     assert len(a.modes) >= 1 and a.mode_share.sum() == pytest.approx(1.0)
     assert len(s["posterior_diagnostics"]["modes"]) == len(a.modes)
+
+
+def test_moves_factory_gets_the_log_posterior_and_burn_in_hook_is_called(fit, modes):
+    """``moves=`` may be a factory ``(log_posterior, proposal) -> moves`` (for moves that
+    need the density's internals, e.g. gradients); a move's ``burn_in_update`` is called
+    after each burn-in stage with its acceptance and the stage's draws, never later."""
+    import emcee
+
+    from hdid._posterior import BURN_IN_STAGES
+
+    seen = {"updates": []}
+
+    class Recording(emcee.moves.DEMove):
+        def burn_in_update(self, rate, draws):
+            seen["updates"].append((rate, np.shape(draws)))
+
+    def factory(lp, proposal):
+        seen["lp"] = lp
+        return [Recording()]
+
+    burn = 40 * BURN_IN_STAGES
+    post = sample_posterior(fit, n_steps=30, burn_in=burn, seed=1, modes=modes, moves=factory)
+    assert isinstance(seen["lp"], LogPosterior) and seen["lp"].ndim == post.chain.shape[2]
+    assert len(seen["updates"]) == BURN_IN_STAGES
+    for rate, shape in seen["updates"]:
+        assert 0.0 <= rate <= 1.0 and shape[1] == post.chain.shape[2]
+    assert post.chain.shape[0] == 30
 
 
 def test_too_short_chain_does_not_crash(fit, modes):

@@ -32,7 +32,9 @@ Priors (documented defaults, all in the sampled space):
 ``likelihood="gaussian"`` is the same as ``"auto"``: the ``q²/12`` term is added whenever
 the encoder step is known (``fit.resolution_known``), and left out otherwise.
 
-Sampling: emcee. :func:`find_modes` restarts the local fit around the least-squares optimum
+Sampling: emcee, in the fit's coordinates except that ``SAMPLE_LINEAR`` parameters (k1,
+k2, τ_c, c_v) are moved in their value, where the data's constraints are straight lines
+(the density carries the Jacobian). :func:`find_modes` restarts the local fit around the least-squares optimum
 and keeps every distinct optimum with its Laplace mass; walkers start spread over them, and
 the moves (:func:`default_moves`) are differential evolution plus an independence
 Metropolis–Hastings proposal from a t-mixture over the modes (:class:`MixtureProposal`,
@@ -73,6 +75,14 @@ SIGMA_BOUNDS = (0.05, 20.0)
 #: on the paper design that volume, not the data, pulled the posterior to k2 → 0 and a
 #: 92 mrad band (benchmarks/results/posterior_calibration.md).
 LINEAR_PRIOR = ("k2", "c_v")
+#: Log-transformed parameters that are *sampled* in their value (relative to the
+#: least-squares one) instead of their log. The data fix sums such as the stiffness torque
+#: ``k1·d + k2·d³`` over the twists seen and the friction ``τ_c + c_v·v`` over the speeds
+#: seen: straight lines in the values, bananas in their logs (k1–k2, τ_c–c_v on the paper
+#: design), and emcee's affine-invariant moves only straighten straight lines. The target
+#: density carries the Jacobian, so this changes the mixing, not the posterior
+#: (benchmarks/results/posterior_coordinates.md).
+SAMPLE_LINEAR = ("k1", "k2", "tau_c", "c_v")
 #: Walkers start from each mode's Laplace approximation at this multiple of its width.
 START_SCALE = 1.0
 #: The burn-in is run in this many stages, the proposal adapted after each.
@@ -109,14 +119,58 @@ class LogPosterior(eqx.Module):
     quant_var: float = 0.0
     #: 1.0 at log-transformed parameters whose prior is flat in the value, not its log
     linear_prior: jax.Array | None = None
+    #: 1.0 at log-transformed parameters *sampled* in their value relative to the
+    #: least-squares one (``y = exp(u − centre)``, see ``SAMPLE_LINEAR``); ``None``: the
+    #: sampled vector is ``u`` itself
+    sample_linear: jax.Array | None = None
 
     @property
     def ndim(self) -> int:
         return self.problem.n_unknowns + 1
 
+    def to_u(self, x):
+        """``(u, log|du/dy|, inside)`` of one sampled vector's unknowns (JAX)."""
+        u = x[:-1]
+        m = self.sample_linear
+        if m is None:
+            return u, 0.0, True
+        P = m.shape[0]
+        y = u[:P]
+        on = m > 0
+        safe = jnp.where(on & (y > 0), y, 1.0)
+        uP = jnp.where(on, self.centre[:P] + jnp.log(safe), y)
+        return u.at[:P].set(uP), -jnp.sum(jnp.where(on, jnp.log(safe), 0.0)), ~jnp.any(on & (y <= 0))
+
+    def to_sampled_np(self, U):
+        """Sampled coordinates of unknowns ``U`` ``(..., n_unknowns + 1)`` (NumPy)."""
+        X = np.array(U, dtype=float)
+        if self.sample_linear is not None:
+            on = np.flatnonzero(np.asarray(self.sample_linear) > 0)
+            X[..., on] = np.exp(X[..., on] - np.asarray(self.centre)[on])
+        return X
+
+    def from_sampled_np(self, X):
+        """Inverse of :meth:`to_sampled_np` (NumPy)."""
+        U = np.array(X, dtype=float)
+        if self.sample_linear is not None:
+            on = np.flatnonzero(np.asarray(self.sample_linear) > 0)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                U[..., on] = np.asarray(self.centre)[on] + np.log(U[..., on])
+        return U
+
+    def sampled_cov_np(self, u, cov):
+        """Covariance ``cov`` of ``u`` carried to the sampled coordinates at ``u`` (linearised)."""
+        if self.sample_linear is None:
+            return np.asarray(cov, dtype=float)
+        d = np.ones(len(u))
+        on = np.flatnonzero(np.asarray(self.sample_linear) > 0)
+        d[on] = np.exp(np.asarray(u)[on] - np.asarray(self.centre)[on])
+        return d[:, None] * np.asarray(cov, dtype=float) * d[None, :]
+
     def log_prob(self, x):
         p = self.problem
-        u, log_sigma = x[:-1], x[-1]
+        u, log_jac, inside = self.to_u(x)
+        log_sigma = x[-1]
         q = p.step
         sigma = jnp.exp(log_sigma)
         lp = self._log_prior(u, log_sigma)
@@ -130,8 +184,8 @@ class LogPosterior(eqx.Module):
             var = sigma**2 + self.quant_var
             z2 = (p.theta - pred) ** 2 / var
             ll = -0.5 * z2 - 0.5 * jnp.log(2 * jnp.pi * var)
-        total = lp + self.temper * jnp.sum(w2 * ll)
-        return jnp.where(jnp.isfinite(total) & jnp.isfinite(lp), total, -jnp.inf)
+        total = lp + self.temper * jnp.sum(w2 * ll) + log_jac
+        return jnp.where(jnp.isfinite(total) & jnp.isfinite(lp) & inside, total, -jnp.inf)
 
     def _log_prior(self, u, log_sigma):
         p = self.problem
@@ -771,6 +825,7 @@ def sample_posterior(
     sigma_floor: float | None = None,
     modes="auto",
     linear_prior: tuple[str, ...] = LINEAR_PRIOR,
+    sample_linear: tuple[str, ...] = SAMPLE_LINEAR,
 ) -> PosteriorResult:
     """Run emcee from the least-squares optimum (or optima) of ``fit``.
 
@@ -808,11 +863,21 @@ def sample_posterior(
         ``"interval"`` (quantization-aware), ``"gaussian"`` or ``"auto"`` (Gaussian with
         the ``q²/12`` rounding variance added when the encoder step is known).
     moves:
-        emcee moves; default :func:`default_moves` with the mixture proposal.
+        emcee moves (a move, a list of moves or of ``(move, weight)``), or a callable
+        ``(log_posterior, proposal) -> moves`` for moves that need the
+        :class:`LogPosterior` itself; default :func:`default_moves` with the mixture
+        proposal. A move with a ``burn_in_update(acceptance, draws)`` method is given its
+        acceptance rate and the stage's draws after each burn-in stage (to tune itself;
+        never during the kept chain).
     sigma_floor:
         Lower bound of the noise prior in encoder steps (default ``SIGMA_BOUNDS[0]``).
     modes:
         ``"auto"``, ``"fit"`` or a list of :class:`Mode` (see above).
+    sample_linear:
+        Log-transformed parameters the walkers move in the *value* of (relative to the
+        least-squares value) rather than its log; the density carries the Jacobian, so
+        only the mixing changes (default ``SAMPLE_LINEAR``; ``()`` for the fit's own
+        coordinates). The returned chain and draws are in the fit's coordinates either way.
     """
     import emcee
 
@@ -837,9 +902,12 @@ def sample_posterior(
     specs = prob.base.parameter_specs()
     lin = np.array([1.0 if (n in linear_prior and specs[n].transform == "log") else 0.0
                     for n in prob.free])
+    samp = np.array([1.0 if (n in sample_linear and specs[n].transform == "log") else 0.0
+                     for n in prob.free])
     lp = LogPosterior(problem=prob, centre=centre, temper=jnp.asarray(temper),
                       quantized=quantized, sigma_bounds=bounds, quant_var=quant_var,
-                      linear_prior=jnp.asarray(lin) if lin.any() else None)
+                      linear_prior=jnp.asarray(lin) if lin.any() else None,
+                      sample_linear=jnp.asarray(samp) if samp.any() else None)
     D = lp.ndim
     W = n_walkers or max(32, 2 * D)
     if W < 2 * D:
@@ -873,20 +941,26 @@ def sample_posterior(
         m.weight = float(wi)
     log_lo = math.log(bounds[0] * q)
     log_rms = math.log(max(fit.rms_residual_rad, bounds[0] * q))
-    P0, lp0 = _mode_start(found, log_prob, W, rng, log_lo + 0.05, log_rms)
+    P0, lp0 = _mode_start(found, lambda U: log_prob(lp.to_sampled_np(U)), W, rng,
+                          log_lo + 0.05, log_rms)
+    P0 = lp.to_sampled_np(P0)
     if not np.all(np.isfinite(lp0)):
         raise RuntimeError("could not place the walkers where the posterior is positive")
 
     # Independence proposal: one t component per mode; log σ_n from the start spread.
     s_mid, s_sd = 0.5 * (log_lo + max(log_rms, log_lo + 0.5)), 0.6
-    means = np.array([np.concatenate([m.u, [s_mid]]) for m in found])
+    means = lp.to_sampled_np(np.array([np.concatenate([m.u, [s_mid]]) for m in found]))
     covs = np.zeros((len(found), D, D))
     for k, m in enumerate(found):
-        covs[k, :-1, :-1] = START_SCALE**2 * m.cov
+        covs[k, :-1, :-1] = lp.sampled_cov_np(m.u, START_SCALE**2 * m.cov)
         covs[k, -1, -1] = s_sd**2
     laplace_mix = MixtureProposal(means, covs, [m.weight for m in found])
     proposal = _Adaptive(laplace_mix)
-    moves = default_moves(proposal) if moves is None else moves
+    if moves is None:
+        moves = default_moves(proposal)
+    elif callable(moves) and not hasattr(moves, "propose"):
+        # a factory for moves that need the log-posterior itself (e.g. gradient-based)
+        moves = moves(lp, proposal)
     if not isinstance(moves, list):
         moves = [(moves, 1.0)]
     moves = [m if isinstance(m, tuple) else (m, 1.0) for m in moves]
@@ -912,6 +986,8 @@ def sample_posterior(
             proposal.mix = proposal.mix.refit(burn_chain)
             for m, _ in counted:
                 inner = m.move
+                if hasattr(inner, "burn_in_update") and m.proposed > 0:
+                    inner.burn_in_update(m.rate, burn_chain)
                 if (isinstance(inner, emcee.moves.DEMove) and inner.gamma0 != 1.0
                         and m.proposed > 0):
                     g = inner.gamma0 if inner.gamma0 is not None else 2.38 / math.sqrt(2 * D)
@@ -968,11 +1044,12 @@ def sample_posterior(
         )
     burn = 0
     thin = max(1, int(tau_max / 2))
-    chain = sampler.get_chain()
-    draws = sampler.get_chain(discard=burn, thin=thin, flat=True)
+    chain_s = sampler.get_chain()  # sampled coordinates
+    chain = lp.from_sampled_np(chain_s)  # the fit's unknowns u (+ log σ_n)
+    draws = lp.from_sampled_np(sampler.get_chain(discard=burn, thin=thin, flat=True))
     # Share of the kept draws in each mode: the mode whose (weighted) Laplace density is
     # highest at the draw (the adapted mixture's components drift, so not those).
-    comp = np.argmax(laplace_mix.component_logpdf(chain.reshape(-1, D)), axis=1)
+    comp = np.argmax(laplace_mix.component_logpdf(chain_s.reshape(-1, D)), axis=1)
     share = np.bincount(comp, minlength=len(found)) / comp.size
     if len(found) > 1:
         warnings.append(
@@ -984,8 +1061,8 @@ def sample_posterior(
         )
     # A chain that climbs well above the best mode found has found yet another one.
     grid = np.linspace(log_lo, max(log_rms, log_lo + math.log(2.0)) + 1.0, 25)
-    ref = max(float(np.max(log_prob(np.column_stack([np.tile(m.u, (grid.size, 1)), grid]))))
-              for m in found)
+    ref = max(float(np.max(log_prob(lp.to_sampled_np(
+        np.column_stack([np.tile(m.u, (grid.size, 1)), grid]))))) for m in found)
     best = float(np.max(sampler.get_log_prob()))
     if best > ref + MODE_GAP:
         warnings.append(
