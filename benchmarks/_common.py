@@ -37,3 +37,26 @@ def cpu_model() -> str:
     except OSError:
         pass
     return cpu
+
+
+RESULTS = ROOT / "benchmarks" / "results"
+
+
+def rerender(name: str, render, interpretation: str | None = None) -> int:
+    """Re-write ``results/<name>.md`` from ``results/<name>.json`` (``--render``), first
+    storing the text of the file ``interpretation`` in the JSON when given."""
+    import json
+
+    out_json = RESULTS / f"{name}.json"
+    res = json.loads(out_json.read_text())
+    if interpretation:
+        res["interpretation"] = Path(interpretation).read_text()
+        out_json.write_text(json.dumps(res, indent=2) + "\n")
+    (RESULTS / f"{name}.md").write_text(render(res))
+    return 0
+
+
+def interpretation_section(res: dict) -> list[str]:
+    """Markdown lines of the hand-written interpretation stored in ``res``, if any."""
+    text = res.get("interpretation")
+    return ["## Interpretation", "", text, ""] if text else []

@@ -82,8 +82,7 @@ def render(res):
                 f"{v['ci95']['k2'][0]:.3g}–{v['ci95']['k2'][1]:.3g} | {v['ci95']['c_v'][0]:.3g}–{v['ci95']['c_v'][1]:.3g} | "
                 f"{1e3 * v['ci95']['stick_band_halfwidth_rad'][0]:.1f}–{1e3 * v['ci95']['stick_band_halfwidth_rad'][1]:.1f} | {v['load']} |")
         L.append("")
-    if res.get("interpretation"):
-        L += ["## Interpretation", "", res["interpretation"], ""]
+    L += _common.interpretation_section(res)
     return "\n".join(L)
 
 
@@ -96,12 +95,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     out_json = RESULTS / "posterior_coordinates.json"
     if args.render:
-        res = json.loads(out_json.read_text())
-        if args.interpretation:
-            res["interpretation"] = open(args.interpretation).read()
-            out_json.write_text(json.dumps(res, indent=2) + "\n")
-        (RESULTS / "posterior_coordinates.md").write_text(render(res))
-        return 0
+        return _common.rerender("posterior_coordinates", render, args.interpretation)
     import emcee
     from hdid._posterior import find_modes, sample_posterior
 

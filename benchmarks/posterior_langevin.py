@@ -413,9 +413,8 @@ def render(res):
         for h, ev in row["eig"].items():
             L.append(f"| {row['cost']:.2f} | {row['weight']:.2f} | {h} | "
                      + ", ".join(f"{e:.3g}" for e in ev[:3]) + " | " + ", ".join(f"{e:.3g}" for e in ev[-3:]) + " |")
-    if res.get("interpretation"):
-        L += ["", "## Interpretation", "", res["interpretation"]]
-    return "\n".join(L) + "\n"
+    L += ([""] + _common.interpretation_section(res)) if res.get("interpretation") else [""]
+    return "\n".join(L)
 
 
 def main(argv=None):
@@ -431,12 +430,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     out_json = RESULTS / "posterior_langevin.json"
     if args.render:
-        res = json.loads(out_json.read_text())
-        if args.interpretation:
-            res["interpretation"] = open(args.interpretation).read()
-            out_json.write_text(json.dumps(res, indent=2) + "\n")
-        (RESULTS / "posterior_langevin.md").write_text(render(res))
-        return 0
+        return _common.rerender("posterior_langevin", render, args.interpretation)
     T0 = time.perf_counter()
     import hdid
     from hdid._posterior import find_modes, sample_posterior

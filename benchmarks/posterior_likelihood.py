@@ -185,8 +185,7 @@ def render(res):
         L.append(f"| {name} | {np.median(d2):.2f} | {np.max(d2):.2f} | {int(np.sum(d2 > 14.07))}/{d2.size} "
                  f"| {int(np.sum(d2 > 6.35))}/{d2.size} |")
     L.append("")
-    if res.get("interpretation"):
-        L += ["## Interpretation", "", res["interpretation"], ""]
+    L += _common.interpretation_section(res)
     return "\n".join(L)
 
 
@@ -199,12 +198,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     out_json = RESULTS / "posterior_likelihood.json"
     if args.render:
-        res = json.loads(out_json.read_text())
-        if args.interpretation:
-            res["interpretation"] = open(args.interpretation).read()
-            out_json.write_text(json.dumps(res, indent=2) + "\n")
-        (RESULTS / "posterior_likelihood.md").write_text(render(res))
-        return 0
+        return _common.rerender("posterior_likelihood", render, args.interpretation)
     gen = _common.import_generate()
     t0 = time.perf_counter()
     res = {"generated": _dt.datetime.now().isoformat(timespec="seconds"),

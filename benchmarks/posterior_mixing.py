@@ -72,8 +72,7 @@ def render(res):
         L.append(f"| {v['name']} | " + " | ".join(f"{v['tau'][p]:.0f}" for p in PHYS)
                  + f" | {v['tau']['log_noise_sigma']:.0f} |")
     L.append("")
-    if res.get("interpretation"):
-        L += ["## Interpretation", "", res["interpretation"], ""]
+    L += _common.interpretation_section(res)
     return "\n".join(L)
 
 
@@ -90,12 +89,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     out_json = RESULTS / f"{args.out}.json"
     if args.render:
-        res = json.loads(out_json.read_text())
-        if args.interpretation:
-            res["interpretation"] = open(args.interpretation).read()
-            out_json.write_text(json.dumps(res, indent=2) + "\n")
-        (RESULTS / f"{args.out}.md").write_text(render(res))
-        return 0
+        return _common.rerender(args.out, render, args.interpretation)
     import hdid
     from hdid._posterior import find_modes, sample_posterior
 
