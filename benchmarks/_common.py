@@ -60,3 +60,11 @@ def interpretation_section(res: dict) -> list[str]:
     """Markdown lines of the hand-written interpretation stored in ``res``, if any."""
     text = res.get("interpretation")
     return ["## Interpretation", "", text, ""] if text else []
+
+
+def add_render_args(ap) -> None:
+    """``--render`` (re-write the markdown from the stored JSON, no run) and
+    ``--interpretation FILE`` (hand-written text stored with it), as :func:`rerender` uses."""
+    ap.add_argument("--render", action="store_true",
+                    help="re-write the markdown from the stored JSON instead of running")
+    ap.add_argument("--interpretation", help="markdown file stored as the Interpretation section")

@@ -90,8 +90,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--steps", type=int, default=6000)
     ap.add_argument("--seeds", default="1002,1007")
-    ap.add_argument("--render", action="store_true")
-    ap.add_argument("--interpretation")
+    _common.add_render_args(ap)
     args = ap.parse_args(argv)
     out_json = RESULTS / "posterior_coordinates.json"
     if args.render:

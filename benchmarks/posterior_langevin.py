@@ -425,8 +425,7 @@ def main(argv=None):
     ap.add_argument("--leapfrog", type=int, default=16)
     ap.add_argument("--hmc-steps", type=int, default=300)
     ap.add_argument("--hmc-burn", type=int, default=200)
-    ap.add_argument("--render", action="store_true")
-    ap.add_argument("--interpretation")
+    _common.add_render_args(ap)
     args = ap.parse_args(argv)
     out_json = RESULTS / "posterior_langevin.json"
     if args.render:

@@ -193,8 +193,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--logs", type=int, default=20)
     ap.add_argument("--seed0", type=int, default=1000)
-    ap.add_argument("--render", action="store_true")
-    ap.add_argument("--interpretation", type=str)
+    _common.add_render_args(ap)
     args = ap.parse_args(argv)
     out_json = RESULTS / "posterior_likelihood.json"
     if args.render:

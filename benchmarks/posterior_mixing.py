@@ -83,8 +83,7 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--variant", action="append", default=[])
     ap.add_argument("--append", action="store_true")
-    ap.add_argument("--render", action="store_true")
-    ap.add_argument("--interpretation")
+    _common.add_render_args(ap)
     ap.add_argument("--out", default="posterior_mixing")
     args = ap.parse_args(argv)
     out_json = RESULTS / f"{args.out}.json"
