@@ -48,14 +48,26 @@ def fit():
 
 
 def test_vectorised_log_prob_equals_per_walker(fit):
-    lp = LogPosterior(problem=fit.problem, centre=jnp.asarray(fit.u), temper=jnp.asarray(1.0), quantized=True)
+    """The batch simulates all walkers' runs in one loop (``Problem.predict_many``), the
+    single call one walker's: same density to rounding. Walkers 0.05 apart in ``u`` stick
+    at other samples than the fit (so the shared loop's event branch mixes lanes that
+    stick and lanes that slide); one sits outside the prior box and must get −inf,
+    not disturb the others."""
     rng = np.random.default_rng(0)
     x0 = np.concatenate([fit.u, [np.log(0.3 * fit.resolution_rad)]])
-    X = x0 + 1e-3 * rng.standard_normal((6, x0.size))
-    batch = np.asarray(lp.batch(jnp.asarray(X)))
-    single = np.array([float(lp.log_prob(jnp.asarray(x))) for x in X])
-    np.testing.assert_allclose(batch, single, rtol=1e-12)
-    assert np.all(np.isfinite(batch))
+    X = x0 + np.repeat([1e-3, 0.05], 4)[:, None] * rng.standard_normal((8, x0.size))
+    X[-1, 0] += 10.0  # k1 × e¹⁰: outside the ±7 prior box (and a stiff, unstable lane)
+    for quantized in (True, False):
+        lp = LogPosterior(problem=fit.problem, centre=jnp.asarray(fit.u), temper=jnp.asarray(1.0),
+                          quantized=quantized, quant_var=0.0 if quantized else float(fit.problem.step) ** 2 / 12)
+        batch = np.asarray(lp.batch(jnp.asarray(X)))
+        single = np.array([float(lp.log_prob(jnp.asarray(x))) for x in X])
+        # rounding: residuals agree to ~1e-13 rad against a log-density of ~200
+        np.testing.assert_allclose(batch[:-1], single[:-1], rtol=1e-11)
+        assert np.all(np.isfinite(batch[:-1])) and batch[-1] == single[-1] == -np.inf
+    pred = np.asarray(fit.problem.predict_many(jnp.asarray(X[:-1, :-1])))
+    for x, p in zip(X[:-1], pred):
+        np.testing.assert_allclose(p, np.asarray(fit.problem.predict(jnp.asarray(x[:-1]))), rtol=0, atol=1e-12)
 
 
 def test_value_coordinates_carry_the_jacobian(fit):
@@ -130,6 +142,21 @@ def test_moves_factory_gets_the_log_posterior_and_burn_in_hook_is_called(fit, mo
     for rate, shape in seen["updates"]:
         assert 0.0 <= rate <= 1.0 and shape[1] == post.chain.shape[2]
     assert post.chain.shape[0] == 30
+
+
+def test_pilot_start_weighs_modes_and_starts_on_the_posterior(fit, modes):
+    """``pilot_steps``: one short chain per optimum, masses by importance sampling. The
+    masses are a distribution over the optima, every optimum keeps at least the floor
+    share, the walkers start where the density is finite, and the result reports them."""
+    post = sample_posterior(fit, n_steps=20, burn_in=0, seed=2, modes=modes, pilot_steps=20)
+    W = post.chain.shape[1]
+    mass = np.array([m.pilot_mass for m in post.modes])
+    assert mass.sum() == pytest.approx(1.0) and np.all(mass >= 0.5 / W / (1 + 0.5 * len(mass) / W))
+    assert post.pilot_ess is not None and post.pilot_ess >= 1.0
+    assert np.all(np.isfinite(post.chain[0]))
+    d = post.to_dict()["posterior_diagnostics"]
+    assert d["pilot_importance_ess"] == post.pilot_ess
+    assert [m["pilot_mass"] for m in d["modes"]] == list(mass)
 
 
 def test_too_short_chain_does_not_crash(fit, modes):

@@ -168,13 +168,17 @@ class LogPosterior(eqx.Module):
         return d[:, None] * np.asarray(cov, dtype=float) * d[None, :]
 
     def log_prob(self, x):
+        """Log-posterior of one sampled vector ``x`` (unknowns, then ``log σ_n``)."""
+        return self._log_prob_given(x, self.problem.predict(self.to_u(x)[0]))
+
+    def _log_prob_given(self, x, pred):
+        """Log-posterior of ``x`` given its predicted readings ``pred`` ``(R, T)``."""
         p = self.problem
         u, log_jac, inside = self.to_u(x)
         log_sigma = x[-1]
         q = p.step
         sigma = jnp.exp(log_sigma)
         lp = self._log_prior(u, log_sigma)
-        pred = p.predict(u)
         w2 = p.weight**2
         if self.quantized:
             ll = _log_interval(p.theta, pred, 0.5 * q, sigma)
@@ -208,9 +212,21 @@ class LogPosterior(eqx.Module):
         outside |= jnp.any(jnp.abs(u[i : i + R] - self.centre[i : i + R]) > 5.0)
         return jnp.where(outside, -jnp.inf, lp)
 
-    @eqx.filter_jit
     def batch(self, X):
-        return jax.vmap(self.log_prob)(X)
+        """:meth:`log_prob` of every row of ``X`` ``(W, D)`` (NumPy or JAX); the walkers'
+        runs are simulated in one loop (:meth:`Problem.predict_many`), not by ``vmap``."""
+        return _batch_jit(self, X)
+
+
+def _batch(lp: LogPosterior, X):
+    U = jax.vmap(lambda x: lp.to_u(x)[0])(X)
+    return jax.vmap(lp._log_prob_given)(X, lp.problem.predict_many(U))
+
+
+# Plain jax.jit, not eqx.filter_jit: every leaf of a LogPosterior is an array or a float,
+# and jax.jit's dispatch is 0.2 ms faster per call (0.54 vs 0.74 ms for 18 walkers), a
+# fifth of the call at emcee's two calls per step.
+_batch_jit = jax.jit(_batch)
 
 
 @eqx.filter_jit
@@ -252,6 +268,8 @@ class PosteriorResult:
     mode_search_s: float = 0.0
     move_acceptance: dict = field(default_factory=dict)  # per move, kept chain only
     n_components: int = 0                    # components of the adapted mixture proposal
+    pilot_ess: float | None = None           # ESS of the pilot's importance weights
+    pilot_s: float = 0.0                     # wall time of the pilot chains
 
     def summary(self) -> dict[str, dict[str, Any]]:
         """Median and central 68 % / 95 % intervals of every parameter and derived quantity."""
@@ -284,6 +302,7 @@ class PosteriorResult:
                 "move_acceptance": dict(self.move_acceptance),
                 "tau_max_emcee": (float(np.nanmax(self.tau_emcee))
                                   if self.tau_emcee is not None else None),
+                "pilot_importance_ess": self.pilot_ess,
                 "modes": [
                     {**m.to_dict(), "share_of_draws": (float(self.mode_share[i])
                                                       if self.mode_share is not None else None)}
@@ -436,10 +455,13 @@ class Mode:
     log_evidence: float      # −cost/2 + ½ log det(2π cov): relative Laplace mass
     weight: float = 1.0      # normalised share of the posterior mass (Laplace)
     values: dict[str, float] = field(default_factory=dict)
+    #: share of the posterior mass estimated by importance sampling from the pilot
+    #: chains (:func:`sample_posterior`); ``None`` without a pilot
+    pilot_mass: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"cost": self.cost, "weight": self.weight, "log_evidence": self.log_evidence,
-                "values": dict(self.values)}
+                "pilot_mass": self.pilot_mass, "values": dict(self.values)}
 
 
 @eqx.filter_jit
@@ -737,6 +759,99 @@ def _mode_start(modes, lp_batch, W, rng, sigma_lo, sigma_hi, scale=START_SCALE):
     return P0, lp0
 
 
+#: Steps of the per-mode pilot chains (:func:`_pilot`, ``sample_posterior(pilot_steps=)``)
+#: as benchmarked; not the default (0): on 4 paper-design logs × 2 sampler seeds the pooled
+#: τ went up as often as down (benchmarks/results/posterior_pilot.md).
+PILOT_STEPS = 200
+#: Draws from the pilot mixture used to estimate the modes' masses by importance sampling.
+PILOT_IS_DRAWS = 4000
+
+
+@dataclass
+class _Pilot:
+    mixture: MixtureProposal   # one t component per mode, fitted to its pilot chain
+    start: np.ndarray          # (W, D) walkers, sampled coordinates
+    start_log_prob: np.ndarray
+    mass: np.ndarray           # importance-sampling share of the posterior per mode
+    ess: float                 # effective sample size of those importance weights
+    kept: list                 # indices of the modes a pilot could start in
+
+
+def _pilot(modes, log_prob, lp, W, rng, seed, steps, sigma_lo, sigma_hi,
+           n_is: int = PILOT_IS_DRAWS) -> _Pilot:
+    """Local chains in each mode, a mixture fitted to them, the modes' masses by
+    importance sampling from it, and start walkers drawn from the pilots in proportion.
+
+    Why: a Gauss–Newton Laplace approximation at an optimum on a kink of the cost (where a
+    run's stick sample changes) can be far too wide or too narrow, and its evidence off by
+    orders of magnitude. On the shipped paper log the optimum at cost 13.0 got a Laplace
+    weight of 0.07 and no draws at all, while chains started in it sit 6.7 higher in
+    log p than the main chain (benchmarks/results/posterior_pilot.md). Each pilot is an
+    ensemble of ``W`` walkers started from one mode's Laplace approximation and moved by
+    differential evolution alone for ``steps`` steps (the first half discarded, stranded
+    walkers re-seeded after it); its draws give that component's mean and covariance.
+    The masses ``Z_k`` come from ``n_is`` draws of the equal-weight mixture, each importance
+    weight ``p(x)/q(x)`` shared among the components by their responsibility for ``x``.
+    The main chain's independence move corrects any error in these exactly: they set
+    where the walkers start and how often each mode is proposed, not the posterior.
+    """
+    import emcee
+
+    D = lp.ndim
+    means, covs, ends, end_lp, kept = [], [], [], [], []
+    for k, m in enumerate(modes):
+        U0, l0 = _mode_start([replace(m, weight=1.0)], lambda U: log_prob(lp.to_sampled_np(U)),
+                             W, rng, sigma_lo, sigma_hi)
+        if not np.all(np.isfinite(l0)):
+            continue
+        sampler = emcee.EnsembleSampler(
+            W, D, log_prob, vectorize=True,
+            moves=[(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)])
+        state = emcee.State(lp.to_sampled_np(U0), log_prob=l0,
+                            random_state=np.random.RandomState(seed + 1 + k).get_state())
+        state = sampler.run_mcmc(state, steps // 2, skip_initial_state_check=True)
+        state, nr = _reset_outliers(state, rng, D)
+        if nr:
+            state.log_prob = log_prob(state.coords)
+        sampler.reset()
+        state = sampler.run_mcmc(state, steps - steps // 2, skip_initial_state_check=True)
+        X = sampler.get_chain(flat=True)
+        means.append(X.mean(axis=0))
+        covs.append(np.cov(X, rowvar=False) + 1e-12 * np.eye(D))
+        ends.append(np.asarray(state.coords))
+        end_lp.append(np.asarray(state.log_prob))
+        kept.append(k)
+    K = len(means)
+    if K == 0:
+        raise RuntimeError("could not place the walkers where the posterior is positive")
+    mix = MixtureProposal(np.array(means), np.array(covs), np.full(K, 1.0 / K))
+    X = mix.sample(n_is, np.random.RandomState(seed))
+    n_is = W * max(1, n_is // W)  # whole batches of W: the log-posterior's compiled shape
+    X = X[:n_is]
+    lw = np.concatenate([log_prob(X[i : i + W]) for i in range(0, n_is, W)]) - mix.logpdf(X)
+    c = mix.component_logpdf(X)
+    resp = np.exp(c - c.max(axis=1, keepdims=True))
+    resp /= resp.sum(axis=1, keepdims=True)
+    ok = np.isfinite(lw)
+    w = np.where(ok, np.exp(lw - np.max(lw[ok])), 0.0) if ok.any() else np.zeros(n_is)
+    mass = (w[:, None] * resp).sum(axis=0)
+    ess = float(w.sum() ** 2 / np.sum(w**2)) if w.sum() > 0 else 0.0
+    # every mode keeps a floor share (a noisy estimate must not switch a mode off)
+    mass = np.clip(mass / mass.sum(), 0.5 / W, None) if mass.sum() > 0 else np.full(K, 1.0 / K)
+    mass /= mass.sum()
+    mix = MixtureProposal(np.array(means), np.array(covs), mass)
+    # start: walkers from each pilot's last positions, as many as its mass asks for
+    share = mass * W
+    n = np.floor(share).astype(int)
+    while n.sum() < W:
+        n[int(np.argmax(share - n))] += 1
+    rows = [rng.choice(W, size=nk, replace=False) for nk in n]
+    start = np.concatenate([ends[k][r] for k, r in enumerate(rows)])
+    start_lp = np.concatenate([end_lp[k][r] for k, r in enumerate(rows)])
+    return _Pilot(mixture=mix, start=start, start_log_prob=start_lp, mass=mass, ess=ess,
+                  kept=kept)
+
+
 def _fit_mode(fit) -> Mode:
     """The fit's own optimum as the only mode (``modes="fit"``)."""
     cost, cov, logz = _laplace(fit.problem, np.asarray(fit.u, dtype=float))
@@ -826,6 +941,7 @@ def sample_posterior(
     modes="auto",
     linear_prior: tuple[str, ...] = LINEAR_PRIOR,
     sample_linear: tuple[str, ...] = SAMPLE_LINEAR,
+    pilot_steps: int = 0,
 ) -> PosteriorResult:
     """Run emcee from the least-squares optimum (or optima) of ``fit``.
 
@@ -878,6 +994,12 @@ def sample_posterior(
         least-squares value) rather than its log; the density carries the Jacobian, so
         only the mixing changes (default ``SAMPLE_LINEAR``; ``()`` for the fit's own
         coordinates). The returned chain and draws are in the fit's coordinates either way.
+    pilot_steps:
+        With ``N > 0``, run an ``N``-step differential-evolution pilot in each optimum
+        first and build the independence proposal, the modes' masses and the start from
+        the pilots instead of the Laplace approximations (:func:`_pilot`; e.g.
+        ``PILOT_STEPS``). Off by default: it did not shorten τ consistently
+        (benchmarks/results/posterior_pilot.md).
     """
     import emcee
 
@@ -914,7 +1036,7 @@ def sample_posterior(
         raise ValueError(f"n_walkers = {W}: emcee needs at least 2 × {D} walkers; raise n_walkers")
 
     def log_prob(X):
-        return np.asarray(lp.batch(jnp.asarray(X)))
+        return np.asarray(lp.batch(X))
 
     rng = np.random.default_rng(seed)
     q = float(prob.step)
@@ -941,21 +1063,30 @@ def sample_posterior(
         m.weight = float(wi)
     log_lo = math.log(bounds[0] * q)
     log_rms = math.log(max(fit.rms_residual_rad, bounds[0] * q))
-    P0, lp0 = _mode_start(found, lambda U: log_prob(lp.to_sampled_np(U)), W, rng,
-                          log_lo + 0.05, log_rms)
-    P0 = lp.to_sampled_np(P0)
-    if not np.all(np.isfinite(lp0)):
-        raise RuntimeError("could not place the walkers where the posterior is positive")
-
-    # Independence proposal: one t component per mode; log σ_n from the start spread.
-    s_mid, s_sd = 0.5 * (log_lo + max(log_rms, log_lo + 0.5)), 0.6
-    means = lp.to_sampled_np(np.array([np.concatenate([m.u, [s_mid]]) for m in found]))
-    covs = np.zeros((len(found), D, D))
-    for k, m in enumerate(found):
-        covs[k, :-1, :-1] = lp.sampled_cov_np(m.u, START_SCALE**2 * m.cov)
-        covs[k, -1, -1] = s_sd**2
-    laplace_mix = MixtureProposal(means, covs, [m.weight for m in found])
-    proposal = _Adaptive(laplace_mix)
+    t_pilot = time.perf_counter()
+    pilot = None
+    if pilot_steps > 0:
+        pilot = _pilot(found, log_prob, lp, W, rng, seed, pilot_steps, log_lo + 0.05, log_rms)
+        P0, lp0, start_mix = pilot.start, pilot.start_log_prob, pilot.mixture
+        found = [replace(found[k], pilot_mass=float(pm)) for k, pm in zip(pilot.kept, pilot.mass)]
+        if not np.all(np.isfinite(lp0)):
+            raise RuntimeError("could not place the walkers where the posterior is positive")
+    else:
+        P0, lp0 = _mode_start(found, lambda U: log_prob(lp.to_sampled_np(U)), W, rng,
+                              log_lo + 0.05, log_rms)
+        P0 = lp.to_sampled_np(P0)
+        if not np.all(np.isfinite(lp0)):
+            raise RuntimeError("could not place the walkers where the posterior is positive")
+        # Independence proposal: one t component per mode; log σ_n from the start spread.
+        s_mid, s_sd = 0.5 * (log_lo + max(log_rms, log_lo + 0.5)), 0.6
+        means = lp.to_sampled_np(np.array([np.concatenate([m.u, [s_mid]]) for m in found]))
+        covs = np.zeros((len(found), D, D))
+        for k, m in enumerate(found):
+            covs[k, :-1, :-1] = lp.sampled_cov_np(m.u, START_SCALE**2 * m.cov)
+            covs[k, -1, -1] = s_sd**2
+        start_mix = MixtureProposal(means, covs, [m.weight for m in found])
+    t_pilot = time.perf_counter() - t_pilot
+    proposal = _Adaptive(start_mix)
     if moves is None:
         moves = default_moves(proposal)
     elif callable(moves) and not hasattr(moves, "propose"):
@@ -1049,12 +1180,14 @@ def sample_posterior(
     draws = lp.from_sampled_np(sampler.get_chain(discard=burn, thin=thin, flat=True))
     # Share of the kept draws in each mode: the mode whose (weighted) Laplace density is
     # highest at the draw (the adapted mixture's components drift, so not those).
-    comp = np.argmax(laplace_mix.component_logpdf(chain_s.reshape(-1, D)), axis=1)
+    comp = np.argmax(start_mix.component_logpdf(chain_s.reshape(-1, D)), axis=1)
     share = np.bincount(comp, minlength=len(found)) / comp.size
     if len(found) > 1:
         warnings.append(
             f"MULTIMODAL: {len(found)} separate optima of the fit's cost (Laplace weights "
             + ", ".join(f"{m.weight:.2f}" for m in found)
+            + ("; pilot masses " + ", ".join(f"{m.pilot_mass:.2f}" for m in found)
+               if pilot is not None else "")
             + "; share of the draws " + ", ".join(f"{s:.2f}" for s in share)
             + "); the walkers started in all of them and the independence move lets them "
             "change mode — see `modes` for their parameters"
@@ -1102,6 +1235,8 @@ def sample_posterior(
         mode_search_s=t_modes,
         move_acceptance={m.name: m.rate for m, _ in counted},
         n_components=len(proposal.mix.weights),
+        pilot_ess=pilot.ess if pilot is not None else None,
+        pilot_s=t_pilot,
     )
 
 

@@ -162,6 +162,30 @@ class Problem(eqx.Module):
 
     def _runs_residuals(self, local):
         """Data residuals ``(R, T)`` from per-run unknowns ``local`` ``(R, P+3)``."""
+        return self.weight * (self._runs_predict(local) - self.theta) / self.sigma
+
+    def predict_many(self, U):
+        """Predicted encoder readings ``(L, R, T)`` of many unknown vectors ``U`` ``(L, n)``.
+
+        The ``L·R`` runs are integrated in *one* :func:`simulate_runs` loop instead of
+        ``vmap`` over the vectors: under ``vmap`` the loop's event branch (a
+        ``lax.cond`` on "any run has an event in this substep") turns into a select that
+        runs at every substep; here it stays a branch. Same numbers to rounding
+        (tested); 1.6–2.1× faster for 9–36 vectors (benchmarks/results/posterior_speed.md).
+        """
+        L, R = U.shape[0], self.n_runs
+        local = jax.vmap(self._local)(U).reshape(L * R, -1)
+
+        def tile(a):
+            return jnp.tile(a, (L,) + (1,) * (a.ndim - 1))
+
+        runs = lambda p: (p.times, p.theta, p.weight, p.setup_index, p.added_inertia,  # noqa: E731
+                          p.hold, p.release_lo, p.release_hi)
+        tiled = eqx.tree_at(runs, self, tuple(tile(a) for a in runs(self)))
+        return tiled._runs_predict(local).reshape(L, R, -1)
+
+    def _runs_predict(self, local):
+        """Predicted readings ``(R, T)`` from per-run unknowns ``local`` ``(R, P+3)``."""
         P, R = self.n_physical, self.n_runs
         specs = self.base.parameter_specs()
         values = {n: from_unconstrained(specs[n], local[:, k]) for k, n in enumerate(self.free)}
@@ -177,7 +201,7 @@ class Problem(eqx.Module):
             models, self.times, theta0_enc - off, t_release,
             added_inertia=self.added_inertia, max_substep=self.max_substep,
         )
-        return self.weight * (pred + off[:, None] - self.theta) / self.sigma
+        return pred + off[:, None]
 
     def data_residuals_and_jacobian(self, u):
         """Data residuals ``(R·T,)`` and their Jacobian ``(R·T, n_unknowns)``.
