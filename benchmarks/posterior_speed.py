@@ -581,6 +581,7 @@ def render(res: dict) -> str:
     L.append(f"\n`vectorize=True` is **{e['speedup_vectorized']:.1f}×** faster. The two chains "
              f"are identical up to max |Δ| = {e['same_chain_max_abs_diff']:.2e} (same moves; "
              f"only floating-point differences between the batched and single log-prob).\n")
+    L += _common.interpretation_section(res)
     return "\n".join(L) + "\n"
 
 
@@ -600,9 +601,14 @@ def main(argv=None):
     ap.add_argument("--reps", type=int, default=40, help="repetitions of the per-call timings")
     ap.add_argument("--out-dir", type=Path, default=RESULTS)
     ap.add_argument("--render", type=Path, help="re-write the markdown from this JSON")
+    ap.add_argument("--interpretation", type=Path,
+                    help="with --render: markdown file stored in the JSON as the Interpretation section")
     args = ap.parse_args(argv)
     if args.render:
         res = json.loads(args.render.read_text())
+        if args.interpretation:
+            res["interpretation"] = args.interpretation.read_text()
+            args.render.write_text(json.dumps(res, indent=2) + "\n")
     else:
         res = measure(args)
         res["options"] = {k: str(v) for k, v in res["options"].items()}
