@@ -28,13 +28,12 @@ import _common  # noqa: E402
 import argparse
 import datetime as _dt
 import json
-import os
 import sys
 import time
 
 import numpy as np
 
-from posterior_coordinates import PHYS, _fits
+from posterior_coordinates import chain_stats, fits_with_modes
 
 RESULTS = _common.ROOT / "benchmarks" / "results"
 VARIANTS = {"Laplace start (pilot_steps=0, default)": 0, "pilot 200 steps": 200}
@@ -88,50 +87,30 @@ def main(argv=None):
     out_json = RESULTS / "posterior_pilot.json"
     if args.render:
         return _common.rerender("posterior_pilot", render, args.interpretation)
-    import emcee
-    from hdid._posterior import find_modes, sample_posterior
+    from hdid._posterior import sample_posterior
 
     T0 = time.perf_counter()
     res = {"generated": _dt.datetime.now().isoformat(timespec="seconds"),
            "src": _common.src_fingerprint(), "steps": args.steps, "logs": []}
     seeds = [int(s) for s in args.seeds.split(",") if s]
     chains = [int(s) for s in args.chains.split(",") if s]
-    t0 = time.perf_counter()
-    for name, fit in _fits(seeds):
-        fit_s = time.perf_counter() - t0
-        t1 = time.perf_counter()
-        modes = find_modes(fit)
-        entry = {"name": name, "fit_s": fit_s, "modes_s": time.perf_counter() - t1,
-                 "n_modes": len(modes), "runs": []}
+    for entry, fit, modes in fits_with_modes(seeds):
+        entry["runs"] = []
         sample_posterior(fit, n_steps=10, burn_in=0, modes=modes, pilot_steps=20)  # compile
         for seed in chains:
             for vname, ps in VARIANTS.items():
                 t2 = time.perf_counter()
                 post = sample_posterior(fit, n_steps=args.steps, modes=modes, seed=seed, pilot_steps=ps)
-                wall = time.perf_counter() - t2
-                ch = post.chain
-                tw = emcee.autocorr.integrated_time(ch, tol=0)
-                idx = [post.labels.index(p) for p in PHYS]
-                acc = post.move_acceptance
-                s = post.summary()
-                v = {"variant": vname, "pilot_steps": ps, "seed": seed, "wall_s": wall,
-                     "pilot_s": post.pilot_s, "pilot_ess": post.pilot_ess,
-                     "tau_walker_max": float(max(tw[j] for j in idx)),
-                     "tau_pooled_max": float(np.nanmax(post.tau)),
-                     "tau_pooled_arg": post.labels[int(np.nanargmax(post.tau))],
-                     "acc_indep": float(acc.get("independence (mixture)", float("nan"))),
-                     "acc_de": float(acc.get("DEMove", float("nan"))),
-                     "ci95": {k: list(s[k]["ci95"]) for k in (*PHYS, "stick_band_halfwidth_rad")},
-                     "pilot_mass": [m.pilot_mass for m in post.modes],
-                     "mode_share": [float(x) for x in post.mode_share],
-                     "load": round(os.getloadavg()[0], 2)}
+                v = {"variant": vname, "pilot_steps": ps, "seed": seed,
+                     "wall_s": time.perf_counter() - t2, "pilot_s": post.pilot_s,
+                     "pilot_ess": post.pilot_ess, "pilot_mass": [m.pilot_mass for m in post.modes],
+                     **chain_stats(post)}
                 entry["runs"].append(v)
-                print(name, vname, seed, {k: v[k] for k in ("tau_walker_max", "tau_pooled_max", "pilot_s",
-                                                            "pilot_ess", "wall_s")}, flush=True)
+                print(entry["name"], vname, seed, {k: v[k] for k in ("tau_walker_max", "tau_pooled_max", "pilot_s",
+                                                                     "pilot_ess", "wall_s")}, flush=True)
         res["logs"].append(entry)
         res["total_s"] = time.perf_counter() - T0
         out_json.write_text(json.dumps(res, indent=2) + "\n")
-        t0 = time.perf_counter()
     res["total_s"] = time.perf_counter() - T0
     out_json.write_text(json.dumps(res, indent=2) + "\n")
     (RESULTS / "posterior_pilot.md").write_text(render(res))
