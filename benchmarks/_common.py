@@ -68,3 +68,23 @@ def add_render_args(ap) -> None:
     ap.add_argument("--render", action="store_true",
                     help="re-write the markdown from the stored JSON instead of running")
     ap.add_argument("--interpretation", help="markdown file stored as the Interpretation section")
+
+
+def parse_or_render(ap, argv, name, render):
+    """Add the render options, parse ``argv``; with ``--render`` re-write
+    ``results/<name>.md`` from its JSON (:func:`rerender`) and return ``None``, else the
+    parsed arguments. ``name`` may be a callable of the arguments (an ``--out`` option)."""
+    add_render_args(ap)
+    args = ap.parse_args(argv)
+    if args.render:
+        rerender(name(args) if callable(name) else name, render, args.interpretation)
+        return None
+    return args
+
+
+def add_log_args(ap, steps: int = 3000) -> None:
+    """``--log`` (default: the shipped paper log), ``--steps`` and ``--seed`` of the
+    one-log posterior scripts."""
+    ap.add_argument("--log", default=str(DATA / "csf8_paper.csv"))
+    ap.add_argument("--steps", type=int, default=steps)
+    ap.add_argument("--seed", type=int, default=0)

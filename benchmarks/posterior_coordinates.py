@@ -126,11 +126,10 @@ def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--steps", type=int, default=6000)
     ap.add_argument("--seeds", default="1002,1007")
-    _common.add_render_args(ap)
-    args = ap.parse_args(argv)
+    args = _common.parse_or_render(ap, argv, "posterior_coordinates", render)
+    if args is None:
+        return 0
     out_json = RESULTS / "posterior_coordinates.json"
-    if args.render:
-        return _common.rerender("posterior_coordinates", render, args.interpretation)
     from hdid._posterior import sample_posterior
 
     T0 = time.perf_counter()

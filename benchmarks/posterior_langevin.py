@@ -419,17 +419,14 @@ def render(res):
 
 def main(argv=None):
     ap = argparse.ArgumentParser()
-    ap.add_argument("--log", default=str(_common.DATA / "csf8_paper.csv"))
-    ap.add_argument("--steps", type=int, default=3000)
-    ap.add_argument("--seed", type=int, default=0)
+    _common.add_log_args(ap, steps=3000)
     ap.add_argument("--leapfrog", type=int, default=16)
     ap.add_argument("--hmc-steps", type=int, default=300)
     ap.add_argument("--hmc-burn", type=int, default=200)
-    _common.add_render_args(ap)
-    args = ap.parse_args(argv)
+    args = _common.parse_or_render(ap, argv, "posterior_langevin", render)
+    if args is None:
+        return 0
     out_json = RESULTS / "posterior_langevin.json"
-    if args.render:
-        return _common.rerender("posterior_langevin", render, args.interpretation)
     T0 = time.perf_counter()
     import hdid
     from hdid._posterior import find_modes, sample_posterior

@@ -193,11 +193,10 @@ def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--logs", type=int, default=20)
     ap.add_argument("--seed0", type=int, default=1000)
-    _common.add_render_args(ap)
-    args = ap.parse_args(argv)
+    args = _common.parse_or_render(ap, argv, "posterior_likelihood", render)
+    if args is None:
+        return 0
     out_json = RESULTS / "posterior_likelihood.json"
-    if args.render:
-        return _common.rerender("posterior_likelihood", render, args.interpretation)
     gen = _common.import_generate()
     t0 = time.perf_counter()
     res = {"generated": _dt.datetime.now().isoformat(timespec="seconds"),

@@ -78,17 +78,14 @@ def render(res):
 
 def main(argv=None):
     ap = argparse.ArgumentParser()
-    ap.add_argument("--log", default=str(_common.DATA / "csf8_paper.csv"))
-    ap.add_argument("--steps", type=int, default=3000)
-    ap.add_argument("--seed", type=int, default=0)
+    _common.add_log_args(ap, steps=3000)
     ap.add_argument("--variant", action="append", default=[])
     ap.add_argument("--append", action="store_true")
-    _common.add_render_args(ap)
     ap.add_argument("--out", default="posterior_mixing")
-    args = ap.parse_args(argv)
+    args = _common.parse_or_render(ap, argv, lambda a: a.out, render)
+    if args is None:
+        return 0
     out_json = RESULTS / f"{args.out}.json"
-    if args.render:
-        return _common.rerender(args.out, render, args.interpretation)
     import hdid
     from hdid._posterior import find_modes, sample_posterior
 

@@ -82,11 +82,10 @@ def main(argv=None):
     ap.add_argument("--steps", type=int, default=8000)
     ap.add_argument("--seeds", default="1002,1007")
     ap.add_argument("--chains", default="0,1", help="sampler seeds")
-    _common.add_render_args(ap)
-    args = ap.parse_args(argv)
+    args = _common.parse_or_render(ap, argv, "posterior_pilot", render)
+    if args is None:
+        return 0
     out_json = RESULTS / "posterior_pilot.json"
-    if args.render:
-        return _common.rerender("posterior_pilot", render, args.interpretation)
     from hdid._posterior import sample_posterior
 
     T0 = time.perf_counter()
