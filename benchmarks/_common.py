@@ -42,6 +42,22 @@ def cpu_model() -> str:
 RESULTS = ROOT / "benchmarks" / "results"
 
 
+class Clock:
+    """Wall and process CPU time (user+sys, all threads) of a ``with`` block:
+    ``.wall`` and ``.cpu`` in seconds."""
+
+    def __enter__(self):
+        import time
+
+        self._time = time
+        self.w0, self.c0 = time.perf_counter(), time.process_time()
+        return self
+
+    def __exit__(self, *exc):
+        self.wall = self._time.perf_counter() - self.w0
+        self.cpu = self._time.process_time() - self.c0
+
+
 def rerender(name: str, render, interpretation: str | None = None) -> int:
     """Re-write ``results/<name>.md`` from ``results/<name>.json`` (``--render``), first
     storing the text of the file ``interpretation`` in the JSON when given."""

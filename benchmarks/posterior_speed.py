@@ -105,16 +105,7 @@ def _machine():
             "platform": platform.platform(), "src_fingerprint": _src_fingerprint()}
 
 
-class _Clock:
-    """Wall and process CPU time (user+sys, all threads) of a block."""
-
-    def __enter__(self):
-        self.w0, self.c0 = time.perf_counter(), time.process_time()
-        return self
-
-    def __exit__(self, *exc):
-        self.wall = time.perf_counter() - self.w0
-        self.cpu = time.process_time() - self.c0
+_Clock = _common.Clock
 
 
 def _per_call(fn, reps, min_time=0.0):

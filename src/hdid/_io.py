@@ -477,6 +477,24 @@ def _cell_text(cell: object) -> str:
     return str(cell).strip()
 
 
+def _exact(raw: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """``values`` with every finite text cell re-read by Python's ``float`` (correctly
+    rounded). pandas' fast text-to-float parser is not: pandas 3.0.6 read
+    ``repr(0.036)`` as 0.036000000000000004, one unit in the last place off, so a log
+    written with ``repr`` would not read back to the same numbers. ``to_numeric`` still
+    decides which cells are numbers."""
+    ok = np.isfinite(values)
+    try:
+        values[ok] = np.asarray(raw[ok], dtype=np.float64)  # float() of each cell, in C
+    except (TypeError, ValueError):  # a form pandas reads and Python does not: cell by cell
+        for i in np.flatnonzero(ok):
+            try:
+                values[i] = float(raw[i])
+            except (TypeError, ValueError):
+                pass
+    return values
+
+
 class _Cells:
     """Parses columns and remembers the first bad cell (earliest row, then column)."""
 
@@ -514,6 +532,7 @@ class _Cells:
             if isinstance(column, pd.Series) and pd.api.types.is_bool_dtype(column.dtype):
                 raw = raw.astype(str)  # True/False are not numbers here
             values = np.asarray(pd.to_numeric(raw, errors="coerce"), dtype=np.float64)
+            values = _exact(raw, values)
         bad = ~np.isfinite(values)
         if bad.any():
             pos = int(np.argmax(bad))

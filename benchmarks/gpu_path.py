@@ -1,0 +1,253 @@
+"""The JAX GPU path: the same fit, log-posterior, sampler and batch fit on CPU and on a GPU.
+
+Run once per backend (JAX picks its default device; ``JAX_PLATFORMS=cpu`` forces the CPU)::
+
+    python benchmarks/gpu_path.py --tag cpu                 # here: 2 cores, no GPU
+    python benchmarks/gpu_path.py --tag gpu --reference benchmarks/results/gpu_path_cpu.json
+    python benchmarks/gpu_path.py --render                  # gpu_path.md from both JSONs
+
+Each run writes ``results/gpu_path_<tag>.json`` (``--out-dir`` elsewhere). It measures:
+
+1. the fit of the shipped paper log (first call = compile, then warm) and its parameters;
+2. one call of the vectorised log-posterior (``LogPosterior.batch``, what emcee calls) for
+   W = 1 … 8192 walkers, at walker positions stored by the CPU run (``--reference``), so
+   the GPU's log p can be compared with the CPU's number for number;
+3. ``sample_posterior`` (2000 steps) with the default 36 walkers and with 8× as many;
+4. ``fit_many`` over 100 and 1000 paper-design logs (``batch_speed.py``'s logs, cached in
+   ``benchmarks/_cache``).
+"""
+
+from __future__ import annotations
+
+import _common  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
+import argparse
+import datetime as _dt
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+LOG = _common.DATA / "csf8_paper.csv"
+WALKERS = (1, 18, 36, 144, 1024, 8192)
+N_POSITIONS = 36
+POST_STEPS = 2000
+PARAMS = ("k1", "k2", "tau_c", "tau_s", "v_s", "delta", "c_v")
+
+
+_Clock = _common.Clock
+
+
+def _per_call(fn, reps=20, min_time=1.0):
+    fn()
+    walls = []
+    t0 = time.perf_counter()
+    while len(walls) < reps or (time.perf_counter() - t0 < min_time and len(walls) < 2000):
+        with _Clock() as c:
+            fn()
+        walls.append(c.wall)
+    walls.sort()
+    return {"median_s": walls[len(walls) // 2], "min_s": walls[0], "n": len(walls)}
+
+
+def _machine() -> dict:
+    import jax
+    import jaxlib
+
+    dev = jax.devices()[0]
+    return {"backend": jax.default_backend(), "device": str(dev),
+            "device_kind": getattr(dev, "device_kind", "?"), "nproc": os.cpu_count(),
+            "cpu": _common.cpu_model(), "python": platform.python_version(),
+            "jax": jax.__version__, "jaxlib": jaxlib.__version__,
+            "x64": bool(jax.config.jax_enable_x64), "src_fingerprint": _common.src_fingerprint(),
+            "load_start": os.getloadavg()[0]}
+
+
+def measure(args, save) -> dict:
+    """Run the four measurements, calling ``save(res)`` after each (a run cut short by a
+    time limit keeps what it measured)."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    import hdid
+    from hdid._posterior import LogPosterior, sample_posterior
+
+    res: dict = {"generated": _dt.datetime.now().isoformat(timespec="seconds"), "tag": args.tag}
+    res["machine"] = _machine()
+    print(res["machine"], flush=True)
+    ref = json.loads(Path(args.reference).read_text()) if args.reference else None
+
+    # 1. fit ---------------------------------------------------------------------------
+    with _Clock() as c1:
+        fit = hdid.fit(LOG)
+    with _Clock() as c2:
+        fit = hdid.fit(LOG)
+    params = {k: float(fit.values[k]) for k in PARAMS if k in fit.values}
+    res["fit"] = {"first_s": c1.wall, "warm_s": c2.wall, "params": params,
+                  "cost": float(fit.starts.costs[fit.starts.best])}
+    if ref:
+        rp = ref["fit"]["params"]
+        res["fit"]["max_rel_diff_vs_reference"] = max(
+            abs(params[k] - rp[k]) / abs(rp[k]) for k in rp)
+    print("fit", res["fit"], flush=True)
+    save(res)
+
+    # 2. log-posterior batch -----------------------------------------------------------
+    prob = fit.problem
+    lp = LogPosterior(problem=prob, centre=jnp.asarray(fit.u), temper=jnp.asarray(1.0),
+                      quantized=False, quant_var=float(prob.step) ** 2 / 12.0)
+    if ref:
+        pos = np.asarray(ref["positions"])
+    else:
+        short = sample_posterior(fit, n_steps=300, seed=0, progress=False)
+        pos = np.asarray(short.chain[-1])[:N_POSITIONS]
+    res["positions"] = pos.tolist()
+    batch = jax.jit(lambda X: lp.batch(X))
+    lp0 = np.asarray(batch(jnp.asarray(pos)))
+    res["logp_at_positions"] = lp0.tolist()
+    if ref:
+        d = np.abs(lp0 - np.asarray(ref["logp_at_positions"]))
+        res["logp_max_abs_diff_vs_reference"] = float(np.max(d))
+    timings = {}
+    for W in WALKERS:
+        X = jnp.asarray(np.resize(pos, (W, pos.shape[1])))
+        with _Clock() as c:
+            jax.block_until_ready(batch(X))
+        t = _per_call(lambda: jax.block_until_ready(batch(X)))
+        t["compile_s"] = c.wall
+        t["us_per_walker"] = t["median_s"] / W * 1e6
+        timings[str(W)] = t
+        print(f"batch W={W}: {t['median_s'] * 1e3:.2f} ms", flush=True)
+    res["logp_batch"] = timings
+    save(res)
+
+    # 3. sampler -----------------------------------------------------------------------
+    res["posterior"] = []
+    for W in (None, 8 * 36):
+        sample_posterior(fit, n_steps=20, n_walkers=W, seed=1, progress=False)  # compile
+        with _Clock() as c:
+            post = sample_posterior(fit, n_steps=POST_STEPS, n_walkers=W, seed=0, progress=False)
+        tau = np.asarray(post.tau)
+        info = {"n_walkers": int(post.chain.shape[1]), "n_steps": int(post.chain.shape[0]),
+                "wall_s": c.wall, "ms_per_step": c.wall / POST_STEPS * 1e3,
+                "tau_max": float(np.nanmax(tau)),
+                "tau_max_label": post.labels[int(np.nanargmax(tau))],
+                "acceptance": float(np.mean(post.acceptance)),
+                "walker_steps_per_s": post.chain.shape[1] * POST_STEPS / c.wall}
+        res["posterior"].append(info)
+        print("posterior", info, flush=True)
+        save(res)
+
+    # 4. fit_many ----------------------------------------------------------------------
+    sys.path.insert(0, str(Path(__file__).parent))
+    import batch_speed
+
+    paths = batch_speed.make_logs("paper", 2 + max(args.n_logs), Path(args.log_dir))
+    with _Clock() as c:
+        hdid.fit_many(paths[:2])
+    res["fit_many"] = {"first_call_s": c.wall, "runs": []}
+    for n in args.n_logs:
+        with _Clock() as c:
+            table = hdid.fit_many(paths[2:2 + n])
+        nerr = int(table["error"].notna().sum()) if "error" in table else 0
+        res["fit_many"]["runs"].append({"n_logs": n, "wall_s": c.wall, "cpu_s": c.cpu,
+                                        "logs_per_s": n / c.wall, "errors": nerr,
+                                        "k1_median": float(np.nanmedian(table["k1"]))})
+        print("fit_many", res["fit_many"]["runs"][-1], flush=True)
+        save(res)
+    res["load_end"] = os.getloadavg()[0]
+    save(res)
+    return res
+
+
+# --------------------------------------------------------------------------- render
+
+
+def render(results: dict) -> str:
+    cpu, gpu = results.get("cpu"), results.get("gpu")
+    cols = [(t, r) for t, r in (("CPU", cpu), ("GPU", gpu)) if r]
+    L = ["# The JAX GPU path: CPU vs GPU on the same code", ""]
+    for t, r in cols:
+        m = r["machine"]
+        L.append(f"- **{t}**: generated {r['generated']} by `python benchmarks/gpu_path.py "
+                 f"--tag {r['tag']}`; backend `{m['backend']}`, device {m['device_kind']}, "
+                 f"{m['nproc']} CPU cores ({m['cpu']}), python {m['python']}, jax {m['jax']}, "
+                 f"x64 {m['x64']}, src {m['src_fingerprint']}, load {m['load_start']:.1f} → "
+                 f"{r.get('load_end', float('nan')):.1f}.")
+    L += ["", "## 1. Fit of the shipped paper log", "",
+          "| | " + " | ".join(t for t, _ in cols) + " |",
+          "|---|" + "---|" * len(cols)]
+    L.append("| first call (compile) | " + " | ".join(f"{r['fit']['first_s']:.1f} s" for _, r in cols) + " |")
+    L.append("| warm call | " + " | ".join(f"{r['fit']['warm_s']:.2f} s" for _, r in cols) + " |")
+    L.append("| cost | " + " | ".join(f"{r['fit']['cost']:.6f}" for _, r in cols) + " |")
+    for k in PARAMS:
+        L.append(f"| {k} | " + " | ".join(f"{r['fit']['params'][k]:.10g}" for _, r in cols) + " |")
+    if gpu and "max_rel_diff_vs_reference" in gpu["fit"]:
+        L.append(f"\nLargest relative difference of a fitted parameter, GPU vs CPU: "
+                 f"{gpu['fit']['max_rel_diff_vs_reference']:.1e}.")
+    L += ["", "## 2. One call of the vectorised log-posterior (`LogPosterior.batch`)", "",
+          "| walkers | " + " | ".join(f"{t} median | {t} µs/walker" for t, _ in cols) + " |",
+          "|---|" + "---|---|" * len(cols)]
+    for W in WALKERS:
+        row = [f"{r['logp_batch'][str(W)]['median_s'] * 1e3:.2f} ms | "
+               f"{r['logp_batch'][str(W)]['us_per_walker']:.1f}" for _, r in cols]
+        L.append(f"| {W} | " + " | ".join(row) + " |")
+    if gpu and "logp_max_abs_diff_vs_reference" in gpu:
+        L.append(f"\nAt the {len(gpu['positions'])} stored walker positions the GPU's log p "
+                 f"differs from the CPU's by at most {gpu['logp_max_abs_diff_vs_reference']:.1e} "
+                 f"(log p ≈ {min(gpu['logp_at_positions']):.1f}…{max(gpu['logp_at_positions']):.1f}).")
+    L += ["", f"## 3. `sample_posterior`, {POST_STEPS} steps after the burn-in", "",
+          "| backend | walkers | wall | ms/step | walker-steps/s | τ_max (param) | acceptance |",
+          "|---|---|---|---|---|---|---|"]
+    for t, r in cols:
+        for p in r["posterior"]:
+            L.append(f"| {t} | {p['n_walkers']} | {p['wall_s']:.1f} s | {p['ms_per_step']:.2f} | "
+                     f"{p['walker_steps_per_s']:.0f} | {p['tau_max']:.0f} ({p['tau_max_label']}) | "
+                     f"{p['acceptance']:.2f} |")
+    L += ["", "## 4. `fit_many` over paper-design logs", "",
+          "| backend | logs | wall | logs/s | errors | median k1 |", "|---|---|---|---|---|---|"]
+    for t, r in cols:
+        L.append(f"| {t} | first call, 2 logs | {r['fit_many']['first_call_s']:.1f} s | | | |")
+        for q in r["fit_many"]["runs"]:
+            L.append(f"| {t} | {q['n_logs']} | {q['wall_s']:.1f} s | {q['logs_per_s']:.1f} | "
+                     f"{q['errors']} | {q['k1_median']:.1f} |")
+    L.append("")
+    L += _common.interpretation_section(results.get("gpu") or results.get("cpu") or {})
+    return "\n".join(L)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--tag", default="cpu", help="results/gpu_path_<tag>.json")
+    ap.add_argument("--reference", help="a CPU run's JSON: its walker positions and numbers")
+    ap.add_argument("--out-dir", default=str(_common.RESULTS))
+    ap.add_argument("--log-dir", default=str(_common.ROOT / "benchmarks" / "_cache" / "batch_logs"))
+    ap.add_argument("--n-logs", type=int, nargs="+", default=[100, 1000])
+    ap.add_argument("--render", action="store_true", help="write gpu_path.md from the JSONs")
+    ap.add_argument("--interpretation", help="markdown stored in the GPU JSON as Interpretation")
+    args = ap.parse_args(argv)
+    out = Path(args.out_dir)
+    if args.render:
+        results = {t: json.loads((out / f"gpu_path_{t}.json").read_text())
+                   for t in ("cpu", "gpu") if (out / f"gpu_path_{t}.json").exists()}
+        if args.interpretation:
+            key = "gpu" if "gpu" in results else "cpu"
+            results[key]["interpretation"] = Path(args.interpretation).read_text()
+            (out / f"gpu_path_{key}.json").write_text(json.dumps(results[key], indent=1) + "\n")
+        (out / "gpu_path.md").write_text(render(results))
+        return 0
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / f"gpu_path_{args.tag}.json"
+
+    def save(res):
+        path.write_text(json.dumps(res, indent=1) + "\n")
+
+    measure(args, save)
+    print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
