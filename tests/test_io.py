@@ -243,6 +243,29 @@ def test_dataframe_input(good):
     assert "'abc'" in str(error_of(df2))
 
 
+def test_numbers_are_read_correctly_rounded_whatever_pandas_parses(good, monkeypatch):
+    """Every number is the correctly rounded value of its text (Python's ``float``), even
+    under a pandas whose text parser is one unit in the last place off — pandas 3.0.6 read
+    ``repr(0.036)`` as 0.036000000000000004 (seen on the GPU machine's image). Here the
+    parser is made off by one ulp on purpose; ``to_numeric`` still decides what is a number."""
+    import hdid._io as io_mod
+
+    real = pd.to_numeric
+
+    def off_by_one_ulp(arg, *a, **kw):
+        out = np.asarray(real(arg, *a, **kw), dtype=np.float64)
+        return np.nextafter(out, np.inf)
+
+    monkeypatch.setattr(io_mod.pd, "to_numeric", off_by_one_ulp)
+    path, lines = good
+    log = read_log(path)
+    header = lines[0].split(",")
+    rows = [line.split(",") for line in lines[1:41]]  # run "a"
+    for col, arr in (("time", log.runs[0].time), ("theta", log.runs[0].theta)):
+        text = [r[header.index(col)] for r in rows]
+        np.testing.assert_array_equal(arr, [float(x) for x in text])
+
+
 def test_file_is_not_modified(good):
     path = good[0]
     digest = hashlib.sha256(path.read_bytes()).hexdigest()
