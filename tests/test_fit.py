@@ -309,6 +309,19 @@ def test_paper_flags_what_the_data_cannot_fix(paper):
     assert "see warnings" in paper.report()
 
 
+def test_runs_the_model_never_releases_are_named(paper):
+    """With k1, k2 and tau_s fixed so that the stick band (tau_s·N²/k1 ≈ 0.5 rad) holds
+    every ±0.157 rad start, the model cannot release any run although each log run moves:
+    a zero-gradient trap the fit cannot leave, which must be said, not hidden. (Seen
+    unforced on an 8-run 1 kHz log whose ±0.05 rad runs sit near the band edge.) The
+    regular fit of the same log releases every run and says nothing of the kind."""
+    trapped = hdid.fit(PAPER_CSV, fix={"k1": 900.0, "k2": 6.5e7, "tau_s": 0.05})
+    assert all(r.peak_speed == 0.0 for r in trapped.runs)
+    text = [w for w in trapped.warnings if "never releases" in w]
+    assert len(text) == 1 and "run(s) 1, 2, 3, 4 " in text[0], trapped.warnings
+    assert not any("never releases" in w for w in paper.warnings)
+
+
 def test_paper_residual_at_floor(paper):
     """Only rounding error left: RMS ≤ 1.3 σ_q (see the rich-design test for the bound)."""
     assert paper.rms_residual_rad <= 1.3 * FLOOR

@@ -213,6 +213,18 @@ def analyse(
                 f"on the fitted Stribeck shape; the data alone bracket it to [{lo:.4f}, "
                 f"{hi:.4f}] rad (largest |rest point|, smallest |angle it slid on from|)"
             )
+    # A run the model never releases (exact stick: its speed is 0 at every sample) although
+    # the log shows it moving has a zero gradient in its release and start angle: the fit
+    # cannot pull it out, and the others' parameters bend around it.
+    held = [r.name for i, r in enumerate(runs)
+            if r.peak_speed == 0.0 and abs(prep.rest[i] - prep.hold[i]) > 1.5 * prep.resolution]
+    if held:
+        warnings.append(
+            "the model never releases run(s) " + ", ".join(held) + " although the log shows "
+            "them moving: the fit is caught in a basin where their release cannot be moved "
+            "(the stick band it tried once exceeded their start angle) and its parameters "
+            "are not trustworthy; check those runs or fit without them"
+        )
     not_stuck = [r.name for r in runs if not r.stuck_at_end]
     if not_stuck:
         warnings.append(
