@@ -34,6 +34,11 @@ DESIGNS = {
     "4 runs ±0.157, ±0.08, 250 Hz": ([0.157, -0.157, 0.08, -0.08], 250.0, 0.5, TWO),
     # runs 1-4 on set-up A, 5-8 on B: the fit is trapped (runs 7, 8 never released)
     "rich, two set-ups: 8 runs ±0.157…±0.05, 1 kHz": (RICH, 1000.0, 0.3, TWO),
+    # 4 runs that reach the band edge (±0.05 rad starts just outside the ≈ 0.048 rad band)
+    "4 runs ±0.157, ±0.05, 1 kHz, one set-up": ([0.157, -0.157, 0.05, -0.05], 1000.0, 0.3,
+                                               {"A": 0.005}),
+    "4 runs ±0.157, ±0.05, 250 Hz, one set-up": ([0.157, -0.157, 0.05, -0.05], 250.0, 0.5,
+                                                {"A": 0.005}),
     # as data/synthetic's RICH_DESIGN: one set-up
     "rich: 8 runs ±0.157…±0.05, 1 kHz, one set-up": (RICH, 1000.0, 0.3, {"A": 0.005}),
 }

@@ -322,6 +322,26 @@ def test_runs_the_model_never_releases_are_named(paper):
     assert not any("never releases" in w for w in paper.warnings)
 
 
+def test_run_released_near_the_band_edge_is_not_left_trapped():
+    """4 releases, ±0.157 and ±0.05 rad, one set-up, 250 Hz: the ±0.05 rad starts sit just
+    outside the 0.048 rad stick band, and on the way every multi-start tried a band wider
+    than that, stuck those runs and moved their start angles into the band, where their
+    gradient is zero (cost 5066, RMS 13× the quantization floor, runs 3 and 4 never
+    released). The fit restarts from such an optimum with those runs' start angles back at
+    their hold readings (``_fit._untrapped``) and must end at the floor, every run released:
+    χ²/N ≈ 1 in quantization units, so RMS ≤ 1.5 floors leaves room for the model's small
+    misfit while a trap (≥ 5 floors) fails."""
+    df = gen.make_log(gen.TRUTH_CSF8, amplitudes=[0.157, -0.157, 0.05, -0.05], fs=250.0,
+                      duration=0.5, hold=0.04, offsets_by_setup={"A": 0.005}, seed=20240611)
+    result = hdid.fit(df)
+    assert result.rms_residual_rad < 1.5 * result.quantization_floor_rad, result.warnings
+    assert all(r.peak_speed > 0 for r in result.runs)
+    assert not any("never releases" in w for w in result.warnings)
+    # the restart is reported as one more start, and it is the best one
+    assert result.starts.best == len(result.starts.costs) - 1
+    assert result.starts.costs[:-1].min() > 100 * result.starts.costs[-1]
+
+
 def test_paper_residual_at_floor(paper):
     """Only rounding error left: RMS ≤ 1.3 σ_q (see the rich-design test for the bound)."""
     assert paper.rms_residual_rad <= 1.3 * FLOOR

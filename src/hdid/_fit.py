@@ -17,7 +17,7 @@ import optimistix as optx
 
 from . import _config  # noqa: F401
 from ._errors import FitError
-from ._identifiability import analyse
+from ._identifiability import MOVED_COUNTS, analyse
 from ._io import Log, read_log
 from ._model import CATALOG_CSF8, DEFAULT_INERTIA, Model
 from ._prepare import Prepared, offset_guess, prepare
@@ -95,8 +95,20 @@ def fit(
     problem, prep, model = setup.problem, setup.prep, setup.model
 
     U0, grid_cost = _grid_starts(problem, prep, model, n_starts, start_from_model)
-    # Phase 1: every start a few iterations; phase 2: the best ones to convergence
-    # (_Schedule). All starts are lanes of one program; a call advances the live ones.
+    U, costs, ok, steps = _local_fits(problem, U0, max_steps)
+    retry = _untrapped(problem, prep, U[int(np.argmin(np.where(np.isfinite(costs), costs,
+                                                                np.inf)))])
+    if retry is not None:
+        U1, c1, ok1, s1 = _local_fits(problem, retry[None, :], max_steps)
+        U, costs = np.concatenate([U, U1]), np.concatenate([costs, c1])
+        ok, steps = np.concatenate([ok, ok1]), np.concatenate([steps, s1])
+    return _finish(setup, U, costs, ok, steps, t_start)
+
+
+def _local_fits(problem: Problem, U0, max_steps: int):
+    """Levenberg–Marquardt from every row of ``U0``. Phase 1: every start a few
+    iterations; phase 2: the best ones to convergence (:class:`_Schedule`). All starts are
+    lanes of one program; a call advances the live ones."""
     U = np.array(U0)
     sched = _Schedule(len(U0), max_steps)
     m = int(np.prod(problem.times.shape)) + problem.n_physical
@@ -110,8 +122,38 @@ def fit(
         U2 = np.asarray(U2)
         U[active] = U2[active]
         sched.update(np.asarray(c2), np.asarray(done2), np.asarray(s2))
-    U, costs, ok, steps = U, sched.costs, sched.ok, sched.steps
-    return _finish(setup, U, costs, ok, steps, t_start)
+    return U, sched.costs, sched.ok, sched.steps
+
+
+def trapped_runs(problem: Problem, prep: Prepared, u) -> np.ndarray:
+    """Runs the model never releases at ``u`` (exact stick: speed 0 at every sample)
+    although the log shows them moving (rest ≠ hold by more than ``MOVED_COUNTS``)."""
+    _, omega, _ = map(np.asarray, problem.simulate(jnp.asarray(u), problem.times,
+                                                   full_output=True))
+    moved = np.abs(prep.rest - prep.hold) > MOVED_COUNTS * prep.resolution
+    return np.flatnonzero(moved & (np.max(np.abs(omega), axis=1) == 0.0))
+
+
+def _untrapped(problem: Problem, prep: Prepared, u):
+    """A restart for an optimum that holds runs the log shows moving, or ``None``.
+
+    Such a run has a zero gradient in its release and start angle: once a stick band tried
+    on the way exceeds its start angle, the fit moves the start angle to a compromise
+    between the hold and the rest readings, deep in the band, and cannot come back (seen
+    with ±0.05 rad releases just outside a 0.048 rad band). The restart puts those runs'
+    start angles back at their hold readings, from the other parameters of ``u``."""
+    trapped = trapped_runs(problem, prep, u)
+    if trapped.size == 0:
+        return None
+    v = np.array(u, dtype=float)
+    i = problem.n_physical
+    if problem.release_free:  # the release instant drifted too: back to the data's guess
+        lo, hi = np.asarray(problem.release_lo), np.asarray(problem.release_hi)
+        guess = interval_to_u(prep.release_guess, lo, hi)
+        v[i + trapped] = np.asarray(guess)[trapped]
+        i += problem.n_runs
+    v[i + trapped] = 0.0  # θ0 = hold − offset
+    return v
 
 
 class _Setup(NamedTuple):

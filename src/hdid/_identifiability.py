@@ -35,6 +35,10 @@ def _jacobian(problem: Problem, u):
 def _dense(problem: Problem, u, times):
     return problem.simulate(u, times, full_output=True)
 
+#: A run whose rest reading differs from its hold reading by more than this many encoder
+#: counts moved (one count of flicker is not motion).
+MOVED_COUNTS = 1.5
+
 
 def unknown_labels(problem: Problem, prep: Prepared) -> list[str]:
     labels = list(problem.free)
@@ -216,8 +220,8 @@ def analyse(
     # A run the model never releases (exact stick: its speed is 0 at every sample) although
     # the log shows it moving has a zero gradient in its release and start angle: the fit
     # cannot pull it out, and the others' parameters bend around it.
-    held = [r.name for i, r in enumerate(runs)
-            if r.peak_speed == 0.0 and abs(prep.rest[i] - prep.hold[i]) > 1.5 * prep.resolution]
+    held = [r.name for i, r in enumerate(runs) if r.peak_speed == 0.0
+            and abs(prep.rest[i] - prep.hold[i]) > MOVED_COUNTS * prep.resolution]
     if held:
         warnings.append(
             "the model never releases run(s) " + ", ".join(held) + " although the log shows "
