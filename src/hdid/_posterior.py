@@ -925,6 +925,17 @@ def _reset_outliers(state, rng, ndim):
     return emcee.State(X, log_prob=L, random_state=state.random_state), int(bad.size)
 
 
+def _no_start(fit):
+    from ._errors import FitError
+
+    return FitError(
+        f"{fit.source}: could not place the posterior's walkers where the density is "
+        "positive — every start around the least-squares optimum has zero posterior "
+        "density, so the fit itself is likely bad: read its warnings, refit (other starts, "
+        "fixed parameters) or check the log"
+    )
+
+
 def sample_posterior(
     fit,
     *,
@@ -1070,13 +1081,13 @@ def sample_posterior(
         P0, lp0, start_mix = pilot.start, pilot.start_log_prob, pilot.mixture
         found = [replace(found[k], pilot_mass=float(pm)) for k, pm in zip(pilot.kept, pilot.mass)]
         if not np.all(np.isfinite(lp0)):
-            raise RuntimeError("could not place the walkers where the posterior is positive")
+            raise _no_start(fit)
     else:
         P0, lp0 = _mode_start(found, lambda U: log_prob(lp.to_sampled_np(U)), W, rng,
                               log_lo + 0.05, log_rms)
         P0 = lp.to_sampled_np(P0)
         if not np.all(np.isfinite(lp0)):
-            raise RuntimeError("could not place the walkers where the posterior is positive")
+            raise _no_start(fit)
         # Independence proposal: one t component per mode; log σ_n from the start spread.
         s_mid, s_sd = 0.5 * (log_lo + max(log_rms, log_lo + 0.5)), 0.6
         means = lp.to_sampled_np(np.array([np.concatenate([m.u, [s_mid]]) for m in found]))
