@@ -241,7 +241,7 @@ def _workers_run(cfg: dict, warm: list, timed: list, t_imp: float) -> dict:
 
 
 def run_worker(cfg: dict, cache_dir: Path, timeout: float = 3600) -> dict:
-    env = dict(os.environ, HDID_CACHE_DIR=str(cache_dir), HDID_CACHE="1")
+    env = dict(os.environ, HDID_CACHE_DIR=str(cache_dir))
     env.pop("HDID_NO_CACHE", None)
     t = time.perf_counter()
     p = subprocess.run([sys.executable, __file__, "--worker", json.dumps(cfg)], env=env,

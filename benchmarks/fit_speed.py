@@ -94,7 +94,6 @@ def _env(cache_dir: Path) -> dict:
     env = dict(os.environ)
     env.pop("HDID_NO_CACHE", None)
     env["HDID_CACHE_DIR"] = str(cache_dir)
-    env["HDID_CACHE"] = "1"  # the `hdid` program's default; _probe_cli calls main() itself
     return env
 
 
@@ -768,7 +767,6 @@ def main(argv=None) -> None:
         # the in-process part reuses the populated cache (set before hdid/jax are imported)
         os.environ.pop("HDID_NO_CACHE", None)
         os.environ["HDID_CACHE_DIR"] = str(cache)
-        os.environ["HDID_CACHE"] = "1"
         logs = _make_logs(tmp)
         res["warm"] = bench_warm(logs, reps)
         print("scipy way ...", flush=True)

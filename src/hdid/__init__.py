@@ -49,7 +49,6 @@ _LAZY = {
     "DrivenJoint": "._driven",
     "simulate_driven": "._driven",
     "PositionalError": "._positional",
-    "enable_compilation_cache": "._config",
 }
 
 __all__ = sorted(_LAZY)
@@ -77,7 +76,6 @@ if TYPE_CHECKING:  # pragma: no cover
     from ._driven_fit import fit_driven, fit_joint
     from ._driven_result import DrivenFitResult
     from ._positional import PositionalError
-    from ._config import enable_compilation_cache
     from ._fit import fit
     from ._io import Log, Run, read_log, write_log
     from ._model import DEFAULT_INERTIA, DEFAULT_RATIO, Model

@@ -54,7 +54,7 @@ def fit_many(
         Local worker processes, one thread each (a ``dask.distributed.LocalCluster``
         started and closed by this call; needs ``pip install "hdid[dask]"``): the way to
         use several cores. Each worker traces and compiles once (or reads the persistent
-        cache, ``HDID_CACHE_DIR``, when on: see :func:`hdid.enable_compilation_cache`) before its first chunk — tens of seconds — so it pays
+        cache, ``HDID_CACHE_DIR``) before its first chunk — tens of seconds — so it pays
         off from a few hundred logs. Default 1 (in this process). Ignored with ``client``.
     client:
         A ``dask.distributed.Client``: the logs are split into chunks of ``chunk_size``

@@ -8,7 +8,6 @@ that ``hdid --help`` answers at once.
 from __future__ import annotations
 
 import json
-import os
 import math
 import sys
 from pathlib import Path
@@ -542,17 +541,5 @@ def simulate_cmd(out, amplitudes, rate, duration, hold, offset, counts_per_rev, 
     click.echo(f"wrote {out}: {len(amps)} run(s) at {rate:g} Hz")
 
 
-def run():
-    """The ``hdid`` program: :func:`main` with JAX's persistent compilation cache on.
-
-    One command, one short process: reading compiled programs from disk saves ~20 s per
-    call. Set before any JAX import and inherited by the worker processes a batch starts;
-    ``main`` called in-process (click's test runner, a notebook) leaves the caller's
-    process as it was (``hdid/_config.py`` says why the library does not turn it on).
-    """
-    os.environ.setdefault("HDID_CACHE", "1")
-    return main()
-
-
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(run())
+    sys.exit(main())
