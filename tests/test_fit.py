@@ -309,6 +309,20 @@ def test_paper_flags_what_the_data_cannot_fix(paper):
     assert "see warnings" in paper.report()
 
 
+def test_a_second_fit_of_the_same_model_compiles_nothing(paper, caplog):
+    """Every program a fit runs is jitted on the problem's structure, so fitting the same
+    model again reuses them. An eager loop compiled a fresh ``while`` program per fit
+    (its body a new closure), which JAX never frees: ~140 memory mappings a fit, and a
+    long batch would reach the kernel's 65 530 (the cause of a SIGSEGV seen in CI)."""
+    import jax
+
+    with jax.log_compiles(True), caplog.at_level("WARNING"):
+        again = hdid.fit(PAPER_CSV)
+    compiled = [r.getMessage()[:80] for r in caplog.records if "Compiling" in r.getMessage()]
+    assert not compiled, compiled
+    assert again.parameters["k1"].value == pytest.approx(paper.parameters["k1"].value, rel=1e-9)
+
+
 def test_runs_the_model_never_releases_are_named(paper):
     """With k1, k2 and tau_s fixed so that the stick band (tau_s·N²/k1 ≈ 0.5 rad) holds
     every ±0.157 rad start, the model cannot release any run although each log run moves:

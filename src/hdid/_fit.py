@@ -17,7 +17,7 @@ import optimistix as optx
 
 from . import _config  # noqa: F401
 from ._errors import FitError
-from ._identifiability import MOVED_COUNTS, analyse
+from ._identifiability import MOVED_COUNTS, _dense, analyse
 from ._io import Log, read_log
 from ._model import CATALOG_CSF8, DEFAULT_INERTIA, Model
 from ._prepare import Prepared, offset_guess, prepare
@@ -128,8 +128,9 @@ def _local_fits(problem: Problem, U0, max_steps: int):
 def trapped_runs(problem: Problem, prep: Prepared, u) -> np.ndarray:
     """Runs the model never releases at ``u`` (exact stick: speed 0 at every sample)
     although the log shows them moving (rest ≠ hold by more than ``MOVED_COUNTS``)."""
-    _, omega, _ = map(np.asarray, problem.simulate(jnp.asarray(u), problem.times,
-                                                   full_output=True))
+    # Jitted: an eager call compiled a fresh `while` program on every fit (its loop body
+    # is a new closure each time), ~140 memory mappings that were never freed.
+    _, omega, _ = map(np.asarray, _dense(problem, jnp.asarray(u), problem.times))
     moved = np.abs(prep.rest - prep.hold) > MOVED_COUNTS * prep.resolution
     return np.flatnonzero(moved & (np.max(np.abs(omega), axis=1) == 0.0))
 
