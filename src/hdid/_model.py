@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from collections.abc import Iterable, Mapping
 from typing import Any
 
@@ -17,6 +19,7 @@ from .effects import (
     CubicStiffness,
     Motion,
     Parameter,
+    Scales,
     StribeckFriction,
     ViscousFriction,
 )
@@ -70,6 +73,9 @@ class Model(eqx.Module):
     effects: tuple[AbstractEffect, ...]
     inertia: Float[ArrayLike, ""]
     ratio: float = eqx.field(static=True, default=DEFAULT_RATIO)
+    #: Optimiser scales of ``"identity"`` parameters whose declared ``scale`` is a
+    #: function of the log (:meth:`with_scales`), as ``((name, power of ten), …)``.
+    param_scales: tuple[tuple[str, float], ...] = eqx.field(static=True, default=())
 
     def __check_init__(self):
         seen: dict[str, str] = {"inertia": "model"}
@@ -108,14 +114,33 @@ class Model(eqx.Module):
     def with_effect(self, effect: AbstractEffect) -> Model:
         """A model with ``effect`` added (or replacing the effect of the same name)."""
         kept = tuple(e for e in self.effects if e.name != effect.name)
-        return Model(effects=kept + (effect,), inertia=self.inertia, ratio=self.ratio)
+        return Model(effects=kept + (effect,), inertia=self.inertia, ratio=self.ratio,
+                     param_scales=self.param_scales)
 
     def without(self, name: str) -> Model:
         """A model without the effect called ``name``."""
         if name not in self.effect_names:
             raise KeyError(f"no effect named {name!r}; the model has {list(self.effect_names)}")
         kept = tuple(e for e in self.effects if e.name != name)
-        return Model(effects=kept, inertia=self.inertia, ratio=self.ratio)
+        return Model(effects=kept, inertia=self.inertia, ratio=self.ratio,
+                     param_scales=self.param_scales)
+
+    def with_ratio(self, ratio: float) -> Model:
+        """The same model for gear ratio ``ratio`` (1: the logged angle is the output's)."""
+        if not (isinstance(ratio, (int, float)) and math.isfinite(ratio) and ratio > 0):
+            raise ValueError(f"ratio = {ratio!r}: must be a positive number (1 for no gear)")
+        return Model(effects=self.effects, inertia=self.inertia, ratio=float(ratio),
+                     param_scales=self.param_scales)
+
+    def with_scales(self, scales: Scales) -> Model:
+        """The same model with the optimiser scales of its ``"identity"`` parameters
+        resolved from a log's :class:`~hdid.effects.Scales` (see ``Parameter.scale``)."""
+        resolved = tuple(
+            (p.name, p.resolved(scales).scale)
+            for e in self.effects for p in e.parameters if callable(p.scale)
+        )
+        return Model(effects=self.effects, inertia=self.inertia, ratio=self.ratio,
+                     param_scales=resolved)
 
     @property
     def effect_names(self) -> tuple[str, ...]:
@@ -130,7 +155,13 @@ class Model(eqx.Module):
     # -- parameters -----------------------------------------------------------------
     def parameter_specs(self) -> dict[str, Parameter]:
         """Every parameter declaration by name, effects first, inertia last."""
-        specs = {p.name: p for e in self.effects for p in e.parameters}
+        over = dict(self.param_scales)
+        specs = {}
+        for e in self.effects:
+            for p in e.parameters:
+                if callable(p.scale):
+                    p = dataclasses.replace(p, scale=over.get(p.name, 1.0))
+                specs[p.name] = p
         specs["inertia"] = INERTIA_PARAMETER
         return specs
 
@@ -165,7 +196,8 @@ class Model(eqx.Module):
                 )
             effects.append(e)
         inertia = values.get("inertia", self.inertia)
-        return Model(effects=tuple(effects), inertia=inertia, ratio=self.ratio)
+        return Model(effects=tuple(effects), inertia=inertia, ratio=self.ratio,
+                     param_scales=self.param_scales)
 
     # -- dynamics -------------------------------------------------------------------
     def init_state(self, theta0: Array) -> tuple[PyTree, ...]:

@@ -1,7 +1,7 @@
 """Physical effects: each a small equinox module whose torques the model sums."""
 
 from ._asymmetric import AsymmetricStribeckFriction
-from ._base import AbstractEffect, Motion, Parameter, positive_power
+from ._base import AbstractEffect, Motion, Parameter, Scales, order_of_magnitude, positive_power
 from ._freeplay import FreePlayStiffness
 from ._hysteresis import DahlHysteresis
 from ._kinematic import KinematicErrorStiffness
@@ -60,6 +60,7 @@ __all__ = [
     "Motion",
     "Parameter",
     "PositionRipple",
+    "Scales",
     "StribeckFriction",
     "ThreeSegmentStiffness",
     "ViscousFriction",

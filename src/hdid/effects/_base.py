@@ -8,12 +8,74 @@ torque they can *hold* at rest, which is what makes the simulator stick exactly.
 from __future__ import annotations
 
 import abc
+import dataclasses
+import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float, PyTree
+
+
+@dataclass(frozen=True)
+class Scales:
+    """Magnitudes of one log, in the log's own units, from which starting values,
+    optimiser scales and weak priors are derived (no constant may encode one gear's size).
+
+    Attributes
+    ----------
+    ratio:
+        Gear ratio N (1: the logged angle is the output's, no gear).
+    inertia:
+        Inertia at the logged axis (the wave generator) [kg m²], assumed or known.
+    k_wg:
+        Small-swing restoring stiffness at the logged axis [N m/rad], ``inertia·ω_n²``
+        with ω_n from the log (zero crossings, spectrum) or a grid around it.
+    amplitude:
+        Typical release (or initial) amplitude at the logged axis [rad] from its rest.
+    speed:
+        Typical peak speed at the logged axis [rad/s].
+    torque:
+        Typical friction torque at the logged axis [N m] (from the amplitude decay, or a
+        fraction of ``k_wg·amplitude``).
+    """
+
+    ratio: float
+    inertia: float
+    k_wg: float
+    amplitude: float
+    speed: float
+    torque: float
+
+    @property
+    def k_out(self) -> float:
+        """Restoring stiffness seen at the output, ``k_wg·N²`` [N m/rad]."""
+        return self.k_wg * self.ratio**2
+
+    @property
+    def twist(self) -> float:
+        """Typical output twist, ``amplitude / N`` [rad]."""
+        return self.amplitude / self.ratio
+
+    @property
+    def c_crit(self) -> float:
+        """Critical viscous damping at the logged axis, ``2·sqrt(k_wg·inertia)`` [N m s/rad]."""
+        return 2.0 * math.sqrt(self.k_wg * self.inertia)
+
+    @property
+    def frequency_hz(self) -> float:
+        """Small-swing natural frequency ``sqrt(k_wg/inertia)/2π`` [Hz]."""
+        return math.sqrt(self.k_wg / self.inertia) / (2.0 * math.pi)
+
+
+def order_of_magnitude(x: float) -> float:
+    """``x`` rounded to a power of ten (scales that differ by less share compiled programs)."""
+    x = abs(float(x))
+    if not math.isfinite(x) or x == 0.0:
+        return 1.0
+    return 10.0 ** round(math.log10(x))
 
 
 @dataclass(frozen=True)
@@ -33,19 +95,36 @@ class Parameter:
         ``("interval", lo, hi)`` (a logistic map onto the open interval).
     prior:
         Optional weak prior in the *transformed* space, ``(mean, sd)``; ``None`` means
-        flat. Used to regularise parameters the data cannot fix (stated in the report).
+        flat. A mean of ``None`` centres the prior on the transformed :attr:`start` of the
+        log at hand (a scale-free prior, e.g. a Stribeck velocity relative to the log's
+        speeds). Used to regularise parameters the data cannot fix (stated in the report).
     scale:
         Typical magnitude of an ``"identity"`` parameter: the optimiser sees
-        ``value / scale``, so that its steps are of order one (e.g. ``1e-3`` for a torque
-        in N m). Ignored by the other transforms, which are scale-free.
+        ``value / scale``, so that its steps are of order one. A number, or a function of
+        the log's :class:`Scales` (e.g. ``lambda s: s.torque`` for a torque), resolved
+        per log to a power of ten. Ignored by the other transforms, which are scale-free.
+    start:
+        Starting value from the log's :class:`Scales` (e.g. ``lambda s: s.k_out`` for a
+        linear stiffness at the output, ``lambda s: 0.1 * s.k_out / s.twist**2`` for a
+        cubic one); ``None``: the model's current value. This is how every library effect
+        starts on a log of any gear size and in any consistent units.
     """
 
     name: str
     unit: str
     doc: str
     transform: str | tuple[str, float, float] = "log"
-    prior: tuple[float, float] | None = None
-    scale: float = 1.0
+    prior: tuple[float | None, float] | None = None
+    scale: float | Callable[[Scales], float] = 1.0
+    start: Callable[[Scales], float] | None = None
+
+    def resolved(self, scales: Scales | None) -> Parameter:
+        """This declaration with a callable :attr:`scale` evaluated on ``scales``
+        (rounded to a power of ten; 1 without scales)."""
+        if not callable(self.scale):
+            return self
+        value = order_of_magnitude(self.scale(scales)) if scales is not None else 1.0
+        return dataclasses.replace(self, scale=value)
 
 
 class Motion(eqx.Module):
