@@ -248,6 +248,9 @@ class Log:
         Output encoder counts per revolution if the log held raw output counts.
     torque_constant : float or None
         Motor torque constant [N m/A] if the log held ``motor_current``.
+    resolution_source : str or None
+        ``"given"`` (``resolution=`` or ``counts_per_rev``), ``"estimated"`` (from the
+        readings' grid) or ``None`` (no resolution: readings on no grid).
 
     Raises
     ------
@@ -263,6 +266,7 @@ class Log:
     output_resolution: float | None = None
     output_counts_per_rev: float | None = None
     torque_constant: float | None = None
+    resolution_source: str | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "runs", tuple(self.runs))
@@ -806,6 +810,7 @@ def read_log(
     min_samples_per_run: int = 8,
     output_counts_per_rev: float | None = None,
     torque_constant: float | None = None,
+    resolution: float | None = None,
 ) -> Log:
     """Read and validate a free-motion or driven log.
 
@@ -835,6 +840,11 @@ def read_log(
         log without one. ``output_counts_per_rev`` and ``torque_constant`` are
         ignored for a free-motion log (no driven column), so that one set of
         arguments reads both logs of a joint fit.
+    resolution : float, optional
+        Encoder step (or sensor resolution) of ``theta`` in the log's own units. Without
+        it (and without ``counts_per_rev``) the step is estimated from the readings'
+        grid; readings on no grid (interpolated, analog) get ``None`` and the fit
+        estimates their noise instead.
 
     Returns
     -------
@@ -874,6 +884,15 @@ def read_log(
             f"read_log expects a path or a pandas DataFrame, got {type(source).__name__}"
         )
     cpr = _check_args(path, counts_per_rev, period_tolerance, min_samples_per_run)
+    given_step = _positive_arg(
+        path, resolution, "resolution", "pass the encoder step in the log's units, e.g. "
+        "--resolution 0.00157 (or --counts-per-rev N)"
+    )
+    if given_step is not None and cpr is not None:
+        raise LogError(
+            "give either the resolution or the counts per revolution, not both "
+            "(--counts-per-rev N implies a step of 2*pi/N)", path=path,
+        )
     out_cpr = _positive_arg(
         path, output_counts_per_rev, "output counts per revolution", _OUTPUT_COUNTS_HINT
     )
@@ -923,6 +942,9 @@ def read_log(
     theta, resolution = _to_radians(
         theta, cpr, fail, _THETA, "encoder", "--counts-per-rev", _COUNTS_HINT
     )
+    if given_step is not None:
+        resolution = given_step
+    resolution_source = "given" if resolution is not None else None
     output_resolution: float | None = None
     if theta_out is not None:
         theta_out, output_resolution = _to_radians(
@@ -1054,6 +1076,7 @@ def read_log(
     if resolution is None:
         offsets = np.repeat(theta[starts], lengths)
         resolution = estimate_resolution(theta - offsets)
+        resolution_source = "estimated" if resolution is not None else None
     if theta_out is not None and output_resolution is None:
         offsets = np.repeat(theta_out[starts], lengths)
         output_resolution = estimate_resolution(theta_out - offsets)
@@ -1095,6 +1118,7 @@ def read_log(
         runs=runs,
         sample_period=period,
         resolution=resolution,
+        resolution_source=resolution_source,
         counts_per_rev=cpr,
         output_resolution=output_resolution,
         output_counts_per_rev=out_cpr,

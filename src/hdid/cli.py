@@ -67,6 +67,7 @@ def _check_output(path: str | None, inputs: list[Path], option: str) -> None:
 _FIX = click.option("--fix", multiple=True, metavar="NAME[=VALUE]", help="Hold a parameter fixed (repeatable).")
 _RELEASE_TIME = click.option("--release-time", type=float, help="Known release instant [s] in each run's time axis.")
 _COUNTS_PER_REV = click.option("--counts-per-rev", type=float, help="theta holds raw encoder counts with this many per revolution.")
+_RESOLUTION = click.option("--resolution", type=float, metavar="STEP", help="Encoder step (sensor resolution) of theta in the log's units. Default: found from the readings' grid, or, for readings on no grid (analog, interpolated), the noise is estimated and the report says so.")
 _QUIET = click.option("--quiet", "-q", is_flag=True, help="No report on stdout.")
 
 
@@ -76,6 +77,7 @@ def _MODEL_OPTIONS(fn):
         click.option("--add", "add_effects", multiple=True, metavar="EFFECT", help="Add a library effect (repeatable; ripple:ORDER sets the order): asymmetric_friction, backlash, hysteresis, kinematic_error, linear_stiffness, load_friction, ripple, soft_windup, stiffness, stribeck, viscous."),
         click.option("--remove", "remove_effects", multiple=True, metavar="EFFECT", help="Remove an effect of the base model (repeatable), e.g. viscous."),
         click.option("--effect-file", "effect_files", multiple=True, metavar="FILE.py", help="Your own effect: a Python file defining AbstractEffect instances (repeatable)."),
+        click.option("--ratio", type=click.FloatRange(min=0, min_open=True), help="Gear ratio N between the logged axis and the output (default 100; 1: the logged angle is the output's, no gear)."),
     )):
         fn = opt(fn)
     return fn
@@ -125,6 +127,7 @@ def main():
 @_MODEL_OPTIONS
 @_RELEASE_TIME
 @_COUNTS_PER_REV
+@_RESOLUTION
 @click.option("--starts", type=click.IntRange(1, 32), help="Multi-starts (default: the library's, 6).")
 @click.option("--posterior", is_flag=True, help="Also sample the posterior with emcee (slow; see README).")
 @click.option("--steps", type=click.IntRange(100, 10**6), help="Posterior chain length (default: until 50 autocorrelation times, at most 20000).")
@@ -141,7 +144,7 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
             inertia_prior, fix, add_effects, remove_effects, effect_files, release_time,
             counts_per_rev, starts, posterior, steps, walkers, seed, chains_out, corner_out,
             quiet, band_bracket, workers, dask_address, torque_constant,
-            output_counts_per_rev, order, joint):
+            output_counts_per_rev, order, joint, ratio, resolution):
     """Fit stiffness, friction (and inertia) jointly to all runs of LOG.csv.
 
     LOG.csv has a header with columns time [s] and theta [rad, WG/motor angle]; optional
@@ -152,8 +155,8 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
     tabulated; a bad file is reported in its row and the others complete. With --joint,
     a driven log and free-motion logs of one gear share one set of parameters.
     """
-    model = _build_model(add_effects, remove_effects, effect_files)
-    driven_options = {"torque_constant": torque_constant,
+    model = _build_model(add_effects, remove_effects, effect_files, ratio)
+    driven_options = {"torque_constant": torque_constant, "resolution": resolution,
                       "output_counts_per_rev": output_counts_per_rev}
     if joint:
         if len(logs) < 2:
@@ -186,7 +189,7 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
     from ._errors import HdidError
 
     try:
-        data = _io.read_log(log_path, counts_per_rev=counts_per_rev)
+        data = _io.read_log(log_path, counts_per_rev=counts_per_rev, resolution=resolution)
         if added is not None:
             data = _with_added_inertia(data, added)
         result = _fit.fit(
@@ -291,14 +294,14 @@ def _fit_driven(paths, model, json_out, plot_out, fix, counts_per_rev, driven_op
             click.echo(f"wrote {plot_out}")
 
 
-def _build_model(add, remove, files):
+def _build_model(add, remove, files, ratio=None):
     """The base model with effects removed, library effects added, and user effects."""
-    if not (add or remove or files):
+    if not (add or remove or files or ratio):
         return None
     from ._model import Model
     from .effects import AbstractEffect, library
 
-    model = Model.default()
+    model = Model.default() if ratio is None else Model.default().with_ratio(ratio)
     for name in remove:
         if name not in model.effect_names:
             raise _Fail(f"--remove {name}: the model has {', '.join(model.effect_names)}")
@@ -452,9 +455,11 @@ def _finite(obj):
 @_MODEL_OPTIONS
 @_RELEASE_TIME
 @_COUNTS_PER_REV
+@_RESOLUTION
 @_QUIET
 def diagnose_cmd(log, json_out, plot_out, residuals_out, candidates, steps, inertia, fix,
-                 add_effects, remove_effects, effect_files, release_time, counts_per_rev, quiet):
+                 add_effects, remove_effects, effect_files, release_time, counts_per_rev, quiet,
+                 ratio, resolution):
     """Fit the model to LOG.csv, then rank the effects that could be missing.
 
     Each candidate effect is added to the fitted model and refitted; candidates are ranked
@@ -465,7 +470,7 @@ def diagnose_cmd(log, json_out, plot_out, residuals_out, candidates, steps, iner
     log_path = Path(log)
     for opt, path in (("--json", json_out), ("--plot", plot_out), ("--residuals", residuals_out)):
         _check_output(path, [log_path], opt)
-    model = _build_model(add_effects, remove_effects, effect_files)
+    model = _build_model(add_effects, remove_effects, effect_files, ratio)
     fixed = _parse_fix(fix)
     wanted = [c.strip() for c in candidates.split(",") if c.strip()] if candidates else None
 
@@ -474,7 +479,7 @@ def diagnose_cmd(log, json_out, plot_out, residuals_out, candidates, steps, iner
     from ._errors import HdidError
 
     try:
-        data = _io.read_log(log_path, counts_per_rev=counts_per_rev)
+        data = _io.read_log(log_path, counts_per_rev=counts_per_rev, resolution=resolution)
         result = diagnose(
             data,
             model,
