@@ -177,3 +177,129 @@ def test_effects_from_the_command_line(tmp_path):
 def test_effect_option_errors(args, fragment):
     out = _run_cli("fit", str(EXAMPLE), *args)
     assert out.returncode == 2 and fragment in out.stderr and "Traceback" not in out.stderr
+
+
+# --- issue 18, item 1: every bad input is one line, exit 2, before any work -------------
+
+def _one_line_exit_2(res, fragment: str) -> str:
+    """The CLI refused with one 'hdid: error:' line on stderr, exit 2, no traceback."""
+    assert res.exception is None or isinstance(res.exception, SystemExit), repr(res.exception)
+    assert res.exit_code == 2, res.output
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1, res.stderr
+    assert lines[0].startswith("hdid: error:") and fragment in lines[0], lines[0]
+    return lines[0]
+
+
+BAD_FILES = {
+    # what a user may hand hdid instead of a UTF-8 CSV, and what the message must name
+    "utf16.csv": ("time,theta\n0,0.1\n0.004,0.2\n".encode("utf-16"), "UTF-16"),
+    "latin1.csv": ("time,theta °\n0,0.1\n0.004,0.2\n".encode("latin-1"), "UTF-8"),
+    "excel.csv": (b"PK\x03\x04\x14\x00\x06\x00" + bytes(range(256)) * 4, "spreadsheet"),
+    "old_excel.csv": (b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1" + bytes(range(256)) * 4, "spreadsheet"),
+    "binary.csv": (bytes(range(256)) * 8, "binary"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(BAD_FILES))
+@pytest.mark.parametrize("command", ["fit", "diagnose"])
+def test_undecodable_log_is_one_line(tmp_path, name, command):
+    content, fragment = BAD_FILES[name]
+    path = tmp_path / name
+    path.write_bytes(content)
+    res = CliRunner().invoke(main, [command, str(path)])
+    line = _one_line_exit_2(res, fragment)
+    assert name in line
+    assert path.read_bytes() == content
+
+
+def test_european_csv_is_read(tmp_path):
+    # ';' between cells and ',' as decimal separator (a German/French Excel export):
+    # the same numbers as the example log, so the same fit.
+    text = EXAMPLE.read_text()
+    euro = tmp_path / "euro.csv"
+    euro.write_text(text.replace(",", ";").replace(".", ","))
+    from hdid import read_log
+
+    a, b = read_log(EXAMPLE), read_log(euro)
+    assert len(a.runs) == len(b.runs)
+    for ra, rb in zip(a.runs, b.runs):
+        assert (ra.time == rb.time).all() and (ra.theta == rb.theta).all()
+    assert a.resolution == b.resolution
+
+
+def test_semicolon_csv_with_decimal_points_is_read(tmp_path):
+    text = EXAMPLE.read_text()
+    semi = tmp_path / "semi.csv"
+    semi.write_text(text.replace(",", ";"))
+    from hdid import read_log
+
+    a, b = read_log(EXAMPLE), read_log(semi)
+    assert all((ra.theta == rb.theta).all() for ra, rb in zip(a.runs, b.runs))
+
+
+@pytest.mark.parametrize(
+    "option, make, fragment",
+    [
+        ("--json", "dir", "directory"),
+        ("--plot", "dir", "directory"),
+        ("--plot", "fit.xyz", "xyz"),
+        ("--plot", "fit", "extension"),
+        ("--json", "missing/fit.json", "does not exist"),
+    ],
+)
+def test_bad_output_path_refused_before_fitting(tmp_path, monkeypatch, option, make, fragment):
+    import hdid._fit
+
+    def no_fit(*a, **k):  # the refusal must come before any fitting
+        raise AssertionError("fit started before the output path was checked")
+
+    monkeypatch.setattr(hdid._fit, "fit", no_fit)
+    target = tmp_path / "out_dir" if make == "dir" else tmp_path / make
+    if make == "dir":
+        target.mkdir()
+    res = CliRunner().invoke(main, ["fit", str(EXAMPLE), option, str(target)])
+    _one_line_exit_2(res, fragment)
+
+
+def test_diagnose_bad_plot_refused_before_fitting(tmp_path, monkeypatch):
+    import hdid._diagnose
+
+    def no_diagnose(*a, **k):
+        raise AssertionError("diagnosed before the output path was checked")
+
+    monkeypatch.setattr(hdid._diagnose, "diagnose", no_diagnose)
+    res = CliRunner().invoke(main, ["diagnose", str(EXAMPLE), "--residuals", str(tmp_path / "r.xyz")])
+    _one_line_exit_2(res, "xyz")
+
+
+def test_simulate_refuses_existing_file_before_simulating(tmp_path, monkeypatch):
+    import hdid._synthetic
+
+    def no_sim(*a, **k):
+        raise AssertionError("simulated before refusing")
+
+    monkeypatch.setattr(hdid._synthetic, "synthesize", no_sim)
+    out = tmp_path / "existing.csv"
+    out.write_text("keep me\n")
+    res = CliRunner().invoke(main, ["simulate", str(out)])
+    _one_line_exit_2(res, "--overwrite")
+    assert out.read_text() == "keep me\n"
+    res = CliRunner().invoke(main, ["simulate", str(tmp_path / "no" / "x.csv")])
+    _one_line_exit_2(res, "does not exist")
+
+
+# --- issue 18, item 7: a batch with failed logs exits 3, good rows written -----------------
+
+def test_batch_partial_failure_exit_3(tmp_path):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time,angle\n0,0\n")
+    summary = tmp_path / "s.csv"
+    res = CliRunner().invoke(main, ["fit", str(EXAMPLE), str(bad), "--summary", str(summary), "-q"])
+    assert res.exit_code == 3, res.output
+    assert "1 of 2" in res.stderr and "Traceback" not in res.output
+    import pandas as pd
+
+    table = pd.read_csv(summary)
+    assert len(table) == 2
+    assert table["error"].isna().sum() == 1 and abs(table["k1"].dropna().iloc[0] / 940 - 1) < 0.1

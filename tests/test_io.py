@@ -337,11 +337,21 @@ def test_missing_column_lists_found_columns(tmp_path):
     assert path.name in msg and "'theta'" in msg and "'angle'" in msg and "'run'" in msg
 
 
-def test_semicolon_file_gets_delimiter_hint(tmp_path):
-    lines = [line.replace(",", ";") for line in log_lines()]
-    path = write_lines(tmp_path / "semi.csv", lines)
+def test_semicolon_file_is_read_like_the_comma_file(tmp_path):
+    # A ';'-separated export (issue 18) reads to the same log as the comma file.
+    lines = log_lines()
+    semi = read_log(write_lines(tmp_path / "semi.csv", [line.replace(",", ";") for line in lines]))
+    comma = read_log(write_lines(tmp_path / "comma.csv", lines))
+    assert [r.name for r in semi.runs] == [r.name for r in comma.runs]
+    assert all(np.array_equal(a.theta, b.theta) for a, b in zip(semi.runs, comma.runs))
+
+
+def test_mixed_delimiters_get_delimiter_hint(tmp_path):
+    lines = log_lines()
+    lines = [lines[0].replace(",", ";")] + lines[1:]  # ';' header, ',' rows
+    path = write_lines(tmp_path / "mixed.csv", lines)
     msg = str(error_of(path))
-    assert path.name in msg and "comma" in msg
+    assert path.name in msg and "delimiter" in msg
 
 
 def test_no_header_hint(tmp_path):

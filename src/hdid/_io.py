@@ -375,18 +375,88 @@ def _show(text: object, limit: int = 20) -> str:
     return repr(text)
 
 
+#: Bytes read to recognise the file type and the delimiter before parsing.
+_SNIFF_BYTES = 65536
+#: A number written with a decimal comma (``-0,157``, ``1,5e-3``).
+_DECIMAL_COMMA = re.compile(r"^\s*[-+]?\d*,\d+(?:[eE][-+]?\d+)?\s*$")
+
+
+def _sniff(path, err) -> str:
+    """Recognise what the file is from its first bytes; return the cell delimiter.
+
+    Spreadsheets renamed ``.csv``, UTF-16 text, other 8-bit encodings and binary
+    files get a one-line error naming what the file is. The delimiter is ``;`` (a
+    European export, possibly with decimal commas) or a tab when the header line
+    has one of those and no comma; else ``,``. Errors opening the file are left to
+    the reader, whose messages already name them.
+    """
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(_SNIFF_BYTES)
+    except (OSError, ValueError):
+        return ","
+    if head.startswith(b"PK\x03\x04") or head.startswith(b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1"):
+        raise err(
+            "this is a spreadsheet (Excel/OpenDocument) file, not CSV text — in the "
+            "spreadsheet program use 'Save as' CSV (comma-separated)"
+        )
+    if head.startswith((b"\xff\xfe", b"\xfe\xff")) or (
+        len(head) >= 4 and head[1::2].count(0) > len(head) // 4 and head[0::2].count(0) == 0
+    ) or (len(head) >= 4 and head[0::2].count(0) > len(head) // 4 and head[1::2].count(0) == 0):
+        raise err("this is UTF-16 text — save the log as a UTF-8 CSV file (comma-separated)")
+    if b"\x00" in head:
+        raise err("this is a binary file, not a CSV text file — give the exported CSV log")
+    try:
+        text = head.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        if exc.start >= len(head) - 3 and len(head) == _SNIFF_BYTES:
+            text = head[: exc.start].decode("utf-8-sig")  # a character cut at the end
+        elif sum(b < 9 or 13 < b < 32 for b in head) > len(head) // 100:
+            raise err(
+                "this is a binary file, not a CSV text file — give the exported CSV log"
+            ) from None
+        else:
+            raise err(
+                "this text is not UTF-8 (Latin-1 or Windows-1252?) — save the log as a "
+                "UTF-8 CSV file (comma-separated)"
+            ) from None
+    if sum(ord(c) < 9 or 13 < ord(c) < 32 for c in text) > len(text) // 100:
+        raise err("this is a binary file, not a CSV text file — give the exported CSV log")
+    header = next((line for line in text.splitlines() if line.strip()), "")
+    if "," not in header:
+        if ";" in header:
+            return ";"
+        if "\t" in header:
+            return "\t"
+    return ","
+
+
+def _decimal_commas(values: np.ndarray) -> np.ndarray:
+    """Cells like ``0,157`` as ``0.157`` (a ';'- or tab-separated European export)."""
+    cells = pd.Series(values, dtype=object)
+    has = cells.str.contains(",", regex=False, na=False)
+    if not has.any():
+        return values
+    hit = cells[has]
+    match = hit.str.match(_DECIMAL_COMMA, na=False)
+    cells.loc[match[match].index] = hit[match].str.replace(",", ".", regex=False)
+    return cells.to_numpy(dtype=object)
+
+
 def _load_csv(path: str | os.PathLike[str]) -> _Table:
     source = os.fspath(path)
     err = lambda message, **kw: LogError(message, path=path, **kw)  # noqa: E731
     suffix = Path(source).suffix.lower()
     if suffix in {".xlsx", ".xlsm", ".xls", ".ods"}:
         raise err("this is a spreadsheet, not a CSV file — export it as CSV (comma-separated)")
+    sep = _sniff(source, err)
     try:
         # header=None: the header line is handled here, so that names are not
         # mangled by pandas and frame row i is exactly file line i + 1.
         frame = pd.read_csv(
             source,
             header=None,
+            sep=sep,
             dtype=object,
             keep_default_na=False,
             na_filter=False,
@@ -420,6 +490,8 @@ def _load_csv(path: str | os.PathLike[str]) -> _Table:
         ) from None
 
     raw = [frame[col].to_numpy(dtype=object) for col in frame.columns]
+    if sep != ",":
+        raw = [_decimal_commas(values) for values in raw]
     blank = np.ones(len(frame), dtype=bool)
     for values in raw:
         blank &= values == ""

@@ -15,6 +15,11 @@ from pathlib import Path
 import click
 
 
+#: Exit status of a batch (``hdid fit a.csv b.csv …``) in which some logs failed and the
+#: others were fitted (their rows written). 0: all fitted; 2: bad usage or every log failed.
+EXIT_PARTIAL = 3
+
+
 class _Fail(click.ClickException):
     """One-line error, exit status 2, no traceback."""
 
@@ -53,14 +58,48 @@ def _parse_fix(items: tuple[str, ...]) -> dict[str, float | None]:
     return out
 
 
-def _check_output(path: str | None, inputs: list[Path], option: str) -> None:
+def _check_output(path: str | None, inputs: list[Path], option: str, *, figure: bool = False) -> None:
+    """Refuse, before any work, an output path that cannot be written: an input log, a
+    folder, a missing or read-only folder, a figure format matplotlib cannot write."""
     if path is None:
         return
-    p = Path(path).resolve()
+    import os
+
+    if not str(path).strip():
+        raise _Fail(f"{option}: empty file name; give one such as fit.json")
+    try:
+        p = Path(path).resolve()
+        exists, is_dir = p.exists(), p.is_dir()
+    except (OSError, ValueError) as exc:  # a name too long, a NUL byte, a loop of links
+        raise _Fail(f"{option} {path!r}: not a usable file name ({exc})") from None
     if any(p == i.resolve() for i in inputs):
         raise _Fail(f"{option} {path}: would overwrite an input log; choose another file")
+    if is_dir:
+        raise _Fail(f"{option} {path}: is a directory; give a file name inside it")
     if not p.parent.exists():
         raise _Fail(f"{option} {path}: folder {p.parent} does not exist")
+    if not p.parent.is_dir():
+        raise _Fail(f"{option} {path}: {p.parent} is not a folder")
+    if not os.access(p.parent, os.W_OK) or (exists and not os.access(p, os.W_OK)):
+        raise _Fail(f"{option} {path}: cannot write there (permission denied)")
+    if figure:
+        from matplotlib.backend_bases import FigureCanvasBase
+
+        formats = sorted(FigureCanvasBase.get_supported_filetypes())
+        ext = p.suffix.lower().lstrip(".")
+        if not ext:
+            raise _Fail(f"{option} {path}: no file extension; end the name in .png, .pdf or .svg")
+        if ext not in formats:
+            raise _Fail(f"{option} {path}: cannot write a .{ext} figure; use one of "
+                        + ", ".join("." + f for f in formats))
+
+
+def _write_text(path: str, text: str, option: str) -> None:
+    """Write an output file; a failure (disk full, …) as one line, not a traceback."""
+    try:
+        Path(path).write_text(text)
+    except OSError as exc:
+        raise _Fail(f"{option} {path}: cannot write ({exc.strerror or exc})") from None
 
 
 # Options shared by `fit` and `diagnose`.
@@ -74,7 +113,7 @@ _QUIET = click.option("--quiet", "-q", is_flag=True, help="No report on stdout."
 def _MODEL_OPTIONS(fn):
     """--add / --remove / --effect-file: the model to start from."""
     for opt in reversed((
-        click.option("--add", "add_effects", multiple=True, metavar="EFFECT", help="Add a library effect (repeatable; ripple:ORDER sets the order): asymmetric_friction, backlash, hysteresis, kinematic_error, linear_stiffness, load_friction, ripple, soft_windup, stiffness, stribeck, viscous."),
+        click.option("--add", "add_effects", multiple=True, metavar="EFFECT", help="Add a library effect (repeatable; ripple:ORDER sets the order): asymmetric_friction, asymmetric_viscous, backlash, gravity, hysteresis, kinematic_error, linear_stiffness, load_friction, ripple, soft_windup, stiffness, stribeck, viscous."),
         click.option("--remove", "remove_effects", multiple=True, metavar="EFFECT", help="Remove an effect of the base model (repeatable), e.g. viscous."),
         click.option("--effect-file", "effect_files", multiple=True, metavar="FILE.py", help="Your own effect: a Python file defining AbstractEffect instances (repeatable)."),
         click.option("--ratio", type=click.FloatRange(min=0, min_open=True), help="Gear ratio N between the logged axis and the output (default 100; 1: the logged angle is the output's, no gear)."),
@@ -176,9 +215,9 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
                           model, band_bracket, dask_address, workers)
     log_path = Path(logs[0])
     _check_output(json_out, [log_path], "--json")
-    _check_output(plot_out, [log_path], "--plot")
+    _check_output(plot_out, [log_path], "--plot", figure=True)
     _check_output(chains_out, [log_path], "--chains")
-    _check_output(corner_out, [log_path], "--corner")
+    _check_output(corner_out, [log_path], "--corner", figure=True)
     prior = _parse_floats(inertia_prior, "--inertia-prior")
     if prior is not None and len(prior) != 2:
         raise _Fail("--inertia-prior: expected MEAN,REL (e.g. 7e-7,0.3)")
@@ -223,7 +262,7 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
         if corner_out:
             post.plot_corner(corner_out)
     if json_out:
-        Path(json_out).write_text(json.dumps(_finite(summary), indent=2) + "\n")
+        _write_text(json_out, json.dumps(_finite(summary), indent=2) + "\n", "--json")
         if not quiet:
             click.echo(f"\nwrote {json_out}")
     if plot_out:
@@ -237,26 +276,28 @@ def _emit(report: str, summary: dict, json_out: str | None, quiet: bool) -> None
     if not quiet:
         click.echo(report)
     if json_out:
-        Path(json_out).write_text(json.dumps(_finite(summary), indent=2) + "\n")
+        _write_text(json_out, json.dumps(_finite(summary), indent=2) + "\n", "--json")
         if not quiet:
             click.echo(f"\nwrote {json_out}")
 
 
 def _is_driven(path: Path) -> bool:
     """Does the CSV's header name a motor-torque column? (cheap: reads one line)."""
+    import re
+
     try:
-        with open(path, newline="") as fh:
-            header = fh.readline()
-    except OSError:
+        with open(path, "rb") as fh:
+            header = fh.readline(65536).decode("utf-8-sig")
+    except (OSError, ValueError):  # ValueError: not UTF-8 text
         return False  # read_log gives the proper one-line error
-    names = {c.strip().strip('"').lower() for c in header.split(",")}
+    names = {c.strip().strip('"').lower() for c in re.split(r"[,;\t]", header)}
     return bool(names & {"motor_torque", "motor_current"})
 
 
 def _fit_driven(paths, model, json_out, plot_out, fix, counts_per_rev, driven_options,
                 order, release_time, quiet):
     for option, out in (("--json", json_out), ("--plot", plot_out)):
-        _check_output(out, paths, option)
+        _check_output(out, paths, option, figure=option == "--plot")
     fixed = _parse_fix(fix)
     from . import _driven_fit, _io
     from ._errors import HdidError
@@ -407,12 +448,15 @@ def _fit_batch(logs, summary_out, json_out, plot_out, inertia, fix, release_time
     if json_out:
         rows = [r.result.to_dict() if r.result is not None else {"source": r.log, "error": r.error}
                 for r in table.itertuples()]
-        Path(json_out).write_text(json.dumps(_finite(rows), indent=2) + "\n")
+        _write_text(json_out, json.dumps(_finite(rows), indent=2) + "\n", "--json")
     failed = int(flat["error"].notna().sum())
     if failed:
-        click.echo(f"hdid: {failed} of {len(flat)} log(s) failed; see the error column", err=True)
+        click.echo(f"hdid: {failed} of {len(flat)} log(s) failed; see the error column"
+                   + (f" of {summary_out}" if summary_out else ""), err=True)
     if failed == len(flat):
         raise SystemExit(2)
+    if failed:
+        raise SystemExit(EXIT_PARTIAL)
 
 
 def _with_added_inertia(data, added):
@@ -469,7 +513,7 @@ def diagnose_cmd(log, json_out, plot_out, residuals_out, candidates, steps, iner
     """
     log_path = Path(log)
     for opt, path in (("--json", json_out), ("--plot", plot_out), ("--residuals", residuals_out)):
-        _check_output(path, [log_path], opt)
+        _check_output(path, [log_path], opt, figure=opt != "--json")
     model = _build_model(add_effects, remove_effects, effect_files, ratio)
     fixed = _parse_fix(fix)
     wanted = [c.strip() for c in candidates.split(",") if c.strip()] if candidates else None
@@ -531,6 +575,9 @@ def simulate_cmd(out, amplitudes, rate, duration, hold, offset, counts_per_rev, 
         raise _Fail("--rate and --duration must be > 0 and --hold >= 0")
     if counts and not counts_per_rev:
         raise _Fail("--counts needs --counts-per-rev > 0")
+    if not overwrite and Path(out).exists():
+        raise _Fail(f"{out} exists; add --overwrite to replace it (or choose another file)")
+    _check_output(out, [], "OUT")
 
     from ._errors import HdidError
     from ._synthetic import synthesize
