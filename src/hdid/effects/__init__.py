@@ -3,6 +3,7 @@
 from ._asymmetric import AsymmetricStribeckFriction
 from ._base import AbstractEffect, Motion, Parameter, Scales, order_of_magnitude, positive_power
 from ._freeplay import FreePlayStiffness
+from ._gravity import Gravity
 from ._hysteresis import DahlHysteresis
 from ._kinematic import KinematicErrorStiffness
 from ._linear import LinearStiffness
@@ -12,6 +13,7 @@ from ._segments import ThreeSegmentStiffness
 from ._stiffness import CubicStiffness
 from ._stribeck import StribeckFriction
 from ._viscous import ViscousFriction
+from ._viscous_asymmetric import AsymmetricViscousFriction
 
 
 def library(values: dict[str, float]) -> dict[str, AbstractEffect]:
@@ -30,7 +32,10 @@ def library(values: dict[str, float]) -> dict[str, AbstractEffect]:
     stribeck = dict(tau_c=tau_c, tau_s=tau_s, v_s=v.get("v_s", 3.0), delta=v.get("delta", 1.0))
     return {
         "asymmetric_friction": AsymmetricStribeckFriction(**stribeck, asym=v.get("asym", 0.0)),
+        "asymmetric_viscous": AsymmetricViscousFriction(c_vp=v.get("c_vp", v.get("c_v", 2e-5)),
+                                                        c_vn=v.get("c_vn", v.get("c_v", 2e-5))),
         "backlash": FreePlayStiffness(k1=k1, k2=k2, backlash=v.get("backlash", 0.01)),
+        "gravity": Gravity(mgl=v.get("mgl", k1)),
         "hysteresis": DahlHysteresis(f_h=v.get("f_h", 0.2 * tau_c), sigma_h=v.get("sigma_h", k_wg)),
         "kinematic_error": KinematicErrorStiffness(k1=k1, k2=k2, ke_a=v.get("ke_a", 0.0),
                                                    ke_b=v.get("ke_b", 0.0), order=v.get("order", 2.0)),
@@ -50,9 +55,11 @@ def library(values: dict[str, float]) -> dict[str, AbstractEffect]:
 __all__ = [
     "AbstractEffect",
     "AsymmetricStribeckFriction",
+    "AsymmetricViscousFriction",
     "CubicStiffness",
     "DahlHysteresis",
     "FreePlayStiffness",
+    "Gravity",
     "KinematicErrorStiffness",
     "LinearStiffness",
     "LoadDependentFriction",

@@ -1,0 +1,43 @@
+"""Gravity on a pendulum mounted on the output: the spring of a drop test."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+from ._base import AbstractEffect, Motion, Parameter
+
+
+class Gravity(AbstractEffect):
+    r"""A pendulum on the output shaft: output torque ``−mgl·sin(θ/N)``, reflected to the
+    wave generator as ``−(mgl/N)·sin(θ/N)``.
+
+    ``mgl`` [N m] is the pendulum's mass × g × distance from the axis to its centre of
+    mass (its gravity torque when horizontal). θ is measured from the fitted zero, so the
+    hanging (stable) position is the per-set-up offset the fit already estimates; the
+    output angle is ``θ/N``. Small swings see an output stiffness ``mgl`` and the
+    frequency ``sqrt(mgl/I_out)/2π`` with ``I_out = N²·I``. It is "the spring" of a drop
+    test (a pendulum released from a hold with the drive torque off), so a model may hold
+    it and no ``stiffness`` (``--remove stiffness --add gravity``); with a flexible gear
+    and a pendulum both act, in parallel. Log transform (``mgl > 0``: the zero is the
+    stable equilibrium); starts at the log's small-swing output stiffness.
+
+    Residual mark when missing or wrong: the swing period grows with amplitude (softening,
+    ``T ≈ T0·(1 + A²/16)`` at output amplitude ``A``), where a spring's stays constant or
+    shrinks; a model with a linear spring in its place fits the small swings and misses
+    the first, large ones by a phase error that grows with the release angle.
+    """
+
+    mgl: Float[ArrayLike, ""]
+
+    name: ClassVar[str] = "gravity"
+    parameters: ClassVar[tuple[Parameter, ...]] = (
+        Parameter("mgl", "N m", "pendulum gravity torque m·g·l at the output (mass × g × arm)",
+                  start=lambda s: s.k_out),
+    )
+
+    def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
+        del state
+        return -self.mgl * jnp.sin(motion.theta / motion.ratio) / motion.ratio

@@ -1,0 +1,44 @@
+"""Direction-dependent (asymmetric) viscous friction at the wave generator."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+from jaxtyping import Array, ArrayLike, Float
+
+from ._base import AbstractEffect, Motion, Parameter
+
+
+class AsymmetricViscousFriction(AbstractEffect):
+    r"""Viscous torque ``−c_vp·ω`` sliding in +θ and ``−c_vn·ω`` sliding in −θ, zero at rest.
+
+    The coefficient follows the sliding ``direction`` ``s`` (held through an integration
+    step, like every friction law here): ``τ = −(c̄ + s·Δ)·ω`` with ``c̄ = (c_vp + c_vn)/2``
+    and ``Δ = (c_vp − c_vn)/2``. At rest ``ω = 0`` and it adds nothing, and it holds no
+    torque. ``c_vp = c_vn`` is :class:`ViscousFriction`'s ``c_v``, which it replaces (its
+    ``name`` is ``"viscous"``). Both in N m s/rad at the WG; log transforms; each starts at
+    5 % of the log's critical damping ``2·sqrt(k·I)``.
+
+    Residual mark when missing or wrong: the half-swings in + and − directions decay by
+    different factors (with a linear spring ``k`` a swing in direction ``s`` ends at
+    ``exp(−π·ζ_s/sqrt(1 − ζ_s²))`` of its starting amplitude, ``ζ_s = c_vs/(2·sqrt(k·I))``),
+    so the peaks on the two sides of the zero shrink at different rates and a symmetric
+    ``c_v`` leaves a residual odd in the velocity that is larger on one side.
+    """
+
+    c_vp: Float[ArrayLike, ""]
+    c_vn: Float[ArrayLike, ""]
+
+    name: ClassVar[str] = "viscous"
+    parameters: ClassVar[tuple[Parameter, ...]] = (
+        Parameter("c_vp", "N m s/rad", "viscous friction coefficient sliding in +θ (wave generator)",
+                  start=lambda s: 0.05 * s.c_crit),
+        Parameter("c_vn", "N m s/rad", "viscous friction coefficient sliding in −θ (wave generator)",
+                  start=lambda s: 0.05 * s.c_crit),
+    )
+
+    def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
+        del state
+        mean = 0.5 * (self.c_vp + self.c_vn)
+        half = 0.5 * (self.c_vp - self.c_vn)
+        return -(mean + motion.direction * half) * motion.omega
