@@ -26,7 +26,9 @@ class _Fail(click.ClickException):
     exit_code = 2
 
     def show(self, file=None):
-        click.echo(f"hdid: error: {self.format_message()}", err=True, file=file)
+        # One line whatever the message quotes (a file name with a newline, …).
+        msg = "".join(c if c.isprintable() else repr(c)[1:-1] for c in self.format_message())
+        click.echo(f"hdid: error: {msg}", err=True, file=file)
 
     @classmethod
     def from_error(cls, exc: Exception) -> _Fail:
@@ -575,9 +577,9 @@ def simulate_cmd(out, amplitudes, rate, duration, hold, offset, counts_per_rev, 
         raise _Fail("--rate and --duration must be > 0 and --hold >= 0")
     if counts and not counts_per_rev:
         raise _Fail("--counts needs --counts-per-rev > 0")
+    _check_output(out, [], "OUT")
     if not overwrite and Path(out).exists():
         raise _Fail(f"{out} exists; add --overwrite to replace it (or choose another file)")
-    _check_output(out, [], "OUT")
 
     from ._errors import HdidError
     from ._synthetic import synthesize
