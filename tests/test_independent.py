@@ -154,3 +154,13 @@ def test_same_log_in_other_units():
     theta, _ = ind.trajectory(plant, r["theta0"], 100.0)(rows["time"].to_numpy() - r["t_release"])
     reading = theta + mt["offsets"]["A"]
     assert np.max(np.abs(rows["theta"].to_numpy() - reading)) <= mt["resolution"] / 2 + 1e-9
+
+
+def test_torque_offset_shifts_the_centre_of_the_swing():
+    # I·θ̈ = −k·θ − tau_0: a cosine about θ_eq = −tau_0/k (hdid's TorqueOffset sign)
+    plant = ind.Plant(inertia=1e-4, ratio=1.0, k1=0.5, tau_0=0.01)
+    w, eq = math.sqrt(0.5 / 1e-4), -0.01 / 0.5
+    t = np.linspace(0.0, 3 * 2 * math.pi / w, 300)
+    theta, _ = ind.trajectory(plant, 0.1, t[-1])(t)
+    # same error budget as the undamped oscillator above; a wrong sign is off by 2·|eq|
+    np.testing.assert_allclose(theta, eq + (0.1 - eq) * np.cos(w * t), rtol=0, atol=1e-9)

@@ -22,7 +22,9 @@ class Gravity(AbstractEffect):
     test (a pendulum released from a hold with the drive torque off), so a model may hold
     it and no ``stiffness`` (``--remove stiffness --add gravity``); with a flexible gear
     and a pendulum both act, in parallel. Log transform (``mgl > 0``: the zero is the
-    stable equilibrium); starts at the log's small-swing output stiffness.
+    stable equilibrium); starts at the log's small-swing output stiffness. Unlike the
+    other effects it is not free of the angle unit: ``sin`` needs θ in radians (a log in
+    degrees or mrad must be converted first); time and torque units are free.
 
     Residual mark when missing or wrong: the swing period grows with amplitude (softening,
     ``T ≈ T0·(1 + A²/16)`` at output amplitude ``A``), where a spring's stays constant or
