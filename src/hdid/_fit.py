@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import time
@@ -19,16 +20,25 @@ from . import _config  # noqa: F401
 from ._errors import FitError
 from ._identifiability import MOVED_COUNTS, _dense, analyse
 from ._io import Log, read_log
-from ._model import CATALOG_CSF8, DEFAULT_INERTIA, Model
+from ._model import DEFAULT_INERTIA, Model
 from ._prepare import Prepared, offset_guess, prepare
-from ._problem import Problem, build_problem, with_jacobian
+from ._problem import OFFSET_SCALE_REL, Problem, build_problem, with_jacobian
 from ._result import FitResult, StartSummary
 from ._simulate import DEFAULT_MAX_SUBSTEP
 from ._transforms import interval_to_u, to_unconstrained
+from .effects import Scales, order_of_magnitude
 
-#: Frequencies [Hz] of the coarse grid that seeds the local fits: 15–400 Hz covers
-#: size-8 to size-20 gears with motors.
-GRID_FREQUENCIES_HZ = np.geomspace(15.0, 400.0, 12)
+#: Natural frequency [Hz] at which the default substep (``DEFAULT_MAX_SUBSTEP``) was
+#: validated against the event-driven reference (error 0.04 of the 250 Hz quantization
+#: floor); other logs scale the substep by powers of two to keep ``h·ω_n`` about the same.
+SUBSTEP_REFERENCE_HZ = 60.0
+
+#: Frequencies of the coarse grid that seeds the local fits, relative to the log's own
+#: oscillation frequency (from its turning points, ``Prepared.frequency_hz``): the span
+#: of the grid validated on CSF-8 logs (15–400 Hz about their ~60 Hz), now centred on
+#: each log; a factor 4 below and 6.7 above covers a poor estimate (a 250 Hz log sees a
+#: 60 Hz swing in 4 samples).
+GRID_FREQUENCY_FACTORS = np.geomspace(0.25, 6.7, 12)
 #: Coulomb friction removes 2·tau_c/k of amplitude per half-cycle, so the logged start and
 #: rest angles give tau_c ≈ k·(|θ0| − |θ_rest|)/(2n) for n half-cycles to rest.
 GRID_HALF_CYCLES = np.array([1, 2, 3, 4, 6])
@@ -46,6 +56,8 @@ def fit(
     inertia_prior: tuple[float, float] | None = None,
     release_time: float | None = None,
     counts_per_rev: float | None = None,
+    ratio: float | None = None,
+    resolution: float | None = None,
     n_starts: int = 6,
     max_substep: float | None = None,
     max_steps: int = 300,
@@ -76,6 +88,12 @@ def fit(
         Known release instant [s] in each run's time axis (otherwise fitted per run).
     counts_per_rev:
         Convert a log of raw encoder counts.
+    ratio:
+        Gear ratio N between the logged axis and the output (default: the model's, 100;
+        1 when the logged angle is the output's).
+    resolution:
+        Sensor step of ``theta`` in the log's units (default: from the readings' grid,
+        else the noise is estimated from the log and the report says so).
     n_starts:
         Local fits started from the best points of a coarse data-driven grid.
     max_substep:
@@ -90,7 +108,8 @@ def fit(
     setup = _setup(
         log, model, inertia=inertia, fix=fix, free_inertia=free_inertia,
         inertia_prior=inertia_prior, release_time=release_time,
-        counts_per_rev=counts_per_rev, max_substep=max_substep,
+        counts_per_rev=counts_per_rev, max_substep=max_substep, ratio=ratio,
+        resolution=resolution,
     )
     problem, prep, model = setup.problem, setup.prep, setup.model
 
@@ -168,14 +187,18 @@ class _Setup(NamedTuple):
 
 def _setup(
     log, model=None, *, inertia=None, fix=None, free_inertia=None, inertia_prior=None,
-    release_time=None, counts_per_rev=None, max_substep=None,
+    release_time=None, counts_per_rev=None, max_substep=None, ratio=None, resolution=None,
 ) -> _Setup:
     """Read and prepare a log and build its :class:`Problem` (options as in :func:`fit`)."""
     if not isinstance(log, Log):
-        log = read_log(log, counts_per_rev=counts_per_rev)
+        log = read_log(log, counts_per_rev=counts_per_rev, resolution=resolution)
+    elif resolution is not None:
+        log = dataclasses.replace(log, resolution=float(resolution), resolution_source="given")
     prep = prepare(log, release_time=release_time)
 
     model = Model.default() if model is None else model
+    if ratio is not None:
+        model = model.with_ratio(ratio)
     if inertia is not None:
         if not inertia > 0:
             raise ValueError(f"inertia = {inertia!r}: must be > 0 kg m^2")
@@ -196,10 +219,20 @@ def _setup(
         priors["inertia"] = (math.log(mean), rel)
 
     n_data = int(np.sum(prep.weight > 0))
-    sub = DEFAULT_MAX_SUBSTEP if max_substep is None else float(max_substep)
+    sub = substep_for(prep.frequency_hz) if max_substep is None else float(max_substep)
     offset0 = offset_guess(prep)
+    scales = log_scales(prep, model, offset0)
+    model = model.with_scales(scales)
+    specs = model.parameter_specs()
+    for n, (mean, sd) in list(priors.items()):  # centred on the log's own scale
+        if mean is None:
+            start = specs[n].start(scales) if specs[n].start else model.float_values()[n]
+            priors[n] = (float(to_unconstrained(specs[n], start)), sd)
+    all_moving = prep.moving_start is not None and bool(np.all(prep.moving_start))
     problem = build_problem(
-        prep, model, free, offset0, sub, release_time is not None, priors
+        prep, model, free, offset0, sub, release_time is not None or all_moving, priors,
+        offset_scale=order_of_magnitude(OFFSET_SCALE_REL * scales.amplitude),
+        vel_scale=order_of_magnitude(scales.speed),
     )
     if n_data <= problem.n_unknowns:
         raise FitError(
@@ -232,6 +265,49 @@ def _finish(setup: _Setup, U, costs, ok, steps, t_start: float, **analyse_option
     return result
 
 
+def substep_for(frequency_hz: float) -> float:
+    """Longest RK4 substep [s] for a log whose oscillation frequency is ``frequency_hz``:
+    ``DEFAULT_MAX_SUBSTEP`` at ``SUBSTEP_REFERENCE_HZ``, halved per octave above (so
+    ``h·ω_n`` stays ≲ 0.26), doubled per octave below; powers of two, so logs of similar
+    gears share compiled programs."""
+    if not (math.isfinite(frequency_hz) and frequency_hz > 0):
+        return DEFAULT_MAX_SUBSTEP
+    octaves = math.floor(math.log2(frequency_hz / SUBSTEP_REFERENCE_HZ) + 0.5)
+    return DEFAULT_MAX_SUBSTEP * 2.0 ** (-octaves)
+
+
+def log_scales(prep: Prepared, model: Model, offset0: np.ndarray,
+               frequency_hz: float | None = None, torque: float | None = None) -> Scales:
+    """The log's magnitudes (:class:`~hdid.effects.Scales`) in its own units, at its own
+    oscillation frequency (or ``frequency_hz``) and friction level (or ``torque``)."""
+    inertia = float(np.median(float(model.inertia) + prep.added_inertia))
+    f = prep.frequency_hz if frequency_hz is None else frequency_hz
+    if not (math.isfinite(f) and f > 0):
+        f = 0.1 / prep.sample_period
+    w = 2 * math.pi * f
+    k_wg = inertia * w**2
+    offset = np.asarray(offset0)[prep.setup_index]
+    theta0 = np.abs(prep.hold - offset)
+    excursion = np.array([np.max(np.abs(prep.theta[i, : prep.lengths[i]] - offset[i]))
+                          for i in range(prep.n_runs)])
+    amp = float(np.max(np.where(prep.moving_start, excursion, theta0))
+                if prep.moving_start is not None else np.max(theta0))
+    if not amp > 0:
+        amp = float(np.max(excursion)) or prep.resolution
+    stopped = ~prep.ends_moving if prep.ends_moving is not None else np.ones(prep.n_runs, bool)
+    rest = np.abs(prep.rest - offset)
+    band = float(np.max(rest[stopped])) if stopped.any() else 0.0
+    if torque is None:
+        held = ~prep.moving_start if prep.moving_start is not None else np.ones(prep.n_runs, bool)
+        sel = held & stopped
+        dec = (float(np.median(theta0[sel] - np.minimum(rest[sel], theta0[sel])))
+               if sel.any() else 0.0)
+        torque = max(k_wg * dec / 4.0, 0.02 * k_wg * amp)
+    speed = max(float(prep.speed) if math.isfinite(prep.speed) else 0.0, w * amp)
+    return Scales(ratio=float(model.ratio), inertia=inertia, k_wg=k_wg, amplitude=amp,
+                  speed=speed, torque=float(torque), band=band)
+
+
 def _fixed_values(model: Model, fix) -> dict[str, float]:
     if fix is None:
         return {}
@@ -259,7 +335,14 @@ def _grid_starts(
 
 
 def _grid_candidates(problem: Problem, prep: Prepared, model: Model, from_model: bool = False):
-    """Candidate unknown vectors of the grid (rows) and their frequency keys."""
+    """Candidate unknown vectors of the grid (rows) and their frequency keys.
+
+    Frequencies around the log's own (``GRID_FREQUENCY_FACTORS``); Coulomb levels from the
+    amplitude lost per half-cycle and fractions of the spring torque; every free
+    parameter from its effect's ``Parameter.start`` rule at that frequency and level (the
+    model's value where an effect declares none); each run's release instant by inverting
+    its first half-cycle.
+    """
     N = model.ratio
     specs = model.parameter_specs()
     current = model.float_values()
@@ -270,19 +353,20 @@ def _grid_candidates(problem: Problem, prep: Prepared, model: Model, from_model:
     rest = np.abs(prep.rest - offset)
     y1 = prep.theta[np.arange(prep.n_runs), prep.first_moved] - offset
     t1 = prep.times[np.arange(prep.n_runs), prep.first_moved]
-    k2_ratio = CATALOG_CSF8["k2"] / CATALOG_CSF8["k1"]
     # (loop invariants hoisted: this runs for every log of a batch)
     med_inertia = float(np.median(inertia))
-    rest_max = float(rest.max())
     decrement = float(np.median(np.abs(theta0) - np.minimum(rest, np.abs(theta0))))
     free = problem.free
     pack = _packer(problem, specs)
+    base = log_scales(prep, model, np.asarray(problem.offset0))
+    ruled = [n for n in free if specs[n].start is not None]
     cands, keys = [], []
-    freqs = list(GRID_FREQUENCIES_HZ)
+    f0 = base.frequency_hz
+    freqs = list(f0 * GRID_FREQUENCY_FACTORS)
     if from_model:
         probe = -0.5 * amp  # secant WG stiffness over half the release amplitude
         k_model = float(model.rest_torque(probe)) / -probe
-        freqs.insert(0, math.sqrt(k_model / med_inertia) / (2 * math.pi))
+        freqs.insert(0, math.sqrt(max(k_model, 1e-300) / med_inertia) / (2 * math.pi))
     for i_f, f in enumerate(freqs):
         w = 2 * math.pi * f
         k_wg = med_inertia * w**2
@@ -299,17 +383,16 @@ def _grid_candidates(problem: Problem, prep: Prepared, model: Model, from_model:
             k_wg * decrement / (2 * GRID_HALF_CYCLES), GRID_COULOMB_FRACTIONS * k_wg * amp
         ])
         tau_c = np.maximum(levels, 1e-3 * k_wg * amp)  # one candidate per level
-        vals = {
-            "k1": np.full_like(tau_c, k_wg * N**2),
-            "k2": np.full_like(tau_c, k_wg * N**2 * k2_ratio),
-            "tau_c": tau_c,
-            "tau_s": np.maximum(1.3 * tau_c, 1.05 * k_wg * rest_max),
-            "c_v": np.full_like(tau_c, 0.05 * 2 * math.sqrt(k_wg * med_inertia)),
-        }
-        vals = {n: v for n, v in vals.items() if n in free}
+        vals = {n: np.empty_like(tau_c) for n in ruled}
+        for j, tau in enumerate(tau_c):
+            sc = Scales(ratio=N, inertia=med_inertia, k_wg=k_wg, amplitude=base.amplitude,
+                        speed=base.speed,
+                        torque=float(tau), band=base.band)
+            for n in ruled:
+                vals[n][j] = specs[n].start(sc)
         full = {**{n: np.full_like(tau_c, v) for n, v in current.items()}, **vals}
         # Release instant: invert the first half-cycle θ = θ_eq + (θ0 − θ_eq)·cos(ω τ).
-        eq = -d * full.get("tau_c", np.zeros_like(tau_c))[:, None] / k_wg
+        eq = -d * full.get("tau_c", tau_c)[:, None] / k_wg
         c = np.clip((y1 - eq) / (theta0 - eq), -1.0, 1.0)
         tr = np.clip(t1 - np.arccos(c) / wr, prep.release_lo, prep.release_hi)
         cands.extend(pack(full, tr))
@@ -332,22 +415,14 @@ def _choose_starts(U, cost, keys, n_starts: int, from_model: bool = False):
     return U[chosen], cost[chosen]
 
 
-def _pack(problem: Problem, specs, values, t_release) -> np.ndarray:
-    parts = [np.array([to_unconstrained(specs[n], values[n]) for n in problem.free])]
-    if problem.release_free:
-        parts.append(
-            interval_to_u(t_release, np.asarray(problem.release_lo), np.asarray(problem.release_hi))
-        )
-    parts.append(np.zeros(problem.n_runs))
-    parts.append(np.zeros(problem.n_setups))
-    return np.concatenate(parts)
-
-
 def _packer(problem: Problem, specs):
     """:func:`_pack` for many candidates of one problem (its arrays read once)."""
     free, release_free = problem.free, problem.release_free
     lo, hi = np.asarray(problem.release_lo), np.asarray(problem.release_hi)
     tail = np.zeros(problem.n_runs + problem.n_setups)
+    if problem.n_moving:  # runs that start moving: their velocity from the data
+        w0 = np.asarray(problem.omega_guess)[np.asarray(problem.moving_index)]
+        tail = np.concatenate([tail, w0 / float(problem.vel_scale)])
     spec_list = [specs[n] for n in free]
 
     def pack(values, t_release):

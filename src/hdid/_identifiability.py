@@ -46,6 +46,8 @@ def unknown_labels(problem: Problem, prep: Prepared) -> list[str]:
         labels += [f"release_time[{n}]" for n in prep.run_names]
     labels += [f"theta0[{n}]" for n in prep.run_names]
     labels += [f"offset[{s}]" for s in prep.setup_names]
+    if problem.n_moving:
+        labels += [f"omega0[{prep.run_names[i]}]" for i in np.asarray(problem.moving_index)]
     return labels
 
 
@@ -207,7 +209,19 @@ def analyse(
                 f"peak speed {peak:.3g} rad/s is not far above the Stribeck velocity "
                 f"{values['v_s']:.3g} rad/s: tau_c, tau_s, v_s and delta blur together"
             )
-    bracket = band_bracket(model, runs) if bracket else None
+    moving_start = (np.zeros(prep.n_runs, bool) if prep.moving_start is None
+                    else np.asarray(prep.moving_start))
+    ends_moving = (np.zeros(prep.n_runs, bool) if prep.ends_moving is None
+                   else np.asarray(prep.ends_moving))
+    stopped = [r for i, r in enumerate(runs) if not ends_moving[i] and not moving_start[i]]
+    bracket = band_bracket(model, stopped) if bracket else None
+    if bracket is not None and bracket[0] > bracket[1]:
+        warnings.append(
+            f"stick band: the largest logged |rest point| {bracket[0]:.4g} exceeds the smallest "
+            f"|angle| {bracket[1]:.4g} from which the fitted model slides on: the fitted "
+            "friction cannot reproduce the logged rest points (no data bracket)"
+        )
+        bracket = None
     if bracket is not None:
         lo, hi = bracket
         hw, hw_std = derived["stick_band_halfwidth_rad"]
@@ -220,7 +234,7 @@ def analyse(
     # A run the model never releases (exact stick: its speed is 0 at every sample) although
     # the log shows it moving has a zero gradient in its release and start angle: the fit
     # cannot pull it out, and the others' parameters bend around it.
-    held = [r.name for i, r in enumerate(runs) if r.peak_speed == 0.0
+    held = [r.name for i, r in enumerate(runs) if r.peak_speed == 0.0 and not moving_start[i]
             and abs(prep.rest[i] - prep.hold[i]) > MOVED_COUNTS * prep.resolution]
     if held:
         warnings.append(
@@ -229,12 +243,21 @@ def analyse(
             "(the stick band it tried once exceeded their start angle) and its parameters "
             "are not trustworthy; check those runs or fit without them"
         )
-    not_stuck = [r.name for r in runs if not r.stuck_at_end]
+    not_stuck = [r.name for i, r in enumerate(runs) if not r.stuck_at_end and not ends_moving[i]]
     if not_stuck:
         warnings.append(
             "the model is still moving at the end of run(s) " + ", ".join(not_stuck)
             + ": the fitted friction cannot hold the logged rest point"
         )
+    open_end = [r.name for i, r in enumerate(runs) if ends_moving[i]]
+    if open_end:
+        warnings.append(
+            "the log ends before the motion stops in run(s) " + ", ".join(open_end)
+            + ": their rest points are not in the data, so they say nothing about the "
+            "stick band; log until the gear is at rest to see it"
+        )
+    warnings += _trust_warnings(problem, u, params, std_u, values)
+    warnings += plausibility_warnings(prep, model, values, rms_all)
 
     return FitResult(
         source=prep.source,
@@ -246,6 +269,7 @@ def analyse(
         rms_residual_rad=rms_all,
         resolution_rad=prep.resolution,
         resolution_known=prep.resolution_known,
+        resolution_source=prep.resolution_source,
         sample_period=prep.sample_period,
         n_effective=n_eff,
         n_unknowns=problem.n_unknowns,
@@ -279,12 +303,21 @@ def _derived(problem: Problem, u, cov, null, precomputed=None) -> dict:
     return out
 
 
-def derived_quantities(model) -> dict:
-    """Derived physical quantities of a model (JAX scalars)."""
+def band_limit(problem: Problem):
+    """How far [log units] to search for the stick band's edges: twice the largest
+    excursion from the spring zero in the log (the band cannot extend past where the log
+    shows the gear sliding; a fixed 1 rad would not fit a log in mrad or in degrees)."""
+    off = problem.offset0[problem.setup_index][:, None]
+    return 2.0 * jnp.max(jnp.abs(problem.theta - off))
+
+
+def derived_quantities(model, theta_max=1.0) -> dict:
+    """Derived physical quantities of a model (JAX scalars); the stick band is searched
+    within ``±theta_max`` (:func:`band_limit` of the log)."""
     N = model.ratio
     v = model.values()
     I = v["inertia"]
-    lo, hi = model.stick_band()
+    lo, hi = model.stick_band(theta_max)
     out = {"stick_band_halfwidth_rad": 0.5 * (hi - lo), "stick_band_lower_rad": lo,
            "stick_band_upper_rad": hi}
     for n in ("k1", "k2", "tau_c", "tau_s", "c_v"):
@@ -292,9 +325,13 @@ def derived_quantities(model) -> dict:
             out[f"{n}/inertia"] = v[n] / I
     if "k1" in v:
         k_wg = v["k1"] / N**2
-        out["natural_frequency_hz"] = jnp.sqrt(k_wg / I) / (2 * jnp.pi)
-        if "c_v" in v:
-            out["damping_ratio"] = v["c_v"] / (2 * jnp.sqrt(k_wg * I))
+    else:  # any other restoring law (a gravity pendulum, segments): its slope at the zero
+        k_wg = -jax.grad(lambda th: model.rest_torque(th))(jnp.zeros(()))
+    ok = k_wg > 0
+    safe = jnp.where(ok, k_wg, 1.0)
+    out["natural_frequency_hz"] = jnp.where(ok, jnp.sqrt(safe / I) / (2 * jnp.pi), jnp.nan)
+    if "c_v" in v:
+        out["damping_ratio"] = jnp.where(ok, v["c_v"] / (2 * jnp.sqrt(safe * I)), jnp.nan)
     return out
 
 
@@ -303,7 +340,8 @@ def _derived_and_jacobian(problem: Problem, u):
     P = problem.n_physical
 
     def quantities(up):
-        return derived_quantities(problem.model(jnp.concatenate([up, u[P:]])))
+        return derived_quantities(problem.model(jnp.concatenate([up, u[P:]])),
+                                  band_limit(problem))
 
     return quantities(u[:P]), jax.jacfwd(quantities)(u[:P])
 
@@ -311,12 +349,20 @@ def _derived_and_jacobian(problem: Problem, u):
 BASE_EFFECTS = ("stiffness", "stribeck", "viscous")
 
 
+def _is_base(model) -> bool:
+    """The base model's effects, by class (a user effect may reuse a slot name)."""
+    from .effects import CubicStiffness, StribeckFriction, ViscousFriction
+
+    classes = (CubicStiffness, StribeckFriction, ViscousFriction)
+    return len(model.effects) == 3 and all(type(e) is c for e, c in zip(model.effects, classes))
+
+
 def band_bracket(model, runs) -> tuple[float, float] | None:
     """What the data say about the stick-band half-width without any smoothness: at
     least the largest |rest point| logged, less than the smallest |angle| at which the
     gear reversed and slid on (located with the event-driven reference simulator at the
     fitted parameters). Base model only; ``None`` otherwise."""
-    if tuple(e.name for e in model.effects) != BASE_EFFECTS or not runs:
+    if not _is_base(model) or not runs:
         return None
     from .reference import reference_trajectory
 
@@ -336,6 +382,80 @@ def band_bracket(model, runs) -> tuple[float, float] | None:
         if slid:
             upper = min(upper, min(slid))
     return lower, upper
+
+
+#: An interval parameter within this fraction of its interval's width from an end is
+#: "at its bound".
+AT_BOUND = 1e-3
+
+
+def _trust_warnings(problem: Problem, u, params, std_u, values) -> list[str]:
+    """A result that is not trustworthy says so: non-finite standard errors, parameters
+    run off to 0/∞ or onto an interval bound, breakaway below Coulomb friction."""
+    out = []
+    specs = problem.base.parameter_specs()
+    u = np.asarray(u, dtype=float)
+    nan = [n for n, p in params.items() if not p.fixed and not np.isfinite(p.std)]
+    if nan:
+        out.append(
+            "no finite standard error for " + ", ".join(nan) + ": the data do not "
+            "determine them at this optimum (fix them, give a prior, or log a richer test)"
+        )
+    for i, n in enumerate(problem.free):
+        t = specs[n].transform
+        if isinstance(t, tuple):
+            _, lo, hi = t
+            x = values[n]
+            if min(x - lo, hi - x) < AT_BOUND * (hi - lo):
+                out.append(f"{n} = {x:.4g} is at the bound of its range ({lo:g}, {hi:g}): "
+                           "the optimum lies outside what the model allows")
+        elif t == "log" and not (1e-200 < values[n] < 1e200):
+            out.append(f"{n} = {values[n]:.4g} ran towards 0 or infinity: the effect is not "
+                       "supported by the data (try the model without it)")
+    if "tau_s" in values and "tau_c" in values and values["tau_s"] < values["tau_c"]:
+        out.append(
+            f"tau_s = {values['tau_s']:.4g} < tau_c = {values['tau_c']:.4g}: the fitted friction "
+            "falls below its sliding level at rest (negative Stribeck rise); the data prefer a "
+            "lower breakaway than sliding friction — check the model (e.g. remove stribeck's "
+            "rise by fixing tau_s = tau_c)"
+        )
+    return out
+
+
+def plausibility_warnings(prep: Prepared, model, values, rms: float) -> list[str]:
+    """Warn when the log's numbers are implausible for the declared units (time in s,
+    angles in rad): a wrong unit otherwise gives a confident-looking fit."""
+    out = []
+    fs = 1.0 / prep.sample_period
+    if fs < 5.0:
+        out.append(
+            f"the sample rate is {fs:.3g} Hz: implausibly low for this test if time is in "
+            "seconds (a log in milliseconds reads as 1000× slower): convert time to seconds"
+        )
+    f_n = prep.frequency_hz
+    if math.isfinite(f_n) and f_n > 0.5 * fs:
+        out.append(
+            f"the log oscillates at about {f_n:.3g} Hz, above half the sample rate: the swing is "
+            "not resolved; log faster"
+        )
+    amp = float(np.max(np.abs(prep.hold - prep.rest))) if prep.n_runs else 0.0
+    has_gravity = any(e.name == "gravity" for e in model.effects)
+    if (not has_gravity and ("k1" in values and model.ratio > 1 and amp / model.ratio > 0.05
+                             or amp > math.pi)):
+        out.append(
+            f"the logged swing {amp:.3g} rad at the input is {amp / model.ratio:.3g} rad at the "
+            f"output (ratio {model.ratio:g}): a strain-wave gear twists ~1e-3 rad at rated "
+            "torque and a spring test rarely swings over half a turn — is theta in degrees, "
+            "mrad or counts (convert to rad, or --counts-per-rev), or is the ratio wrong "
+            "(--ratio)?"
+        )
+    if prep.quantized and math.isfinite(rms) and rms > 20.0 * prep.resolution / math.sqrt(12):
+        out.append(
+            f"the RMS residual is {rms / (prep.resolution / math.sqrt(12)):.3g}× the "
+            "quantization floor: the model does not describe this log (wrong units, a missing "
+            "effect — try `hdid diagnose` — or a wrong resolution)"
+        )
+    return out
 
 
 def _release_std(problem: Problem, u, std_u, i: int) -> float:

@@ -14,8 +14,9 @@ from ._prepare import Prepared
 from ._simulate import simulate_runs
 from ._transforms import from_unconstrained, interval_from_u
 
-#: Scale of the per-set-up offset in the optimiser's space [rad].
-OFFSET_SCALE = 0.01
+#: Scale of the per-set-up offset in the optimiser's space, relative to the log's typical
+#: release amplitude (rounded to a power of ten: 0.01 rad for ±0.157 rad releases).
+OFFSET_SCALE_REL = 0.064
 
 
 class Problem(eqx.Module):
@@ -24,7 +25,9 @@ class Problem(eqx.Module):
     The unknowns ``u`` are laid out as: free physical parameters (transformed), then the
     release instant of each run (logistic map onto its bracket; absent when fixed), the
     true encoder reading at release of each run (in encoder steps from the logged hold),
-    and the encoder reading at the spring's zero of each set-up (``OFFSET_SCALE`` units).
+    the encoder reading at the spring's zero of each set-up (``offset_scale`` units), and
+    — only for logs with runs that start in motion — the initial velocity of each such
+    run (``vel_scale`` units; ``moving_index`` says which runs).
     Residuals are ``weight·(model − measured)/σ_q`` with ``σ_q = step/√12`` — the
     quantization noise of an ideal encoder — followed by weak-prior rows.
     """
@@ -46,6 +49,11 @@ class Problem(eqx.Module):
     free: tuple[str, ...] = eqx.field(static=True)
     release_free: bool = eqx.field(static=True)
     max_substep: float = eqx.field(static=True)
+    offset_scale: Float[Array, ""] = None
+    moving_index: Array = None
+    vel_scale: Float[Array, ""] = None
+    omega_guess: Float[Array, " R"] = None
+    n_moving: int = eqx.field(static=True, default=0)
 
     @property
     def n_runs(self) -> int:
@@ -61,7 +69,8 @@ class Problem(eqx.Module):
 
     @property
     def n_unknowns(self) -> int:
-        return self.n_physical + (2 if self.release_free else 1) * self.n_runs + self.n_setups
+        return (self.n_physical + (2 if self.release_free else 1) * self.n_runs
+                + self.n_setups + self.n_moving)
 
     @property
     def sigma(self):
@@ -80,8 +89,23 @@ class Problem(eqx.Module):
             t_release = self.release_lo
         theta0_enc = self.hold + self.step * u[i : i + R]
         i += R
-        offset = self.offset0 + OFFSET_SCALE * u[i : i + self.n_setups]
+        offset = self.offset0 + self.offset_scale * u[i : i + self.n_setups]
         return values, t_release, theta0_enc, offset
+
+    def omega0(self, u):
+        """Initial velocity of every run ``(R,)`` (0 for runs released from a hold)."""
+        if self.n_moving == 0:
+            return jnp.zeros(self.n_runs)
+        return jnp.zeros(self.n_runs).at[self.moving_index].set(
+            self.vel_scale * u[self.n_unknowns - self.n_moving:])
+
+    def omega0_np(self, u) -> np.ndarray:
+        """NumPy twin of :meth:`omega0`."""
+        out = np.zeros(self.n_runs)
+        if self.n_moving:
+            u = np.asarray(u, dtype=float)
+            out[np.asarray(self.moving_index)] = float(self.vel_scale) * u[self.n_unknowns - self.n_moving:]
+        return out
 
     def unpack_np(self, u):
         """NumPy twin of :meth:`unpack` for results (no JAX dispatch outside jit)."""
@@ -98,7 +122,7 @@ class Problem(eqx.Module):
             t_release = lo
         theta0_enc = np.asarray(self.hold) + float(self.step) * u[i : i + R]
         i += R
-        offset = np.asarray(self.offset0) + OFFSET_SCALE * u[i : i + self.n_setups]
+        offset = np.asarray(self.offset0) + float(self.offset_scale) * u[i : i + self.n_setups]
         return values, t_release, theta0_enc, offset
 
     def free_values_np(self, U) -> dict[str, np.ndarray]:
@@ -127,7 +151,7 @@ class Problem(eqx.Module):
             per_run(self.model(u), self.n_runs), self.times if times is None else times,
             theta0_enc - offset[self.setup_index], t_release,
             added_inertia=self.added_inertia, max_substep=self.max_substep,
-            full_output=full_output,
+            full_output=full_output, omega0=self.omega0(u) if self.n_moving else None,
         )
 
     def predict(self, u, times=None):
@@ -151,14 +175,19 @@ class Problem(eqx.Module):
 
     # -- structured Jacobian ----------------------------------------------------------
     def _local(self, u):
-        """Per-run unknowns ``(R, P+3)``: physical, release, start angle, own offset."""
+        """Per-run unknowns ``(R, P+3)``: physical, release, start angle, own offset (and,
+        with runs that start moving, ``(R, P+4)``: their initial velocity, 0 elsewhere)."""
         P, R = self.n_physical, self.n_runs
         i = P + (R if self.release_free else 0)
         tr = u[P : P + R] if self.release_free else jnp.zeros(R)
         th0 = u[i : i + R]
         off = u[i + R : i + R + self.n_setups][self.setup_index]
         phys = jnp.broadcast_to(u[:P], (R, P))
-        return jnp.concatenate([phys, tr[:, None], th0[:, None], off[:, None]], axis=1)
+        cols = [phys, tr[:, None], th0[:, None], off[:, None]]
+        if self.n_moving:
+            vel = jnp.zeros(R).at[self.moving_index].set(u[self.n_unknowns - self.n_moving:])
+            cols.append(vel[:, None])
+        return jnp.concatenate(cols, axis=1)
 
     def _runs_residuals(self, local):
         """Data residuals ``(R, T)`` from per-run unknowns ``local`` ``(R, P+3)``."""
@@ -181,6 +210,8 @@ class Problem(eqx.Module):
 
         runs = lambda p: (p.times, p.theta, p.weight, p.setup_index, p.added_inertia,  # noqa: E731
                           p.hold, p.release_lo, p.release_hi)
+        # (runs that start moving: their velocity is column P+3 of `local`, and each
+        # tiled run reads it from there; `moving_index` is not used by _runs_predict)
         tiled = eqx.tree_at(runs, self, tuple(tile(a) for a in runs(self)))
         return tiled._runs_predict(local).reshape(L, R, -1)
 
@@ -196,10 +227,11 @@ class Problem(eqx.Module):
         else:
             t_release = self.release_lo
         theta0_enc = self.hold + self.step * local[:, P + 1]
-        off = self.offset0[self.setup_index] + OFFSET_SCALE * local[:, P + 2]
+        off = self.offset0[self.setup_index] + self.offset_scale * local[:, P + 2]
         pred = simulate_runs(
             models, self.times, theta0_enc - off, t_release,
             added_inertia=self.added_inertia, max_substep=self.max_substep,
+            omega0=self.vel_scale * local[:, P + 3] if self.n_moving else None,
         )
         return pred + off[:, None]
 
@@ -232,6 +264,10 @@ class Problem(eqx.Module):
             J = J.at[idx, :, rel + idx].set(jac_local[:, :, P])
         J = J.at[idx, :, th0 + idx].set(jac_local[:, :, P + 1])
         J = J.at[idx, :, off + self.setup_index].add(jac_local[:, :, P + 2])
+        if self.n_moving:
+            m = self.moving_index
+            vel = self.n_unknowns - self.n_moving
+            J = J.at[m, :, vel + jnp.arange(self.n_moving)].set(jac_local[m, :, P + 3])
         return r.reshape(-1), J.reshape(R * T, self.n_unknowns)
 
     def residuals_and_jacobian(self, u):
@@ -257,6 +293,8 @@ def build_problem(
     max_substep: float,
     release_fixed: bool,
     priors: dict[str, tuple[float, float]],
+    offset_scale: float = 0.01,
+    vel_scale: float = 1.0,
 ) -> Problem:
     mean = np.array([priors[n][0] if n in priors else 0.0 for n in free])
     sd = np.array([priors[n][1] if n in priors else 1.0 for n in free])
@@ -264,6 +302,8 @@ def build_problem(
     # Fixed values as arrays, not Python floats: filter_jit would treat floats as static
     # and recompile for every new inertia= / fix= value.
     base = jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype=float), base)
+    moving = (np.zeros(prep.n_runs, dtype=bool) if prep.moving_start is None
+              else np.asarray(prep.moving_start, dtype=bool))
     return Problem(
         base=base,
         times=jnp.asarray(prep.times),
@@ -282,6 +322,12 @@ def build_problem(
         free=tuple(free),
         release_free=not release_fixed,
         max_substep=max_substep,
+        offset_scale=jnp.asarray(offset_scale, dtype=float),
+        moving_index=jnp.asarray(np.flatnonzero(moving), dtype=int),
+        vel_scale=jnp.asarray(vel_scale, dtype=float),
+        omega_guess=jnp.asarray(np.zeros(prep.n_runs) if prep.omega_guess is None
+                                else prep.omega_guess, dtype=float),
+        n_moving=int(np.sum(moving)),
     )
 
 

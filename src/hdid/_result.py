@@ -87,6 +87,8 @@ class StartSummary:
             "converged": [bool(x) for x in self.converged],
             "iterations": [int(s) for s in self.steps],
             "relative_spread_at_best_cost": self.spread(),
+            "best": int(self.best),
+            "parameter_values": {n: [float(x) for x in v] for n, v in self.values.items()},
         }
 
 
@@ -120,6 +122,15 @@ class FitResult:
     labels: list[str] = field(repr=False)
     band_bracket: tuple[float, float] | None = None
     wall_time_s: float = float("nan")
+    #: SHA-256 of the input log file (set by the CLI; else computed from ``source``)
+    input_sha256: str | None = None
+    #: options of the fit (the CLI's, as given), written to the JSON
+    options: dict | None = None
+    #: hdid version that made the fit (None: this one; set for a loaded result)
+    hdid_version: str | None = None
+    #: "given", "estimated" (an encoder grid found in the readings) or "noise" (readings
+    #: on no grid: ``resolution_rad`` is ``σ·√12`` of the noise estimated from the log)
+    resolution_source: str = "estimated"
 
     # -- accessors --------------------------------------------------------------------
     @property
@@ -141,6 +152,7 @@ class FitResult:
 
         from ._identifiability import _dense
 
+        self._need_log("predict()")
         t = self.problem.times if times is None else jnp.asarray(times)
         theta, _, _ = _dense(self.problem, jnp.asarray(self.u), t)
         off = np.array([r.offset for r in self.runs])
@@ -163,7 +175,10 @@ class FitResult:
                 for r in self.runs
             },
             "rms_residual_rad": self.rms_residual_rad,
-            "rms_residual_counts": self.rms_residual_rad / self.resolution_rad,
+            "rms_residual_counts": (self.rms_residual_rad / self.resolution_rad
+                                    if self.resolution_source != "noise" else None),
+            "resolution": self.resolution_rad,
+            "resolution_source": self.resolution_source,
             "quantization_floor_rad": self.quantization_floor_rad,
             "stick_band_halfwidth_rad": self.stick_band_halfwidth_rad,
             "stick_band_halfwidth_std_rad": self.derived["stick_band_halfwidth_rad"][1],
@@ -177,6 +192,7 @@ class FitResult:
             "unknowns": self.n_unknowns,
             "noise_scale_vs_quantization": self.noise_scale,
             "wall_time_s": self.wall_time_s,
+            **self._reuse_dict(),
         }
 
     def report(self) -> str:
@@ -206,21 +222,34 @@ class FitResult:
             lines.append(f"  {k:<26} {v:12.5g} ± {s:.3g}{rel}")
         lines.append("")
         floor = self.quantization_floor_rad
-        lines.append(
-            f"RMS residual {self.rms_residual_rad:.3e} rad = "
-            f"{self.rms_residual_rad / self.resolution_rad:.3f} counts "
-            f"(quantization floor {floor:.3e} rad = 0.289 counts"
-            + ("" if self.resolution_known else f", encoder step {self.resolution_rad:.4g} rad assumed")
-            + ")"
-        )
+        if self.resolution_source == "noise":
+            fit_sigma = floor * self.noise_scale if math.isfinite(self.noise_scale) else floor
+            lines.append(
+                f"RMS residual {self.rms_residual_rad:.3e} rad; the readings lie on no encoder "
+                f"grid, so the noise is estimated: σ ≈ {fit_sigma:.3e} rad from the fit's "
+                f"residuals ({floor:.3e} rad from the log alone); pass --resolution STEP if "
+                "you know the sensor's"
+            )
+        else:
+            how = "given" if self.resolution_source == "given" else "found in the readings"
+            lines.append(
+                f"RMS residual {self.rms_residual_rad:.3e} rad = "
+                f"{self.rms_residual_rad / self.resolution_rad:.3f} counts "
+                f"(quantization floor {floor:.3e} rad = 0.289 counts of the encoder step "
+                f"{self.resolution_rad:.4g} rad, {how})"
+            )
         lo = self.derived["stick_band_lower_rad"][0]
         hi = self.derived["stick_band_upper_rad"][0]
         hw, hws = self.derived["stick_band_halfwidth_rad"]
-        lines.append(
-            f"stick band (WG, from spring zero): [{lo:+.4f}, {hi:+.4f}] rad, "
-            f"half-width {hw:.4f} ± {hws:.4f} rad"
-        )
-        if self.band_bracket:
+        scale = max((abs(r.theta0) for r in self.runs), default=1.0)
+        if max(abs(lo), abs(hi)) <= 1e-9 * scale:
+            lines.append("stick band: none (the model holds no torque at rest)")
+        else:
+            lines.append(
+                f"stick band (WG, from spring zero): [{lo:+.4f}, {hi:+.4f}] rad, "
+                f"half-width {hw:.4f} ± {hws:.4f} rad"
+            )
+        if self.band_bracket and self.band_bracket[0] <= self.band_bracket[1]:
             b0, b1 = self.band_bracket
             lines.append(
                 f"  the data bracket the half-width to [{b0:.4f}, {b1:.4f}] rad "
@@ -229,13 +258,14 @@ class FitResult:
         lines.append("")
         lines.append(
             f"{'run':<6} {'setup':<6} {'n':>4} {'release [s]':>12} {'theta0':>9} "
-            f"{'rest logged':>12} {'rest model':>11} {'RMS [counts]':>12}"
+            f"{'rest logged':>12} {'rest model':>11} "
+            f"{'RMS [counts]' if self.resolution_source != 'noise' else 'RMS [noise σ]':>12}"
         )
         for r in self.runs:
             lines.append(
                 f"{r.name:<6} {r.setup:<6} {r.n_samples:>4} {r.release_time:12.5f} "
                 f"{r.theta0:+9.4f} {r.rest_logged:+12.4f} {r.rest_model:+11.4f} "
-                f"{r.rms_rad / self.resolution_rad:12.3f}"
+                f"{r.rms_rad / (self.resolution_rad if self.resolution_source != 'noise' else floor):12.3f}"
             )
         for s, o in self.setups.items():
             lines.append(f"set-up {s}: encoder reading at spring zero {o:+.5f} rad")
@@ -255,6 +285,48 @@ class FitResult:
 
     def __str__(self) -> str:
         return self.report()
+
+    def _reuse_dict(self) -> dict[str, Any]:
+        """Model structure, correlation/covariance, version, input checksum, options."""
+        from ._saved import extras
+
+        return extras(self)
+
+    def parameter_covariance(self):
+        """``(names, matrix)``: the free parameters' covariance in physical units."""
+        from ._saved import covariance_matrix
+
+        return covariance_matrix(self)
+
+    def save(self, path) -> None:
+        """Write the result as JSON (what ``hdid fit --json`` writes; schema in
+        ``hdid/schema/fit.schema.json``). :meth:`load` reads it back."""
+        from ._saved import save
+
+        save(self, path)
+
+    @classmethod
+    def load(cls, path, *, effects: dict | None = None) -> FitResult:
+        """Read a result written by :meth:`save` or ``hdid fit --json``.
+
+        The report, parameters, derived values, runs and the fitted ``model`` come back
+        (``hdid.simulate(result.model, …)``, or a warm start with
+        ``hdid.fit(log, model=result.model, start_from_model=True)``); the log does not,
+        so :meth:`predict` and :meth:`plot` need a refit. ``effects`` maps class names to
+        your own effect classes (those not in hdid).
+        """
+        from ._saved import load
+
+        return load(path, effects)
+
+    def _need_log(self, what: str) -> None:
+        if self.problem is None:
+            from ._errors import HdidError
+
+            raise HdidError(
+                f"{what} needs the log, and this result was loaded from a file: refit with "
+                "hdid.fit(log, model=result.model, start_from_model=True)"
+            )
 
     def plot(self, path=None, *, axes=None, fine_rate: float = 20000.0):
         """Measured vs model for every run (top) with residuals in counts (bottom).

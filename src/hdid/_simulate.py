@@ -175,8 +175,9 @@ def simulate(
     max_substep: float = None,
     substeps: int = 1,
     full_output: bool = False,
+    omega0: Float[ArrayLike, ""] = 0.0,
 ):
-    """Wave-generator angle at ``times`` after a release from rest.
+    """Wave-generator angle at ``times`` after a release (from rest, or at ``omega0``).
 
     Parameters
     ----------
@@ -198,6 +199,8 @@ def simulate(
         Minimum number of substeps per sample interval.
     full_output:
         Also return velocity and the stuck flag at each sample.
+    omega0:
+        Velocity at ``t_release`` [rad/s] (0: released from rest).
 
     Returns
     -------
@@ -213,6 +216,7 @@ def simulate(
         max_substep=max_substep,
         substeps=substeps,
         full_output=True,
+        omega0=jnp.asarray(omega0, dtype=float)[None],
     )
     theta, omega, stuck = (o[0] for o in out)
     return (theta, omega, stuck) if full_output else theta
@@ -228,8 +232,12 @@ def simulate_runs(
     max_substep: float = None,
     substeps: int = 1,
     full_output: bool = False,
+    omega0: Float[ArrayLike, " R"] | None = None,
 ):
     """:func:`simulate` for ``R`` runs at once, in one loop.
+
+    ``omega0`` (default 0) is each run's velocity at ``t_release``: a run that the log
+    shows already moving (a ring-down, a log cut after the release) starts sliding.
 
     ``models`` is a :class:`~hdid.Model` whose every array leaf has a leading axis of
     length ``R`` (one model per run, e.g. ``jax.tree_util.tree_map(lambda x:
@@ -300,8 +308,13 @@ def simulate_runs(
         out = tuple(o.at[:, k].set(v) for o, v in zip(out, (theta, omega, direction == 0)))
         return k + 1, state, out
 
-    # Before release the wave generator rests at θ0 (held by the servo, not friction).
-    state0 = (theta0, jnp.zeros(R), jnp.zeros(R), jax.vmap(lambda m, t: m.init_state(t))(models, theta0))
+    # Before release the wave generator rests at θ0 (held by the servo, not friction); a
+    # run given an initial velocity starts sliding in its direction.
+    if omega0 is None:
+        w0 = jnp.zeros(R)
+    else:
+        w0 = jnp.broadcast_to(jnp.asarray(omega0, dtype=float), (R,))
+    state0 = (theta0, w0, jnp.sign(w0), jax.vmap(lambda m, t: m.init_state(t))(models, theta0))
     out0 = (jnp.broadcast_to(theta0[:, None], (R, n)), jnp.zeros((R, n)), jnp.zeros((R, n), dtype=bool))
     k, (theta_end, _, _, _), (theta, omega, stuck) = jax.lax.while_loop(
         cond, body, (jnp.min(first), state0, out0)

@@ -59,7 +59,7 @@ from ._fit import (
     _Setup,
     _setup,
 )
-from ._identifiability import derived_quantities
+from ._identifiability import band_limit, derived_quantities
 from ._problem import Problem
 
 #: Lanes per compiled call of the Levenberg–Marquardt program. One: the LM's Jacobian is
@@ -195,7 +195,8 @@ def _lane_analysis(problems: Problem, U):
         P = p.n_physical
 
         def quantities(up):
-            return derived_quantities(p.model(jax.numpy.concatenate([up, u[P:]])))
+            return derived_quantities(p.model(jax.numpy.concatenate([up, u[P:]])),
+                                      band_limit(p))
 
         derived = (quantities(u[:P]), jax.jacfwd(quantities)(u[:P]))
         return (J, r), dense, derived

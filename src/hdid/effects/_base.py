@@ -40,6 +40,8 @@ class Scales:
     torque:
         Typical friction torque at the logged axis [N m] (from the amplitude decay, or a
         fraction of ``k_wg·amplitude``).
+    band:
+        Largest distance of a logged rest point from the zero [rad] (0 if none).
     """
 
     ratio: float
@@ -48,6 +50,7 @@ class Scales:
     amplitude: float
     speed: float
     torque: float
+    band: float = 0.0
 
     @property
     def k_out(self) -> float:

@@ -29,7 +29,8 @@ class FreePlayStiffness(AbstractEffect):
 
     name: ClassVar[str] = "stiffness"
     parameters: ClassVar[tuple[Parameter, ...]] = CubicStiffness.parameters + (
-        Parameter("backlash", "rad", "total free play at the wave generator"),
+        Parameter("backlash", "rad", "total free play at the wave generator",
+                  start=lambda s: 0.06 * s.amplitude),
     )
 
     def torque(self, motion: Motion, state: None) -> Float[Array, ""]:

@@ -37,8 +37,10 @@ class DahlHysteresis(AbstractEffect):
 
     name: ClassVar[str] = "hysteresis"
     parameters: ClassVar[tuple[Parameter, ...]] = (
-        Parameter("f_h", "N m", "saturation torque of the Dahl element at the wave generator"),
-        Parameter("sigma_h", "N m/rad", "initial (rest) stiffness of the Dahl element, WG side"),
+        Parameter("f_h", "N m", "saturation torque of the Dahl element at the wave generator",
+                  start=lambda s: 0.2 * s.torque),
+        Parameter("sigma_h", "N m/rad", "initial (rest) stiffness of the Dahl element, WG side",
+                  start=lambda s: s.k_wg),
     )
 
     def _z(self, theta, theta_a, z_a, s):

@@ -35,9 +35,9 @@ class KinematicErrorStiffness(AbstractEffect):
     name: ClassVar[str] = "stiffness"
     parameters: ClassVar[tuple[Parameter, ...]] = CubicStiffness.parameters + (
         Parameter("ke_a", "rad", "sine amplitude of the kinematic error, output side",
-                  transform="identity", scale=1e-4),
+                  transform="identity", scale=lambda s: 0.05 * s.twist),
         Parameter("ke_b", "rad", "cosine amplitude of the kinematic error, output side",
-                  transform="identity", scale=1e-4),
+                  transform="identity", scale=lambda s: 0.05 * s.twist),
     )
 
     def torque(self, motion: Motion, state: None) -> Float[Array, ""]:

@@ -30,7 +30,8 @@ class LoadDependentFriction(AbstractEffect):
 
     name: ClassVar[str] = "load_friction"
     parameters: ClassVar[tuple[Parameter, ...]] = (
-        Parameter("c_load", "N m/rad", "friction increase per rad of WG twist (μ·k1/N²)"),
+        Parameter("c_load", "N m/rad", "friction increase per rad of WG twist (μ·k1/N²)",
+                  start=lambda s: 0.05 * s.k_wg),
     )
 
     def torque(self, motion: Motion, state: None) -> Float[Array, ""]:

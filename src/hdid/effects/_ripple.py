@@ -33,9 +33,9 @@ class PositionRipple(AbstractEffect):
     name: ClassVar[str] = "ripple"
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter("ripple_a", "N m", "sine amplitude of the position-periodic torque (WG)",
-                  transform="identity", scale=1e-4),
+                  transform="identity", scale=lambda s: 0.03 * s.torque),
         Parameter("ripple_b", "N m", "cosine amplitude of the position-periodic torque (WG)",
-                  transform="identity", scale=1e-4),
+                  transform="identity", scale=lambda s: 0.03 * s.torque),
     )
 
     def torque(self, motion: Motion, state: None) -> Float[Array, ""]:

@@ -33,11 +33,17 @@ class ThreeSegmentStiffness(AbstractEffect):
 
     name: ClassVar[str] = "stiffness"
     parameters: ClassVar[tuple[Parameter, ...]] = (
-        Parameter("K1", "N m/rad", "stiffness of the first segment (|T| ≤ T1), output side"),
-        Parameter("K2", "N m/rad", "stiffness of the second segment (T1 … T2), output side"),
-        Parameter("K3", "N m/rad", "stiffness beyond T2, output side"),
-        Parameter("T1", "N m", "output torque at the first corner"),
-        Parameter("dT12", "N m", "T2 − T1: output torque between the corners"),
+        # the CSF-8 catalog's segments relative to its cubic fit (physics notes)
+        Parameter("K1", "N m/rad", "stiffness of the first segment (|T| ≤ T1), output side",
+                  start=lambda s: 0.97 * s.k_out),
+        Parameter("K2", "N m/rad", "stiffness of the second segment (T1 … T2), output side",
+                  start=lambda s: 1.06 * s.k_out),
+        Parameter("K3", "N m/rad", "stiffness beyond T2, output side",
+                  start=lambda s: 1.28 * s.k_out),
+        Parameter("T1", "N m", "output torque at the first corner",
+                  start=lambda s: 0.2 * s.k_out * s.twist),
+        Parameter("dT12", "N m", "T2 − T1: output torque between the corners",
+                  start=lambda s: 0.31 * s.k_out * s.twist),
     )
 
     def spring_torque(self, twist: Float[Array, ""]) -> Float[Array, ""]:

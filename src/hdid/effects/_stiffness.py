@@ -25,8 +25,11 @@ class CubicStiffness(AbstractEffect):
 
     name: ClassVar[str] = "stiffness"
     parameters: ClassVar[tuple[Parameter, ...]] = (
-        Parameter("k1", "N m/rad", "linear torsional stiffness, output side"),
-        Parameter("k2", "N m/rad^3", "cubic torsional stiffness, output side"),
+        Parameter("k1", "N m/rad", "linear torsional stiffness, output side",
+                  start=lambda s: s.k_out),
+        # k2·d³ about 17 % of the torque at the largest twist (the CSF-8 catalog's cubic)
+        Parameter("k2", "N m/rad^3", "cubic torsional stiffness, output side",
+                  start=lambda s: 0.17 * s.k_out / s.twist**2),
     )
 
     def spring_torque(self, twist: Float[Array, ""]) -> Float[Array, ""]:

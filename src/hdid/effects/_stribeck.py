@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from typing import ClassVar
 
 import jax.numpy as jnp
@@ -31,12 +30,17 @@ class StribeckFriction(AbstractEffect):
 
     name: ClassVar[str] = "stribeck"
     parameters: ClassVar[tuple[Parameter, ...]] = (
-        Parameter("tau_c", "N m", "Coulomb friction torque at the wave generator"),
-        Parameter("tau_s", "N m", "static (breakaway) friction torque at the wave generator"),
+        Parameter("tau_c", "N m", "Coulomb friction torque at the wave generator",
+                  start=lambda s: s.torque),
+        # breakaway above Coulomb, and enough to hold the largest logged rest point
+        Parameter("tau_s", "N m", "static (breakaway) friction torque at the wave generator",
+                  start=lambda s: max(1.3 * s.torque, 1.05 * s.k_wg * s.band)),
         # Weak priors (transformed space) keep the poorly identified shape parameters
-        # finite when the data cannot see them; the report says when that happens.
+        # finite when the data cannot see them; the report says when that happens. The
+        # Stribeck velocity's is centred on 5 % of the log's peak speed (3 rad/s on the
+        # CSF-8 paper log), a factor e² either way.
         Parameter("v_s", "rad/s", "Stribeck velocity (wave generator)",
-                  prior=(math.log(3.0), 2.0)),
+                  prior=(None, 2.0), start=lambda s: 0.05 * s.speed),
         Parameter("delta", "1", "Stribeck shape exponent",
                   transform=("interval", 0.3, 4.0), prior=(0.0, 2.0)),
     )

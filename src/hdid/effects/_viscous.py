@@ -20,7 +20,8 @@ class ViscousFriction(AbstractEffect):
 
     name: ClassVar[str] = "viscous"
     parameters: ClassVar[tuple[Parameter, ...]] = (
-        Parameter("c_v", "N m s/rad", "viscous friction coefficient at the wave generator"),
+        Parameter("c_v", "N m s/rad", "viscous friction coefficient at the wave generator",
+                  start=lambda s: 0.05 * s.c_crit),
     )
 
     def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
