@@ -206,18 +206,35 @@ def _library_variant(key: str, starts: Callable | None = None):
     def variants(model, values, hints):
         from .effects import library
 
+        values = {**values, "_k_wg": _model_k_wg(model, values, hints),
+                  "_swing": hints.get("swing_rad", math.nan)}
         overrides = starts(values) if starts is not None else [{}]
         return [(key, model.with_effect(library({**values, **o})[key])) for o in overrides]
 
     return variants
 
 
+def _model_k_wg(model, values, hints) -> float:
+    """The fitted model's small-swing restoring stiffness at the logged axis [N m/rad]:
+    ``k1/N²`` for a cubic spring, else the secant of its rest torque over a tenth of the
+    logged swing (a gravity pendulum, segments) — never a catalog number."""
+    if "k1" in values:
+        return float(values["k1"]) / model.ratio**2
+    swing = hints.get("swing_rad", math.nan)
+    probe = 0.1 * swing if math.isfinite(swing) and swing > 0 else 1e-3
+    return max(float(model.rest_torque(probe)) / -probe, 0.0)
+
+
 def _k_wg(values) -> float:
-    return values.get("k1", values.get("K1", 940.0)) / 1e4
+    return values["_k_wg"]
 
 
 def _tau(values) -> float:
-    return values.get("tau_c", 3e-3)
+    """The fitted Coulomb level, or a small fraction of the spring torque over the swing."""
+    if "tau_c" in values:
+        return values["tau_c"]
+    swing = values.get("_swing", math.nan)
+    return 0.02 * values["_k_wg"] * (swing if math.isfinite(swing) else 1.0)
 
 
 #: Orders (cycles per WG revolution) scanned for a position-periodic torque: the WG mesh
@@ -258,7 +275,10 @@ def default_candidates() -> list[Candidate]:
     return [
         Candidate(
             "backlash", cubic,
-            _library_variant("backlash", lambda v: [{"backlash": 0.005}, {"backlash": 0.02}]),
+            # free play a few % of the logged swing (0.005 and 0.02 rad on a CSF-8's ±0.157)
+            _library_variant("backlash", lambda v: [
+                {"backlash": f * v["_swing"]} for f in (0.016, 0.064)
+            ] if math.isfinite(v["_swing"]) else [{}]),
             mark="the approach to rest is too abrupt in the model — the gear coasts through a "
                  "dead zone without spring torque — and rest points spread wider than stiction "
                  "explains",
@@ -306,7 +326,8 @@ def default_candidates() -> list[Candidate]:
         ),
         Candidate(
             "soft_windup", cubic,
-            _library_variant("soft_windup", lambda v: [{}, {"K1": 0.6 * v.get("k1", 940.0)}]),
+            _library_variant("soft_windup", lambda v: [{}, {"K1": 0.6 * v["k1"]}] if "k1" in v
+                             else [{}]),
             mark="the swing period near rest differs from the cubic model's: the phase error "
                  "grows as the amplitude decays",
             experiment="a small-amplitude release (inside the first catalog segment) measures "

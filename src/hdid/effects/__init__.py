@@ -12,6 +12,7 @@ from ._ripple import PositionRipple
 from ._segments import ThreeSegmentStiffness
 from ._stiffness import CubicStiffness
 from ._stribeck import StribeckFriction
+from ._torque_offset import TorqueOffset
 from ._viscous import ViscousFriction
 from ._viscous_asymmetric import AsymmetricViscousFriction
 
@@ -28,7 +29,9 @@ def library(values: dict[str, float]) -> dict[str, AbstractEffect]:
     k2 = v.get("k2", 6.5e7)
     tau_c = v.get("tau_c", 3e-3)
     tau_s = v.get("tau_s", 4.5e-3)
-    k_wg = k1 / 1e4  # k1/N², N = 100
+    # the small-swing stiffness at the logged axis, as the caller measured it (diagnose
+    # passes the fitted model's); k1/N² with N = 100 only as a last resort
+    k_wg = v.get("_k_wg", k1 / 1e4)
     stribeck = dict(tau_c=tau_c, tau_s=tau_s, v_s=v.get("v_s", 3.0), delta=v.get("delta", 1.0))
     return {
         "asymmetric_friction": AsymmetricStribeckFriction(**stribeck, asym=v.get("asym", 0.0)),
@@ -48,6 +51,7 @@ def library(values: dict[str, float]) -> dict[str, AbstractEffect]:
             T1=v.get("T1", 0.29 * k1 / 940.0), dT12=v.get("dT12", 0.46 * k1 / 940.0)),
         "stiffness": CubicStiffness(k1=k1, k2=k2),
         "stribeck": StribeckFriction(**stribeck),
+        "torque_offset": TorqueOffset(tau_0=v.get("tau_0", 0.0)),
         "viscous": ViscousFriction(c_v=v.get("c_v", 2e-5)),
     }
 
@@ -70,6 +74,7 @@ __all__ = [
     "Scales",
     "StribeckFriction",
     "ThreeSegmentStiffness",
+    "TorqueOffset",
     "ViscousFriction",
     "positive_power",
 ]
