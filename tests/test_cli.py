@@ -303,3 +303,47 @@ def test_batch_partial_failure_exit_3(tmp_path):
     table = pd.read_csv(summary)
     assert len(table) == 2
     assert table["error"].isna().sum() == 1 and abs(table["k1"].dropna().iloc[0] / 940 - 1) < 0.1
+
+
+# --- issue 18, item 2: no silent wait on a terminal, nothing extra when redirected ----------
+
+def _stub_fit_error(*args, **kwargs):
+    from hdid._errors import FitError
+
+    raise FitError("stub: the fit itself is not under test here")
+
+
+@pytest.mark.parametrize("tty", [True, False])
+def test_phases_on_a_terminal_only(monkeypatch, tty):
+    import hdid._fit
+    import hdid.cli
+
+    monkeypatch.setattr(hdid._fit, "fit", _stub_fit_error)
+    monkeypatch.setattr(hdid.cli, "_stderr_is_tty", lambda: tty)
+    res = CliRunner().invoke(main, ["fit", str(EXAMPLE)])
+    assert res.exit_code == 2
+    lines = res.stderr.strip().splitlines()
+    if tty:
+        assert lines[0].startswith("hdid: reading") and lines[0].endswith(" s")
+        assert lines[1].startswith("hdid: fitting 4 run(s)") and "compiles" in lines[1]
+        assert len(lines) == 3 and lines[2].startswith("hdid: error: ")
+    else:
+        assert len(lines) == 1 and lines[0].startswith("hdid: error: ")
+    res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "-q"])  # -q: no phases either
+    monkeypatch.setattr(hdid.cli, "_stderr_is_tty", lambda: True)
+    assert len(res.stderr.strip().splitlines()) == 1
+
+
+def test_too_long_log_refused_at_once(monkeypatch):
+    import hdid._fit
+    import hdid.cli
+
+    def no_fit(*a, **k):
+        raise AssertionError("a log over the limit must be refused before fitting")
+
+    monkeypatch.setattr(hdid._fit, "fit", no_fit)
+    # The example has 125 samples per run: a limit of 100 refuses it, with the hint.
+    monkeypatch.setattr(hdid.cli, "MAX_SAMPLES_PER_RUN", 100)
+    res = CliRunner().invoke(main, ["fit", str(EXAMPLE)])
+    line = _one_line_exit_2(res, "125 samples")
+    assert "crop" in line and "one row in 2" in line and "250 Hz" in line

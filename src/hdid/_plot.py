@@ -5,32 +5,85 @@ from __future__ import annotations
 import numpy as np
 
 
+#: Runs per row of the fit figure; more runs wrap into further rows.
+RUNS_PER_ROW = 4
+
+
+def _fit_axes(plt, R: int):
+    """A new figure with a (2, R) array of axes: per run the angle above its residual,
+    at most RUNS_PER_ROW runs side by side (more wrap into rows)."""
+    ncol = min(R, RUNS_PER_ROW)
+    nrow = -(-R // ncol)
+    fig = plt.figure(figsize=(3.2 * ncol + 1, 5.2 * nrow))
+    gs = fig.add_gridspec(2 * nrow, ncol, height_ratios=[3, 1.3] * nrow)
+    axes = np.empty((2, R), dtype=object)
+    for i in range(R):
+        r, c = divmod(i, ncol)
+        axes[0, i] = fig.add_subplot(gs[2 * r, c])
+        axes[1, i] = fig.add_subplot(gs[2 * r + 1, c], sharex=axes[0, i])
+    return fig, axes
+
+
+def _overlay(result, ax, times, meas, model_s):
+    """All runs in one axes: angle from the spring zero against time since release."""
+    lo = result.derived["stick_band_lower_rad"][0]
+    hi = result.derived["stick_band_upper_rad"][0]
+    ax.axhspan(lo, hi, color="0.9", label="stick band (fit)")
+    for i, run in enumerate(result.runs):
+        n = run.n_samples
+        t = times[i, :n] - run.release_time
+        ax.plot(t, model_s[i, :n] - run.offset, "-", color=f"C{i % 10}", lw=1.0,
+                label=f"run {run.name}: model")
+        ax.plot(t, meas[i, :n] - run.offset, "o", ms=2.5, mfc="none", color=f"C{i % 10}")
+    ax.set_xlabel("time since release [s]")
+    ax.set_ylabel("WG angle from spring zero [rad]")
+    ax.set_title(f"{result.source}: measured (o) and model (–)", fontsize=9)
+    ax.legend(fontsize=7)
+    return ax.figure
+
+
 def plot_fit(result, path=None, *, axes=None, fine_rate: float = 20000.0):
+    """Measured vs model per run (angle from the fitted spring zero, so the stick band is
+    centred on 0) with the residual in encoder counts below. ``axes``: a ``(2, R)`` array
+    of axes, or one Axes (all runs overlaid, no residuals)."""
     import matplotlib
 
     if path is not None and axes is None:
         matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
+    result._need_log("plot()")
     prob = result.problem
     times = np.asarray(prob.times)
     meas = np.asarray(prob.theta)
     R = times.shape[0]
+    model_s = result.predict()
+    if axes is not None and hasattr(axes, "plot"):  # one matplotlib Axes
+        fig = _overlay(result, axes, times, meas, model_s)
+        if path is not None:
+            fig.savefig(path, dpi=110)
+        return fig
     n_fine = int(np.ceil((times.max() - times.min()) * fine_rate)) + 1
     fine = np.stack([np.linspace(t[0], t[-1], n_fine) for t in times])
     model_fine = result.predict(fine)
-    model_s = result.predict()
     if axes is None:
-        fig, axes = plt.subplots(
-            2, R, figsize=(3.2 * R + 1, 5.2), sharex="col", squeeze=False,
-            gridspec_kw={"height_ratios": [3, 1.3]},
-        )
+        fig, axes = _fit_axes(plt, R)
     else:
-        axes = np.asarray(axes).reshape(2, R)
+        arr = np.asarray(axes, dtype=object)
+        if arr.size != 2 * R:
+            from ._errors import HdidError
+
+            raise HdidError(
+                f"axes: this fit has {R} run(s), so give a (2, {R}) array of axes (angle above, "
+                f"residual below, one column per run) or a single Axes (runs overlaid); got "
+                f"{arr.size} axes of shape {arr.shape}"
+            )
+        axes = arr.reshape(2, R)
         fig = axes[0, 0].figure
     step = result.resolution_rad
     lo = result.derived["stick_band_lower_rad"][0]
     hi = result.derived["stick_band_upper_rad"][0]
+    cropped = []
     for i, run in enumerate(result.runs):
         n = run.n_samples
         ax, axr = axes[0, i], axes[1, i]
@@ -39,25 +92,33 @@ def plot_fit(result, path=None, *, axes=None, fine_rate: float = 20000.0):
         moving = np.flatnonzero(np.abs(np.diff(model_s[i, :n])) > 0)
         t_end = times[i, min(moving[-1] + 6, n - 1)] if moving.size else times[i, n - 1]
         t_end = max(t_end, t0 + 0.05)
-        sel = (times[i, :n] >= t0 - 5 * result.sample_period) & (times[i, :n] <= t_end)
-        fsel = (fine[i] >= t0 - 5 * result.sample_period) & (fine[i] <= t_end)
-        ax.axhspan(run.offset + lo, run.offset + hi, color="0.9", label="stick band (fit)")
-        ax.plot(fine[i, fsel], model_fine[i, fsel], "-", color="C0", lw=1.2, label="model")
-        ax.plot(times[i, :n][sel], meas[i, :n][sel], "o", ms=3.5, color="k", mfc="none",
-                label="encoder")
+        t_begin = t0 - 5 * result.sample_period
+        sel = (times[i, :n] >= t_begin) & (times[i, :n] <= t_end)
+        fsel = (fine[i] >= t_begin) & (fine[i] <= t_end)
+        if not sel.all():
+            cropped.append(run.name)
+        ax.axhspan(lo, hi, color="0.9", label="stick band (fit)")
+        ax.plot(times[i, :n][sel], meas[i, :n][sel] - run.offset, "o", ms=3.5, color="k",
+                mfc="none", label="encoder", zorder=2)
+        ax.plot(fine[i, fsel], model_fine[i, fsel] - run.offset, "-", color="C0", lw=1.4,
+                label="model", zorder=3)
         ax.axvline(t0, color="C3", lw=0.8, ls=":", label="release (fit)")
         ax.set_title(f"run {run.name} (set-up {run.setup})", fontsize=9)
         res = (meas[i, :n] - model_s[i, :n]) / step
-        axr.axhspan(-0.5, 0.5, color="0.9")
-        axr.plot(times[i, :n][sel], res[sel], "o-", ms=3, lw=0.8, color="C1")
-        axr.set_xlabel("time [s]")
+        axr.axhspan(-0.5, 0.5, color="0.9", label="±½ count (rounding)")
+        axr.plot(times[i, :n][sel], res[sel], "o-", ms=3, lw=0.8, color="C1", label="residual")
+        shown = f"{times[i, :n][sel][0]:.3g}–{times[i, :n][sel][-1]:.3g} s of {times[i, 0]:.3g}–{times[i, n - 1]:.3g}" if sel.any() else ""
+        axr.set_xlabel("time [s]" + (f"\n(shows {shown})" if not sel.all() and shown else ""), fontsize=8)
         if i == 0:
-            ax.set_ylabel("WG angle [rad]")
+            ax.set_ylabel("WG angle from spring zero [rad]")
             axr.set_ylabel("measured − model\n[counts]")
             ax.legend(fontsize=7, loc="best")
+            axr.legend(fontsize=6, loc="lower right")
+    note = ("; panels show release to rest, the still hold and tail are cropped"
+            if cropped else "")
     fig.suptitle(
         f"{result.source}: RMS {result.rms_residual_rad / step:.2f} counts "
-        f"(floor 0.29), band half-width {result.stick_band_halfwidth_rad:.4f} rad",
+        f"(floor 0.29), band half-width {result.stick_band_halfwidth_rad:.4f} rad{note}",
         fontsize=10,
     )
     fig.tight_layout()

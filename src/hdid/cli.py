@@ -19,6 +19,10 @@ import click
 #: others were fitted (their rows written). 0: all fitted; 2: bad usage or every log failed.
 EXIT_PARTIAL = 3
 
+#: Longest run (samples) `hdid fit` takes; longer logs are refused with a hint to crop or
+#: decimate. Fit time and memory grow with the samples: benchmarks/results/long_log.md.
+MAX_SAMPLES_PER_RUN = 5_000
+
 
 class _Fail(click.ClickException):
     """One-line error, exit status 2, no traceback."""
@@ -46,18 +50,98 @@ def _parse_floats(text: str | None, what: str) -> list[float] | None:
         raise _Fail(f"{what}: expected comma-separated numbers, got {text!r}") from None
 
 
-def _parse_fix(items: tuple[str, ...]) -> dict[str, float | None]:
+def _parse_fix(items: tuple[str, ...], option: str = "--fix") -> dict[str, float | None]:
     out: dict[str, float | None] = {}
     for item in items:
         name, _, value = item.partition("=")
         name = name.strip()
-        if not name:
-            raise _Fail(f"--fix {item!r}: expected NAME or NAME=VALUE (e.g. --fix k2=6.5e7)")
+        if not name or (option == "--start" and not value):
+            raise _Fail(f"{option} {item!r}: expected "
+                        + ("NAME=VALUE (e.g. --start k1=1200)" if option == "--start"
+                           else "NAME or NAME=VALUE (e.g. --fix k2=6.5e7)"))
         try:
             out[name] = float(value) if value else None
         except ValueError:
-            raise _Fail(f"--fix {item!r}: {value!r} is not a number") from None
+            raise _Fail(f"{option} {item!r}: {value!r} is not a number") from None
+        if option == "--start" and not math.isfinite(out[name]):
+            raise _Fail(f"{option} {item!r}: give a finite number")
     return out
+
+
+def _check_size(data) -> None:
+    """Refuse at once a log whose runs are too long to fit in minutes (see
+    benchmarks/results/long_log.md): say how to crop or decimate it."""
+    longest = max(r.n_samples for r in data.runs)
+    if longest > MAX_SAMPLES_PER_RUN:
+        period = getattr(data, "sample_period", None) or 0.0
+        factor = -(-longest // MAX_SAMPLES_PER_RUN)
+        rate = f" (now {1 / period:.0f} Hz)" if period > 0 else ""
+        raise _Fail(
+            f"{data.source}: a run has {longest} samples, more than the "
+            f"{MAX_SAMPLES_PER_RUN} per run hdid fits in minutes; crop each run to the "
+            f"release and the settling (a few hundred ms), or keep one row in {factor}"
+            f"{rate}; hdid.fit() in Python fits it anyway"
+        )
+
+
+def _with_start_values(model, guesses: dict):
+    """The model to fit, with the --start values as its own (the warm start)."""
+    from ._model import Model
+
+    model = Model.default() if model is None else model
+    specs = model.parameter_specs()
+    unknown = [n for n in guesses if n not in specs]
+    if unknown:
+        raise _Fail(f"--start {unknown[0]}: the model has no such parameter; it has "
+                    + ", ".join(specs))
+    try:
+        return model.replace(**guesses)
+    except (ValueError, TypeError) as exc:
+        raise _Fail(f"--start: {exc}") from None
+
+
+def _options_used(ctx) -> dict:
+    """The fit options as given (defaults and output paths left out), for the JSON."""
+    skip = {"logs", "json_out", "plot_out", "summary_out", "chains_out", "corner_out", "quiet"}
+    out = {}
+    for name, value in ctx.params.items():
+        if name in skip or value is None or value is False or value == () or value == "":
+            continue
+        if ctx.get_parameter_source(name) == click.core.ParameterSource.DEFAULT:
+            continue
+        out[name] = list(value) if isinstance(value, tuple) else value
+    return out
+
+
+def _stderr_is_tty() -> bool:
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        return False
+
+
+class _Phases:
+    """On a terminal, say on stderr what hdid is doing and how long each phase took:
+    ``hdid: reading log.csv … 0.1 s``. Silent when stderr is redirected or with -q."""
+
+    def __init__(self, enabled: bool):
+        self.enabled = enabled
+        self.t0: float | None = None
+
+    def start(self, what: str) -> None:
+        import time
+
+        self.stop()
+        if self.enabled:
+            click.echo(f"hdid: {what} …", err=True, nl=False)
+            self.t0 = time.perf_counter()
+
+    def stop(self) -> None:
+        import time
+
+        if self.enabled and self.t0 is not None:
+            click.echo(f" {time.perf_counter() - self.t0:.1f} s", err=True)
+        self.t0 = None
 
 
 def _check_output(path: str | None, inputs: list[Path], option: str, *, figure: bool = False) -> None:
@@ -170,6 +254,7 @@ def main():
 @_COUNTS_PER_REV
 @_RESOLUTION
 @click.option("--starts", type=click.IntRange(1, 32), help="Multi-starts (default: the library's, 6).")
+@click.option("--start", "start_values", multiple=True, metavar="NAME=VALUE", help="Initial guess for a parameter, e.g. --start k1=1200 (repeatable): one more start from these values, run beside the multi-start grid.")
 @click.option("--posterior", is_flag=True, help="Also sample the posterior with emcee (slow; see README).")
 @click.option("--steps", type=click.IntRange(100, 10**6), help="Posterior chain length (default: until 50 autocorrelation times, at most 20000).")
 @click.option("--walkers", type=click.IntRange(4, 4096), help="emcee walkers (default max(32, 2·dim)).")
@@ -185,7 +270,7 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
             inertia_prior, fix, add_effects, remove_effects, effect_files, release_time,
             counts_per_rev, starts, posterior, steps, walkers, seed, chains_out, corner_out,
             quiet, band_bracket, workers, dask_address, torque_constant,
-            output_counts_per_rev, order, joint, ratio, resolution):
+            output_counts_per_rev, order, joint, ratio, resolution, start_values):
     """Fit stiffness, friction (and inertia) jointly to all runs of LOG.csv.
 
     LOG.csv has a header with columns time [s] and theta [rad, WG/motor angle]; optional
@@ -211,10 +296,12 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
             raise _Fail(f"{logs[0]}: --posterior is not available for driven logs yet; fit without it")
         return _fit_driven([Path(logs[0])], model, json_out, plot_out, fix, counts_per_rev,
                            driven_options, order, release_time, quiet)
+    if start_values and (len(logs) > 1 or summary_out or joint):
+        raise _Fail("--start takes one free-motion log; fit the logs one by one for it")
     if len(logs) > 1 or summary_out:
         return _fit_batch(logs, summary_out, json_out, plot_out, inertia, fix, release_time,
                           counts_per_rev, starts, quiet, posterior or chains_out or corner_out,
-                          model, band_bracket, dask_address, workers)
+                          model, band_bracket, dask_address, workers, resolution)
     log_path = Path(logs[0])
     _check_output(json_out, [log_path], "--json")
     _check_output(plot_out, [log_path], "--plot", figure=True)
@@ -225,14 +312,25 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
         raise _Fail("--inertia-prior: expected MEAN,REL (e.g. 7e-7,0.3)")
     added = _parse_floats(added_inertia, "--added-inertia")
     fixed = _parse_fix(fix)
+    guesses = _parse_fix(start_values, "--start")
+    options = _options_used(click.get_current_context())
+    phases = _Phases(enabled=not quiet and _stderr_is_tty())
 
     from . import _fit, _io
     from ._errors import HdidError
+    from ._saved import sha256
 
     try:
+        phases.start(f"reading {log_path}")
+        digest = sha256(log_path)
         data = _io.read_log(log_path, counts_per_rev=counts_per_rev, resolution=resolution)
         if added is not None:
             data = _with_added_inertia(data, added)
+        _check_size(data)
+        if guesses:
+            model = _with_start_values(model, guesses)
+        phases.start(f"fitting {len(data.runs)} run(s), {data.n_samples} samples "
+                     f"({starts or 6} starts; a fresh environment compiles first, ~20 s)")
         result = _fit.fit(
             data,
             model,
@@ -242,10 +340,14 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
             free_inertia=True if free_inertia else None,
             inertia_prior=tuple(prior) if prior else None,
             release_time=release_time,
+            start_from_model=bool(guesses),
             **({"n_starts": starts} if starts else {}),
         )
     except (HdidError, ValueError, KeyError) as exc:
+        phases.stop()
         raise _Fail.from_error(exc) from None
+    phases.stop()
+    result.input_sha256, result.options = digest, options
     if not quiet:
         click.echo(result.report())
     summary = result.to_dict()
@@ -325,11 +427,12 @@ def _fit_driven(paths, model, json_out, plot_out, fix, counts_per_rev, driven_op
         import matplotlib.pyplot as plt
 
         has_kin = result.data.has_output
-        fig, axes = plt.subplots(2 if has_kin else 1, 1, figsize=(9, 7 if has_kin else 4),
-                                 squeeze=False)
-        result.plot(ax=axes[0, 0])
+        fig, axes = plt.subplots(3 if has_kin else 2, 1, figsize=(9, 9 if has_kin else 6),
+                                 squeeze=False,
+                                 gridspec_kw={"height_ratios": [2, 1, 2] if has_kin else [2, 1]})
+        result.plot(ax=axes[0, 0], residual_ax=axes[1, 0])
         if has_kin:
-            result.plot_kinematic_error(ax=axes[1, 0])
+            result.plot_kinematic_error(ax=axes[2, 0])
         fig.tight_layout()
         fig.savefig(plot_out, dpi=120)
         plt.close(fig)
@@ -390,7 +493,7 @@ def _load_effect_file(path: Path, base):
 
 def _fit_batch(logs, summary_out, json_out, plot_out, inertia, fix, release_time,
                counts_per_rev, starts, quiet, posterior, model, band_bracket=None,
-               dask_address=None, workers=None):
+               dask_address=None, workers=None, resolution=None):
     paths = [Path(p) for p in logs]
     if plot_out or posterior:
         raise _Fail("--plot and --posterior take one log; fit the logs one by one for those")
@@ -427,6 +530,7 @@ def _fit_batch(logs, summary_out, json_out, plot_out, inertia, fix, release_time
         release_time=release_time,
         counts_per_rev=counts_per_rev,
         **({"n_starts": starts} if starts else {}),
+        **({"resolution": resolution} if resolution else {}),
     )
     flat = table.drop(columns=["result"])
     timing = table.attrs.get("timing", {})
@@ -526,6 +630,7 @@ def diagnose_cmd(log, json_out, plot_out, residuals_out, candidates, steps, iner
 
     try:
         data = _io.read_log(log_path, counts_per_rev=counts_per_rev, resolution=resolution)
+        _check_size(data)
         result = diagnose(
             data,
             model,
@@ -562,8 +667,9 @@ def diagnose_cmd(log, json_out, plot_out, residuals_out, candidates, steps, iner
 @click.option("--set", "values", multiple=True, metavar="NAME=VALUE", help="Model parameter, e.g. --set k1=1200 (repeatable).")
 @click.option("--counts", is_flag=True, help="Write theta as integer counts.")
 @click.option("--overwrite", is_flag=True, help="Replace OUT if it exists.")
+@click.option("--from", "from_json", metavar="FIT.json", help="Re-simulate a fitted model (the JSON of `hdid fit --json`): its effects and values, and by default its log's design (release angles, rate, length, encoder step, offset); options given here override.")
 def simulate_cmd(out, amplitudes, rate, duration, hold, offset, counts_per_rev, noise, seed,
-                 values, counts, overwrite):
+                 values, counts, overwrite, from_json):
     """Write a synthetic free-motion log (same format as `hdid fit` reads)."""
     amps = _parse_floats(amplitudes, "--amplitudes") or []
     params = {}
@@ -584,15 +690,60 @@ def simulate_cmd(out, amplitudes, rate, duration, hold, offset, counts_per_rev, 
     from ._errors import HdidError
     from ._synthetic import synthesize
 
+    model = None
+    if from_json:
+        src = Path(from_json)
+        if not src.is_file():
+            raise _Fail(f"--from {from_json}: no such file")
+        from ._saved import load
+
+        try:
+            fitted = load(src)
+        except (HdidError, ValueError, KeyError, TypeError) as exc:
+            raise _Fail(f"--from {from_json}: {exc}") from None
+        model = fitted.model
+        given = lambda name: (click.get_current_context().get_parameter_source(name)  # noqa: E731
+                              != click.core.ParameterSource.DEFAULT)
+        design = _design_of(fitted)
+        amps = amps if given("amplitudes") else design["amplitudes"]
+        rate = rate if given("rate") else design["rate"]
+        duration = duration if given("duration") else design["duration"]
+        hold = hold if given("hold") else design["hold"]
+        offset = offset if given("offset") else design["offset"]
+        if not given("counts_per_rev"):
+            counts_per_rev = design["counts_per_rev"]
+        if counts and not counts_per_rev:
+            raise _Fail("--counts needs --counts-per-rev > 0 (the fitted log had no encoder grid)")
     try:
         synthesize(
             out, amplitudes=amps, rate=rate, duration=duration, hold=hold, offset=offset,
             counts_per_rev=counts_per_rev or None, noise=noise, seed=seed, values=params,
-            as_counts=counts, overwrite=overwrite,
+            model=model, as_counts=counts, overwrite=overwrite,
         )
     except (HdidError, ValueError, KeyError) as exc:
         raise _Fail.from_error(exc) from None
     click.echo(f"wrote {out}: {len(amps)} run(s) at {rate:g} Hz")
+
+
+def _design_of(fitted) -> dict:
+    """The experiment behind a fit: release angles, rate, run length, hold, encoder step."""
+    import statistics
+
+    rate = 1.0 / fitted.sample_period if fitted.sample_period > 0 else 250.0
+    n = max(r.n_samples for r in fitted.runs)
+    release = statistics.median(r.release_time for r in fitted.runs)
+    step = fitted.resolution_rad
+    cpr = (round(2 * math.pi / step) if fitted.resolution_known and step > 0
+           and abs(2 * math.pi / step - round(2 * math.pi / step)) < 1e-6 * (2 * math.pi / step)
+           else 0)
+    return {
+        "amplitudes": [r.theta0 for r in fitted.runs],
+        "rate": rate,
+        "duration": n / rate,
+        "hold": min(max(release - 0.5 / rate, 0.0), 0.5 * n / rate),
+        "offset": next(iter(fitted.setups.values()), 0.0),
+        "counts_per_rev": cpr,
+    }
 
 
 if __name__ == "__main__":  # pragma: no cover

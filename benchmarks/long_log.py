@@ -1,0 +1,111 @@
+"""Fit time and peak memory against log length (issue 18: a 1 000 000-row log ran for over
+20 minutes at 3.4 GB with no output).
+
+Each size is a 4-run log (±0.157, ±0.08 rad) sampled at 10 kHz, written by the simulator
+(`hdid.cli simulate`'s `synthesize`) and fitted by `hdid.fit` in a fresh Python process
+(cold: its compile included; `HDID_NO_CACHE=1`), whose wall time and peak resident memory
+(`ru_maxrss`) are recorded. A size that runs over `--timeout` is stopped and recorded as
+such. The results decide the CLI's refusal threshold (`hdid.cli.MAX_SAMPLES_PER_RUN`).
+
+    taskset -c 0 python benchmarks/long_log.py --samples 1000,2500,5000,10000,25000
+
+Results: benchmarks/results/long_log.md (and .json).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import RESULTS, ROOT, cpu_model, src_fingerprint  # noqa: E402
+
+RATE = 10_000.0
+AMPLITUDES = [0.157, -0.157, 0.08, -0.08]
+
+CHILD = r"""
+import json, resource, sys, time
+import hdid
+t0 = time.perf_counter()
+log = hdid.read_log(sys.argv[1])
+t1 = time.perf_counter()
+r = hdid.fit(log)
+t2 = time.perf_counter()
+print(json.dumps({"read_s": t1 - t0, "fit_s": t2 - t1,
+                  "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+                  "k1": r.parameters["k1"].value, "rms_counts": r.rms_residual_rad / r.resolution_rad}))
+"""
+
+
+def one(n: int, timeout: float, tmp: Path) -> dict:
+    from hdid._synthetic import synthesize
+
+    path = tmp / f"long_{n}.csv"
+    t = time.perf_counter()
+    synthesize(path, amplitudes=AMPLITUDES, rate=RATE, duration=n / RATE, hold=0.01,
+               counts_per_rev=4000, seed=1, overwrite=True)
+    sim_s = time.perf_counter() - t
+    rows = len(AMPLITUDES) * n
+    env = {**os.environ, "HDID_NO_CACHE": "1", "JAX_PLATFORMS": "cpu"}
+    t = time.perf_counter()
+    try:
+        out = subprocess.run([sys.executable, "-c", CHILD, str(path)], capture_output=True,
+                             text=True, timeout=timeout, env=env)
+    except subprocess.TimeoutExpired:
+        return {"samples_per_run": n, "rows": rows, "mb": path.stat().st_size / 1e6,
+                "simulate_s": sim_s, "status": f"stopped after {timeout:.0f} s"}
+    wall = time.perf_counter() - t
+    if out.returncode != 0:
+        return {"samples_per_run": n, "rows": rows, "status": "failed",
+                "stderr": out.stderr.strip().splitlines()[-1:]}
+    res = json.loads(out.stdout.strip().splitlines()[-1])
+    return {"samples_per_run": n, "rows": rows, "mb": path.stat().st_size / 1e6,
+            "simulate_s": sim_s, "process_s": wall, **res, "status": "ok"}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--samples", default="1000,2500,5000,10000,25000",
+                    help="samples per run, comma-separated")
+    ap.add_argument("--timeout", type=float, default=600.0, help="per fit [s]")
+    ap.add_argument("--out", default=str(RESULTS / "long_log"))
+    args = ap.parse_args()
+    sizes = [int(x) for x in args.samples.split(",")]
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in sizes:
+            load = os.getloadavg()[0]
+            r = one(n, args.timeout, Path(tmp))
+            r["load_before"] = load
+            rows.append(r)
+            print(json.dumps(r), flush=True)
+            if r["status"] != "ok":
+                break
+    meta = {"cpu": cpu_model(), "affinity": sorted(os.sched_getaffinity(0)),
+            "src": src_fingerprint(), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+            "load_after": os.getloadavg()[0], "rate_hz": RATE, "amplitudes": AMPLITUDES}
+    Path(args.out + ".json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=2) + "\n")
+    lines = [
+        "# Fit time and peak memory vs log length (`benchmarks/long_log.py`)", "",
+        f"{meta['date']}, {meta['cpu']}, CPU affinity {meta['affinity']}, src {meta['src']}; "
+        f"4 runs at 10 kHz; each fit in a fresh process, cold (compile included, no cache).", "",
+        "| samples/run | rows | CSV [MB] | read [s] | fit [s] | peak RSS [MB] | k1 | RMS [counts] | load avg before | status |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        f = lambda k, fmt: (format(r[k], fmt) if k in r else "–")  # noqa: E731
+        lines.append(f"| {r['samples_per_run']} | {r['rows']} | {f('mb', '.2f')} | {f('read_s', '.2f')} | "
+                     f"{f('fit_s', '.1f')} | {f('peak_rss_mb', '.0f')} | {f('k1', '.1f')} | "
+                     f"{f('rms_counts', '.3f')} | {r['load_before']:.2f} | {r['status']} |")
+    Path(args.out + ".md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
