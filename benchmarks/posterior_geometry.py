@@ -125,7 +125,7 @@ def fixed_subsets(fit, steps, seed=0):
     p = fit.problem
     q = float(p.step)
     lp = LogPosterior(problem=p, centre=jnp.asarray(fit.u), temper=jnp.asarray(1.0),
-                      quantized=False, quant_var=q * q / 12)
+                      quant_var=q * q / 12)
     x0 = np.append(np.asarray(fit.u), math.log(0.2 * q))
     names = list(p.free)
     P = len(names)

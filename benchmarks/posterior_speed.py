@@ -285,7 +285,7 @@ def measure(args) -> dict:
     rho1 = residual_autocorrelation(fit)
     # the default likelihood ("auto": Gaussian with the q²/12 rounding variance)
     lp = LogPosterior(problem=prob, centre=jnp.asarray(fit.u), temper=jnp.asarray(post.temper),
-                      quantized=False, quant_var=float(prob.step) ** 2 / 12.0)
+                      quant_var=float(prob.step) ** 2 / 12.0)
     pos = np.asarray(post.chain[-1])                 # (W, D): walkers in the posterior bulk
     X32 = pos[:32]
     single_f = eqx.filter_jit(lambda m, x: m.log_prob(x))

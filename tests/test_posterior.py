@@ -11,13 +11,11 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from scipy.stats import norm
 
 import hdid
 from hdid._posterior import (
     LogPosterior,
     MixtureProposal,
-    _log_interval,
     _reset_outliers,
     find_modes,
     sample_posterior,
@@ -25,21 +23,6 @@ from hdid._posterior import (
 )
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "data" / "synthetic" / "csf8_paper.csv"
-
-
-def test_interval_likelihood_matches_direct_and_is_stable_in_tails():
-    q = 2 * np.pi / 4000
-    y = np.array([0.0, 0.0, 0.0, 0.0])
-    theta = np.array([0.0, 0.3 * q, 2.0 * q, -1.1 * q])
-    sigma = 0.3 * q
-    direct = np.log(norm.cdf((y + q / 2 - theta) / sigma) - norm.cdf((y - q / 2 - theta) / sigma))
-    got = np.asarray(_log_interval(jnp.asarray(y), jnp.asarray(theta), q / 2, sigma))
-    np.testing.assert_allclose(got, direct, rtol=1e-10)
-    # 60 σ away both tails underflow in a naive difference; the stable form stays finite
-    # and close to the asymptotic log-density of the nearer edge.
-    far = float(_log_interval(jnp.asarray(0.0), jnp.asarray(20 * q), q / 2, 0.3 * q))
-    z = (20 * q - q / 2) / (0.3 * q)
-    assert np.isfinite(far) and far == pytest.approx(norm.logsf(z), rel=1e-6)
 
 
 @pytest.fixture(scope="module")
@@ -57,14 +40,13 @@ def test_vectorised_log_prob_equals_per_walker(fit):
     x0 = np.concatenate([fit.u, [np.log(0.3 * fit.resolution_rad)]])
     X = x0 + np.repeat([1e-3, 0.05], 4)[:, None] * rng.standard_normal((8, x0.size))
     X[-1, 0] += 10.0  # k1 × e¹⁰: outside the ±7 prior box (and a stiff, unstable lane)
-    for quantized in (True, False):
-        lp = LogPosterior(problem=fit.problem, centre=jnp.asarray(fit.u), temper=jnp.asarray(1.0),
-                          quantized=quantized, quant_var=0.0 if quantized else float(fit.problem.step) ** 2 / 12)
-        batch = np.asarray(lp.batch(jnp.asarray(X)))
-        single = np.array([float(lp.log_prob(jnp.asarray(x))) for x in X])
-        # rounding: residuals agree to ~1e-13 rad against a log-density of ~200
-        np.testing.assert_allclose(batch[:-1], single[:-1], rtol=1e-11)
-        assert np.all(np.isfinite(batch[:-1])) and batch[-1] == single[-1] == -np.inf
+    lp = LogPosterior(problem=fit.problem, centre=jnp.asarray(fit.u), temper=jnp.asarray(1.0),
+                      quant_var=float(fit.problem.step) ** 2 / 12)
+    batch = np.asarray(lp.batch(jnp.asarray(X)))
+    single = np.array([float(lp.log_prob(jnp.asarray(x))) for x in X])
+    # rounding: residuals agree to ~1e-13 rad against a log-density of ~200
+    np.testing.assert_allclose(batch[:-1], single[:-1], rtol=1e-11)
+    assert np.all(np.isfinite(batch[:-1])) and batch[-1] == single[-1] == -np.inf
     pred = np.asarray(fit.problem.predict_many(jnp.asarray(X[:-1, :-1])))
     for x, p in zip(X[:-1], pred):
         np.testing.assert_allclose(p, np.asarray(fit.problem.predict(jnp.asarray(x[:-1]))), rtol=0, atol=1e-12)
@@ -78,7 +60,7 @@ def test_value_coordinates_carry_the_jacobian(fit):
     prob = fit.problem
     names = ("k1", "k2", "tau_c", "c_v")
     mask = jnp.asarray([1.0 if n in names else 0.0 for n in prob.free])
-    kw = dict(problem=prob, centre=jnp.asarray(fit.u), temper=jnp.asarray(1.0), quantized=False,
+    kw = dict(problem=prob, centre=jnp.asarray(fit.u), temper=jnp.asarray(1.0),
               quant_var=float(prob.step) ** 2 / 12)
     lp_u = LogPosterior(**kw)
     lp_y = LogPosterior(**kw, sample_linear=mask)
@@ -108,9 +90,16 @@ def test_short_chain_is_reproducible_and_summarised(fit, modes):
     assert set(s["posterior"]) >= {"k1", "tau_c", "stick_band_halfwidth_rad", "natural_frequency_hz"}
     for v in s["posterior"].values():
         assert v["ci95"][0] <= v["ci68"][0] <= v["median"] <= v["ci68"][1] <= v["ci95"][1]
-    # 150 steps is far below 50 autocorrelation times: the sampler must say so.
-    assert any("NOT CONVERGED" in w and "autocorrelation" in w
-               for w in s["posterior_diagnostics"]["warnings"])
+    # 100 steps of 36 walkers cannot reach ESS 400 on this posterior: the sampler must say
+    # so, naming the criterion, and the JSON must carry the arviz diagnostics.
+    d = s["posterior_diagnostics"]
+    assert any("NOT CONVERGED" in w and "R-hat" in w for w in d["warnings"])
+    assert d["converged"] is False and d["convergence"]["rhat_max"] > 1.0
+    assert "stick_band_halfwidth_rad" in d["convergence"]["per_quantity"]
+    # every free parameter says how much the data narrowed it
+    assert set(s["posterior_width"]) == set(fit.problem.free)
+    assert all(v["verdict"] in ("measured", "partly measured", "assumed")
+               for v in s["posterior_width"].values())
     assert a.chain.shape[0] == 100 and a.burn_in == 40  # burn-in run and discarded
     # the walkers started from the optima find_modes kept; their shares are reported
     assert len(a.modes) >= 1 and a.mode_share.sum() == pytest.approx(1.0)
@@ -144,21 +133,6 @@ def test_moves_factory_gets_the_log_posterior_and_burn_in_hook_is_called(fit, mo
     assert post.chain.shape[0] == 30
 
 
-def test_pilot_start_weighs_modes_and_starts_on_the_posterior(fit, modes):
-    """``pilot_steps``: one short chain per optimum, masses by importance sampling. The
-    masses are a distribution over the optima, every optimum keeps at least the floor
-    share, the walkers start where the density is finite, and the result reports them."""
-    post = sample_posterior(fit, n_steps=20, burn_in=0, seed=2, modes=modes, pilot_steps=20)
-    W = post.chain.shape[1]
-    mass = np.array([m.pilot_mass for m in post.modes])
-    assert mass.sum() == pytest.approx(1.0) and np.all(mass >= 0.5 / W / (1 + 0.5 * len(mass) / W))
-    assert post.pilot_ess is not None and post.pilot_ess >= 1.0
-    assert np.all(np.isfinite(post.chain[0]))
-    d = post.to_dict()["posterior_diagnostics"]
-    assert d["pilot_importance_ess"] == post.pilot_ess
-    assert [m["pilot_mass"] for m in d["modes"]] == list(mass)
-
-
 def test_too_short_chain_does_not_crash(fit, modes):
     # 5 steps: some walkers never move, τ is NaN; the sampler must warn, not crash.
     post = sample_posterior(fit, n_steps=5, burn_in=0, seed=1, modes=modes)
@@ -171,7 +145,7 @@ def test_gaussian_likelihood_has_the_quantization_floor(fit):
     # (Widrow), so even σ_n → 0 leaves the q/√12 floor. Checked against the formula.
     q = float(fit.problem.step)
     lp = LogPosterior(problem=fit.problem, centre=jnp.asarray(fit.u), temper=jnp.asarray(1.0),
-                      quantized=False, quant_var=q**2 / 12)
+                      quant_var=q**2 / 12)
     x = np.concatenate([fit.u, [np.log(0.1 * q)]])
     got = float(lp.log_prob(jnp.asarray(x)))
     p = fit.problem
@@ -328,7 +302,7 @@ def test_walkers_started_outside_the_prior_are_pulled_back(fit):
 
     u = np.asarray(fit.u, dtype=float)
     lp = LogPosterior(problem=fit.problem, centre=jnp.asarray(u), temper=jnp.asarray(1.0),
-                      quantized=False, quant_var=float(fit.problem.step) ** 2 / 12)
+                      quant_var=float(fit.problem.step) ** 2 / 12)
     wide = Mode(u=u, cost=0.0, cov=100.0 * np.eye(u.size), log_evidence=0.0)
 
     def batch(X):

@@ -13,6 +13,7 @@ __version__ = "0.1.0"
 _LAZY = {
     "fit": "._fit",
     "fit_many": "._batch",
+    "sample_posterior": "._posterior",
     "FitResult": "._result",
     "Model": "._model",
     "DEFAULT_INERTIA": "._model",
@@ -74,6 +75,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from . import effects
     from ._errors import FitError, HdidError, LogError
     from ._batch import fit_many
+    from ._posterior import sample_posterior
     from ._diagnose import Diagnosis, diagnose, model_ladder
     from ._driven import DrivenJoint, simulate_driven
     from ._driven_fit import fit_driven, fit_joint

@@ -1,0 +1,235 @@
+"""The log-posterior: likelihood, priors, sampled coordinates and the batched evaluation.
+
+The sampled space is the fit's own unconstrained vector ``u`` (physical parameters in
+their transformed space, per-run release instant and start angle, per-set-up offset and
+any further per-run unknowns the problem has) plus ``log σ_n``, the encoder noise before
+quantization.
+
+Likelihood: an encoder reading ``y`` is the model angle plus Gaussian noise ``σ_n``
+(fitted) plus the rounding to the step ``q`` treated as independent uniform noise of
+variance ``q²/12`` (Widrow): Gaussian with ``σ² = σ_n² + q²/12``, never below the
+quantization floor (the ``q²/12`` term is left out when the encoder step is not known).
+Measured on 20 noiseless rounded paper-design logs (benchmarks/results/
+posterior_likelihood.md) it puts the truth at 2Δlog L consistent with χ²₇. Each stretch
+of identical readings (pre-release hold, stuck tail) carries one observation's weight, as
+in the fit (``weight²`` multiplies the log-likelihood). When the fit's residuals are
+autocorrelated beyond what i.i.d. noise gives, the log-likelihood is tempered by the
+effective-sample-size factor ``(1 − ρ₁)/(1 + ρ₁)``.
+
+Priors (documented defaults, all in the sampled space):
+- physical parameters: the problem's own priors (``Problem.prior_mean``, ``prior_sd``,
+  ``prior_on``: the weak priors on ``v_s`` and ``delta``, the inertia prior when the inertia
+  is free) times a flat prior in the transformed space (flat in log for positive ones)
+  within ``± PRIOR_HALF_WIDTH`` of the least-squares value; the coefficients of terms that
+  may vanish (``LINEAR_PRIOR``: ``k2``, ``c_v``) are flat in their value instead (same box);
+- release instant: uniform on its bracket between samples; start angle flat within
+  ±5 encoder steps of its least-squares value; offset and other per-run unknowns flat;
+- ``σ_n``: log-uniform between ``0.05 q`` (the simulator's accuracy) and ``20 q``.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import _config  # noqa: F401
+from .._identifiability import derived_quantities
+from .._problem import Problem
+from .._transforms import from_unconstrained
+
+#: Flat prior half-width around the least-squares value in the transformed space
+#: (±7 in log ≈ a factor 1000 either way: uninformative but proper).
+PRIOR_HALF_WIDTH = 7.0
+#: Noise prior bounds, in encoder steps. The floor is the forward model's own accuracy:
+#: the simulator's error at the default substep is ≤ 0.042 steps
+#: (benchmarks/results/simulator_schemes.md); a smaller σ_n would claim the model reproduces
+#: readings more exactly than it can compute them.
+SIGMA_BOUNDS = (0.05, 20.0)
+#: Log-transformed parameters whose default prior is flat in the *value*, not in its log:
+#: coefficients of terms that may be absent. A prior flat in log k2 (or log c_v) gives the
+#: "no cubic stiffness" ("no viscous friction") end an unbounded volume as the box widens —
+#: on the paper design that volume, not the data, pulled the posterior to k2 → 0 and a
+#: 92 mrad band (benchmarks/results/posterior_calibration.md).
+LINEAR_PRIOR = ("k2", "c_v")
+#: Log-transformed parameters that are *sampled* in their value (relative to the
+#: least-squares one) instead of their log. The data fix sums such as the stiffness torque
+#: ``k1·d + k2·d³`` over the twists seen and the friction ``τ_c + c_v·v`` over the speeds
+#: seen: straight lines in the values, bananas in their logs (k1–k2, τ_c–c_v on the paper
+#: design), and emcee's affine-invariant moves only straighten straight lines. The target
+#: density carries the Jacobian, so this changes the mixing, not the posterior
+#: (benchmarks/results/posterior_coordinates.md).
+SAMPLE_LINEAR = ("k1", "k2", "tau_c", "c_v")
+#: Half-width of the start angle's flat prior around its least-squares value [encoder steps].
+START_ANGLE_HALF_WIDTH = 5.0
+
+
+class LogPosterior(eqx.Module):
+    """Vectorised log-posterior over walkers: ``(W, D) -> (W,)``."""
+
+    problem: Problem
+    centre: jax.Array
+    temper: jax.Array
+    sigma_bounds: tuple[float, float] = SIGMA_BOUNDS
+    quant_var: float = 0.0
+    #: 1.0 at log-transformed parameters whose prior is flat in the value, not its log
+    linear_prior: jax.Array | None = None
+    #: 1.0 at log-transformed parameters *sampled* in their value relative to the
+    #: least-squares one (``y = exp(u − centre)``, see ``SAMPLE_LINEAR``); ``None``: the
+    #: sampled vector is ``u`` itself
+    sample_linear: jax.Array | None = None
+
+    @property
+    def ndim(self) -> int:
+        return self.problem.n_unknowns + 1
+
+    def to_u(self, x):
+        """``(u, log|du/dy|, inside)`` of one sampled vector's unknowns (JAX)."""
+        u = x[:-1]
+        m = self.sample_linear
+        if m is None:
+            return u, 0.0, True
+        P = m.shape[0]
+        y = u[:P]
+        on = m > 0
+        safe = jnp.where(on & (y > 0), y, 1.0)
+        uP = jnp.where(on, self.centre[:P] + jnp.log(safe), y)
+        return u.at[:P].set(uP), -jnp.sum(jnp.where(on, jnp.log(safe), 0.0)), ~jnp.any(on & (y <= 0))
+
+    def to_sampled_np(self, U):
+        """Sampled coordinates of unknowns ``U`` ``(..., n_unknowns + 1)`` (NumPy)."""
+        X = np.array(U, dtype=float)
+        if self.sample_linear is not None:
+            on = np.flatnonzero(np.asarray(self.sample_linear) > 0)
+            X[..., on] = np.exp(X[..., on] - np.asarray(self.centre)[on])
+        return X
+
+    def from_sampled_np(self, X):
+        """Inverse of :meth:`to_sampled_np` (NumPy)."""
+        U = np.array(X, dtype=float)
+        if self.sample_linear is not None:
+            on = np.flatnonzero(np.asarray(self.sample_linear) > 0)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                U[..., on] = np.asarray(self.centre)[on] + np.log(U[..., on])
+        return U
+
+    def sampled_cov_np(self, u, cov):
+        """Covariance ``cov`` of ``u`` carried to the sampled coordinates at ``u`` (linearised)."""
+        if self.sample_linear is None:
+            return np.asarray(cov, dtype=float)
+        d = np.ones(len(u))
+        on = np.flatnonzero(np.asarray(self.sample_linear) > 0)
+        d[on] = np.exp(np.asarray(u)[on] - np.asarray(self.centre)[on])
+        return d[:, None] * np.asarray(cov, dtype=float) * d[None, :]
+
+    def log_prob(self, x):
+        """Log-posterior of one sampled vector ``x`` (unknowns, then ``log σ_n``)."""
+        return self._log_prob_given(x, self.problem.predict(self.to_u(x)[0]))
+
+    def _log_prob_given(self, x, pred):
+        """Log-posterior of ``x`` given its predicted readings ``pred`` ``(R, T)``."""
+        p = self.problem
+        u, log_jac, inside = self.to_u(x)
+        log_sigma = x[-1]
+        lp = self._log_prior(u, log_sigma)
+        # Gaussian; on a quantized log the rounding error is added as uniform noise of
+        # variance q²/12 (Widrow): the total noise never falls below that floor.
+        var = jnp.exp(2 * log_sigma) + self.quant_var
+        ll = -0.5 * (p.theta - pred) ** 2 / var - 0.5 * jnp.log(2 * jnp.pi * var)
+        total = lp + self.temper * jnp.sum(p.weight**2 * ll) + log_jac
+        return jnp.where(jnp.isfinite(total) & jnp.isfinite(lp) & inside, total, -jnp.inf)
+
+    def _log_prior(self, u, log_sigma):
+        p = self.problem
+        P, R = p.n_physical, p.n_runs
+        lp = -0.5 * jnp.sum(p.prior_residuals(u) ** 2)
+        if self.linear_prior is not None:
+            # flat in x = exp(u): density in u is ∝ exp(u)
+            lp += jnp.sum(self.linear_prior * (u[:P] - self.centre[:P]))
+        outside = jnp.any(jnp.abs(u[:P] - self.centre[:P]) > PRIOR_HALF_WIDTH)
+        q = p.step
+        lo, hi = jnp.log(self.sigma_bounds[0] * q), jnp.log(self.sigma_bounds[1] * q)
+        outside |= (log_sigma < lo) | (log_sigma > hi)
+        if p.release_free:
+            v = u[P : P + R]
+            # uniform on the bracket: density of the logistic variable is s(1 − s)
+            lp += jnp.sum(-jax.nn.softplus(-v) - jax.nn.softplus(v))
+        # start angle: within a few encoder steps of its least-squares value (the hold
+        # reads it to ±½ step; a slow start can sit a few steps off the reading)
+        i = P + (R if p.release_free else 0)
+        outside |= jnp.any(jnp.abs(u[i : i + R] - self.centre[i : i + R]) > START_ANGLE_HALF_WIDTH)
+        return jnp.where(outside, -jnp.inf, lp)
+
+    def batch(self, X):
+        """:meth:`log_prob` of every row of ``X`` ``(W, D)`` (NumPy or JAX); the walkers'
+        runs are simulated in one loop (:meth:`Problem.predict_many`), not by ``vmap``."""
+        return _batch_jit(self, X)
+
+
+def _batch(lp: LogPosterior, X):
+    U = jax.vmap(lambda x: lp.to_u(x)[0])(X)
+    return jax.vmap(lp._log_prob_given)(X, lp.problem.predict_many(U))
+
+
+# Plain jax.jit, not eqx.filter_jit: every leaf of a LogPosterior is an array or a float,
+# and jax.jit's dispatch is 0.2 ms faster per call (0.54 vs 0.74 ms for 18 walkers), a
+# fifth of the call at emcee's two calls per step.
+_batch_jit = jax.jit(_batch)
+
+
+@eqx.filter_jit
+def _derived_batch(problem: Problem, X):
+    def one(x):
+        return derived_quantities(problem.model(x[:-1]))
+
+    return jax.vmap(one)(X)
+
+
+#: Rows per call of :func:`derived_np` (one compiled shape, whatever the number of draws).
+DERIVED_BLOCK = 4096
+
+
+def derived_np(problem: Problem, X) -> dict[str, np.ndarray]:
+    """Derived quantities of every row of ``X`` ``(N, D)`` (unknowns, then ``log σ_n``), in
+    padded blocks of ``DERIVED_BLOCK`` rows so that any ``N`` reuses one compiled program."""
+    X = np.asarray(X, dtype=float)
+    n = X.shape[0]
+    out: dict[str, list] = {}
+    for i in range(0, max(n, 1), DERIVED_BLOCK):
+        blk = X[i : i + DERIVED_BLOCK]
+        k = blk.shape[0]
+        if k < DERIVED_BLOCK:
+            blk = np.concatenate([blk, np.repeat(X[:1], DERIVED_BLOCK - k, axis=0)])
+        for name, v in _derived_batch(problem, jnp.asarray(blk)).items():
+            out.setdefault(name, []).append(np.asarray(v)[:k])
+    return {name: np.concatenate(v) for name, v in out.items()}
+
+
+@eqx.filter_jit
+def _predict_batch(problem: Problem, X, times):
+    return jax.vmap(lambda x: problem.predict(x[:-1], times))(X)
+
+
+def to_physical(problem: Problem, flat: np.ndarray) -> dict[str, np.ndarray]:
+    """Free physical parameter values of each row of ``flat`` (unknowns first)."""
+    specs = problem.base.parameter_specs()
+    return {n: np.asarray(from_unconstrained(specs[n], flat[:, i], np), dtype=float)
+            for i, n in enumerate(problem.free)}
+
+
+def residual_autocorrelation(fit) -> float:
+    """Lag-1 autocorrelation of the fit's residuals while the gear moves."""
+    prob = fit.problem
+    r = np.asarray(fit.predict()) - np.asarray(prob.theta)
+    w = np.asarray(prob.weight)
+    num = den = 0.0
+    for i in range(r.shape[0]):
+        moving = w[i] >= 1.0  # full-weight samples: the motion (not hold or stuck tail)
+        x = r[i][moving]
+        if x.size < 3:
+            continue
+        x = x - x.mean()
+        num += float(np.sum(x[1:] * x[:-1]))
+        den += float(np.sum(x * x))
+    return num / den if den > 0 else 0.0

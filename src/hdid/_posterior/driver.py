@@ -1,0 +1,390 @@
+"""``sample_posterior``: emcee around a least-squares fit, until converged (arviz)."""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from dataclasses import replace
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._identifiability import unknown_labels
+from .._problem import Problem
+from .density import (
+    LINEAR_PRIOR,
+    PRIOR_HALF_WIDTH,
+    SAMPLE_LINEAR,
+    SIGMA_BOUNDS,
+    LogPosterior,
+    derived_np,
+    residual_autocorrelation,
+    to_physical,
+)
+from .diagnostics import (
+    convergence,
+    diagnostic_stride,
+    tau_pooled,
+    width_ratios,
+)
+from .modes import _fit_mode, find_modes
+from .moves import (
+    START_SCALE,
+    MixtureProposal,
+    _Adaptive,
+    _Counted,
+    _mode_start,
+    _move_name,
+    _reset_outliers,
+    default_moves,
+)
+from .result import PosteriorResult
+
+#: The burn-in is run in this many stages, the proposal adapted after each.
+BURN_IN_STAGES = 4
+#: τ multiple reported beside the arviz criterion (the ensemble rule of thumb).
+MIN_TAU_MULTIPLE = 50
+#: A chain this far (log p) above the least-squares optimum has found another mode
+#: (Δχ² = 10 in the fit's units: beyond the 99.8 % point of χ²₁).
+MODE_GAP = 5.0
+BAND = "stick_band_halfwidth_rad"
+#: The convergence check runs after ``chunk`` steps, then each time the chain has grown by
+#: this factor (at least ``chunk`` more steps): at most ~10 checks up to 20 000 steps.
+CHECK_GROWTH = 1.4
+
+
+def _no_start(fit):
+    from .._errors import FitError
+
+    return FitError(
+        f"{fit.source}: could not place the posterior's walkers where the density is "
+        "positive — every start around the least-squares optimum has zero posterior "
+        "density, so the fit itself is likely bad: read its warnings, refit (other starts, "
+        "fixed parameters) or check the log"
+    )
+
+
+class _RunNames:
+    """Adapter giving ``unknown_labels`` the run and set-up names of a FitResult."""
+
+    def __init__(self, fit):
+        self.run_names = [r.name for r in fit.runs]
+        self.setup_names = list(fit.setups)
+
+
+def sample_posterior(
+    fit,
+    *,
+    n_walkers: int | None = None,
+    n_steps: int | None = None,
+    max_steps: int = 20000,
+    burn_in: int = 400,
+    chunk: int = 500,
+    seed: int = 0,
+    progress: bool | None = None,
+    likelihood: str = "auto",
+    moves=None,
+    sigma_floor: float | None = None,
+    modes="auto",
+    linear_prior: tuple[str, ...] = LINEAR_PRIOR,
+    sample_linear: tuple[str, ...] = SAMPLE_LINEAR,
+) -> PosteriorResult:
+    """Sample the posterior of ``fit``'s parameters with emcee, until converged.
+
+    Modes: with ``modes="auto"`` (default) :func:`find_modes` restarts the local fit
+    around ``fit`` and keeps every distinct optimum with its Laplace mass; the walkers
+    start spread over them in proportion to that mass. ``modes="fit"`` uses the fit's
+    optimum only; a list of :class:`Mode` is used as given.
+
+    Burn-in (discarded): ``burn_in`` steps of differential evolution plus independence
+    Metropolis–Hastings from a t-mixture over the optima (:class:`MixtureProposal`),
+    refitted after each of ``BURN_IN_STAGES`` stages; the kept chain uses the last mixture,
+    fixed. (A normalizing flow fitted to the burn-in draws in its place was measured and
+    lost: benchmarks/results/posterior_flow.md.)
+
+    The kept chain grows (checked after ``chunk`` steps, then at every growth by
+    ``CHECK_GROWTH``) until it converges — every sampled quantity and the stick-band
+    half-width has a rank-normalised R-hat ≤ 1.01 and bulk and tail ESS
+    ≥ 400 (arviz; :func:`~hdid._posterior.diagnostics.convergence`) — or reaches
+    ``max_steps``; ``n_steps`` fixes its length instead. A chain that falls short carries a
+    ``NOT CONVERGED`` warning that says what to do.
+
+    Parameters
+    ----------
+    fit:
+        A :class:`~hdid.FitResult`.
+    n_walkers:
+        Default ``max(32, 2·D)`` (emcee's red-blue moves need at least twice the dimension).
+    progress:
+        Progress bar (tqdm); shown only when standard error is a terminal (default: then).
+    likelihood:
+        ``"auto"`` / ``"gaussian"``: Gaussian with the ``q²/12`` rounding variance added when
+        the encoder step is known (the interval likelihood was retired, see
+        benchmarks/README.md).
+    moves:
+        emcee moves (a move, a list of moves or of ``(move, weight)``), or a callable
+        ``(log_posterior, proposal) -> moves``; default :func:`default_moves`. A move with
+        a ``burn_in_update(acceptance, draws)`` method is given its acceptance rate and the
+        stage's draws after each burn-in stage.
+    sample_linear:
+        Log-transformed parameters the walkers move in the *value* of (default
+        ``SAMPLE_LINEAR``); the density carries the Jacobian, so only the mixing changes.
+    """
+    import emcee
+
+    t0 = time.perf_counter()
+    progress = (sys.stderr.isatty() if progress is None else bool(progress)) and sys.stderr.isatty()
+    prob: Problem = fit.problem
+    warnings: list[str] = []
+    if likelihood not in ("auto", "gaussian"):
+        raise ValueError(f"likelihood must be 'auto' or 'gaussian', not {likelihood!r} (the "
+                         "interval likelihood was retired: benchmarks/README.md)")
+    quant_var = float(prob.step) ** 2 / 12.0 if fit.resolution_known else 0.0
+    rho1 = residual_autocorrelation(fit)
+    n_moving = int(np.sum(np.asarray(prob.weight) >= 1.0))
+    temper = 1.0
+    if n_moving > 3 and rho1 > 2.0 / math.sqrt(n_moving):
+        temper = (1.0 - rho1) / (1.0 + rho1)
+        warnings.append(
+            f"fit residuals are autocorrelated (lag-1 r = {rho1:.2f}); the likelihood is "
+            f"tempered by the effective-sample-size factor {temper:.2f}"
+        )
+    bounds = (SIGMA_BOUNDS[0] if sigma_floor is None else float(sigma_floor), SIGMA_BOUNDS[1])
+    u_fit = np.asarray(fit.u, dtype=float)
+    specs = prob.base.parameter_specs()
+    lin = np.array([1.0 if (n in linear_prior and specs[n].transform == "log") else 0.0
+                    for n in prob.free])
+    samp = np.array([1.0 if (n in sample_linear and specs[n].transform == "log") else 0.0
+                     for n in prob.free])
+    lp = LogPosterior(problem=prob, centre=jnp.asarray(u_fit), temper=jnp.asarray(temper),
+                      sigma_bounds=bounds, quant_var=quant_var,
+                      linear_prior=jnp.asarray(lin) if lin.any() else None,
+                      sample_linear=jnp.asarray(samp) if samp.any() else None)
+    D = lp.ndim
+    W = n_walkers or max(32, 2 * D)
+    if W < 2 * D:
+        raise ValueError(f"n_walkers = {W}: emcee needs at least 2 × {D} walkers; raise n_walkers")
+
+    def log_prob(X):
+        return np.asarray(lp.batch(X))
+
+    rng = np.random.default_rng(seed)
+    q = float(prob.step)
+    t_modes = time.perf_counter()
+    if isinstance(modes, str):
+        if modes == "auto":
+            found = find_modes(fit, seed=seed)
+        elif modes == "fit":
+            found = [_fit_mode(fit)]
+        else:
+            raise ValueError(f"modes must be 'auto', 'fit' or a list of Mode, not {modes!r}")
+    else:
+        found = [replace(m) for m in modes]  # weights are re-set below: leave the caller's
+    t_modes = time.perf_counter() - t_modes
+    # Modes outside the prior box around the fit (±PRIOR_HALF_WIDTH) cannot be sampled.
+    P = prob.n_physical
+    found = [m for m in found if np.all(np.abs(m.u[:P] - u_fit[:P]) < PRIOR_HALF_WIDTH)]
+    if not found:
+        found = [_fit_mode(fit)]
+    # Laplace weights under the sampled prior (the fit's cost has the log-flat one).
+    lz = np.array([m.log_evidence + float(lin @ (m.u[:P] - u_fit[:P])) for m in found])
+    wz = np.exp(lz - lz.max())
+    for m, wi in zip(found, wz / wz.sum()):
+        m.weight = float(wi)
+    log_lo = math.log(bounds[0] * q)
+    log_rms = math.log(max(fit.rms_residual_rad, bounds[0] * q))
+    # compile the log-posterior for the two shapes emcee uses (half and whole ensemble)
+    t_compile = time.perf_counter()
+    x_fit = lp.to_sampled_np(np.concatenate([u_fit, [log_rms]]))
+    log_prob(np.tile(x_fit, (W // 2, 1)))
+    log_prob(np.tile(x_fit, (W, 1)))
+    t_compile = time.perf_counter() - t_compile
+    P0, lp0 = _mode_start(found, lambda U: log_prob(lp.to_sampled_np(U)), W, rng,
+                          log_lo + 0.05, log_rms)
+    P0 = lp.to_sampled_np(P0)
+    if not np.all(np.isfinite(lp0)):
+        raise _no_start(fit)
+    # Independence proposal: one t component per mode; log σ_n from the start spread.
+    s_mid, s_sd = 0.5 * (log_lo + max(log_rms, log_lo + 0.5)), 0.6
+    means = lp.to_sampled_np(np.array([np.concatenate([m.u, [s_mid]]) for m in found]))
+    covs = np.zeros((len(found), D, D))
+    for k, m in enumerate(found):
+        covs[k, :-1, :-1] = lp.sampled_cov_np(m.u, START_SCALE**2 * m.cov)
+        covs[k, -1, -1] = s_sd**2
+    start_mix = MixtureProposal(means, covs, [m.weight for m in found])
+    proposal = _Adaptive(start_mix)
+    if moves is None:
+        moves = default_moves(proposal)
+    elif callable(moves) and not hasattr(moves, "propose"):
+        # a factory for moves that need the log-posterior itself (e.g. gradient-based)
+        moves = moves(lp, proposal)
+    if not isinstance(moves, list):
+        moves = [(moves, 1.0)]
+    moves = [m if isinstance(m, tuple) else (m, 1.0) for m in moves]
+    counted = [(_Counted(m, _move_name(m)), w) for m, w in moves]
+    sampler = emcee.EnsembleSampler(W, D, log_prob, vectorize=True, moves=counted)
+    # emcee draws its moves from the state's random state: seeding it makes runs repeatable.
+    state = emcee.State(P0, log_prob=lp0, random_state=np.random.RandomState(seed).get_state())
+    n_reset = 0
+    burn_draws = None
+    t_burn = time.perf_counter()
+    if burn_in > 0:
+        # Burn-in in stages; after each: re-seed stranded walkers, refit the mixture to the
+        # walkers' positions, and scale the local DE step towards ~25 % acceptance (emcee's
+        # 2.38/√(2D) is tuned for a Gaussian; on this thin curved ridge it accepts < 1 %).
+        n_stage = BURN_IN_STAGES if burn_in >= 40 * BURN_IN_STAGES else 1
+        sizes = [burn_in // n_stage] * n_stage
+        sizes[-1] += burn_in - sum(sizes)
+        for h in sizes:
+            state = sampler.run_mcmc(state, h, progress=progress, skip_initial_state_check=True)
+            state, nr = _reset_outliers(state, rng, D)
+            n_reset += nr
+            if nr:
+                state.log_prob = log_prob(state.coords)
+            burn_draws = sampler.get_chain()[h // 2 :].reshape(-1, D)
+            proposal.mix = proposal.mix.refit(burn_draws)
+            _tune(counted, burn_draws, D)
+            sampler.reset()
+    t_burn = time.perf_counter() - t_burn
+    for m, _ in counted:
+        m.proposed = m.accepted = 0
+    total = n_steps or max_steps
+    done = 0
+    conv = None
+    labels = unknown_labels(prob, _RunNames(fit)) + ["log_noise_sigma"]
+    t_kept = time.perf_counter()
+    t_diag = 0.0
+    next_check = chunk
+    while done < total:
+        step = min(max(next_check - done, 1) if n_steps is None else total, total - done)
+        state = sampler.run_mcmc(state, step, progress=progress, skip_initial_state_check=True)
+        done += step
+        # checks at chunk, then ×CHECK_GROWTH: the diagnostics' cost stays a few checks
+        next_check = max(done + chunk, int(CHECK_GROWTH * done))
+        if n_steps is None or done >= total:
+            td = time.perf_counter()
+            conv = _converge(sampler, lp, prob, labels)
+            t_diag += time.perf_counter() - td
+            if n_steps is None and conv.converged:
+                break
+    t_kept = time.perf_counter() - t_kept
+    with np.errstate(invalid="ignore", divide="ignore"):  # a walker that never moved
+        tau_e = sampler.get_autocorr_time(tol=0)
+    tau = np.fmax(tau_e, tau_pooled(sampler.get_chain()))
+    finite_tau = np.isfinite(tau)
+    tau_max = float(np.max(tau[finite_tau])) if finite_tau.any() else float(done)
+    if not conv.converged:
+        name, what = conv.worst
+        warnings.append(
+            f"NOT CONVERGED: after {done} steps ({burn_in} burn-in before) the worst quantity "
+            f"is {name} ({what}); the criterion is R-hat ≤ 1.01 and bulk/tail ESS ≥ 400 on "
+            f"every sampled quantity and the band. Run longer (max_steps ≥ {2 * done}); if "
+            "R-hat stays high the walkers sit in optima they do not leave — check the "
+            "modes and the trace plot"
+        )
+    acc = sampler.acceptance_fraction
+    if n_reset:
+        warnings.append(
+            f"{n_reset} walker(s) were stranded far below the bulk during the burn-in and "
+            "were restarted from good walkers (a minor mode may be under-represented)"
+        )
+    stuck = acc < 0.25 * np.median(acc)
+    if np.any(stuck) or np.any(acc < 0.01):
+        warnings.append(
+            f"STUCK WALKERS: {int(np.sum(stuck | (acc < 0.01)))} walker(s) accepted far fewer "
+            f"moves than the rest (min {np.min(acc):.3f}, median {np.median(acc):.3f}); "
+            "intervals may under-cover — check the chains (trace plot)"
+        )
+    burn = 0
+    thin = max(1, int(tau_max / 2))
+    chain_s = sampler.get_chain()  # sampled coordinates
+    chain = lp.from_sampled_np(chain_s)  # the fit's unknowns u (+ log σ_n)
+    draws = lp.from_sampled_np(sampler.get_chain(discard=burn, thin=thin, flat=True))
+    # Share of the kept draws in each mode: the mode whose (weighted) Laplace density is
+    # highest at the draw (the adapted mixture's components drift, so not those).
+    comp = np.argmax(start_mix.component_logpdf(chain_s.reshape(-1, D)), axis=1)
+    share = np.bincount(comp, minlength=len(found)) / comp.size
+    if len(found) > 1:
+        warnings.append(
+            f"MULTIMODAL: {len(found)} separate optima of the fit's cost (Laplace weights "
+            + ", ".join(f"{m.weight:.2f}" for m in found)
+            + "; share of the draws " + ", ".join(f"{s:.2f}" for s in share)
+            + "); the walkers started in all of them and the independence move lets them "
+            "change mode — see `modes` for their parameters"
+        )
+    # A chain that climbs well above the best mode found has found yet another one.
+    grid = np.linspace(log_lo, max(log_rms, log_lo + math.log(2.0)) + 1.0, 25)
+    ref = max(float(np.max(log_prob(lp.to_sampled_np(
+        np.column_stack([np.tile(m.u, (grid.size, 1)), grid]))))) for m in found)
+    best = float(np.max(sampler.get_log_prob()))
+    if best > ref + MODE_GAP:
+        warnings.append(
+            f"MULTIMODAL: the chain reached log p {best - ref:+.1f} above the best optimum "
+            "found — the posterior has a mode the search missed; intervals from a chain "
+            "that has not mixed between modes are unreliable"
+        )
+    phys = to_physical(prob, draws)
+    # Fixed parameters appear with their constant value so every name is present.
+    values = fit.model.float_values()
+    for n in values:
+        if n not in phys:
+            phys[n] = np.full(draws.shape[0], values[n])
+    phys = {n: phys[n] for n in values}
+    der = derived_np(prob, draws)
+    der["noise_sigma_rad"] = np.exp(draws[:, -1])
+    widths = width_ratios(prob, chain.reshape(-1, D), u_fit, PRIOR_HALF_WIDTH, lin)
+    return PosteriorResult(
+        samples=phys,
+        derived=der,
+        chain=chain,
+        labels=labels,
+        tau=np.asarray(tau),
+        acceptance=np.asarray(acc),
+        burn=burn,
+        thin=thin,
+        warnings=warnings,
+        seed=seed,
+        wall_time_s=time.perf_counter() - t0,
+        temper=temper,
+        residual_rho1=rho1,
+        fit=fit,
+        draws=draws,
+        burn_in=burn_in,
+        modes=found,
+        mode_share=share,
+        tau_emcee=np.asarray(tau_e),
+        mode_search_s=t_modes,
+        move_acceptance={m.name: m.rate for m, _ in counted},
+        n_components=len(proposal.mix.weights),
+        convergence=conv,
+        widths=widths,
+        compile_s=t_compile,
+        stage_s={"mode_search": t_modes, "compile": t_compile, "burn_in": t_burn,
+                 "kept_chain": t_kept, "diagnostics": t_diag},
+    )
+
+
+def _tune(counted, burn_draws, D):
+    """After a burn-in stage: hand the stage to moves that tune themselves, scale the
+    local DE step towards 25 % acceptance, and reset the counters."""
+    import emcee
+
+    for m, _ in counted:
+        inner = m.move
+        if hasattr(inner, "burn_in_update") and m.proposed > 0:
+            inner.burn_in_update(m.rate, burn_draws)
+        if isinstance(inner, emcee.moves.DEMove) and inner.gamma0 != 1.0 and m.proposed > 0:
+            g = inner.gamma0 if inner.gamma0 is not None else 2.38 / math.sqrt(2 * D)
+            inner.gamma0 = g * float(np.clip(m.rate / 0.25, 0.2, 1.5))
+        m.proposed = m.accepted = 0
+
+
+def _converge(sampler, lp, prob, labels):
+    """arviz diagnostics of the kept chain's sampled quantities and the band."""
+    chain = sampler.get_chain()
+    chain = chain[:: diagnostic_stride(chain.shape[0])]
+    S, W, D = chain.shape
+    U = lp.from_sampled_np(chain.reshape(-1, D))
+    band = derived_np(prob, U)[BAND].reshape(S, W, 1)
+    return convergence(np.concatenate([chain, band], axis=2), labels + [BAND])

@@ -1,0 +1,170 @@
+"""The posterior's result: draws, summaries, diagnostics, plots and export."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .density import derived_np, to_physical
+
+@dataclass
+class PosteriorResult:
+    """Samples and summaries of the posterior (see :func:`sample_posterior`)."""
+
+    samples: dict[str, np.ndarray]           # name -> (draws,) physical units
+    derived: dict[str, np.ndarray]           # name -> (draws,)
+    chain: np.ndarray                        # (steps, walkers, D) raw, sampled space
+    labels: list[str]
+    tau: np.ndarray                          # integrated autocorrelation time per dim
+    acceptance: np.ndarray                   # per walker
+    burn: int
+    thin: int
+    warnings: list[str]
+    seed: int
+    wall_time_s: float
+    temper: float
+    residual_rho1: float
+    fit: Any = field(repr=False)
+    draws: np.ndarray = field(repr=False)    # (draws, D) sampled space, after burn/thin
+    burn_in: int = 0                         # steps run and discarded before ``chain``
+    modes: list = field(default_factory=list)  # Mode: the optima the walkers started from
+    mode_share: np.ndarray | None = None     # share of the kept chain nearest each mode
+    tau_emcee: np.ndarray | None = None      # emcee's τ (walkers about their own means)
+    mode_search_s: float = 0.0
+    move_acceptance: dict = field(default_factory=dict)  # per move, kept chain only
+    n_components: int = 0                    # components of the adapted mixture proposal
+    convergence: Any = None                  # diagnostics.Convergence of the kept chain
+    widths: dict = field(default_factory=dict)  # name -> posterior/prior width, verdict
+    compile_s: float = 0.0                   # first (compiling) log-posterior call
+    stage_s: dict = field(default_factory=dict)  # wall time of each stage
+
+    @property
+    def converged(self) -> bool:
+        """The kept chain meets the arviz criterion (``diagnostics.Convergence``)."""
+        return bool(self.convergence is not None and self.convergence.converged)
+
+    def summary(self) -> dict[str, dict[str, Any]]:
+        """Median and central 68 % / 95 % intervals of every parameter and derived quantity."""
+        out = {}
+        for name, v in {**self.samples, **self.derived}.items():
+            v = np.asarray(v)
+            q = np.percentile(v, [2.5, 16, 50, 84, 97.5])
+            out[name] = {
+                "median": float(q[2]),
+                "ci68": [float(q[1]), float(q[3])],
+                "ci95": [float(q[0]), float(q[4])],
+            }
+        return out
+
+    def to_dict(self) -> dict[str, Any]:
+        s = self.summary()
+        return {
+            "posterior": s,
+            "posterior_width": dict(self.widths),
+            "posterior_diagnostics": {
+                "n_walkers": int(self.chain.shape[1]),
+                "n_steps": int(self.chain.shape[0]),
+                "burn_in": self.burn_in,
+                "burn": self.burn,
+                "thin": self.thin,
+                "chain_in_tau_max": float(self.chain.shape[0] / np.nanmax(self.tau)),
+                "converged": self.converged,
+                "convergence": self.convergence.to_dict() if self.convergence is not None else None,
+                "n_draws": int(self.draws.shape[0]),
+                "tau_max": float(np.nanmax(self.tau)),
+                "tau": {l: float(t) for l, t in zip(self.labels, self.tau)},
+                "move_acceptance": dict(self.move_acceptance),
+                "tau_max_emcee": (float(np.nanmax(self.tau_emcee))
+                                  if self.tau_emcee is not None else None),
+                "modes": [
+                    {**m.to_dict(), "share_of_draws": (float(self.mode_share[i])
+                                                      if self.mode_share is not None else None)}
+                    for i, m in enumerate(self.modes)
+                ],
+                "acceptance_mean": float(np.mean(self.acceptance)),
+                "acceptance_min": float(np.min(self.acceptance)),
+                "residual_lag1_autocorrelation": self.residual_rho1,
+                "likelihood_temper": self.temper,
+                "seed": self.seed,
+                "wall_time_s": self.wall_time_s,
+                "compile_s": self.compile_s,
+                "stage_s": dict(self.stage_s),
+                "mode_search_s": self.mode_search_s,
+                "warnings": list(self.warnings),
+            },
+        }
+
+    def report(self) -> str:
+        lines = ["posterior (median, 68 % and 95 % intervals; posterior/prior width):"]
+        for name, s in self.summary().items():
+            w = self.widths.get(name)
+            tail = f"  {w['posterior_over_prior_width']:.2g} {w['verdict']}" if w else ""
+            lines.append(
+                f"  {name:<26} {s['median']:12.5g}  [{s['ci68'][0]:.4g}, {s['ci68'][1]:.4g}]"
+                f"  [{s['ci95'][0]:.4g}, {s['ci95'][1]:.4g}]{tail}"
+            )
+        lines.append(
+            f"  {self.chain.shape[1]} walkers × {self.chain.shape[0]} steps (after "
+            f"{self.burn_in} burn-in), max τ {np.nanmax(self.tau):.0f} = chain / "
+            f"{self.chain.shape[0] / np.nanmax(self.tau):.1f}, acceptance {np.mean(self.acceptance):.2f}, "
+            f"{self.draws.shape[0]} draws, {self.wall_time_s:.1f} s "
+            f"(of which compile {self.compile_s:.1f} s, mode search {self.mode_search_s:.1f} s)"
+        )
+        if self.convergence is not None:
+            c = self.convergence
+            name, what = c.worst
+            lines.append(
+                f"  convergence (arviz, every sampled quantity and the band): "
+                f"{'converged' if c.converged else 'NOT CONVERGED'}; R-hat max "
+                f"{np.max(c.rhat):.3f}, ESS bulk min {np.min(c.ess_bulk):.0f}, tail min "
+                f"{np.min(c.ess_tail):.0f} (worst: {name}, {what})")
+        if self.move_acceptance:
+            lines.append("  acceptance per move: " + ", ".join(
+                f"{k} {v:.3f}" for k, v in self.move_acceptance.items()))
+        lines += [f"  warning: {w}" for w in self.warnings]
+        return "\n".join(lines)
+
+    def to_inference_data(self):
+        """arviz InferenceData (posterior group: physical and derived quantities)."""
+        import arviz as az
+
+        steps, walkers, _ = self.chain.shape
+        post = self.chain[self.burn :: self.thin]  # (S, W, D)
+        flat = post.reshape(-1, post.shape[-1])
+        phys = to_physical(self.fit.problem, flat)
+        der = derived_np(self.fit.problem, flat)
+        data = {}
+        shape = (walkers, post.shape[0])
+        for k, v in {**phys, **der}.items():
+            data[k.replace("/", "_per_")] = np.asarray(v).reshape(post.shape[0], walkers).T.reshape(shape)
+        data["noise_sigma_rad"] = np.exp(flat[:, -1]).reshape(post.shape[0], walkers).T
+        return az.from_dict(posterior=data, attrs={"source": self.fit.source, "seed": self.seed})
+
+    def save(self, path) -> None:
+        """Write the chains as arviz NetCDF (reopen with ``arviz.from_netcdf``)."""
+        self.to_inference_data().to_netcdf(str(path))
+
+    def plot_corner(self, path=None, names=None, fig=None):
+        import corner
+
+        names = names or [n for n in self.samples if np.ptp(self.samples[n]) > 0]
+        data = np.column_stack([self.samples[n] for n in names])
+        fig = corner.corner(data, labels=names, quantiles=[0.16, 0.5, 0.84], fig=fig,
+                            show_titles=True, title_fmt=".3g")
+        if path is not None:
+            fig.savefig(path, dpi=90)
+        return fig
+
+    def plot_predictive(self, path=None, n_draws: int = 100, axes=None, seed: int = 0):
+        from ._plot import plot_predictive
+
+        return plot_predictive(self, path=path, n_draws=n_draws, axes=axes, seed=seed)
+
+    def plot_band(self, path=None, ax=None):
+        from ._plot import plot_band
+
+        return plot_band(self, path=path, ax=ax)
+
+
