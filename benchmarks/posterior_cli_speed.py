@@ -127,7 +127,7 @@ def main(argv=None):
         import numpy as np
 
         seed = args.seed0 + i
-        truth = sbc.draw_truth(gen, np.random.default_rng(seed))
+        truth = sbc.draw_truth(gen, np.random.default_rng(seed), 0.157)
         d = dict(gen.PAPER_DESIGN, seed=seed)
         p = tmp / f"paper_{seed}.csv"
         gen.make_log(truth, **d).to_csv(p, index=False)

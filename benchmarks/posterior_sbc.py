@@ -58,14 +58,28 @@ def _load():
     return [round(x, 2) for x in os.getloadavg()]
 
 
-def draw_truth(gen, rng):
+#: A drawn truth is redrawn until its stick band is narrower than this fraction of the
+#: design's smallest release amplitude (a release inside the band never moves: the log
+#: would have a run without motion, which hdid rejects, and the design would not be the one
+#: asked for). On the four-amplitude design (smallest 0.05 rad) this trims the upper tail
+#: of tau_s/k1.
+BAND_MARGIN = 0.9
+
+
+def draw_truth(gen, rng, min_amplitude=None):
+    from hdid.reference import stick_band_halfwidth
+
     cat = dict(gen.TRUTH_CSF8)
-    t = dict(cat)
-    for n in ("k1", "k2", "tau_c", "c_v", "v_s", "delta"):
-        t[n] = cat[n] * math.exp(SPREAD[n] * rng.standard_normal())
-    r = (cat["tau_s"] - cat["tau_c"]) / cat["tau_c"]
-    t["tau_s"] = t["tau_c"] * (1.0 + r * math.exp(SPREAD["stribeck_excess"] * rng.standard_normal()))
-    return t
+    for _ in range(100):
+        t = dict(cat)
+        for n in ("k1", "k2", "tau_c", "c_v", "v_s", "delta"):
+            t[n] = cat[n] * math.exp(SPREAD[n] * rng.standard_normal())
+        r = (cat["tau_s"] - cat["tau_c"]) / cat["tau_c"]
+        t["tau_s"] = t["tau_c"] * (1.0 + r * math.exp(SPREAD["stribeck_excess"] * rng.standard_normal()))
+        band = stick_band_halfwidth(t["k1"], t["k2"], t["tau_s"], t.get("ratio", 100.0))
+        if min_amplitude is None or band < BAND_MARGIN * min_amplitude:
+            return t
+    raise RuntimeError("no truth with a band inside the design's smallest amplitude")
 
 
 def run_one(gen, design_name, design, seed, max_steps):
@@ -74,7 +88,7 @@ def run_one(gen, design_name, design, seed, max_steps):
     import hdid
 
     rng = np.random.default_rng(seed)
-    truth = draw_truth(gen, rng)
+    truth = draw_truth(gen, rng, min(abs(a) for a in design["amplitudes"]))
     d = dict(design)
     d["seed"] = seed
     df, info = gen.make_log(truth, **d, return_truth=True)

@@ -14,6 +14,7 @@ import pytest
 
 import hdid
 from hdid._posterior import (
+    PRIOR_HALF_WIDTH,
     LogPosterior,
     MixtureProposal,
     _reset_outliers,
@@ -21,6 +22,7 @@ from hdid._posterior import (
     sample_posterior,
     tau_pooled,
 )
+from hdid._posterior.diagnostics import prior_sd, width_ratios
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "data" / "synthetic" / "csf8_paper.csv"
 
@@ -313,3 +315,53 @@ def test_walkers_started_outside_the_prior_are_pulled_back(fit):
                           np.log(0.1 * q), np.log(0.3 * q))
     assert np.all(np.isfinite(lp0))
     np.testing.assert_allclose(lp0, batch(P0), rtol=1e-12)
+
+
+def test_prior_width_is_the_box_the_linear_prior_or_the_gaussian(fit):
+    """Prior sd in the fit's coordinates: flat box ±7 → 14/√12 = 4.04; flat in the value
+    (density ∝ eᵘ on the box) → a truncated exponential, sd ≈ 1 (exactly 1 untruncated;
+    truncation at 14 changes it by < 1e-4); a weak Gaussian prior inside the box → its own
+    sd (the box cuts it only if sd is comparable to 7). Grid of 4001 points: 1e-3 relative."""
+    prob = fit.problem
+    P = prob.n_physical
+    centre = np.asarray(prob.prior_mean, dtype=float).copy()
+    on = np.asarray(prob.prior_on, dtype=bool)
+    centre[~on] = np.asarray(fit.u)[:P][~on]
+    lin = np.zeros(P)
+    lin[0] = 1.0 if not on[0] else 0.0
+    sd = prior_sd(prob, centre, PRIOR_HALF_WIDTH, lin)
+    for i in range(P):
+        if on[i]:
+            want = float(np.asarray(prob.prior_sd)[i])
+            if want < 2.0:
+                assert sd[i] == pytest.approx(want, rel=1e-2)
+        elif lin[i]:
+            assert sd[i] == pytest.approx(1.0, rel=1e-3)
+        else:
+            assert sd[i] == pytest.approx(14 / np.sqrt(12), rel=1e-3)
+
+
+def test_width_ratio_tells_measured_from_assumed(fit):
+    """Draws 100× narrower than every prior read "measured"; draws as wide as the prior
+    of a parameter read "assumed" for it."""
+    prob = fit.problem
+    P = prob.n_physical
+    u = np.asarray(fit.u, dtype=float)
+    lin = np.zeros(P)
+    psd = prior_sd(prob, u, PRIOR_HALF_WIDTH, lin)
+    rng = np.random.default_rng(0)
+    draws = u + 0.01 * psd[np.r_[np.arange(P), np.zeros(u.size - P, int)]] * rng.standard_normal((4000, u.size))
+    w = width_ratios(prob, draws, u, PRIOR_HALF_WIDTH, lin)
+    assert all(v["verdict"] == "measured" for v in w.values())
+    draws[:, 0] = u[0] + psd[0] * rng.standard_normal(4000)
+    w = width_ratios(prob, draws, u, PRIOR_HALF_WIDTH, lin)
+    assert w[prob.free[0]]["verdict"] == "assumed"
+    assert w[prob.free[0]]["posterior_over_prior_width"] == pytest.approx(1.0, abs=0.05)
+
+
+def test_no_progress_bar_unless_stderr_is_a_terminal(fit, capfd):
+    """tqdm's carriage-return updates must not reach a redirected stderr (a log file),
+    even when progress is asked for (the CLI asks unless -q)."""
+    sample_posterior(fit, n_steps=20, burn_in=0, seed=0, modes="fit", progress=True)
+    err = capfd.readouterr().err
+    assert "\r" not in err and "it/s" not in err
