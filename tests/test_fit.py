@@ -351,9 +351,12 @@ def test_run_released_near_the_band_edge_is_not_left_trapped():
     assert result.rms_residual_rad < 1.5 * result.quantization_floor_rad, result.warnings
     assert all(r.peak_speed > 0 for r in result.runs)
     assert not any("never releases" in w for w in result.warnings)
-    # the restart is reported as one more start, and it is the best one
-    assert result.starts.best == len(result.starts.costs) - 1
-    assert result.starts.costs[:-1].min() > 100 * result.starts.costs[-1]
+    # if the restart was needed it is reported as one more start, and it is the best one
+    # (since the grid is centred on the log's own frequency, issue 16, one of the six grid
+    # starts reaches this log's floor by itself: costs 5065…5081 and 9.26, no restart)
+    if len(result.starts.costs) > 6:
+        assert result.starts.best == len(result.starts.costs) - 1
+        assert result.starts.costs[:-1].min() > 100 * result.starts.costs[-1]
 
 
 def test_paper_residual_at_floor(paper):

@@ -298,12 +298,16 @@ class Log:
 # ------------------------------------------------------------------ resolution
 
 
+#: Largest divisor of the smallest gap between reading levels tried as the step.
+MAX_STEP_DIVISOR = 64
+
+
 def estimate_resolution(theta: np.ndarray, *, rtol: float = 1e-6) -> float | None:
     """Estimate the quantization step of a quantized signal.
 
-    The distinct levels of `theta` are sorted; the smallest gap between adjacent
-    levels is the candidate step ``q``. The signal counts as quantized when every
-    gap is an integer multiple of ``q`` within ``rtol * q``. Only differences of
+    The distinct levels of `theta` are sorted; the step ``q`` is the largest divisor
+    ``g/k`` (``k`` = 1 … ``MAX_STEP_DIVISOR``) of the smallest gap ``g`` between adjacent
+    levels of which every gap is an integer multiple within ``rtol`` per step. Only differences of
     values are used, so a constant offset (``offset + k*q``) does not matter.
     The returned step is refined as (highest - lowest level) / (number of steps).
 
@@ -341,12 +345,18 @@ def estimate_resolution(theta: np.ndarray, *, rtol: float = 1e-6) -> float | Non
     if levels.size < 2 or (levels.size == 2 and x.size < 3):
         return None
     gaps = np.diff(levels)
-    q0 = float(gaps.min())
-    steps = np.rint(gaps / q0)
-    if np.any(np.abs(gaps / q0 - steps) > rtol):
-        return None
-    q = float((levels[-1] - levels[0]) / steps.sum())
-    return q if q > 0 and math.isfinite(q) else None
+    # The step is the greatest common divisor of the gaps: the smallest gap divided by
+    # 1, 2, … (a short 250 Hz run may show levels 4, 13 and 25 counts apart but never two
+    # adjacent counts). Readings on no grid fail every divisor: with many gaps the chance
+    # that all lie within rtol of integers is nil.
+    g0 = float(gaps.min())
+    for k in range(1, MAX_STEP_DIVISOR + 1):
+        q0 = g0 / k
+        steps = np.rint(gaps / q0)
+        if np.all(np.abs(gaps / q0 - steps) <= rtol * np.maximum(steps, 1.0)):
+            q = float((levels[-1] - levels[0]) / steps.sum())
+            return q if q > 0 and math.isfinite(q) else None
+    return None
 
 
 # ---------------------------------------------------------------------- loading

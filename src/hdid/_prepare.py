@@ -116,13 +116,13 @@ class Prepared:
         return np.sign(moved - self.hold)
 
 
-def noise_sigma(runs, step: float | None) -> float:
+def noise_sigma(runs, step: float | None, still_only: bool = False) -> float:
     """Noise standard deviation of the readings [log units], robustly.
 
     From the still stretches (hold, stuck tail: runs of samples within a few MADs of each
     other at the start and end of every run) where there are any, else from the third
     differences (variance ``20·σ²`` for white noise; an upper bound where the motion is
-    coarsely sampled). Never zero: at least ``1e-9`` of the log's angle span.
+    coarsely sampled). Never below ``1e-4`` of the log's angle span (the simulator's accuracy).
     """
     pieces = []
     for run in runs:
@@ -140,12 +140,17 @@ def noise_sigma(runs, step: float | None) -> float:
         # and tail's estimates per run (one of them may move)
         mads = [1.4826 * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(2) for d in pieces]
         sig_still = float(np.min(mads)) if mads else np.inf
+    if still_only:  # (nan where the still stretches say nothing)
+        return sig_still if np.isfinite(sig_still) else float("nan")
     d3 = np.concatenate([np.diff(np.asarray(r.theta, float), 3) for r in runs if len(r.theta) > 4])
     sig_d3 = 1.4826 * float(np.median(np.abs(d3))) / math.sqrt(20.0) if d3.size else np.inf
     sig = sig_still if np.isfinite(sig_still) and sig_still > 0 else sig_d3
     if not np.isfinite(sig) or sig <= 0:
         sig = sig_d3 if np.isfinite(sig_d3) and sig_d3 > 0 else 0.0
-    return max(sig, 1e-9 * span)
+    # The simulator's own error (RK4 substeps: 1.9e-5 rad on a 0.157 rad swing,
+    # benchmarks/results/simulator_schemes.md) is ~1e-4 of the swing; weights finer than
+    # what the model can resolve only make the fit ill-conditioned (a noiseless log).
+    return max(sig, 1e-4 * span)
 
 
 def turning_points(th: np.ndarray, threshold: float) -> list[int]:
@@ -192,6 +197,11 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
     if log.resolution:
         step = float(log.resolution)
         source = "given" if getattr(log, "resolution_source", None) == "given" else "estimated"
+        # A grid found in the readings may be the printing precision of a noisy analog
+        # sensor, not an encoder: then the still stretches wander over many levels.
+        if source == "estimated" and noise_sigma(runs, None, still_only=True) > 2.0 * step:
+            step = noise_sigma(runs, None) * math.sqrt(12.0)
+            source = "noise"
     else:
         step = noise_sigma(runs, None) * math.sqrt(12.0)
         source = "noise"

@@ -53,6 +53,7 @@ class Problem(eqx.Module):
     moving_index: Array = None
     vel_scale: Float[Array, ""] = None
     omega_guess: Float[Array, " R"] = None
+    theta0_scale: Float[Array, ""] = None
     n_moving: int = eqx.field(static=True, default=0)
 
     @property
@@ -73,6 +74,14 @@ class Problem(eqx.Module):
                 + self.n_setups + self.n_moving)
 
     @property
+    def theta0_step(self):
+        """Unit of the start-angle unknowns: the encoder step (a start angle is known to
+        about a count), or, for readings on no grid whose noise may be tiny, at least a
+        thousandth of the log's amplitude (``theta0_scale``), so the optimiser's steps
+        stay of order one."""
+        return self.step if self.theta0_scale is None else self.theta0_scale
+
+    @property
     def sigma(self):
         return self.step / jnp.sqrt(12.0)
 
@@ -87,7 +96,7 @@ class Problem(eqx.Module):
             i += R
         else:
             t_release = self.release_lo
-        theta0_enc = self.hold + self.step * u[i : i + R]
+        theta0_enc = self.hold + self.theta0_step * u[i : i + R]
         i += R
         offset = self.offset0 + self.offset_scale * u[i : i + self.n_setups]
         return values, t_release, theta0_enc, offset
@@ -120,7 +129,7 @@ class Problem(eqx.Module):
             i += R
         else:
             t_release = lo
-        theta0_enc = np.asarray(self.hold) + float(self.step) * u[i : i + R]
+        theta0_enc = np.asarray(self.hold) + float(self.theta0_step) * u[i : i + R]
         i += R
         offset = np.asarray(self.offset0) + float(self.offset_scale) * u[i : i + self.n_setups]
         return values, t_release, theta0_enc, offset
@@ -226,7 +235,7 @@ class Problem(eqx.Module):
             t_release = interval_from_u(local[:, P], self.release_lo, self.release_hi)
         else:
             t_release = self.release_lo
-        theta0_enc = self.hold + self.step * local[:, P + 1]
+        theta0_enc = self.hold + self.theta0_step * local[:, P + 1]
         off = self.offset0[self.setup_index] + self.offset_scale * local[:, P + 2]
         pred = simulate_runs(
             models, self.times, theta0_enc - off, t_release,
@@ -328,6 +337,9 @@ def build_problem(
         omega_guess=jnp.asarray(np.zeros(prep.n_runs) if prep.omega_guess is None
                                 else prep.omega_guess, dtype=float),
         n_moving=int(np.sum(moving)),
+        theta0_scale=(None if prep.quantized else jnp.asarray(
+            max(prep.resolution, 1e-3 * float(np.max(np.abs(prep.theta - np.median(prep.rest))))),
+            dtype=float)),
     )
 
 

@@ -314,7 +314,7 @@ class BatchTiming:
 
 
 _SETUP_OPTIONS = ("model", "inertia", "fix", "free_inertia", "inertia_prior", "release_time",
-                  "counts_per_rev", "max_substep")
+                  "counts_per_rev", "max_substep", "ratio", "resolution")
 _FIT_OPTIONS = (*_SETUP_OPTIONS, "n_starts", "max_steps", "start_from_model")
 
 
