@@ -120,7 +120,7 @@ def test_simulate_then_fit_round_trip(tmp_path):
     res = CliRunner().invoke(
         main,
         ["simulate", str(out), "--amplitudes", "0.157,-0.157,0.157,-0.157", "--counts",
-         "--set", "k1=1200", "--seed", "3"],
+         "--rate", "250", "--duration", "0.5", "--set", "k1=1200", "--seed", "3"],
     )
     assert res.exit_code == 0, res.output
     again = CliRunner().invoke(main, ["simulate", str(out)])
@@ -347,3 +347,19 @@ def test_too_long_log_refused_at_once(monkeypatch):
     res = CliRunner().invoke(main, ["fit", str(EXAMPLE)])
     line = _one_line_exit_2(res, "125 samples")
     assert "crop" in line and "one row in 2" in line and "250 Hz" in line
+
+
+def test_simulate_default_is_the_measured_design(tmp_path):
+    # issue 18 item 6: the default teaches the experiment that determines the friction
+    out = tmp_path / "d.csv"
+    res = CliRunner().invoke(main, ["simulate", str(out)])
+    assert res.exit_code == 0, res.output
+    from hdid import read_log
+
+    log = read_log(out)
+    assert len(log.runs) == 8 and abs(log.sample_period - 1e-3) < 1e-12
+    amps = sorted({round(abs(r.theta[0]), 2) for r in log.runs})
+    assert amps == [0.05, 0.08, 0.12, 0.16]  # four amplitudes, both signs
+    help_text = CliRunner().invoke(main, ["simulate", "--help"]).output
+    assert "paper's design" in help_text
+    assert "v_s" in help_text and "1 kHz" in help_text
