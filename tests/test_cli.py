@@ -324,9 +324,10 @@ def test_phases_on_a_terminal_only(monkeypatch, tty):
     assert res.exit_code == 2
     lines = res.stderr.strip().splitlines()
     if tty:
-        assert lines[0].startswith("hdid: reading") and lines[0].endswith(" s")
-        assert lines[1].startswith("hdid: fitting 4 run(s)") and "compiles" in lines[1]
-        assert len(lines) == 3 and lines[2].startswith("hdid: error: ")
+        assert lines[0].startswith("hdid: loading JAX") and lines[0].endswith(" s")
+        assert lines[1].startswith("hdid: reading") and lines[1].endswith(" s")
+        assert lines[2].startswith("hdid: fitting 4 run(s)") and "compiles" in lines[2]
+        assert len(lines) == 4 and lines[3].startswith("hdid: error: ")
     else:
         assert len(lines) == 1 and lines[0].startswith("hdid: error: ")
     res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "-q"])  # -q: no phases either

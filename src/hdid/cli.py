@@ -315,6 +315,7 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
     guesses = _parse_fix(start_values, "--start")
     options = _options_used(click.get_current_context())
     phases = _Phases(enabled=not quiet and _stderr_is_tty())
+    phases.start("loading JAX")
 
     from . import _fit, _io
     from ._errors import HdidError
