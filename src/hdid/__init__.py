@@ -43,6 +43,7 @@ _LAZY = {
     "ThreeSegmentStiffness": ".effects",
     "KinematicErrorStiffness": ".effects",
     "LinearStiffness": ".effects",
+    "TorqueOffset": ".effects",
     "effects": ".effects",
     "diagnose": "._diagnose",
     "Diagnosis": "._diagnose",
@@ -103,5 +104,6 @@ if TYPE_CHECKING:  # pragma: no cover
         Scales,
         StribeckFriction,
         ThreeSegmentStiffness,
+        TorqueOffset,
         ViscousFriction,
     )

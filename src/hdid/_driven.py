@@ -12,8 +12,11 @@ exactly ``τ_l + τ_fout``:
 
 Conventions (shared with the independent reference in ``data/synthetic/driven.py``):
 
-* ``τ_d`` is held from each sample to the next (zero-order hold: a digital drive's
-  command); ``τ_l`` is interpolated linearly (a measured signal).
+* ``τ_d`` is held from each sample to the next (``input_hold="zoh"``, zero-order hold:
+  a digital drive's command, held by its DAC or PWM until the next), or interpolated
+  linearly between samples (``input_hold="foh"``, first-order hold: a sampled analog
+  signal such as a measured motor current); ``τ_l`` is interpolated linearly (a
+  measured signal).
 * ``τ_fout = tau_fout·s``: while the WG slides, ``s`` is its sliding direction (the output
   turns the other way, so the friction opposes it); at rest the output friction keeps
   its last sliding value (the flexspline stays wound; ``s = 0`` before the first motion).
@@ -271,6 +274,7 @@ def simulate_driven(
     substeps: int | None = None,
     max_substep: float | None = None,
     full_output: bool = False,
+    input_hold: str = "zoh",
 ):
     """WG angle (and, with ``full_output``, the rest) of a driven run at ``times``.
 
@@ -281,7 +285,7 @@ def simulate_driven(
     times:
         Sample times [s], increasing; the state at ``times[0]`` is ``(theta0, omega0)``.
     motor_torque:
-        Motor torque at the WG [N m] per sample, held until the next sample.
+        Motor torque at the WG [N m] per sample (held or interpolated: ``input_hold``).
     load_torque:
         External torque on the output [N m] per sample, linear between samples (default 0).
     theta0, omega0:
@@ -292,6 +296,9 @@ def simulate_driven(
     substeps:
         RK4 substeps per sample interval (static); default from ``max_substep``
         (0.5 ms), which needs concrete ``times``.
+    input_hold:
+        ``"zoh"``: the motor torque is held from each sample to the next (a command);
+        ``"foh"``: it is interpolated linearly between samples (a sampled analog signal).
     full_output:
         Return a dict with ``theta``, ``omega``, ``direction`` (0 while stuck),
         ``output_direction`` (the output friction's sign ``s``), ``theta_out`` (eq. 8).
@@ -310,9 +317,13 @@ def simulate_driven(
     theta0 = jnp.asarray(theta0, dtype=float)
     omega0 = jnp.asarray(omega0, dtype=float)
 
+    if input_hold not in ("zoh", "foh"):
+        raise ValueError(f"input_hold = {input_hold!r}: must be 'zoh' (held) or 'foh' (linear)")
     dts = jnp.diff(times)
     ext0 = tau_d[:-1] - tau_l[:-1] / N
     rate = -_safe_div(jnp.diff(tau_l), dts, dts > 0) / N
+    if input_hold == "foh":
+        rate = rate + _safe_div(jnp.diff(tau_d), dts, dts > 0)
 
     def interval(carry, xs):
         dt, e0, er = xs

@@ -6,6 +6,7 @@ import math
 import os
 import time
 from collections.abc import Iterable, Mapping, Sequence
+from typing import ClassVar
 
 import jax
 import jax.numpy as jnp
@@ -14,7 +15,6 @@ import numpy as np
 from . import _config  # noqa: F401
 from ._driven import DrivenJoint
 from ._driven_problem import (
-    OMEGA0_SCALE,
     DrivenData,
     DrivenProblem,
     JointProblem,
@@ -26,13 +26,11 @@ from ._io import Log, read_log
 from ._model import Model
 from ._positional import PositionalError
 from ._transforms import to_unconstrained
+from .effects import AbstractEffect, Parameter, Scales, StribeckFriction
+from jaxtyping import ArrayLike, Float
 
 #: Highest positional-error order tried when the order is chosen by BIC.
 DEFAULT_MAX_ORDER = 6
-#: |ω| above which a sample enters the equation-error starting estimate [rad/s]: well
-#: above the speed noise of a 7-sample Savitzky–Golay derivative of a 4000-count
-#: encoder at 250 Hz (≈ step·fs/√(window) ≈ 0.15 rad/s).
-START_MIN_SPEED = 1.0
 
 
 def fit_driven(
@@ -47,6 +45,7 @@ def fit_driven(
     output_counts_per_rev: float | None = None,
     max_substep: float | None = None,
     max_steps: int = 200,
+    input_hold: str | None = None,
 ) -> DrivenFitResult:
     """Fit a driven (input/output) log: WG dynamics (eq. 9), output twist and positional
     error (eqs. 3, 8).
@@ -70,16 +69,23 @@ def fit_driven(
         Parameters held fixed (names, or ``{name: value}``).
     torque_constant, output_counts_per_rev, counts_per_rev:
         Unit conversions for logs of motor current and raw encoder counts.
+    input_hold:
+        How the motor torque runs between samples: ``"zoh"`` (held: a drive's command,
+        the default for a ``motor_torque`` column) or ``"foh"`` (linear: a sampled analog
+        signal, the default for a measured ``motor_current``); see :func:`input_hold_for`.
     """
     t_start = time.perf_counter()
     log = _read(log, counts_per_rev, torque_constant, output_counts_per_rev)
+    hold = input_hold_for(log, input_hold)
     data = DrivenData.from_log(log)
-    joint = _as_joint(model, max_order if order is None else order)
+    joint = _as_joint(model, max_order if order is None else order, data)
     free, fixed, notes = _free_names(joint, fix, data)
     joint = joint.replace(**fixed) if fixed else joint
     joint = _start_values(data, joint, free)
-    problem = build_driven_problem(data, joint, free, _priors(joint, free), max_substep)
-    u, problem = _solve(problem, _pack(problem, joint, data=data), data.source, max_steps, data)
+    joint = _with_scales(joint, data)
+    warnings: list[str] = []
+    u, problem = _fit_nested_first(data, joint, free, max_substep, max_steps, warnings, notes,
+                                   hold)
     bic = None
     if order is None and data.has_output:
         best_k, bic = choose_order(problem, u, max_order)
@@ -88,13 +94,115 @@ def fit_driven(
             free2 = tuple(n for n in free if not n.startswith("pos_")) + tuple(
                 n for n in joint2.positional.names() if n not in fixed
             )
-            problem2 = build_driven_problem(data, joint2, free2, _priors(joint2, free2), max_substep)
+            problem2 = build_driven_problem(data, joint2, free2, _priors(joint2, free2), max_substep, hold)
             u0 = _pack(problem2, joint2, nuisance=np.asarray(u[problem.n_physical:]))
             problem2 = eqx_tree_set(problem2, direction0=problem.direction0)
             u, problem = _solve(problem2, u0, data.source, max_steps, data)
     result = analyse_driven(problem, u, data=data, notes=notes, order_bic=bic)
+    result.warnings[:0] = warnings
     result.wall_time_s = time.perf_counter() - t_start
     return result
+
+
+def input_hold_for(log, input_hold: str | None = None) -> str:
+    """The motor torque's hold between samples: ``input_hold`` when given, else
+    ``"foh"`` (linear interpolation) for a log of measured motor current — a sampled
+    analog signal, continuous between its samples — and ``"zoh"`` (held) for a
+    ``motor_torque`` column, read as the drive's command, which its DAC or PWM holds
+    until the next sample."""
+    if input_hold is not None:
+        if input_hold not in ("zoh", "foh"):
+            raise ValueError(f"input_hold = {input_hold!r}: must be 'zoh' (held) or 'foh' (linear)")
+        return input_hold
+    return "foh" if getattr(log, "torque_constant", None) is not None else "zoh"
+
+
+def _with_scales(joint: DrivenJoint, data: DrivenData) -> DrivenJoint:
+    """The joint with its model's data-derived optimiser scales resolved on this log."""
+    values = joint.float_values()
+    coulomb = sum(values.get(p.name, 0.0) for e in _coulomb_effects(joint)
+                  for p in e.parameters[:1])
+    scales = log_scales(data, joint, values["inertia"], coulomb or None)
+    return DrivenJoint(joint.model.with_scales(scales), joint.tau_fout, joint.positional)
+
+
+class _Coulomb(AbstractEffect):
+    """Coulomb friction, the nested special case ``tau_s = tau_c`` of Stribeck friction
+    (it takes the Stribeck effect's slot and its ``tau_c`` declaration)."""
+
+    tau_c: Float[ArrayLike, ""]
+    name: ClassVar[str] = "stribeck"
+    parameters: ClassVar[tuple[Parameter, ...]] = StribeckFriction.parameters[:1]
+
+    def torque(self, motion, state):
+        del state
+        return -motion.direction * self.tau_c
+
+    def holding_torque(self, motion, state):
+        del motion, state
+        return jnp.asarray(self.tau_c, dtype=float)
+
+
+def _data_cost(problem, u) -> float:
+    """χ² of the data rows (the weak-prior rows left out), in units of the quantization σ."""
+    from ._driven_result import _residuals
+
+    r = np.asarray(_residuals(problem, jnp.asarray(u)))[: -problem.n_physical or None]
+    return float(r @ r) * float(problem.noise_scale) ** 2
+
+
+#: Relative χ² margin by which a general model may end above its nested special case
+#: before it is called worse (the LM stopping tolerance on the cost).
+NESTED_MARGIN = 1e-3
+
+
+def _fit_nested_first(data, joint, free, max_substep, max_steps, warnings, notes, hold):
+    """Fit, Coulomb first where a Stribeck law is free.
+
+    Stribeck friction nests Coulomb friction (``tau_s = tau_c``, any ``v_s``): the
+    Coulomb case is fitted first, and the Stribeck fit starts from its optimum (with
+    ``tau_s`` just above ``tau_c``), so it can only improve on it. Should it still end
+    worse (a stick event, the weak priors), that is a warning and the result is the
+    Coulomb optimum (``tau_s = tau_c``); ``tau_s < tau_c`` at the end is reported."""
+    stribeck = [e for e in _coulomb_effects(joint) if type(e) is StribeckFriction]
+    names = [p.name for e in stribeck for p in e.parameters]
+    if len(stribeck) != 1 or not {names[0], names[1]} <= set(free):
+        problem = build_driven_problem(data, joint, free, _priors(joint, free), max_substep, hold)
+        return _solve(problem, _pack(problem, joint, data=data), data.source, max_steps, data)
+    e = stribeck[0]
+    tc, ts = names[0], names[1]
+    shape = [n for n in names[2:] if n in free]
+    nested = DrivenJoint(joint.model.with_effect(_Coulomb(tau_c=e.tau_c)), joint.tau_fout,
+                         joint.positional)
+    free_n = tuple(n for n in free if n not in (ts, *shape))
+    pn = build_driven_problem(data, nested, free_n, _priors(nested, free_n), max_substep, hold)
+    un, pn = _solve(pn, _pack(pn, nested, data=data), data.source, max_steps, data)
+    cost_n = _data_cost(pn, un)
+    at = pn.values_np(un)
+    start = {n: at[n] for n in free_n}
+    start[ts] = 1.02 * at[tc]
+    joint_g = joint.replace(**start)
+    pg = build_driven_problem(data, joint_g, free, _priors(joint_g, free), max_substep, hold)
+    pg = eqx_tree_set(pg, direction0=pn.direction0, noise_scale=pn.noise_scale)
+    ug, pg = _solve(pg, _pack(pg, joint_g, nuisance=np.asarray(un[pn.n_physical:])),
+                    data.source, max_steps, data)
+    cost_g = _data_cost(pg, ug)
+    notes.append(
+        f"Coulomb friction ({tc} = {ts}) fitted first: χ² {cost_n:.6g}; Stribeck from its "
+        f"optimum: χ² {cost_g:.6g} ({'better' if cost_g < cost_n else 'not better'})")
+    if cost_g > cost_n * (1 + NESTED_MARGIN):
+        warnings.append(
+            f"the Stribeck fit ended worse (χ² {cost_g:.4g}) than its nested Coulomb case "
+            f"{tc} = {ts} (χ² {cost_n:.4g}) although it started from it: the result is the "
+            f"Coulomb optimum ({ts} = {tc}; the Stribeck shape is then undetermined)")
+        back = joint.replace(**{**start, ts: at[tc]})
+        ug = _pack(pg, back, nuisance=np.asarray(un[pn.n_physical:]))
+    vals = pg.values_np(ug)
+    if vals[ts] < vals[tc]:
+        warnings.append(
+            f"{ts} = {vals[ts]:.4g} < {tc} = {vals[tc]:.4g}: the friction rises from rest to "
+            "sliding (no Stribeck dip); the Stribeck shape parameters mean nothing here")
+    return ug, pg
 
 
 def fit_joint(
@@ -110,6 +218,7 @@ def fit_joint(
     release_time: float | None = None,
     max_substep: float | None = None,
     max_steps: int = 200,
+    input_hold: str | None = None,
 ) -> DrivenFitResult:
     """One set of physical parameters for a free-motion log and a driven log of one gear.
 
@@ -130,9 +239,15 @@ def fit_joint(
             f"logs: a joint fit needs exactly one driven log and at least one free-motion "
             f"log; got {len(driven)} driven and {len(free_logs)} free-motion"
         )
+    if not isinstance(model, DrivenJoint) and getattr(driven[0].runs[0], "theta_out", None) is None:
+        # Without an output encoder the driven log sees tau_c + tau_fout/N, the free-motion
+        # log tau_c: the joint fit keeps the output friction at the driven joint's
+        # default rather than folding it into the shared tau_c (see fit_driven).
+        model = DrivenJoint(Model.default() if model is None else model, 0.05,
+                            PositionalError.zeros(max_order if order is None else order))
     alone = fit_driven(
         driven[0], model, order=order, max_order=max_order, fix=fix,
-        max_substep=max_substep, max_steps=max_steps,
+        max_substep=max_substep, max_steps=max_steps, input_hold=input_hold,
     )
     joint = alone.joint
     dproblem: DrivenProblem = alone.problem
@@ -215,10 +330,15 @@ def _read(log, counts_per_rev, torque_constant, output_counts_per_rev):
     return read_log(log, **kwargs)
 
 
-def _as_joint(model, order: int) -> DrivenJoint:
+def _as_joint(model, order: int, data: DrivenData | None = None) -> DrivenJoint:
+    """A :class:`DrivenJoint` from a model. Its output friction starts at 0 and is fitted
+    from the output encoder; without one it is held at 0: eq. 9 alone cannot tell
+    ``tau_fout/N`` from WG Coulomb friction, which then carries it."""
     if isinstance(model, DrivenJoint):
         return model.with_order(order) if model.positional.order != order else model
-    return DrivenJoint(Model.default() if model is None else model, 0.05, PositionalError.zeros(order))
+    m = Model.default() if model is None else model
+    tau_fout = 0.0 if data is not None and not data.has_output else 0.05
+    return DrivenJoint(m, tau_fout, PositionalError.zeros(order))
 
 
 def _fixed_from(joint: DrivenJoint, fix) -> dict[str, float]:
@@ -254,8 +374,17 @@ def _free_names(joint: DrivenJoint, fix, data: DrivenData):
 
 
 def _priors(joint: DrivenJoint, free) -> dict[str, tuple[float, float]]:
+    """Weak priors of the free parameters; a declared mean of ``None`` is centred on the
+    (data-derived) starting value ``joint`` holds."""
     specs = joint.parameter_specs()
-    return {n: specs[n].prior for n in free if specs[n].prior is not None}
+    values = joint.float_values()
+    out = {}
+    for n in free:
+        prior = specs[n].prior
+        if prior is not None:
+            mean = prior[0] if prior[0] is not None else float(to_unconstrained(specs[n], values[n]))
+            out[n] = (float(mean), float(prior[1]))
+    return out
 
 
 def _pack(problem, joint: DrivenJoint, nuisance=None, data=None) -> np.ndarray:
@@ -263,7 +392,7 @@ def _pack(problem, joint: DrivenJoint, nuisance=None, data=None) -> np.ndarray:
     values = joint.float_values()
     phys = np.array([to_unconstrained(specs[n], values[n]) for n in problem.free], dtype=float)
     if nuisance is None:
-        nuisance = np.concatenate([np.zeros(problem.n_runs), data.omega0 / OMEGA0_SCALE])
+        nuisance = np.concatenate([np.zeros(problem.n_runs), data.omega0 / data.omega_scale])
     return np.concatenate([phys, nuisance])
 
 
@@ -282,7 +411,11 @@ def _solve(problem, u0, source: str, max_steps: int, data: DrivenData | None = N
     from ._fit import _solve_many
 
     u = jnp.asarray(u0)
-    for _ in range(DIRECTION_ROUNDS if data is not None else 1):
+    rounds = DIRECTION_ROUNDS if data is not None else 1
+    if (data is not None and not data.has_output and "tau_fout" not in problem.free
+            and float(problem.base.tau_fout) == 0.0):
+        rounds = 1  # no output friction: the windows' starting signs change nothing
+    for _ in range(rounds):
         # In chunks, each restarting the solver: a stick event met far from the optimum
         # can shrink the trust region to nothing, and a fresh start recovers it.
         used = 0
@@ -292,6 +425,13 @@ def _solve(problem, u0, source: str, max_steps: int, data: DrivenData | None = N
             )
             u = U[0]
             used += LM_CHUNK
+            if (data is not None and np.isfinite(float(cost[0]))
+                    and float(getattr(problem, "noise_scale", 0.0)) == 1.0):
+                ratio = _scatter_ratio(problem, u)
+                if ratio > MODEL_ERROR_RATIO:
+                    problem = eqx_tree_set(problem, noise_scale=jnp.asarray(ratio))
+                    if not (bool(done[0]) and not bool(np.any(np.asarray(problem.prior_on)))):
+                        continue  # (a uniform σ moves no optimum without priors)
             if bool(done[0]) or not np.isfinite(float(cost[0])):
                 break
         if not np.isfinite(float(cost[0])) or not np.all(np.isfinite(np.asarray(u))):
@@ -306,6 +446,21 @@ def _solve(problem, u0, source: str, max_steps: int, data: DrivenData | None = N
             break
         problem = eqx_tree_set(problem, direction0=jnp.asarray(new))
     return np.asarray(u), problem
+
+
+#: Residual scatter (in quantization σ) above which the model error, not the encoder,
+#: sets the scatter: the residuals are then measured in that scatter.
+MODEL_ERROR_RATIO = 3.0
+
+
+def _scatter_ratio(problem, u) -> float:
+    """RMS of the weighted WG residuals in units of the current σ."""
+    from ._driven_result import _simulate
+
+    _, sim = _simulate(problem, jnp.asarray(u))
+    w = np.asarray(problem.weight)
+    r = w * (np.asarray(sim["theta"]) - np.asarray(problem.theta)) / float(problem.sigma)
+    return float(np.sqrt(np.sum(r**2) / max(np.sum(w > 0), 1)))
 
 
 def _window_directions(problem: DrivenProblem, u, data: DrivenData) -> np.ndarray:
@@ -333,23 +488,86 @@ def _smooth_derivatives(theta, dt):
     return omega, alpha
 
 
+#: Samples enter the equation-error start when their smoothed speed exceeds this many
+#: times the speed noise of the 7-point Savitzky–Golay derivative (the angle noise σ
+#: times the filter's gain): a sign of the velocity read there is right with
+#: overwhelming probability, in any units.
+START_NOISE_FACTOR = 10.0
+#: … and at least this fraction of the log's speed scale (its 95th-percentile speed):
+#: friction near zero speed (Stribeck, stiction) is not the Coulomb + viscous line.
+START_SPEED_FRACTION = 0.02
+
+
+def _offset_parameters(joint: DrivenJoint, free) -> list[str]:
+    """Free parameters of constant-torque effects (:class:`~hdid.effects.TorqueOffset`):
+    their torque ``−tau_0`` is one more column of the equation-error regression."""
+    from .effects import TorqueOffset
+
+    return [p.name for e in joint.wg_model.effects if isinstance(e, TorqueOffset)
+            for p in e.parameters if p.name in free]
+
+
+def _coulomb_effects(joint: DrivenJoint):
+    """The model's Stribeck-type friction effects (``tau_c``, ``tau_s`` fields; their
+    nested special case is Coulomb friction, ``tau_s = tau_c``)."""
+    from .effects import AsymmetricStribeckFriction, StribeckFriction
+
+    return [e for e in joint.wg_model.effects
+            if isinstance(e, (StribeckFriction, AsymmetricStribeckFriction))]
+
+
+def log_scales(data: DrivenData, joint: DrivenJoint, inertia: float | None = None,
+               coulomb: float | None = None) -> Scales:
+    """The driven log's magnitudes in its own units (:class:`~hdid.effects.Scales`)."""
+    speeds, torques, spans = [], [], []
+    for i in range(data.n_runs):
+        n = int(data.weight[i].sum())
+        omega, _ = _smooth_derivatives(data.theta[i, :n], data.sample_period)
+        speeds.append(np.abs(omega))
+        torques.append(np.abs(data.motor_torque[i, :n]))
+        spans.append(np.ptp(data.theta[i, :n]))
+    speed = float(np.percentile(np.concatenate(speeds), 95)) if speeds else 1.0
+    drive = float(np.percentile(np.concatenate(torques), 95)) if torques else 1.0
+    torque = coulomb if coulomb and coulomb > 0 else 0.1 * drive
+    values = joint.float_values()
+    N = joint.ratio
+    amplitude = max(float(np.max(spans)) if spans else 1.0, data.step)
+    d = amplitude / N
+    k_out = float(joint.spring_torque(d)) / d if d > 0 else float("nan")
+    k_wg = k_out / N**2 if math.isfinite(k_out) and k_out > 0 else drive / amplitude
+    return Scales(ratio=N, inertia=float(inertia or values["inertia"]), k_wg=k_wg,
+                  amplitude=amplitude, speed=max(speed, 1e-300), torque=max(torque, 1e-300))
+
+
 def _start_values(data: DrivenData, joint: DrivenJoint, free) -> DrivenJoint:
     """Equation-error estimates (for starting values only): linear least squares of
-    eq. 9 on smoothed encoder derivatives, and of the kinematic error on the load."""
+    eq. 9 on smoothed encoder derivatives, and of the kinematic error on the load.
+
+    Every threshold is relative to the log (its angle noise and speed scale), so the
+    same physical log in any consistent units starts from the same physics."""
+    from scipy.signal import savgol_coeffs
+
     N = joint.ratio
+    dt = data.sample_period
+    gain = float(np.sqrt(np.sum(savgol_coeffs(7, 3, deriv=1, delta=dt) ** 2)))
+    speed_noise = data.sigma * gain
+    scales0 = log_scales(data, joint)
+    threshold = max(START_NOISE_FACTOR * speed_noise, START_SPEED_FRACTION * scales0.speed)
+    offsets = _offset_parameters(joint, free)
     rows, target, kin_rows, kin_y = [], [], [], []
     K = joint.positional.order
     for i in range(data.n_runs):
         n = int(data.weight[i].sum())
         th = data.theta[i, :n]
-        omega, alpha = _smooth_derivatives(th, data.sample_period)
+        omega, alpha = _smooth_derivatives(th, dt)
         td = data.motor_torque[i, :n]
         td_mid = 0.5 * (td + np.concatenate([[td[0]], td[:-1]]))
         tl = data.load_torque[i, :n]
-        moving = np.abs(omega) > START_MIN_SPEED
+        moving = np.abs(omega) > threshold
         moving[[0, -1]] = False
         s = np.sign(omega)
-        rows.append(np.stack([alpha, s, omega], axis=1)[moving])
+        cols = [alpha, s, omega] + ([np.ones(n)] if offsets else [])
+        rows.append(np.stack(cols, axis=1)[moving])
         target.append((td_mid - tl / N)[moving])
         if data.has_output:
             held = s.copy()
@@ -364,34 +582,60 @@ def _start_values(data: DrivenData, joint: DrivenJoint, free) -> DrivenJoint:
     values = joint.float_values()
     new = {}
     X, y = np.concatenate(rows), np.concatenate(target)
-    if X.shape[0] > 3:
-        inertia, coulomb, c_v = np.linalg.lstsq(X, y, rcond=None)[0]
+    coulomb = None
+    if X.shape[0] > X.shape[1] + 1:
+        coef = np.linalg.lstsq(X, y, rcond=None)[0]
+        inertia, coulomb, c_v = coef[:3]
         if inertia > 0:
             new["inertia"] = float(inertia)
         if c_v > 0:
             new["c_v"] = float(c_v)
-    else:
-        coulomb = values["tau_c"]
+        for name in offsets:
+            new[name] = float(coef[3])
     if data.has_output:
         A, b = np.concatenate(kin_rows), np.concatenate(kin_y)
         coef = np.linalg.lstsq(A, b, rcond=None)[0]
         if coef[0] > 0:
-            k1 = 1.0 / coef[0]
-            new["k1"] = k1
-            new["k2"] = values["k2"] * k1 / values["k1"]
+            k_est = 1.0 / coef[0]
+            load = float(np.max(np.abs(data.load_torque)))
+            new.update(_spring_rescaled(joint, k_est, load / k_est if load > 0 else 1.0 / k_est))
             if coef[1] > 0:
-                new["tau_fout"] = float(coef[1] * k1)
+                new["tau_fout"] = float(coef[1] * k_est)
         new["pos_a0"] = float(coef[2])
         for h in range(1, K + 1):
             new[f"pos_a{h}"] = float(coef[2 + h])
             new[f"pos_b{h}"] = float(coef[2 + K + h])
     tau_fout = new.get("tau_fout", values["tau_fout"])
-    if coulomb > 0:
+    scales = log_scales(data, joint, new.get("inertia"), coulomb)
+    if coulomb is not None and coulomb > 0:
         tau_c = max(coulomb - tau_fout / N, 0.3 * coulomb)
+        # Start at the nested Coulomb case (tau_s just above tau_c) with the Stribeck
+        # velocity a tenth of the log's speeds: from there the fit can only improve on
+        # Coulomb friction, never start in the v_s → 0 corner.
         new["tau_c"] = tau_c
-        new["tau_s"] = 1.5 * tau_c
+        new["tau_s"] = 1.05 * tau_c
+    # Library parameters with a data-derived start the regression did not give.
+    for e in joint.model.effects:
+        for p in e.parameters:
+            if p.start is not None and p.name not in new and p.name in free:
+                try:
+                    new[p.name] = float(p.start(scales))
+                except (AttributeError, ArithmeticError, ValueError):
+                    pass  # a start needing magnitudes a driven log does not give
     new = {k: v for k, v in new.items() if k in free and k in values}
     return joint.replace(**new) if new else joint
+
+
+def _spring_rescaled(joint: DrivenJoint, k_est: float, twist: float) -> dict[str, float]:
+    """The spring law's parameters scaled so that its secant stiffness over the log's
+    largest load twist is ``k_est`` (whatever the spring effect calls its parameters:
+    every parameter in torque or stiffness units, ``N m…``, scales with the law)."""
+    k_now = float(joint.spring_torque(twist)) / twist
+    if not (math.isfinite(k_now) and k_now > 0):
+        return {}
+    c = k_est / k_now
+    values = joint.float_values()
+    return {p.name: values[p.name] * c for p in joint.spring.parameters if p.unit.startswith("N m")}
 
 
 def choose_order(problem: DrivenProblem, u, max_order: int):

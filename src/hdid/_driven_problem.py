@@ -14,6 +14,7 @@ from jaxtyping import Array, Float
 from . import _config  # noqa: F401
 from ._driven import DrivenJoint, simulate_driven, substeps_for_times
 from ._transforms import from_unconstrained
+from .effects import order_of_magnitude
 
 #: Scale of the fitted initial WG velocity of a run in the optimiser's space [rad/s].
 OMEGA0_SCALE = 1.0
@@ -57,6 +58,12 @@ class DrivenData:
     run_of_window: np.ndarray
     window_names: tuple[str, ...]
     first_row: tuple[int, ...] = ()
+    #: ``"given"``, ``"estimated"`` (the readings' grid) or ``"estimated"`` from the
+    #: noise about a local polynomial when the readings lie on no grid.
+    step_source: str = "given"
+    #: Speed scale of the log (a power of ten near its 95th-percentile speed), in the
+    #: log's units per second: the optimiser's unit for the fitted window velocities.
+    omega_scale: float = OMEGA0_SCALE
 
     @property
     def n_runs(self) -> int:
@@ -72,11 +79,10 @@ class DrivenData:
         """Quantization σ of the motor encoder [rad]."""
         return self.step / math.sqrt(12.0)
 
-    @property
-    def sigma_kinematic(self) -> float:
+    def sigma_kinematic(self, ratio: float) -> float:
         """σ of the measured kinematic error ``θ_out + θ/N`` [rad]: both encoders round."""
         out = (self.output_step or 0.0) ** 2 / 12.0
-        return math.sqrt(out + (self.step / 100.0) ** 2 / 12.0)
+        return math.sqrt(out + (self.step / ratio) ** 2 / 12.0)
 
     @classmethod
     def from_log(cls, log, window: float = DEFAULT_WINDOW) -> DrivenData:
@@ -130,16 +136,46 @@ class DrivenData:
             changed = np.nonzero(np.diff(r.theta[: a + 1]))[0]
             d0[j] = np.sign(np.diff(r.theta[: a + 1])[changed[-1]]) if changed.size else 0.0
             names.append(f"{r.name}@{t[0]:.3g}s")
-        step = log.resolution or (2 * math.pi / 4000)
+        step, step_source = log.resolution, getattr(log, "resolution_source", None) or "given"
+        if step is None:
+            step, step_source = _noise_step([r.theta for r in runs], dt), "estimated"
+        speeds = np.concatenate([np.abs(_smooth_speed(r.theta, dt)) for r in runs])
+        omega_scale = order_of_magnitude(float(np.percentile(speeds, 95)) if speeds.size else 1.0)
         return cls(
             source=log.source, run_names=tuple(r.name for r in runs), times=times,
             theta=theta, motor_torque=tau_d, load_torque=tau_l,
             theta_out=out if has_out else None, weight=w, step=float(step),
             output_step=getattr(log, "output_resolution", None), sample_period=dt,
             direction0=d0, omega0=om0, moving0=mov, run_of_window=np.array([p[0] for p in pieces]),
+            step_source=step_source, omega_scale=omega_scale,
             window_names=tuple(names),
             first_row=tuple(getattr(r, "first_row", 0) for r in runs),
         )
+
+
+def _noise_step(thetas, dt: float) -> float:
+    """An equivalent encoder step ``√12·σ`` for readings on no grid (interpolated or
+    analog): ``σ`` from the scatter about a 7-point cubic Savitzky–Golay fit, robustly
+    (median absolute deviation) and corrected for the fit's own share of the noise
+    (for white noise the residual variance is ``σ²·(1 − h₀)``, ``h₀`` the filter's
+    centre weight). A smooth trajectory sampled fast leaves almost nothing but noise
+    there, so this is an upper bound of the sensor's floor in the log's own units."""
+    from scipy.signal import savgol_coeffs, savgol_filter
+
+    res = []
+    for th in thetas:
+        th = np.asarray(th, dtype=float)
+        if th.size >= 7:
+            res.append(th - savgol_filter(th, 7, 3))
+    if not res:
+        return 1.0
+    r = np.concatenate(res)
+    h0 = float(savgol_coeffs(7, 3)[3])
+    sigma = 1.4826 * float(np.median(np.abs(r - np.median(r)))) / math.sqrt(1.0 - h0)
+    if not sigma > 0:
+        spans = [np.ptp(np.asarray(t, dtype=float)) for t in thetas]
+        sigma = 1e-9 * max(max(spans), 1e-300)
+    return sigma * math.sqrt(12.0)
 
 
 def _smooth_speed(theta: np.ndarray, dt: float) -> np.ndarray:
@@ -158,7 +194,7 @@ class DrivenProblem(eqx.Module):
 
     Unknowns ``u``: the free parameters (transformed), then per window the true WG angle
     at its first sample (in encoder steps from the logged one) and its velocity
-    (``OMEGA0_SCALE`` units). Residuals, all in units of their quantization σ:
+    (in units of the log's speed scale ``omega_scale``). Residuals, all in units of their quantization σ:
 
     * WG angle: simulated (eq. 9, from the logged torque, per window) − logged;
     * output: the kinematic error ``θ_out + θ/N`` logged − modelled
@@ -180,6 +216,11 @@ class DrivenProblem(eqx.Module):
     moving0: Float[Array, " W"]
     step: Float[Array, ""]
     sigma_kin: Float[Array, ""]
+    omega_scale: Float[Array, ""]
+    #: Multiplies the quantization σ of the WG residuals: 1, or the residual scatter in
+    #: units of σ once a fit shows the model error dominates (so that the solver's
+    #: statistical stop and the weak priors work in units of the real scatter).
+    noise_scale: Float[Array, ""]
     prior_mean: Float[Array, " P"]
     prior_sd: Float[Array, " P"]
     prior_on: Array
@@ -188,6 +229,7 @@ class DrivenProblem(eqx.Module):
     kin_index: tuple[int, ...] = eqx.field(static=True)
     has_output: bool = eqx.field(static=True)
     substeps: int = eqx.field(static=True)
+    input_hold: str = eqx.field(static=True, default="zoh")
 
     @property
     def n_runs(self) -> int:
@@ -204,7 +246,7 @@ class DrivenProblem(eqx.Module):
 
     @property
     def sigma(self):
-        return self.step / jnp.sqrt(12.0)
+        return self.noise_scale * self.step / jnp.sqrt(12.0)
 
     def labels(self, window_names) -> list[str]:
         return (list(self.free) + [f"theta0[{n}]" for n in window_names]
@@ -219,7 +261,7 @@ class DrivenProblem(eqx.Module):
         P, R = self.n_physical, self.n_runs
         values = self._values(self.free, u[:P], xp)
         theta0 = self.theta[:, 0] + self.step * u[P : P + R]
-        omega0 = self.moving0 * OMEGA0_SCALE * u[P + R : P + 2 * R]
+        omega0 = self.moving0 * self.omega_scale * u[P + R : P + 2 * R]
         return values, theta0, omega0
 
     def joint(self, u) -> DrivenJoint:
@@ -236,7 +278,7 @@ class DrivenProblem(eqx.Module):
     def _simulate_window(self, joint, t, td, tl, th0, om0, d0):
         return simulate_driven(
             joint, t, td, tl, th0, om0, output_direction0=d0, substeps=self.substeps,
-            full_output=True,
+            full_output=True, input_hold=self.input_hold,
         )
 
     def simulate(self, u):
@@ -284,7 +326,7 @@ class DrivenProblem(eqx.Module):
             vals = self._values(names, loc[:ps])
             joint = base.replace(**vals) if vals else base
             th0 = th_first + self.step * loc[ps]
-            om0 = mov * OMEGA0_SCALE * loc[ps + 1]
+            om0 = mov * self.omega_scale * loc[ps + 1]
             sim = self._simulate_window(joint, t, td, tl, th0, om0, d0)
             r = wt * (sim["theta"] - th) / self.sigma
             return r, (r, sim["output_direction"])
@@ -322,6 +364,7 @@ class DrivenProblem(eqx.Module):
 def build_driven_problem(
     data: DrivenData, base: DrivenJoint, free: tuple[str, ...],
     priors: dict[str, tuple[float, float]], max_substep: float | None = None,
+    input_hold: str = "zoh",
 ) -> DrivenProblem:
     spring_names = {p.name for p in base.spring.parameters}
     pos_names = set(base.positional.names())
@@ -349,7 +392,9 @@ def build_driven_problem(
         direction0=jnp.asarray(data.direction0, dtype=float),
         moving0=jnp.asarray(data.moving0, dtype=float),
         step=jnp.asarray(data.step),
-        sigma_kin=jnp.asarray(data.sigma_kinematic),
+        sigma_kin=jnp.asarray(data.sigma_kinematic(base.ratio)),
+        omega_scale=jnp.asarray(float(data.omega_scale)),
+        noise_scale=jnp.asarray(1.0),
         prior_mean=jnp.asarray(mean, dtype=float),
         prior_sd=jnp.asarray(sd, dtype=float),
         prior_on=jnp.asarray(on),
@@ -358,6 +403,7 @@ def build_driven_problem(
         kin_index=kin_index,
         has_output=data.has_output,
         substeps=substeps_for_times(data.times, max_substep),
+        input_hold=input_hold,
     )
 
 

@@ -174,19 +174,38 @@ class DrivenFitResult:
         }
 
     # -- plots ----------------------------------------------------------------------
-    def plot(self, ax=None):
-        """Measured and simulated WG angle of every driven run (one axes)."""
+    def plot(self, ax=None, residual_ax=None):
+        """Measured (dots) and simulated (line, drawn above them) WG angle of every driven
+        run, and below it the residual ``model − logged`` with the quantization floor
+        ±σ shaded. Without ``ax`` a two-panel figure is made; with ``ax`` alone only the
+        top panel is drawn there. Returns ``ax``."""
         import matplotlib.pyplot as plt
 
         if ax is None:
-            _, ax = plt.subplots(figsize=(8, 4))
-        for name, c in zip(self.data.run_names, self.curves_by_run()):
-            line, = ax.plot(c["time"], c["theta"], ".", ms=3, label=f"run {name}")
-            ax.plot(c["time"], c["theta_model"], "-", lw=1, color=line.get_color())
-        ax.set_xlabel("time [s]")
-        ax.set_ylabel("WG angle [rad]")
-        ax.set_title("driven runs: logged (dots) and simulated from the motor torque")
+            _, (ax, residual_ax) = plt.subplots(
+                2, 1, figsize=(8, 6), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
+        runs = self.curves_by_run()
+        for name, c in zip(self.data.run_names, runs):
+            line, = ax.plot(c["time"], c["theta_model"], "-", lw=1.2, zorder=3,
+                            label=f"run {name} model")
+            ax.plot(c["time"], c["theta"], ".", ms=2, alpha=0.5, zorder=2,
+                    color=line.get_color(), label=f"run {name} logged")
+            if residual_ax is not None:
+                residual_ax.plot(c["time"], c["theta_model"] - c["theta"], "-", lw=0.6,
+                                 color=line.get_color())
+        ax.set_ylabel("WG angle (log units)")
+        ax.set_title("driven runs: logged (dots) and simulated from the motor torque (line)")
         ax.legend(fontsize=7)
+        if residual_ax is not None:
+            sigma = self.data.sigma
+            residual_ax.axhspan(-sigma, sigma, color="0.85", zorder=0,
+                                label=f"±σ floor ({self.data.step_source})")
+            residual_ax.axhline(0.0, color="k", lw=0.5)
+            residual_ax.set_ylabel("model − logged")
+            residual_ax.set_xlabel("time [s]")
+            residual_ax.legend(fontsize=7)
+        else:
+            ax.set_xlabel("time [s]")
         return ax
 
     def plot_kinematic_error(self, ax=None, run: int = 0):
@@ -218,6 +237,11 @@ def _simulate(problem, u):
 
 
 @eqx.filter_jit
+def _residuals(problem, u):
+    return problem.residuals(u)
+
+
+@eqx.filter_jit
 def _predict(problem, u):
     return problem.predict(u)
 
@@ -244,6 +268,8 @@ def analyse_driven(
     chi2_red = float(r @ r) / dof
     cov, null_s, scale = _scaled_covariance(J.T @ J, _covariance)
     inflate = max(1.0, chi2_red)
+    tau_int = _residual_correlation_time(dproblem, r)
+    inflate *= tau_int
     specs = joint.parameter_specs()
     values = joint.float_values()
     where = {n: i for i, n in enumerate(dproblem.free)}
@@ -302,6 +328,12 @@ def analyse_driven(
             f"the kinematic-error RMS is {rms['kinematic_rad'] / rms['kinematic_floor_rad']:.1f}× "
             "its floor: see plot_kinematic_error()"
         )
+    if tau_int > 1.0:
+        notes = list(notes) + [
+            f"the WG residual is correlated in time (integrated correlation time {tau_int:.3g} "
+            "samples, model error rather than encoder noise): the stds are scaled up by "
+            f"√{tau_int:.3g}, the effective number of independent residuals"]
+    warnings += _parameter_flags(params, specs, du, where, dproblem)
     spring = [p.name for p in joint.spring.parameters]
     if dproblem.has_output and any(n in where and math.isinf(stds[n]) for n in spring):
         notes = list(notes) + [
@@ -320,6 +352,61 @@ def analyse_driven(
         warnings=warnings, notes=list(notes), data=data, problem=problem, u=u,
         covariance=cov * inflate, labels=labels, order_bic=order_bic, chi2_reduced=chi2_red,
     )
+
+
+#: Residual scatter (in units of the floor) above which the residuals are taken as
+#: model error and their correlation in time widens the stds.
+CORRELATED_ABOVE_FLOOR = 3.0
+
+
+def _residual_correlation_time(dproblem, r) -> float:
+    """Integrated autocorrelation time [samples] of the WG residuals within windows,
+    ``1 + 2 Σ ρ_k`` summed until ρ first drops below 0 (Geyer's initial positive
+    sequence), when the residual is model error (RMS > ``CORRELATED_ABOVE_FLOOR`` of its
+    σ); 1 otherwise. Least squares treats residuals as independent; a smooth model error
+    shared by neighbouring samples carries ``n/τ`` samples' worth of information."""
+    W, T = dproblem.times.shape
+    w = np.asarray(dproblem.weight) > 0
+    rw = np.asarray(r[: W * T]).reshape(W, T) * w
+    n = w.sum()
+    scatter = math.sqrt(float((rw**2).sum()) / max(n, 1)) * float(getattr(dproblem, "noise_scale", 1.0))
+    if scatter <= CORRELATED_ABOVE_FLOOR or T < 4:
+        return 1.0
+    rw = rw - (rw.sum(axis=1, keepdims=True) / np.maximum(w.sum(axis=1, keepdims=True), 1)) * w
+    var = float((rw**2).sum())
+    if var <= 0:
+        return 1.0
+    tau = 1.0
+    for k in range(1, T // 2):
+        rho = float((rw[:, k:] * rw[:, :-k]).sum()) / var
+        if rho <= 0:
+            break
+        tau += 2.0 * rho
+    return tau
+
+
+def _parameter_flags(params, specs, u, where, dproblem) -> list[str]:
+    """Warnings for fitted parameters the data do not fix: an undetermined or ``nan``
+    std, a value at a bound of its interval, a positive parameter driven to 0 (its std
+    larger than its value) — as the free-motion report does."""
+    out = []
+    for n, p in params.items():
+        if p.fixed:
+            continue
+        spec = specs[n]
+        if math.isnan(p.std):
+            out.append(f"{n}: the std is nan (the fit's curvature there is not positive); "
+                       "the value is not determined by the data")
+        elif math.isinf(p.std):
+            out.append(f"{n}: not determined by the data")
+        elif spec.transform == "log" and p.std > p.value:
+            out.append(f"{n} = {p.value:.4g} ± {p.std:.3g}: consistent with 0; the data do "
+                       "not show this effect")
+        if isinstance(spec.transform, tuple):
+            _, lo, hi = spec.transform
+            if min(p.value - lo, hi - p.value) < 0.01 * (hi - lo):
+                out.append(f"{n} = {p.value:.4g} is at a bound of its range [{lo}, {hi}]")
+    return out
 
 
 def _scaled_covariance(fisher: np.ndarray, covariance):
@@ -366,7 +453,7 @@ def _rms(problem, u, data, dproblem, du) -> dict[str, float]:
         kin = np.asarray(dproblem.theta_out) + theta / N - np.asarray(
             joint.kinematic_error(dproblem.theta, dproblem.load_torque, sim["output_direction"]))
         out["kinematic_rad"] = float(np.sqrt(np.mean(kin[w] ** 2)))
-        out["kinematic_floor_rad"] = data.sigma_kinematic
+        out["kinematic_floor_rad"] = float(dproblem.sigma_kin)
     if hasattr(problem, "parts"):
         for i, (part, idx) in enumerate(zip(problem.parts[1:], problem.index[1:])):
             pu = jnp.asarray(np.asarray(u)[np.asarray(idx)])
