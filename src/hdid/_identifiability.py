@@ -82,6 +82,14 @@ def analyse(
     else:
         s2_used = max(s2, 1e-12)
 
+    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(r))):
+        from ._errors import FitError
+
+        raise FitError(
+            f"{prep.source}: the fit diverged (non-finite residuals or sensitivities at its "
+            "optimum); check the units (time in s, angles in rad or --resolution), the ratio "
+            "and the inertia, or fix parameters the log cannot determine"
+        )
     fisher_data = J.T @ J / s2_used
     prior_prec = np.zeros(problem.n_unknowns)
     prior_on = np.asarray(problem.prior_on)
@@ -214,7 +222,8 @@ def analyse(
     ends_moving = (np.zeros(prep.n_runs, bool) if prep.ends_moving is None
                    else np.asarray(prep.ends_moving))
     stopped = [r for i, r in enumerate(runs) if not ends_moving[i] and not moving_start[i]]
-    bracket = band_bracket(model, stopped) if bracket else None
+    duration = float(np.max(prep.lengths)) * prep.sample_period
+    bracket = band_bracket(model, stopped, duration) if bracket else None
     if bracket is not None and bracket[0] > bracket[1]:
         warnings.append(
             f"stick band: the largest logged |rest point| {bracket[0]:.4g} exceeds the smallest "
@@ -357,7 +366,7 @@ def _is_base(model) -> bool:
     return len(model.effects) == 3 and all(type(e) is c for e, c in zip(model.effects, classes))
 
 
-def band_bracket(model, runs) -> tuple[float, float] | None:
+def band_bracket(model, runs, duration: float = 0.5) -> tuple[float, float] | None:
     """What the data say about the stick-band half-width without any smoothness: at
     least the largest |rest point| logged, less than the smallest |angle| at which the
     gear reversed and slid on (located with the event-driven reference simulator at the
@@ -372,7 +381,7 @@ def band_bracket(model, runs) -> tuple[float, float] | None:
     for r in runs:
         try:
             traj = reference_trajectory(
-                0.5, theta0=r.theta0, t_release=0.0, ratio=model.ratio,
+                duration, theta0=r.theta0, t_release=0.0, ratio=model.ratio,
                 **{k: v[k] for k in ("k1", "k2", "tau_c", "tau_s", "v_s", "delta", "c_v", "inertia")},
             )
         except (ValueError, RuntimeError):

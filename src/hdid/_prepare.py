@@ -144,9 +144,10 @@ def noise_sigma(runs, step: float | None, still_only: bool = False) -> float:
         return sig_still if np.isfinite(sig_still) else float("nan")
     d3 = np.concatenate([np.diff(np.asarray(r.theta, float), 3) for r in runs if len(r.theta) > 4])
     sig_d3 = 1.4826 * float(np.median(np.abs(d3))) / math.sqrt(20.0) if d3.size else np.inf
-    sig = sig_still if np.isfinite(sig_still) and sig_still > 0 else sig_d3
-    if not np.isfinite(sig) or sig <= 0:
-        sig = sig_d3 if np.isfinite(sig_d3) and sig_d3 > 0 else 0.0
+    # Both are upper bounds where the "still" stretches move (a ring-down has none) or the
+    # motion is coarse: the smaller positive one.
+    positive = [x for x in (sig_still, sig_d3) if np.isfinite(x) and x > 0]
+    sig = min(positive) if positive else 0.0
     # The simulator's own error (RK4 substeps: 1.9e-5 rad on a 0.157 rad swing,
     # benchmarks/results/simulator_schemes.md) is ~1e-4 of the swing; weights finer than
     # what the model can resolve only make the fit ill-conditioned (a noiseless log).

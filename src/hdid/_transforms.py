@@ -51,8 +51,13 @@ def _sigmoid(u):
 
 
 def interval_to_u(value, lo, hi):
-    p = np.clip((np.asarray(value, dtype=float) - lo) / (hi - lo), 1e-6, 1 - 1e-6)
-    return np.log(p) - np.log1p(-p)
+    """Inverse of :func:`interval_from_u`; 0 where the interval is a point (``lo == hi``:
+    a run that starts in motion has its release at its first sample)."""
+    lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+    width = hi - lo
+    safe = np.where(width > 0, width, 1.0)
+    p = np.clip((np.asarray(value, dtype=float) - lo) / safe, 1e-6, 1 - 1e-6)
+    return np.where(width > 0, np.log(p) - np.log1p(-p), 0.0)
 
 
 def interval_from_u(u, lo, hi):
