@@ -79,6 +79,17 @@ def analyse(
             "standard errors are not available; add runs or fix parameters"
         )
         s2_used = 1.0
+    elif prep.resolution_source == "noise":
+        # readings on no grid: never claim more precision than the noise floor estimated
+        # from the log, itself at least the simulator's accuracy (1e-4 of the swing)
+        s2_used = max(s2, 1.0)
+        if s2 < 0.01:
+            warnings.append(
+                f"the residual ({math.sqrt(s2):.2g}× the estimated noise floor) is far below what "
+                "a real sensor gives: the readings look noiseless (simulated, or smoothed); the "
+                "standard errors then rest on the floor of the simulator's accuracy and are "
+                "lower bounds"
+            )
     else:
         s2_used = max(s2, 1e-12)
 
