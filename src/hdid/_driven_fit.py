@@ -163,7 +163,9 @@ def _fit_nested_first(data, joint, free, max_substep, max_steps, warnings, notes
     Coulomb case is fitted first, and the Stribeck fit starts from its optimum (with
     ``tau_s`` just above ``tau_c``), so it can only improve on it. Should it still end
     worse (a stick event, the weak priors), that is a warning and the result is the
-    Coulomb optimum (``tau_s = tau_c``); ``tau_s < tau_c`` at the end is reported."""
+    Coulomb optimum (``tau_s = tau_c``). An end with ``tau_s < tau_c`` is excluded the
+    same way (the admissible optimum is then on the boundary ``tau_s = tau_c``) and
+    reported."""
     stribeck = [e for e in _coulomb_effects(joint) if type(e) is StribeckFriction]
     names = [p.name for e in stribeck for p in e.parameters]
     if len(stribeck) != 1 or not {names[0], names[1]} <= set(free):
@@ -198,10 +200,16 @@ def _fit_nested_first(data, joint, free, max_substep, max_steps, warnings, notes
         back = joint.replace(**{**start, ts: at[tc]})
         ug = _pack(pg, back, nuisance=np.asarray(un[pn.n_physical:]))
     vals = pg.values_np(ug)
-    if vals[ts] < vals[tc]:
+    if vals[ts] < vals[tc] and cost_g <= cost_n * (1 + NESTED_MARGIN):
+        # Excluded: a Stribeck law has tau_s ≥ tau_c; when the free optimum falls below,
+        # the best admissible one is on the boundary tau_s = tau_c — the Coulomb optimum.
         warnings.append(
-            f"{ts} = {vals[ts]:.4g} < {tc} = {vals[tc]:.4g}: the friction rises from rest to "
-            "sliding (no Stribeck dip); the Stribeck shape parameters mean nothing here")
+            f"the free Stribeck fit ends with {ts} = {vals[ts]:.4g} < {tc} = {vals[tc]:.4g} "
+            f"(friction rising from rest, χ² {cost_g:.4g} against {cost_n:.4g}): excluded; "
+            f"the result is the Coulomb optimum {ts} = {tc}, where the Stribeck shape is "
+            "undetermined")
+        back = joint.replace(**{**start, ts: at[tc]})
+        ug = _pack(pg, back, nuisance=np.asarray(un[pn.n_physical:]))
     return ug, pg
 
 
