@@ -247,8 +247,9 @@ def analyse(
         hw, hw_std = derived["stick_band_halfwidth_rad"]
         if hi > lo and 2 * hw_std < 0.5 * (hi - lo):
             warnings.append(
-                f"stick band: the half-width {hw:.4f} ± {hw_std:.4f} rad of the smooth fit rests "
-                f"on the fitted Stribeck shape; the data alone bracket it to [{lo:.4f}, "
+                f"stick band: the half-width {hw:.4f} ± {hw_std:.4f} rad of the smooth fit (and "
+                "tau_s, the torque that sets it) rests on the fitted Stribeck shape; the data "
+                f"alone bracket it to [{lo:.4f}, "
                 f"{hi:.4f}] rad (largest |rest point|, smallest |angle it slid on from|)"
             )
     # A run the model never releases (exact stick: its speed is 0 at every sample) although
