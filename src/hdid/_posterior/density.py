@@ -35,7 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _config  # noqa: F401
-from .._identifiability import derived_quantities
+from .._identifiability import band_limit, derived_quantities
 from .._problem import Problem
 from .._transforms import from_unconstrained
 
@@ -181,7 +181,7 @@ _batch_jit = jax.jit(_batch)
 @eqx.filter_jit
 def _derived_batch(problem: Problem, X):
     def one(x):
-        return derived_quantities(problem.model(x[:-1]))
+        return derived_quantities(problem.model(x[:-1]), band_limit(problem))
 
     return jax.vmap(one)(X)
 

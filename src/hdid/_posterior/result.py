@@ -158,12 +158,12 @@ class PosteriorResult:
         return fig
 
     def plot_predictive(self, path=None, n_draws: int = 100, axes=None, seed: int = 0):
-        from ._plot import plot_predictive
+        from .._plot import plot_predictive
 
         return plot_predictive(self, path=path, n_draws=n_draws, axes=axes, seed=seed)
 
     def plot_band(self, path=None, ax=None):
-        from ._plot import plot_band
+        from .._plot import plot_band
 
         return plot_band(self, path=path, ax=ax)
 
