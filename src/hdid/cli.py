@@ -584,14 +584,10 @@ def _with_added_inertia(data, added):
 
 
 def _finite(obj):
-    """JSON has no NaN/inf: write them as null."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
-    return obj
+    """JSON has no NaN/inf: write them as null (the library's rule, ``_saved.finite``)."""
+    from ._saved import finite
+
+    return finite(obj)
 
 
 @main.command("diagnose")
