@@ -194,3 +194,40 @@ def test_asymmetric_viscous_half_swing_decay_in_hdid():
     # peaks located on a 10 µs grid (at most (ω·dt/2)²/2 ≈ 2e-6 relative low) and RK4: 1e-4;
     # the two factors differ by 17 %, and a symmetric mean c_v would be 8 % off each
     np.testing.assert_allclose(ratios, expected, rtol=1e-4)
+
+
+def test_coulomb_is_stribeck_at_equal_levels_and_decays_linearly_in_hdid():
+    # Stribeck with tau_s = tau_c is Coulomb friction for any v_s, delta (torque and hold)
+    c = library({"tau_c": 3e-3})["coulomb"]
+    assert type(c).__name__ == "CoulombFriction" and c.name == "stribeck"
+    s = hdid.StribeckFriction(tau_c=3e-3, tau_s=3e-3, v_s=0.7, delta=1.6)
+    for omega, d in ((2.0, 1.0), (0.01, 1.0), (-5.0, -1.0)):
+        m = _motion(0.1, omega, d, 100.0)
+        assert float(c.torque(m, None)) == pytest.approx(float(s.torque(m, None)), rel=1e-14)
+    rest = _motion(0.1, 0.0, 0.0, 100.0)
+    assert float(c.holding_torque(rest, None)) == float(s.holding_torque(rest, None))
+    # Linear spring k + Coulomb friction (the classical closed form): every half-swing
+    # loses exactly 2·tau_c/k of amplitude at the undamped period; the motion stops at
+    # the first turning point inside the stick band |θ| ≤ tau_c/k.
+    k1, ratio, inertia, tau_c = 940.0, 100.0, 7e-7, 2e-3
+    k = k1 / ratio**2
+    model = hdid.Model(effects=(library({"k1": k1})["linear_stiffness"],
+                                library({"tau_c": tau_c})["coulomb"]),
+                       inertia=inertia, ratio=ratio)
+    t = np.arange(0.0, 0.08, 1e-5)
+    theta = np.asarray(hdid.simulate(model, t, 0.157, 0.0))
+    peaks = [i for i in range(1, len(t) - 1)
+             if abs(theta[i]) >= abs(theta[i - 1]) and abs(theta[i]) > abs(theta[i + 1])]
+    amps = np.abs(theta[peaks])
+    n = np.arange(1, len(amps) + 1)
+    expected = 0.157 - 2 * n * tau_c / k
+    assert len(amps) >= 3
+    # the peak sits on a 10 µs grid: (ω·dt)²/2 ≈ 6e-6 of the amplitude, RK4 far below;
+    # a 10 % error in tau_c would move the last peak by 0.004 rad
+    np.testing.assert_allclose(amps, expected, rtol=0, atol=2e-5 * 0.157)
+    # the last moving peak lies outside the band, so the next turning point is the rest
+    assert expected[-1] > tau_c / k
+    rest = abs(theta[-1])
+    assert rest <= tau_c / k
+    assert abs(rest - abs(0.157 - 2 * (len(amps) + 1) * tau_c / k)) < 2e-5 * 0.157
+    assert np.ptp(theta[-200:]) == 0.0  # stuck, not creeping

@@ -6,7 +6,6 @@ import math
 import os
 import time
 from collections.abc import Iterable, Mapping, Sequence
-from typing import ClassVar
 
 import jax
 import jax.numpy as jnp
@@ -26,8 +25,7 @@ from ._io import Log, read_log
 from ._model import Model
 from ._positional import PositionalError
 from ._transforms import to_unconstrained
-from .effects import AbstractEffect, Parameter, Scales, StribeckFriction
-from jaxtyping import ArrayLike, Float
+from .effects import CoulombFriction, Scales, StribeckFriction
 
 #: Highest positional-error order tried when the order is chosen by BIC.
 DEFAULT_MAX_ORDER = 6
@@ -126,23 +124,6 @@ def _with_scales(joint: DrivenJoint, data: DrivenData) -> DrivenJoint:
     return DrivenJoint(joint.model.with_scales(scales), joint.tau_fout, joint.positional)
 
 
-class _Coulomb(AbstractEffect):
-    """Coulomb friction, the nested special case ``tau_s = tau_c`` of Stribeck friction
-    (it takes the Stribeck effect's slot and its ``tau_c`` declaration)."""
-
-    tau_c: Float[ArrayLike, ""]
-    name: ClassVar[str] = "stribeck"
-    parameters: ClassVar[tuple[Parameter, ...]] = StribeckFriction.parameters[:1]
-
-    def torque(self, motion, state):
-        del state
-        return -motion.direction * self.tau_c
-
-    def holding_torque(self, motion, state):
-        del motion, state
-        return jnp.asarray(self.tau_c, dtype=float)
-
-
 def _data_cost(problem, u) -> float:
     """χ² of the data rows (the weak-prior rows left out), in units of the quantization σ."""
     from ._driven_result import _residuals
@@ -174,7 +155,7 @@ def _fit_nested_first(data, joint, free, max_substep, max_steps, warnings, notes
     e = stribeck[0]
     tc, ts = names[0], names[1]
     shape = [n for n in names[2:] if n in free]
-    nested = DrivenJoint(joint.model.with_effect(_Coulomb(tau_c=e.tau_c)), joint.tau_fout,
+    nested = DrivenJoint(joint.model.with_effect(CoulombFriction(tau_c=e.tau_c)), joint.tau_fout,
                          joint.positional)
     free_n = tuple(n for n in free if n not in (ts, *shape))
     pn = build_driven_problem(data, nested, free_n, _priors(nested, free_n), max_substep, hold)

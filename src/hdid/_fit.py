@@ -21,6 +21,7 @@ from ._errors import FitError
 from ._identifiability import MOVED_COUNTS, _dense, analyse
 from ._io import Log, read_log
 from ._model import DEFAULT_INERTIA, Model
+from ._nested import against_nested, stribeck_pair
 from ._prepare import Prepared, offset_guess, prepare
 from ._problem import OFFSET_SCALE_REL, Problem, build_problem, with_jacobian
 from ._result import FitResult, StartSummary
@@ -62,6 +63,7 @@ def fit(
     max_substep: float | None = None,
     max_steps: int = 300,
     start_from_model: bool = False,
+    nested: bool = True,
 ) -> FitResult:
     """Fit stiffness, friction (and optionally inertia) to all runs of a log jointly.
 
@@ -103,8 +105,15 @@ def fit(
     start_from_model:
         Also start from the model's own values (a warm start, e.g. a fitted model with
         an effect added, as :func:`hdid.diagnose` does); that start is always run.
+    nested:
+        With a free Stribeck law, also fit its nested Coulomb case (``tau_s = tau_c``)
+        and restart from that optimum when the general law ended worse
+        (:mod:`hdid._nested`); a warning says when it stays worse.
     """
     t_start = time.perf_counter()
+    if not isinstance(log, Log):
+        log = read_log(log, counts_per_rev=counts_per_rev, resolution=resolution)
+        counts_per_rev = resolution = None
     setup = _setup(
         log, model, inertia=inertia, fix=fix, free_inertia=free_inertia,
         inertia_prior=inertia_prior, release_time=release_time,
@@ -121,7 +130,20 @@ def fit(
         U1, c1, ok1, s1 = _local_fits(problem, retry[None, :], max_steps)
         U, costs = np.concatenate([U, U1]), np.concatenate([costs, c1])
         ok, steps = np.concatenate([ok, ok1]), np.concatenate([steps, s1])
-    return _finish(setup, U, costs, ok, steps, t_start)
+    result = _finish(setup, U, costs, ok, steps, t_start)
+    if nested and stribeck_pair(result.model, setup.fixed) is not None:
+        def refit(m: Model, n_starts: int = n_starts) -> FitResult:
+            names = set(m.parameter_specs())
+            fixed = ({n: v for n, v in fix.items() if n in names} if isinstance(fix, Mapping)
+                     else [n for n in (fix or ()) if n in names])
+            return fit(log, m, fix=fixed or None, free_inertia="inertia" not in setup.fixed,
+                       inertia_prior=inertia_prior, release_time=release_time,
+                       n_starts=n_starts, max_substep=max_substep, max_steps=max_steps,
+                       start_from_model=True, nested=False)
+
+        result = against_nested(result, setup.fixed, refit)
+        result.wall_time_s = time.perf_counter() - t_start
+    return result
 
 
 def _local_fits(problem: Problem, U0, max_steps: int):

@@ -13,6 +13,7 @@ from ._segments import ThreeSegmentStiffness
 from ._stiffness import CubicStiffness
 from ._stribeck import StribeckFriction
 from ._torque_offset import TorqueOffset
+from ._coulomb import CoulombFriction
 from ._viscous import ViscousFriction
 from ._viscous_asymmetric import AsymmetricViscousFriction
 
@@ -37,6 +38,7 @@ def library(values: dict[str, float]) -> dict[str, AbstractEffect]:
         "asymmetric_friction": AsymmetricStribeckFriction(**stribeck, asym=v.get("asym", 0.0)),
         "asymmetric_viscous": AsymmetricViscousFriction(c_vp=v.get("c_vp", v.get("c_v", 2e-5)),
                                                         c_vn=v.get("c_vn", v.get("c_v", 2e-5))),
+        "coulomb": CoulombFriction(tau_c=tau_c),
         "backlash": FreePlayStiffness(k1=k1, k2=k2, backlash=v.get("backlash", 0.01)),
         "gravity": Gravity(mgl=v.get("mgl", k1)),
         "hysteresis": DahlHysteresis(f_h=v.get("f_h", 0.2 * tau_c), sigma_h=v.get("sigma_h", k_wg)),
@@ -60,6 +62,7 @@ __all__ = [
     "AbstractEffect",
     "AsymmetricStribeckFriction",
     "AsymmetricViscousFriction",
+    "CoulombFriction",
     "CubicStiffness",
     "DahlHysteresis",
     "FreePlayStiffness",
