@@ -9,12 +9,23 @@ import numpy as np
 RUNS_PER_ROW = 4
 
 
+def _new_figure(plt, **kw):
+    """A figure: through pyplot when given (shown in a notebook or a window), else a bare
+    :class:`~matplotlib.figure.Figure` (only saved: no backend is chosen or touched)."""
+    if plt is not None:
+        return plt.figure(**kw)
+    from matplotlib.figure import Figure
+
+    return Figure(**kw)
+
+
 def _fit_axes(plt, R: int):
     """A new figure with a (2, R) array of axes: per run the angle above its residual,
-    at most RUNS_PER_ROW runs side by side (more wrap into rows)."""
+    at most RUNS_PER_ROW runs side by side (more wrap into rows). ``plt``: pyplot, or
+    None for a figure that is only saved."""
     ncol = min(R, RUNS_PER_ROW)
     nrow = -(-R // ncol)
-    fig = plt.figure(figsize=(3.2 * ncol + 1, 5.2 * nrow))
+    fig = _new_figure(plt, figsize=(3.2 * ncol + 1, 5.2 * nrow))
     gs = fig.add_gridspec(2 * nrow, ncol, height_ratios=[3, 1.3] * nrow)
     axes = np.empty((2, R), dtype=object)
     for i in range(R):
@@ -24,16 +35,24 @@ def _fit_axes(plt, R: int):
     return fig, axes
 
 
-def _overlay(result, ax, times, meas, model_s):
-    """All runs in one axes: angle from the spring zero against time since release."""
+#: Width of the model's confidence band in standard errors (±2σ: ~95 % for a Gaussian).
+BAND_SIGMAS = 2.0
+BAND_LABEL = f"model ±{BAND_SIGMAS:g}σ (fit uncertainty)"
+
+
+def _overlay(result, ax, times, meas, model_s, sd_s):
+    """All runs in one axes: angle from the spring zero against time since release, each
+    model with its ±2σ confidence band."""
     lo = result.derived["stick_band_lower_rad"][0]
     hi = result.derived["stick_band_upper_rad"][0]
     ax.axhspan(lo, hi, color="0.9", label="stick band (fit)")
     for i, run in enumerate(result.runs):
         n = run.n_samples
         t = times[i, :n] - run.release_time
-        ax.plot(t, model_s[i, :n] - run.offset, "-", color=f"C{i % 10}", lw=1.0,
-                label=f"run {run.name}: model")
+        m = model_s[i, :n] - run.offset
+        ax.fill_between(t, m - BAND_SIGMAS * sd_s[i, :n], m + BAND_SIGMAS * sd_s[i, :n],
+                        color=f"C{i % 10}", alpha=0.3, lw=0, label=BAND_LABEL if i == 0 else None)
+        ax.plot(t, m, "-", color=f"C{i % 10}", lw=1.0, label=f"run {run.name}: model")
         ax.plot(t, meas[i, :n] - run.offset, "o", ms=2.5, mfc="none", color=f"C{i % 10}")
     ax.set_xlabel("time since release [s]")
     ax.set_ylabel("WG angle from spring zero [rad]")
@@ -44,28 +63,29 @@ def _overlay(result, ax, times, meas, model_s):
 
 def plot_fit(result, path=None, *, axes=None, fine_rate: float = 20000.0):
     """Measured vs model per run (angle from the fitted spring zero, so the stick band is
-    centred on 0) with the residual in encoder counts below. ``axes``: a ``(2, R)`` array
-    of axes, or one Axes (all runs overlaid, no residuals)."""
-    import matplotlib
-
-    if path is not None and axes is None:
-        matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
+    centred on 0) with the model's ±2σ confidence band (:meth:`FitResult.predict_std`),
+    and the residual in encoder counts below it, where the same band is drawn about 0.
+    ``axes``: a ``(2, R)`` array of axes, or one Axes (all runs overlaid, no residuals).
+    With ``path`` and no ``axes`` the figure is only saved: it is made without pyplot, so
+    no backend is chosen and a notebook's stays as it is."""
     result._need_log("plot()")
+    if path is None or axes is not None:
+        import matplotlib.pyplot as plt
+    else:
+        plt = None
     prob = result.problem
     times = np.asarray(prob.times)
     meas = np.asarray(prob.theta)
     R = times.shape[0]
-    model_s = result.predict()
     if axes is not None and hasattr(axes, "plot"):  # one matplotlib Axes
-        fig = _overlay(result, axes, times, meas, model_s)
+        fig = _overlay(result, axes, times, meas, *result._predict_with_std())
         if path is not None:
             fig.savefig(path, dpi=110)
         return fig
     n_fine = int(np.ceil((times.max() - times.min()) * fine_rate)) + 1
     fine = np.stack([np.linspace(t[0], t[-1], n_fine) for t in times])
-    model_fine = result.predict(fine)
+    model_s = result.predict()  # compiled by the fit already
+    model_fine, sd_fine = result._predict_with_std(fine)
     if axes is None:
         fig, axes = _fit_axes(plt, R)
     else:
@@ -100,12 +120,17 @@ def plot_fit(result, path=None, *, axes=None, fine_rate: float = 20000.0):
         ax.axhspan(lo, hi, color="0.9", label="stick band (fit)")
         ax.plot(times[i, :n][sel], meas[i, :n][sel] - run.offset, "o", ms=3.5, color="k",
                 mfc="none", label="encoder", zorder=2)
-        ax.plot(fine[i, fsel], model_fine[i, fsel] - run.offset, "-", color="C0", lw=1.4,
-                label="model", zorder=3)
+        m = model_fine[i, fsel] - run.offset
+        band = BAND_SIGMAS * sd_fine[i, fsel]
+        ax.fill_between(fine[i, fsel], m - band, m + band, color="C0", alpha=0.35, lw=0,
+                        label=BAND_LABEL, zorder=2.5)
+        ax.plot(fine[i, fsel], m, "-", color="C0", lw=1.4, label="model", zorder=3)
         ax.axvline(t0, color="C3", lw=0.8, ls=":", label="release (fit)")
         ax.set_title(f"run {run.name} (set-up {run.setup})", fontsize=9)
         res = (meas[i, :n] - model_s[i, :n]) / step
         axr.axhspan(-0.5, 0.5, color="0.9", label="±½ count (rounding)")
+        axr.fill_between(fine[i, fsel], -band / step, band / step, color="C0", alpha=0.35,
+                         lw=0, label=BAND_LABEL)
         axr.plot(times[i, :n][sel], res[sel], "o-", ms=3, lw=0.8, color="C1", label="residual")
         shown = f"{times[i, :n][sel][0]:.3g}–{times[i, :n][sel][-1]:.3g} s of {times[i, 0]:.3g}–{times[i, n - 1]:.3g}" if sel.any() else ""
         axr.set_xlabel("time [s]" + (f"\n(shows {shown})" if not sel.all() and shown else ""), fontsize=8)
@@ -113,7 +138,7 @@ def plot_fit(result, path=None, *, axes=None, fine_rate: float = 20000.0):
             ax.set_ylabel("WG angle from spring zero [rad]")
             axr.set_ylabel("measured − model\n[counts]")
             ax.legend(fontsize=7, loc="best")
-            axr.legend(fontsize=6, loc="lower right")
+            axr.legend(fontsize=6, loc="best")
     note = ("; panels show release to rest, the still hold and tail are cropped"
             if cropped else "")
     fig.suptitle(
