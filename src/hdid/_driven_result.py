@@ -45,6 +45,16 @@ class DrivenFitResult:
     order_bic: dict[int, float] | None = None
     chi2_reduced: float = float("nan")
     wall_time_s: float = float("nan")
+    #: the logs fitted (the driven one first), as given
+    sources: list[str] = field(default_factory=list)
+    #: free unknowns with a physical meaning (parameters and positional coefficients) and
+    #: their covariance in physical units (inf where undetermined)
+    covariance_names: list[str] = field(default_factory=list)
+    parameter_covariance: np.ndarray = field(default=None, repr=False)
+    #: SHA-256 of each input file by path (set by the CLI; else computed from ``sources``)
+    input_sha256: dict[str, str | None] | None = None
+    #: options of the fit (the CLI's, as given), written to the JSON
+    options: dict | None = None
 
     @property
     def values(self) -> dict[str, float]:
@@ -171,7 +181,48 @@ class DrivenFitResult:
             "warnings": list(self.warnings),
             "notes": list(self.notes),
             "wall_time_s": self.wall_time_s,
+            **self._provenance(),
         }
+
+    def _provenance(self) -> dict[str, Any]:
+        """The fields the fit JSON has for reuse (``hdid._saved.provenance``): version, the
+        input files and their SHA-256, the options, the model's structure, and the full
+        correlation and covariance of the parameters and positional coefficients."""
+        from ._saved import SCHEMA_VERSION, hdid_version, model_structure, sha256
+
+        digests = self.input_sha256 or {}
+        inputs = [{"path": p, "sha256": digests.get(p) or sha256(p)}
+                  for p in (self.sources or [self.source])]
+        names = list(self.covariance_names)
+        cov = (np.asarray(self.parameter_covariance, dtype=float) if names
+               else np.zeros((0, 0)))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sd = np.sqrt(np.diag(cov))
+            corr = cov / np.outer(sd, sd)
+        corr[~np.isfinite(corr)] = np.nan  # undetermined: null in the JSON
+        np.fill_diagonal(corr, np.where(np.isfinite(sd), 1.0, np.nan))
+        specs = self.joint.parameter_specs()
+        units = [specs[n].unit if n in specs else "" for n in names]
+        model = model_structure(self.joint.model)
+        model["output_friction_tau_fout"] = float(self.joint.tau_fout)
+        model["positional_error_order"] = int(self.joint.positional.order)
+        model["input_hold"] = self.input_hold
+        return {
+            "schema_version": SCHEMA_VERSION,
+            "hdid_version": hdid_version(),
+            "input": inputs[0],
+            "inputs": inputs,
+            "options": dict(self.options or {}),
+            "model": model,
+            "correlation": {"parameters": names, "matrix": corr.tolist()},
+            "covariance": {"parameters": names, "units": units, "matrix": cov.tolist()},
+        }
+
+    @property
+    def input_hold(self) -> str:
+        """How the motor torque was taken between samples: "zoh" (held) or "foh" (linear)."""
+        problem, _ = self._driven_problem()
+        return str(getattr(problem, "input_hold", "zoh"))
 
     # -- plots ----------------------------------------------------------------------
     def plot(self, ax=None, residual_ax=None):
@@ -317,6 +368,16 @@ def analyse_driven(
             if abs(c) > HIGH_CORRELATION:
                 corr[(a, b)] = c
     rms = _rms(problem, u, data, dproblem, du)
+    # physical covariance of every free parameter and positional coefficient, the delta
+    # method through each one's transform (the same as the stds above); inf along the
+    # null directions, where the std is undetermined
+    cov_names = list(where)
+    G = np.array([grads[n] for n in cov_names]).reshape(len(cov_names), u.size)
+    phys_cov = G @ (cov * inflate) @ G.T
+    phys_cov = 0.5 * (phys_cov + phys_cov.T)  # the pseudo-inverse is symmetric to rounding
+    bad = np.array([math.isinf(stds[n]) for n in cov_names], dtype=bool)
+    phys_cov[bad, :] = math.inf
+    phys_cov[:, bad] = math.inf
     warnings = []
     if rms["wg_rad"] > 3 * rms["wg_floor_rad"]:
         warnings.append(
@@ -351,6 +412,8 @@ def analyse_driven(
         parameters=params, positional=positional, rms=rms, correlation=corr,
         warnings=warnings, notes=list(notes), data=data, problem=problem, u=u,
         covariance=cov * inflate, labels=labels, order_bic=order_bic, chi2_reduced=chi2_red,
+        sources=[data.source] + [p.source for p in free_preps],
+        covariance_names=cov_names, parameter_covariance=phys_cov,
     )
 
 

@@ -26,11 +26,19 @@ from ._errors import HdidError
 SCHEMA_VERSION = 1
 
 
-def schema() -> dict:
-    """The JSON Schema (draft 2020-12) of the fit JSON, shipped with the package."""
+#: The JSON files hdid writes, each with its schema in ``hdid/schema/<kind>.schema.json``.
+SCHEMA_KINDS = ("fit", "driven", "diagnose")
+
+
+def schema(kind: str = "fit") -> dict:
+    """The JSON Schema (draft 2020-12) of a JSON file hdid writes, shipped with the
+    package: ``"fit"`` (``hdid fit --json``, :meth:`FitResult.save`), ``"driven"`` (a
+    driven or joint fit) or ``"diagnose"`` (``hdid diagnose --json``)."""
     from importlib.resources import files
 
-    return json.loads(files("hdid").joinpath("schema/fit.schema.json").read_text())
+    if kind not in SCHEMA_KINDS:
+        raise ValueError(f"schema {kind!r}: choose one of {', '.join(SCHEMA_KINDS)}")
+    return json.loads(files("hdid").joinpath(f"schema/{kind}.schema.json").read_text())
 
 
 def finite(obj):
@@ -148,8 +156,11 @@ def covariance_matrix(result) -> tuple[list[str], np.ndarray]:
     return names, cov
 
 
-def extras(result) -> dict[str, Any]:
-    """What the fit JSON holds beyond the report: see the module docstring."""
+def provenance(result) -> dict[str, Any]:
+    """Where a fit came from and what it was: layout and hdid version, the input file and
+    its SHA-256, the options as given, the model's structure, and the free parameters'
+    full correlation and covariance matrices. The same fields in the fit, driven and
+    diagnose JSON (for a diagnosis, those of its base fit)."""
     names, corr = correlation_matrix(result)
     _, cov = covariance_matrix(result)
     units = [result.parameters[n].unit for n in names]
@@ -163,6 +174,13 @@ def extras(result) -> dict[str, Any]:
         "model": model_structure(result.model),
         "correlation": {"parameters": names, "matrix": corr.tolist()},
         "covariance": {"parameters": names, "units": units, "matrix": cov.tolist()},
+    }
+
+
+def extras(result) -> dict[str, Any]:
+    """What the fit JSON holds beyond the report: see the module docstring."""
+    return {
+        **provenance(result),
         "resolution_known": bool(result.resolution_known),
         "sample_period_s": float(result.sample_period),
     }
