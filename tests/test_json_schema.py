@@ -343,3 +343,17 @@ def test_diagnose_json_has_the_fit_provenance(fitted, tmp_path, monkeypatch):
     for key in ("model", "correlation", "covariance"):
         assert diag[key] == data[key], key
     assert diag["verdict"] == "adequate"  # the diagnosis's own fields are kept
+
+
+def test_load_refuses_a_driven_json_in_one_line(driven_json, tmp_path):
+    """A driven fit's JSON has a model and parameters too: FitResult.load and
+    simulate --from must say what it is, not fail on a missing field."""
+    data, _ = driven_json
+    path = tmp_path / "d.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(hdid.HdidError, match="the JSON of a driven fit"):
+        hdid.FitResult.load(path)
+    res = CliRunner().invoke(main, ["simulate", str(tmp_path / "x.csv"), "--from", str(path)])
+    assert res.exit_code == 2 and len(res.stderr.strip().splitlines()) == 1, res.output
+    assert "the JSON of a driven fit" in res.stderr
+    assert not (tmp_path / "x.csv").exists()

@@ -227,8 +227,8 @@ class DrivenFitResult:
     # -- plots ----------------------------------------------------------------------
     def plot(self, ax=None, residual_ax=None):
         """Measured (dots) and simulated (line, drawn above them) WG angle of every driven
-        run, and below it the residual ``model − logged`` with the quantization floor
-        ±σ shaded. Without ``ax`` a two-panel figure is made; with ``ax`` alone only the
+        run, and below it the residual ``logged − model`` (the sign of the free-motion
+        figure) with the quantization floor ±σ shaded. Without ``ax`` a two-panel figure is made; with ``ax`` alone only the
         top panel is drawn there. Returns ``ax``."""
         import matplotlib.pyplot as plt
 
@@ -242,7 +242,7 @@ class DrivenFitResult:
             ax.plot(c["time"], c["theta"], ".", ms=2, alpha=0.5, zorder=2,
                     color=line.get_color(), label=f"run {name} logged")
             if residual_ax is not None:
-                residual_ax.plot(c["time"], c["theta_model"] - c["theta"], "-", lw=0.6,
+                residual_ax.plot(c["time"], c["theta"] - c["theta_model"], "-", lw=0.6,
                                  color=line.get_color())
         ax.set_ylabel("WG angle (log units)")
         ax.set_title("driven runs: logged (dots) and simulated from the motor torque (line)")
@@ -252,7 +252,7 @@ class DrivenFitResult:
             residual_ax.axhspan(-sigma, sigma, color="0.85", zorder=0,
                                 label=f"±σ floor ({self.data.step_source})")
             residual_ax.axhline(0.0, color="k", lw=0.5)
-            residual_ax.set_ylabel("model − logged")
+            residual_ax.set_ylabel("logged − model")
             residual_ax.set_xlabel("time [s]")
             residual_ax.legend(fontsize=7)
         else:

@@ -192,6 +192,16 @@ def save(result, path) -> None:
 
 def load(path, effects: dict | None = None):
     """A :class:`FitResult` from its JSON (without the log: no predict/plot)."""
+    try:
+        return _load(path, effects)
+    except (KeyError, TypeError, IndexError) as exc:  # a field missing or of the wrong type
+        raise HdidError(
+            f"{path}: not a complete hdid fit JSON ({type(exc).__name__}: {exc}); write it "
+            "with hdid fit LOG.csv --json or FitResult.save"
+        ) from None
+
+
+def _load(path, effects):
     from ._result import FitResult, ParameterEstimate, RunSummary, StartSummary
 
     try:
@@ -202,6 +212,12 @@ def load(path, effects: dict | None = None):
         raise HdidError(
             f"{path}: not the JSON of one hdid fit (written by `hdid fit --json` or "
             "FitResult.save; a batch JSON is a list: load its entries one by one)"
+        )
+    if d.get("kind") in ("driven", "joint") or "verdict" in d:
+        what = f"a {d['kind']} fit" if "kind" in d else "a diagnosis (hdid diagnose --json)"
+        raise HdidError(
+            f"{path}: the JSON of {what}; FitResult.load and hdid simulate --from read the "
+            "JSON of a free-motion fit (hdid fit LOG.csv --json)"
         )
     if d.get("schema_version", 0) > SCHEMA_VERSION:
         raise HdidError(f"{path}: written by a newer hdid ({d.get('hdid_version')}); upgrade hdid")

@@ -379,7 +379,9 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
         if not quiet:
             click.echo(f"\nwrote {json_out}")
     if plot_out:
+        phases.start(f"drawing {plot_out} (the model's band compiles once, ~10 s)")
         result.plot(plot_out)
+        phases.stop()
         if not quiet:
             click.echo(f"wrote {plot_out}")
 
@@ -688,9 +690,10 @@ def diagnose_cmd(log, json_out, plot_out, residuals_out, candidates, steps, iner
 @click.option("--set", "values", multiple=True, metavar="NAME=VALUE", help="Model parameter, e.g. --set k1=1200 (repeatable).")
 @click.option("--counts", is_flag=True, help="Write theta as integer counts.")
 @click.option("--overwrite", is_flag=True, help="Replace OUT if it exists.")
+@_QUIET
 @click.option("--from", "from_json", metavar="FIT.json", help="Re-simulate a fitted model (the JSON of `hdid fit --json`): its effects and values, and by default its log's design (release angles, rate, length, encoder step, offset); options given here override.")
 def simulate_cmd(out, amplitudes, rate, duration, hold, offset, counts_per_rev, noise, seed,
-                 values, counts, overwrite, from_json):
+                 values, counts, overwrite, from_json, quiet):
     """Write a synthetic free-motion log (same format as `hdid fit` reads).
 
     \b
@@ -732,7 +735,7 @@ def simulate_cmd(out, amplitudes, rate, duration, hold, offset, counts_per_rev, 
         try:
             fitted = load(src)
         except (HdidError, ValueError, KeyError, TypeError) as exc:
-            raise _Fail(f"--from {from_json}: {exc}") from None
+            raise _Fail(f"--from: {exc}") from None
         model = fitted.model
         given = lambda name: (click.get_current_context().get_parameter_source(name)  # noqa: E731
                               != click.core.ParameterSource.DEFAULT)
@@ -754,7 +757,8 @@ def simulate_cmd(out, amplitudes, rate, duration, hold, offset, counts_per_rev, 
         )
     except (HdidError, ValueError, KeyError) as exc:
         raise _Fail.from_error(exc) from None
-    click.echo(f"wrote {out}: {len(amps)} run(s) at {rate:g} Hz")
+    if not quiet:
+        click.echo(f"wrote {out}: {len(amps)} run(s) at {rate:g} Hz")
 
 
 def _design_of(fitted) -> dict:
