@@ -40,21 +40,40 @@ BAND_SIGMAS = 2.0
 BAND_LABEL = f"model ±{BAND_SIGMAS:g}σ (fit uncertainty)"
 
 
-def _overlay(result, ax, times, meas, model_s, sd_s):
-    """All runs in one axes: angle from the spring zero against time since release, each
-    model with its ±2σ confidence band."""
+def _window(result, i, times, model_s):
+    """Run ``i``'s shown stretch: from a few samples before the release to a little after
+    the model comes to rest (at least 0.05 time units after the release)."""
+    run = result.runs[i]
+    n = run.n_samples
+    moving = np.flatnonzero(np.abs(np.diff(model_s[i, :n])) > 0)
+    t_end = times[i, min(moving[-1] + 6, n - 1)] if moving.size else times[i, n - 1]
+    return run.release_time - 5 * result.sample_period, max(t_end, run.release_time + 0.05)
+
+
+def _overlay(result, ax, times, meas, model_s, fine, model_fine, sd_fine):
+    """All runs in one axes: angle from the spring zero against time since release (the
+    release-to-rest stretch of every run), each model with its ±2σ confidence band."""
     lo = result.derived["stick_band_lower_rad"][0]
     hi = result.derived["stick_band_upper_rad"][0]
     ax.axhspan(lo, hi, color="0.9", label="stick band (fit)")
+    windows = [_window(result, i, times, model_s) for i in range(len(result.runs))]
+    before = max(run.release_time - w[0] for run, w in zip(result.runs, windows))
+    after = max(w[1] - run.release_time for run, w in zip(result.runs, windows))
+    cropped = False
     for i, run in enumerate(result.runs):
-        n = run.n_samples
-        t = times[i, :n] - run.release_time
-        m = model_s[i, :n] - run.offset
-        ax.fill_between(t, m - BAND_SIGMAS * sd_s[i, :n], m + BAND_SIGMAS * sd_s[i, :n],
-                        color=f"C{i % 10}", alpha=0.3, lw=0, label=BAND_LABEL if i == 0 else None)
-        ax.plot(t, m, "-", color=f"C{i % 10}", lw=1.0, label=f"run {run.name}: model")
-        ax.plot(t, meas[i, :n] - run.offset, "o", ms=2.5, mfc="none", color=f"C{i % 10}")
-    ax.set_xlabel("time since release [s]")
+        n, t0, color = run.n_samples, run.release_time, f"C{i % 10}"
+        sel = (times[i, :n] >= t0 - before) & (times[i, :n] <= t0 + after)
+        fsel = (fine[i] >= t0 - before) & (fine[i] <= t0 + after)
+        cropped |= not sel.all()
+        m = model_fine[i, fsel] - run.offset
+        band = BAND_SIGMAS * sd_fine[i, fsel]
+        ax.fill_between(fine[i, fsel] - t0, m - band, m + band, color=color, alpha=0.3, lw=0,
+                        label=BAND_LABEL if i == 0 else None)
+        ax.plot(fine[i, fsel] - t0, m, "-", color=color, lw=1.0, label=f"run {run.name}: model")
+        ax.plot(times[i, :n][sel] - t0, meas[i, :n][sel] - run.offset, "o", ms=2.5, mfc="none",
+                color=color)
+    ax.set_xlabel("time since release [s]" + ("  (release to rest; hold and tail cropped)"
+                                              if cropped else ""))
     ax.set_ylabel("WG angle from spring zero [rad]")
     ax.set_title(f"{result.source}: measured (o) and model (–)", fontsize=9)
     ax.legend(fontsize=7)
@@ -77,28 +96,31 @@ def plot_fit(result, path=None, *, axes=None, fine_rate: float = 20000.0):
     times = np.asarray(prob.times)
     meas = np.asarray(prob.theta)
     R = times.shape[0]
-    if axes is not None and hasattr(axes, "plot"):  # one matplotlib Axes
-        fig = _overlay(result, axes, times, meas, *result._predict_with_std())
-        if path is not None:
-            fig.savefig(path, dpi=110)
-        return fig
-    n_fine = int(np.ceil((times.max() - times.min()) * fine_rate)) + 1
-    fine = np.stack([np.linspace(t[0], t[-1], n_fine) for t in times])
-    model_s = result.predict()  # compiled by the fit already
-    model_fine, sd_fine = result._predict_with_std(fine)
-    if axes is None:
-        fig, axes = _fit_axes(plt, R)
-    else:
-        arr = np.asarray(axes, dtype=object)
-        if arr.size != 2 * R:
+    one = axes is not None and hasattr(axes, "plot")  # one matplotlib Axes
+    if axes is not None and not one:  # checked before any work
+        grid = np.asarray(axes, dtype=object)
+        if grid.size != 2 * R:
             from ._errors import HdidError
 
             raise HdidError(
                 f"axes: this fit has {R} run(s), so give a (2, {R}) array of axes (angle above, "
                 f"residual below, one column per run) or a single Axes (runs overlaid); got "
-                f"{arr.size} axes of shape {arr.shape}"
+                f"{grid.size} axes of shape {grid.shape}"
             )
-        axes = arr.reshape(2, R)
+        grid = grid.reshape(2, R)
+    n_fine = int(np.ceil((times.max() - times.min()) * fine_rate)) + 1
+    fine = np.stack([np.linspace(t[0], t[-1], n_fine) for t in times])
+    model_s = result.predict()  # compiled by the fit already
+    model_fine, sd_fine = result._predict_with_std(fine)
+    if one:
+        fig = _overlay(result, axes, times, meas, model_s, fine, model_fine, sd_fine)
+        if path is not None:
+            fig.savefig(path, dpi=110)
+        return fig
+    if axes is None:
+        fig, axes = _fit_axes(plt, R)
+    else:
+        axes = grid
         fig = axes[0, 0].figure
     step = result.resolution_rad
     lo = result.derived["stick_band_lower_rad"][0]
@@ -109,10 +131,7 @@ def plot_fit(result, path=None, *, axes=None, fine_rate: float = 20000.0):
         ax, axr = axes[0, i], axes[1, i]
         t0 = run.release_time
         # Show the motion: from a few samples before release to a little after rest.
-        moving = np.flatnonzero(np.abs(np.diff(model_s[i, :n])) > 0)
-        t_end = times[i, min(moving[-1] + 6, n - 1)] if moving.size else times[i, n - 1]
-        t_end = max(t_end, t0 + 0.05)
-        t_begin = t0 - 5 * result.sample_period
+        t_begin, t_end = _window(result, i, times, model_s)
         sel = (times[i, :n] >= t_begin) & (times[i, :n] <= t_end)
         fsel = (fine[i] >= t_begin) & (fine[i] <= t_end)
         if not sel.all():
