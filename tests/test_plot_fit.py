@@ -95,6 +95,11 @@ def test_one_axes_overlay_has_the_band(result):
     result.plot(axes=ax)
     assert BAND_LABEL in [t.get_text() for t in ax.get_legend().get_texts()]
     assert len(ax.collections) >= len(result.runs)
+    # the motion fills the axes: the still tail (most of each 0.5 s run) is cropped, as in
+    # fit.png (the gear rests ~20 ms after release; the window ends 6 samples later)
+    duration = result.runs[0].n_samples * result.sample_period
+    assert ax.get_xlim()[1] < 0.25 * duration
+    assert "cropped" in ax.get_xlabel()
     plt.close("all")
 
 
