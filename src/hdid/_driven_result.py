@@ -228,8 +228,8 @@ class DrivenFitResult:
     def plot(self, ax=None, residual_ax=None):
         """Measured (dots) and simulated (line, drawn above them) WG angle of every driven
         run, and below it the residual ``logged − model`` (the sign of the free-motion
-        figure) with the quantization floor ±σ shaded. Without ``ax`` a two-panel figure is made; with ``ax`` alone only the
-        top panel is drawn there. Returns ``ax``."""
+        figure) with the quantization floor ±σ shaded. Without ``ax`` a two-panel figure
+        is made; with ``ax`` alone only the top panel is drawn there. Returns ``ax``."""
         import matplotlib.pyplot as plt
 
         if ax is None:
