@@ -301,9 +301,11 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
         return _fit_driven([Path(logs[0])], model, json_out, plot_out, fix, counts_per_rev,
                            driven_options, order, release_time, quiet, fit_options)
     if input_hold:
-        raise _Fail(f"--input-hold: {logs[0] if len(logs) == 1 else 'these logs'} "
-                    "has no motor_torque or motor_current column (a free-motion log has no "
-                    "input to hold); leave --input-hold out, or give it with a driven log")
+        what = (f"{logs[0]} has" if len(logs) == 1 else
+                "a batch fits free-motion logs, which have")
+        raise _Fail(f"--input-hold: {what} no motor_torque or motor_current column (a "
+                    "free-motion log has no input to hold); leave --input-hold out, or give "
+                    "it with one driven log (or --joint)")
     if start_values and (len(logs) > 1 or summary_out or joint):
         raise _Fail("--start takes one free-motion log; fit the logs one by one for it")
     if len(logs) > 1 or summary_out:
