@@ -17,6 +17,10 @@ from ._transforms import derivative
 #: Correlations above this are listed in the report.
 HIGH_CORRELATION = 0.95
 
+#: How the note on time-correlated residuals begins (a joint fit replaces the one of its
+#: driven-alone start, whose correlation time is stale).
+_CORRELATED_NOTE = "the WG residual is correlated in time"
+
 
 @dataclass
 class DrivenFitResult:
@@ -389,9 +393,11 @@ def analyse_driven(
             f"the kinematic-error RMS is {rms['kinematic_rad'] / rms['kinematic_floor_rad']:.1f}× "
             "its floor: see plot_kinematic_error()"
         )
+    # a joint fit passes on the driven-alone fit's notes: its correlation time is stale
+    notes = [n for n in notes if not n.startswith(_CORRELATED_NOTE)]
     if tau_int > 1.0:
         notes = list(notes) + [
-            f"the WG residual is correlated in time (integrated correlation time {tau_int:.3g} "
+            f"{_CORRELATED_NOTE} (integrated correlation time {tau_int:.3g} "
             "samples, model error rather than encoder noise): the stds are scaled up by "
             f"√{tau_int:.3g}, the effective number of independent residuals"]
     warnings += _parameter_flags(params, specs, du, where, dproblem)
