@@ -352,14 +352,18 @@ class FitResult:
             )
 
     def plot(self, path=None, *, axes=None, fine_rate: float = 20000.0):
-        """Measured vs model for every run (top) with residuals in counts (bottom).
+        """Measured vs model for every run (top) with residuals in counts (bottom); the
+        model carries its ±2σ confidence band (:meth:`predict_std`). Returns the figure.
 
         Parameters
         ----------
         path:
-            Save the figure here (PNG, PDF, …) if given.
+            Save the figure here (PNG, PDF, …) if given. Without ``axes`` the figure is then
+            made without pyplot: no backend is chosen, nothing is shown.
         axes:
-            ``(2, R)`` array of matplotlib axes to draw into; a new figure otherwise.
+            ``(2, R)`` array of matplotlib axes to draw into (angle above, residual below,
+            one column per run), or one Axes (every run's release-to-rest stretch overlaid,
+            no residuals); a new figure otherwise.
         """
         from ._plot import plot_fit
 
