@@ -119,3 +119,24 @@ def test_saving_leaves_the_backend_alone(result, tmp_path):
         assert fig not in [plt.figure(n) for n in plt.get_fignums()]  # not kept by pyplot
     finally:
         matplotlib.use(before)
+
+
+def test_readings_on_no_grid_get_no_counts(result):
+    """A log whose readings lie on no grid has no encoder counts (issue 16: never print
+    counts for an assumed encoder): fit.png's residual is then in the estimated noise σ."""
+    import dataclasses
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    analog = dataclasses.replace(result, resolution_source="noise")
+    fig = analog.plot()
+    texts = [fig._suptitle.get_text(), fig.axes[1].get_ylabel()]
+    texts += [t.get_text() for t in fig.axes[1].get_legend().get_texts()]
+    assert not any("count" in t for t in texts), texts
+    assert "noise σ" in fig.axes[1].get_ylabel()
+    fig = result.plot()  # on a grid: counts, as before
+    assert "counts" in fig.axes[1].get_ylabel() and "counts" in fig._suptitle.get_text()
+    plt.close("all")

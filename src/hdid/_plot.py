@@ -83,7 +83,8 @@ def _overlay(result, ax, times, meas, model_s, fine, model_fine, sd_fine):
 def plot_fit(result, path=None, *, axes=None, fine_rate: float = 20000.0):
     """Measured vs model per run (angle from the fitted spring zero, so the stick band is
     centred on 0) with the model's ±2σ confidence band (:meth:`FitResult.predict_std`),
-    and the residual in encoder counts below it, where the same band is drawn about 0.
+    and the residual in encoder counts below it (in the estimated noise σ for readings on
+    no grid), where the same band is drawn about 0.
     ``axes``: a ``(2, R)`` array of axes, or one Axes (all runs overlaid, no residuals).
     With ``path`` and no ``axes`` the figure is only saved: it is made without pyplot, so
     no backend is chosen and a notebook's stays as it is."""
@@ -122,7 +123,11 @@ def plot_fit(result, path=None, *, axes=None, fine_rate: float = 20000.0):
     else:
         axes = grid
         fig = axes[0, 0].figure
-    step = result.resolution_rad
+    # Residuals in encoder counts; for readings on no grid (analog, interpolated) there are
+    # no counts: in units of the noise σ estimated from the log (the report's "noise σ").
+    on_grid = result.resolution_source != "noise"
+    step = result.resolution_rad if on_grid else result.quantization_floor_rad
+    unit = "counts" if on_grid else "noise σ, estimated"
     lo = result.derived["stick_band_lower_rad"][0]
     hi = result.derived["stick_band_upper_rad"][0]
     cropped = []
@@ -147,7 +152,8 @@ def plot_fit(result, path=None, *, axes=None, fine_rate: float = 20000.0):
         ax.axvline(t0, color="C3", lw=0.8, ls=":", label="release (fit)")
         ax.set_title(f"run {run.name} (set-up {run.setup})", fontsize=9)
         res = (meas[i, :n] - model_s[i, :n]) / step
-        axr.axhspan(-0.5, 0.5, color="0.9", label="±½ count (rounding)")
+        axr.axhspan(-0.5 if on_grid else -1.0, 0.5 if on_grid else 1.0, color="0.9",
+                    label="±½ count (rounding)" if on_grid else "±1σ noise (estimated)")
         axr.fill_between(fine[i, fsel], -band / step, band / step, color="C0", alpha=0.35,
                          lw=0, label=BAND_LABEL)
         axr.plot(times[i, :n][sel], res[sel], "o-", ms=3, lw=0.8, color="C1", label="residual")
@@ -155,14 +161,15 @@ def plot_fit(result, path=None, *, axes=None, fine_rate: float = 20000.0):
         axr.set_xlabel("time [s]" + (f"\n(shows {shown})" if not sel.all() and shown else ""), fontsize=8)
         if i == 0:
             ax.set_ylabel("WG angle from spring zero [rad]")
-            axr.set_ylabel("measured − model\n[counts]")
+            axr.set_ylabel(f"measured − model\n[{unit}]")
             ax.legend(fontsize=7, loc="best")
             axr.legend(fontsize=6, loc="best")
     note = ("; panels show release to rest, the still hold and tail are cropped"
             if cropped else "")
     fig.suptitle(
-        f"{result.source}: RMS {result.rms_residual_rad / step:.2f} counts "
-        f"(floor 0.29), band half-width {result.stick_band_halfwidth_rad:.4f} rad{note}",
+        f"{result.source}: RMS {result.rms_residual_rad / step:.2f} "
+        + (f"counts (floor {1 / np.sqrt(12):.2f})" if on_grid else "× the estimated noise σ")
+        + f", band half-width {result.stick_band_halfwidth_rad:.4f} rad{note}",
         fontsize=10,
     )
     fig.tight_layout()
