@@ -214,3 +214,146 @@ def test_ten_runs_wrap_into_rows():
     width, height = fig.get_size_inches()
     assert width <= 3.2 * RUNS_PER_ROW + 1 and height > 5.2 * 2  # 3 rows of 4, 4, 2
     plt.close("all")
+
+
+# -- driven and diagnose JSON: the same provenance as the fit JSON (issue 18 item 5) ------
+
+DRIVEN = ROOT / "data" / "synthetic" / "driven_csf8.csv"
+SHARED = ("schema_version", "hdid_version", "input", "options", "model", "correlation", "covariance")
+
+
+def _schema_validator(kind):
+    from hdid._saved import schema
+
+    s = schema(kind)
+    jsonschema.Draft202012Validator.check_schema(s)
+    return jsonschema.Draft202012Validator(s), s
+
+
+@pytest.fixture(scope="module")
+def driven_json(tmp_path_factory):
+    """A CLI driven fit of a short piece of the shipped driven log (run 1, its first
+    0.4 s: two 0.2 s windows, positional order given), with --input-hold given."""
+    import pandas as pd
+
+    tmp = tmp_path_factory.mktemp("driven")
+    df = pd.read_csv(DRIVEN)
+    log = tmp / "driven_short.csv"
+    df[(df["run"] == df["run"].iloc[0]) & (df["time"] < 0.4)].to_csv(log, index=False)
+    out = tmp / "d.json"
+    res = CliRunner().invoke(main, ["fit", str(log), "--order", "2", "--input-hold", "zoh",
+                                    "-q", "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    return json.loads(out.read_text()), log
+
+
+def test_driven_json_follows_its_schema_with_provenance(driven_json):
+    data, log = driven_json
+    validator, s = _schema_validator("driven")
+    errors = sorted(validator.iter_errors(data), key=str)
+    assert not errors, errors[0]
+    assert set(data) <= set(s["properties"]), set(data) - set(s["properties"])
+    assert data["hdid_version"] == version("hdid")
+    assert data["input"] == {"path": str(log), "sha256": hashlib.sha256(log.read_bytes()).hexdigest()}
+    assert data["inputs"] == [data["input"]]
+    assert data["options"] == {"order": 2, "input_hold": "zoh"}
+    model = data["model"]
+    assert model["gear_ratio"] == 100.0 and model["input_hold"] == "zoh"
+    assert model["positional_error_order"] == 2
+    assert [e["name"] for e in model["effects"]] == ["stiffness", "stribeck", "viscous"]
+    assert model["effects"][0]["fields"]["k1"] == data["parameters"]["k1"]["value"]
+    # covariance over the free parameters and positional coefficients: its diagonal is the
+    # report's (widened) std squared, and the correlation is its normalised form
+    names = data["covariance"]["parameters"]
+    free = [n for n, p in data["parameters"].items() if not p["fixed"]]
+    assert names[: len(free)] == free
+    assert set(names[len(free):]) == set(data["positional_error"]["coefficients"])
+    cov = np.array(data["covariance"]["matrix"], dtype=float)
+    std = np.array([data["parameters"][n]["std"] if n in data["parameters"]
+                    else data["positional_error"]["coefficients"][n]["std"] for n in names], dtype=float)
+    ok = np.isfinite(std)
+    assert ok.sum() >= len(free) - 2  # the short log still fixes most of them
+    assert np.allclose(np.sqrt(np.diag(cov))[ok], std[ok], rtol=1e-9)
+    sub = cov[np.ix_(ok, ok)]
+    assert np.allclose(sub, sub.T, rtol=1e-9, atol=0)
+    corr = np.array(data["correlation"]["matrix"], dtype=float)[np.ix_(ok, ok)]
+    assert np.allclose(np.diag(corr), 1.0) and np.all(np.abs(corr) <= 1 + 1e-9)
+    assert data["covariance"]["units"][names.index("k1")] == "N m/rad"
+
+
+@pytest.mark.parametrize("breakage", ["hold", "no covariance", "no inputs"])
+def test_driven_schema_rejects_broken_json(driven_json, breakage):
+    data = json.loads(json.dumps(driven_json[0]))
+    if breakage == "hold":
+        data["model"]["input_hold"] = "linear"
+    elif breakage == "no covariance":
+        del data["covariance"]
+    else:
+        data["inputs"] = []
+    validator, _ = _schema_validator("driven")
+    assert list(validator.iter_errors(data))
+
+
+def test_schemas_share_the_provenance_fields():
+    """The provenance fields mean the same in the three files: the driven and diagnose
+    schemas define them as the fit schema does (the driven model only adds its keys)."""
+    from hdid._saved import schema
+
+    fit = schema("fit")["properties"]
+    for kind in ("driven", "diagnose"):
+        s = schema(kind)
+        assert set(SHARED) <= set(s["required"]), kind
+        for key in SHARED:
+            a, b = json.loads(json.dumps(fit[key])), json.loads(json.dumps(s["properties"][key]))
+            a.pop("description", None), b.pop("description", None)
+            if key == "model":
+                assert set(a["required"]) <= set(b["required"])
+                assert {k: v for k, v in b["properties"].items() if k in a["properties"]} == a["properties"]
+            else:
+                assert a == b, (kind, key)
+
+
+def test_diagnose_json_has_the_fit_provenance(fitted, tmp_path, monkeypatch):
+    """hdid diagnose --json: the base fit's model, correlation and covariance, the input's
+    checksum and the options, validated against diagnose.schema.json. The diagnosis
+    itself is stubbed (its content is the diagnose tests' business): this is the JSON."""
+    import hdid._diagnose
+    from hdid._diagnose import Diagnosis
+    from hdid._residuals import whiteness
+
+    data, result, _ = fitted
+
+    def stub(log, model=None, **kw):
+        return Diagnosis(source=str(EXAMPLE), verdict="adequate", summary="stub", base=result,
+                         candidates=[], whiteness_before=whiteness(result), notes=[],
+                         ladder=[], floor_rad=result.quantization_floor_rad)
+
+    monkeypatch.setattr(hdid._diagnose, "diagnose", stub)
+    out = tmp_path / "diag.json"
+    res = CliRunner().invoke(main, ["diagnose", str(EXAMPLE), "--fix", "delta=1", "-q",
+                                    "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    diag = json.loads(out.read_text())
+    validator, _ = _schema_validator("diagnose")
+    errors = sorted(validator.iter_errors(diag), key=str)
+    assert not errors, errors[0]
+    assert diag["input"]["sha256"] == hashlib.sha256(EXAMPLE.read_bytes()).hexdigest()
+    assert diag["options"] == {"fix": ["delta=1"]}
+    assert diag["hdid_version"] == version("hdid")
+    for key in ("model", "correlation", "covariance"):
+        assert diag[key] == data[key], key
+    assert diag["verdict"] == "adequate"  # the diagnosis's own fields are kept
+
+
+def test_load_refuses_a_driven_json_in_one_line(driven_json, tmp_path):
+    """A driven fit's JSON has a model and parameters too: FitResult.load and
+    simulate --from must say what it is, not fail on a missing field."""
+    data, _ = driven_json
+    path = tmp_path / "d.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(hdid.HdidError, match="the JSON of a driven fit"):
+        hdid.FitResult.load(path)
+    res = CliRunner().invoke(main, ["simulate", str(tmp_path / "x.csv"), "--from", str(path)])
+    assert res.exit_code == 2 and len(res.stderr.strip().splitlines()) == 1, res.output
+    assert "the JSON of a driven fit" in res.stderr
+    assert not (tmp_path / "x.csv").exists()

@@ -17,6 +17,10 @@ from ._transforms import derivative
 #: Correlations above this are listed in the report.
 HIGH_CORRELATION = 0.95
 
+#: How the note on time-correlated residuals begins (a joint fit replaces the one of its
+#: driven-alone start, whose correlation time is stale).
+_CORRELATED_NOTE = "the WG residual is correlated in time"
+
 
 @dataclass
 class DrivenFitResult:
@@ -45,6 +49,16 @@ class DrivenFitResult:
     order_bic: dict[int, float] | None = None
     chi2_reduced: float = float("nan")
     wall_time_s: float = float("nan")
+    #: the logs fitted (the driven one first), as given
+    sources: list[str] = field(default_factory=list)
+    #: free unknowns with a physical meaning (parameters and positional coefficients) and
+    #: their covariance in physical units (inf where undetermined)
+    covariance_names: list[str] = field(default_factory=list)
+    parameter_covariance: np.ndarray = field(default=None, repr=False)
+    #: SHA-256 of each input file by path (set by the CLI; else computed from ``sources``)
+    input_sha256: dict[str, str | None] | None = None
+    #: options of the fit (the CLI's, as given), written to the JSON
+    options: dict | None = None
 
     @property
     def values(self) -> dict[str, float]:
@@ -171,14 +185,55 @@ class DrivenFitResult:
             "warnings": list(self.warnings),
             "notes": list(self.notes),
             "wall_time_s": self.wall_time_s,
+            **self._provenance(),
         }
+
+    def _provenance(self) -> dict[str, Any]:
+        """The fields the fit JSON has for reuse (``hdid._saved.provenance``): version, the
+        input files and their SHA-256, the options, the model's structure, and the full
+        correlation and covariance of the parameters and positional coefficients."""
+        from ._saved import SCHEMA_VERSION, hdid_version, model_structure, sha256
+
+        digests = self.input_sha256 or {}
+        inputs = [{"path": p, "sha256": digests.get(p) or sha256(p)}
+                  for p in (self.sources or [self.source])]
+        names = list(self.covariance_names)
+        cov = (np.asarray(self.parameter_covariance, dtype=float) if names
+               else np.zeros((0, 0)))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sd = np.sqrt(np.diag(cov))
+            corr = cov / np.outer(sd, sd)
+        corr[~np.isfinite(corr)] = np.nan  # undetermined: null in the JSON
+        np.fill_diagonal(corr, np.where(np.isfinite(sd), 1.0, np.nan))
+        specs = self.joint.parameter_specs()
+        units = [specs[n].unit if n in specs else "" for n in names]
+        model = model_structure(self.joint.model)
+        model["output_friction_tau_fout"] = float(self.joint.tau_fout)
+        model["positional_error_order"] = int(self.joint.positional.order)
+        model["input_hold"] = self.input_hold
+        return {
+            "schema_version": SCHEMA_VERSION,
+            "hdid_version": hdid_version(),
+            "input": inputs[0],
+            "inputs": inputs,
+            "options": dict(self.options or {}),
+            "model": model,
+            "correlation": {"parameters": names, "matrix": corr.tolist()},
+            "covariance": {"parameters": names, "units": units, "matrix": cov.tolist()},
+        }
+
+    @property
+    def input_hold(self) -> str:
+        """How the motor torque was taken between samples: "zoh" (held) or "foh" (linear)."""
+        problem, _ = self._driven_problem()
+        return str(getattr(problem, "input_hold", "zoh"))
 
     # -- plots ----------------------------------------------------------------------
     def plot(self, ax=None, residual_ax=None):
         """Measured (dots) and simulated (line, drawn above them) WG angle of every driven
-        run, and below it the residual ``model − logged`` with the quantization floor
-        ±σ shaded. Without ``ax`` a two-panel figure is made; with ``ax`` alone only the
-        top panel is drawn there. Returns ``ax``."""
+        run, and below it the residual ``logged − model`` (the sign of the free-motion
+        figure) with the quantization floor ±σ shaded. Without ``ax`` a two-panel figure
+        is made; with ``ax`` alone only the top panel is drawn there. Returns ``ax``."""
         import matplotlib.pyplot as plt
 
         if ax is None:
@@ -191,7 +246,7 @@ class DrivenFitResult:
             ax.plot(c["time"], c["theta"], ".", ms=2, alpha=0.5, zorder=2,
                     color=line.get_color(), label=f"run {name} logged")
             if residual_ax is not None:
-                residual_ax.plot(c["time"], c["theta_model"] - c["theta"], "-", lw=0.6,
+                residual_ax.plot(c["time"], c["theta"] - c["theta_model"], "-", lw=0.6,
                                  color=line.get_color())
         ax.set_ylabel("WG angle (log units)")
         ax.set_title("driven runs: logged (dots) and simulated from the motor torque (line)")
@@ -201,7 +256,7 @@ class DrivenFitResult:
             residual_ax.axhspan(-sigma, sigma, color="0.85", zorder=0,
                                 label=f"±σ floor ({self.data.step_source})")
             residual_ax.axhline(0.0, color="k", lw=0.5)
-            residual_ax.set_ylabel("model − logged")
+            residual_ax.set_ylabel("logged − model")
             residual_ax.set_xlabel("time [s]")
             residual_ax.legend(fontsize=7)
         else:
@@ -317,6 +372,16 @@ def analyse_driven(
             if abs(c) > HIGH_CORRELATION:
                 corr[(a, b)] = c
     rms = _rms(problem, u, data, dproblem, du)
+    # physical covariance of every free parameter and positional coefficient, the delta
+    # method through each one's transform (the same as the stds above); inf along the
+    # null directions, where the std is undetermined
+    cov_names = list(where)
+    G = np.array([grads[n] for n in cov_names]).reshape(len(cov_names), u.size)
+    phys_cov = G @ (cov * inflate) @ G.T
+    phys_cov = 0.5 * (phys_cov + phys_cov.T)  # the pseudo-inverse is symmetric to rounding
+    bad = np.array([math.isinf(stds[n]) for n in cov_names], dtype=bool)
+    phys_cov[bad, :] = math.inf
+    phys_cov[:, bad] = math.inf
     warnings = []
     if rms["wg_rad"] > 3 * rms["wg_floor_rad"]:
         warnings.append(
@@ -328,9 +393,11 @@ def analyse_driven(
             f"the kinematic-error RMS is {rms['kinematic_rad'] / rms['kinematic_floor_rad']:.1f}× "
             "its floor: see plot_kinematic_error()"
         )
+    # a joint fit passes on the driven-alone fit's notes: its correlation time is stale
+    notes = [n for n in notes if not n.startswith(_CORRELATED_NOTE)]
     if tau_int > 1.0:
         notes = list(notes) + [
-            f"the WG residual is correlated in time (integrated correlation time {tau_int:.3g} "
+            f"{_CORRELATED_NOTE} (integrated correlation time {tau_int:.3g} "
             "samples, model error rather than encoder noise): the stds are scaled up by "
             f"√{tau_int:.3g}, the effective number of independent residuals"]
     warnings += _parameter_flags(params, specs, du, where, dproblem)
@@ -351,6 +418,8 @@ def analyse_driven(
         parameters=params, positional=positional, rms=rms, correlation=corr,
         warnings=warnings, notes=list(notes), data=data, problem=problem, u=u,
         covariance=cov * inflate, labels=labels, order_bic=order_bic, chi2_reduced=chi2_red,
+        sources=[data.source] + [p.source for p in free_preps],
+        covariance_names=cov_names, parameter_covariance=phys_cov,
     )
 
 

@@ -9,12 +9,23 @@ import numpy as np
 RUNS_PER_ROW = 4
 
 
+def _new_figure(plt, **kw):
+    """A figure: through pyplot when given (shown in a notebook or a window), else a bare
+    :class:`~matplotlib.figure.Figure` (only saved: no backend is chosen or touched)."""
+    if plt is not None:
+        return plt.figure(**kw)
+    from matplotlib.figure import Figure
+
+    return Figure(**kw)
+
+
 def _fit_axes(plt, R: int):
     """A new figure with a (2, R) array of axes: per run the angle above its residual,
-    at most RUNS_PER_ROW runs side by side (more wrap into rows)."""
+    at most RUNS_PER_ROW runs side by side (more wrap into rows). ``plt``: pyplot, or
+    None for a figure that is only saved."""
     ncol = min(R, RUNS_PER_ROW)
     nrow = -(-R // ncol)
-    fig = plt.figure(figsize=(3.2 * ncol + 1, 5.2 * nrow))
+    fig = _new_figure(plt, figsize=(3.2 * ncol + 1, 5.2 * nrow))
     gs = fig.add_gridspec(2 * nrow, ncol, height_ratios=[3, 1.3] * nrow)
     axes = np.empty((2, R), dtype=object)
     for i in range(R):
@@ -24,18 +35,45 @@ def _fit_axes(plt, R: int):
     return fig, axes
 
 
-def _overlay(result, ax, times, meas, model_s):
-    """All runs in one axes: angle from the spring zero against time since release."""
+#: Width of the model's confidence band in standard errors (±2σ: ~95 % for a Gaussian).
+BAND_SIGMAS = 2.0
+BAND_LABEL = f"model ±{BAND_SIGMAS:g}σ (fit uncertainty)"
+
+
+def _window(result, i, times, model_s):
+    """Run ``i``'s shown stretch: from a few samples before the release to a little after
+    the model comes to rest (at least 0.05 time units after the release)."""
+    run = result.runs[i]
+    n = run.n_samples
+    moving = np.flatnonzero(np.abs(np.diff(model_s[i, :n])) > 0)
+    t_end = times[i, min(moving[-1] + 6, n - 1)] if moving.size else times[i, n - 1]
+    return run.release_time - 5 * result.sample_period, max(t_end, run.release_time + 0.05)
+
+
+def _overlay(result, ax, times, meas, model_s, fine, model_fine, sd_fine):
+    """All runs in one axes: angle from the spring zero against time since release (the
+    release-to-rest stretch of every run), each model with its ±2σ confidence band."""
     lo = result.derived["stick_band_lower_rad"][0]
     hi = result.derived["stick_band_upper_rad"][0]
     ax.axhspan(lo, hi, color="0.9", label="stick band (fit)")
+    windows = [_window(result, i, times, model_s) for i in range(len(result.runs))]
+    before = max(run.release_time - w[0] for run, w in zip(result.runs, windows))
+    after = max(w[1] - run.release_time for run, w in zip(result.runs, windows))
+    cropped = False
     for i, run in enumerate(result.runs):
-        n = run.n_samples
-        t = times[i, :n] - run.release_time
-        ax.plot(t, model_s[i, :n] - run.offset, "-", color=f"C{i % 10}", lw=1.0,
-                label=f"run {run.name}: model")
-        ax.plot(t, meas[i, :n] - run.offset, "o", ms=2.5, mfc="none", color=f"C{i % 10}")
-    ax.set_xlabel("time since release [s]")
+        n, t0, color = run.n_samples, run.release_time, f"C{i % 10}"
+        sel = (times[i, :n] >= t0 - before) & (times[i, :n] <= t0 + after)
+        fsel = (fine[i] >= t0 - before) & (fine[i] <= t0 + after)
+        cropped |= not sel.all()
+        m = model_fine[i, fsel] - run.offset
+        band = BAND_SIGMAS * sd_fine[i, fsel]
+        ax.fill_between(fine[i, fsel] - t0, m - band, m + band, color=color, alpha=0.3, lw=0,
+                        label=BAND_LABEL if i == 0 else None)
+        ax.plot(fine[i, fsel] - t0, m, "-", color=color, lw=1.0, label=f"run {run.name}: model")
+        ax.plot(times[i, :n][sel] - t0, meas[i, :n][sel] - run.offset, "o", ms=2.5, mfc="none",
+                color=color)
+    ax.set_xlabel("time since release [s]" + ("  (release to rest; hold and tail cropped)"
+                                              if cropped else ""))
     ax.set_ylabel("WG angle from spring zero [rad]")
     ax.set_title(f"{result.source}: measured (o) and model (–)", fontsize=9)
     ax.legend(fontsize=7)
@@ -44,43 +82,52 @@ def _overlay(result, ax, times, meas, model_s):
 
 def plot_fit(result, path=None, *, axes=None, fine_rate: float = 20000.0):
     """Measured vs model per run (angle from the fitted spring zero, so the stick band is
-    centred on 0) with the residual in encoder counts below. ``axes``: a ``(2, R)`` array
-    of axes, or one Axes (all runs overlaid, no residuals)."""
-    import matplotlib
-
-    if path is not None and axes is None:
-        matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
+    centred on 0) with the model's ±2σ confidence band (:meth:`FitResult.predict_std`),
+    and the residual in encoder counts below it (in the estimated noise σ for readings on
+    no grid), where the same band is drawn about 0.
+    ``axes``: a ``(2, R)`` array of axes, or one Axes (all runs overlaid, no residuals).
+    With ``path`` and no ``axes`` the figure is only saved: it is made without pyplot, so
+    no backend is chosen and a notebook's stays as it is."""
     result._need_log("plot()")
+    if path is None or axes is not None:
+        import matplotlib.pyplot as plt
+    else:
+        plt = None
     prob = result.problem
     times = np.asarray(prob.times)
     meas = np.asarray(prob.theta)
     R = times.shape[0]
-    model_s = result.predict()
-    if axes is not None and hasattr(axes, "plot"):  # one matplotlib Axes
-        fig = _overlay(result, axes, times, meas, model_s)
-        if path is not None:
-            fig.savefig(path, dpi=110)
-        return fig
-    n_fine = int(np.ceil((times.max() - times.min()) * fine_rate)) + 1
-    fine = np.stack([np.linspace(t[0], t[-1], n_fine) for t in times])
-    model_fine = result.predict(fine)
-    if axes is None:
-        fig, axes = _fit_axes(plt, R)
-    else:
-        arr = np.asarray(axes, dtype=object)
-        if arr.size != 2 * R:
+    one = axes is not None and hasattr(axes, "plot")  # one matplotlib Axes
+    if axes is not None and not one:  # checked before any work
+        grid = np.asarray(axes, dtype=object)
+        if grid.size != 2 * R:
             from ._errors import HdidError
 
             raise HdidError(
                 f"axes: this fit has {R} run(s), so give a (2, {R}) array of axes (angle above, "
                 f"residual below, one column per run) or a single Axes (runs overlaid); got "
-                f"{arr.size} axes of shape {arr.shape}"
+                f"{grid.size} axes of shape {grid.shape}"
             )
-        axes = arr.reshape(2, R)
+        grid = grid.reshape(2, R)
+    n_fine = int(np.ceil((times.max() - times.min()) * fine_rate)) + 1
+    fine = np.stack([np.linspace(t[0], t[-1], n_fine) for t in times])
+    model_s = result.predict()  # compiled by the fit already
+    model_fine, sd_fine = result._predict_with_std(fine)
+    if one:
+        fig = _overlay(result, axes, times, meas, model_s, fine, model_fine, sd_fine)
+        if path is not None:
+            fig.savefig(path, dpi=110)
+        return fig
+    if axes is None:
+        fig, axes = _fit_axes(plt, R)
+    else:
+        axes = grid
         fig = axes[0, 0].figure
-    step = result.resolution_rad
+    # Residuals in encoder counts; for readings on no grid (analog, interpolated) there are
+    # no counts: in units of the noise σ estimated from the log (the report's "noise σ").
+    on_grid = result.resolution_source != "noise"
+    step = result.resolution_rad if on_grid else result.quantization_floor_rad
+    unit = "counts" if on_grid else "noise σ, estimated"
     lo = result.derived["stick_band_lower_rad"][0]
     hi = result.derived["stick_band_upper_rad"][0]
     cropped = []
@@ -89,10 +136,7 @@ def plot_fit(result, path=None, *, axes=None, fine_rate: float = 20000.0):
         ax, axr = axes[0, i], axes[1, i]
         t0 = run.release_time
         # Show the motion: from a few samples before release to a little after rest.
-        moving = np.flatnonzero(np.abs(np.diff(model_s[i, :n])) > 0)
-        t_end = times[i, min(moving[-1] + 6, n - 1)] if moving.size else times[i, n - 1]
-        t_end = max(t_end, t0 + 0.05)
-        t_begin = t0 - 5 * result.sample_period
+        t_begin, t_end = _window(result, i, times, model_s)
         sel = (times[i, :n] >= t_begin) & (times[i, :n] <= t_end)
         fsel = (fine[i] >= t_begin) & (fine[i] <= t_end)
         if not sel.all():
@@ -100,25 +144,32 @@ def plot_fit(result, path=None, *, axes=None, fine_rate: float = 20000.0):
         ax.axhspan(lo, hi, color="0.9", label="stick band (fit)")
         ax.plot(times[i, :n][sel], meas[i, :n][sel] - run.offset, "o", ms=3.5, color="k",
                 mfc="none", label="encoder", zorder=2)
-        ax.plot(fine[i, fsel], model_fine[i, fsel] - run.offset, "-", color="C0", lw=1.4,
-                label="model", zorder=3)
+        m = model_fine[i, fsel] - run.offset
+        band = BAND_SIGMAS * sd_fine[i, fsel]
+        ax.fill_between(fine[i, fsel], m - band, m + band, color="C0", alpha=0.35, lw=0,
+                        label=BAND_LABEL, zorder=2.5)
+        ax.plot(fine[i, fsel], m, "-", color="C0", lw=1.4, label="model", zorder=3)
         ax.axvline(t0, color="C3", lw=0.8, ls=":", label="release (fit)")
         ax.set_title(f"run {run.name} (set-up {run.setup})", fontsize=9)
         res = (meas[i, :n] - model_s[i, :n]) / step
-        axr.axhspan(-0.5, 0.5, color="0.9", label="±½ count (rounding)")
+        axr.axhspan(-0.5 if on_grid else -1.0, 0.5 if on_grid else 1.0, color="0.9",
+                    label="±½ count (rounding)" if on_grid else "±1σ noise (estimated)")
+        axr.fill_between(fine[i, fsel], -band / step, band / step, color="C0", alpha=0.35,
+                         lw=0, label=BAND_LABEL)
         axr.plot(times[i, :n][sel], res[sel], "o-", ms=3, lw=0.8, color="C1", label="residual")
         shown = f"{times[i, :n][sel][0]:.3g}–{times[i, :n][sel][-1]:.3g} s of {times[i, 0]:.3g}–{times[i, n - 1]:.3g}" if sel.any() else ""
         axr.set_xlabel("time [s]" + (f"\n(shows {shown})" if not sel.all() and shown else ""), fontsize=8)
         if i == 0:
             ax.set_ylabel("WG angle from spring zero [rad]")
-            axr.set_ylabel("measured − model\n[counts]")
+            axr.set_ylabel(f"measured − model\n[{unit}]")
             ax.legend(fontsize=7, loc="best")
-            axr.legend(fontsize=6, loc="lower right")
+            axr.legend(fontsize=6, loc="best")
     note = ("; panels show release to rest, the still hold and tail are cropped"
             if cropped else "")
     fig.suptitle(
-        f"{result.source}: RMS {result.rms_residual_rad / step:.2f} counts "
-        f"(floor 0.29), band half-width {result.stick_band_halfwidth_rad:.4f} rad{note}",
+        f"{result.source}: RMS {result.rms_residual_rad / step:.2f} "
+        + (f"counts (floor {1 / np.sqrt(12):.2f})" if on_grid else "× the estimated noise σ")
+        + f", band half-width {result.stick_band_halfwidth_rad:.4f} rad{note}",
         fontsize=10,
     )
     fig.tight_layout()

@@ -158,6 +158,29 @@ class FitResult:
         off = np.array([r.offset for r in self.runs])
         return np.asarray(theta) + off[:, None]
 
+    def predict_std(self, times=None) -> np.ndarray:
+        """Standard error of :meth:`predict` ``(R, T)`` from the fit's uncertainty: a
+        confidence band on the model, not on a new reading (add the noise for that).
+
+        Delta method: ``σ(t)² = g(t)ᵀ C g(t)``, with ``g`` the sensitivity of the predicted
+        reading to every unknown of the fit (physical parameters and per-run nuisances:
+        release instant, start angle, offset), forward-mode through the simulator, and ``C``
+        their covariance (the one behind the report's std). It is widest where the data
+        pin the model least: at the release (its instant is uncertain while the gear moves
+        fastest) and around the stop.
+        """
+        return self._predict_with_std(times)[1]
+
+    def _predict_with_std(self, times=None) -> tuple[np.ndarray, np.ndarray]:
+        import jax.numpy as jnp
+
+        self._need_log("predict_std()")
+        t = self.problem.times if times is None else jnp.asarray(times)
+        pred, J = map(np.asarray, _prediction_and_jacobian(self.problem, jnp.asarray(self.u), t))
+        C = np.asarray(self.covariance)
+        var = np.einsum("rtk,kl,rtl->rt", J, C, J)
+        return pred, np.sqrt(np.clip(var, 0.0, None))
+
     # -- output -----------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         """JSON-able summary (the ``hdid fit --json`` schema)."""
@@ -329,14 +352,18 @@ class FitResult:
             )
 
     def plot(self, path=None, *, axes=None, fine_rate: float = 20000.0):
-        """Measured vs model for every run (top) with residuals in counts (bottom).
+        """Measured vs model for every run (top) with residuals in counts (bottom); the
+        model carries its ±2σ confidence band (:meth:`predict_std`). Returns the figure.
 
         Parameters
         ----------
         path:
-            Save the figure here (PNG, PDF, …) if given.
+            Save the figure here (PNG, PDF, …) if given. Without ``axes`` the figure is then
+            made without pyplot: no backend is chosen, nothing is shown.
         axes:
-            ``(2, R)`` array of matplotlib axes to draw into; a new figure otherwise.
+            ``(2, R)`` array of matplotlib axes to draw into (angle above, residual below,
+            one column per run), or one Axes (every run's release-to-rest stretch overlaid,
+            no residuals); a new figure otherwise.
         """
         from ._plot import plot_fit
 
@@ -360,3 +387,28 @@ class FitResult:
         from ._residuals import plot_residuals
 
         return plot_residuals(self, path=path, axes=axes)
+
+
+_PRED_JAC = None
+
+
+def _prediction_and_jacobian(problem, u, times):
+    """Predicted encoder readings ``(R, T)`` and their Jacobian ``(R, T, n)`` in the
+    unknowns (one forward-mode pass; one jit-compiled function, built on first use so that
+    importing this module stays free of JAX)."""
+    global _PRED_JAC
+    if _PRED_JAC is None:
+        import equinox as eqx
+        import jax
+
+        @eqx.filter_jit
+        def run(problem, u, times):
+            def f(v):
+                p = problem.predict(v, times)
+                return p, p
+
+            J, p = jax.jacfwd(f, has_aux=True)(u)
+            return p, J
+
+        _PRED_JAC = run
+    return _PRED_JAC(problem, u, times)

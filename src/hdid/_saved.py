@@ -26,11 +26,19 @@ from ._errors import HdidError
 SCHEMA_VERSION = 1
 
 
-def schema() -> dict:
-    """The JSON Schema (draft 2020-12) of the fit JSON, shipped with the package."""
+#: The JSON files hdid writes, each with its schema in ``hdid/schema/<kind>.schema.json``.
+SCHEMA_KINDS = ("fit", "driven", "diagnose")
+
+
+def schema(kind: str = "fit") -> dict:
+    """The JSON Schema (draft 2020-12) of a JSON file hdid writes, shipped with the
+    package: ``"fit"`` (``hdid fit --json``, :meth:`FitResult.save`), ``"driven"`` (a
+    driven or joint fit) or ``"diagnose"`` (``hdid diagnose --json``)."""
     from importlib.resources import files
 
-    return json.loads(files("hdid").joinpath("schema/fit.schema.json").read_text())
+    if kind not in SCHEMA_KINDS:
+        raise ValueError(f"schema {kind!r}: choose one of {', '.join(SCHEMA_KINDS)}")
+    return json.loads(files("hdid").joinpath(f"schema/{kind}.schema.json").read_text())
 
 
 def finite(obj):
@@ -148,8 +156,11 @@ def covariance_matrix(result) -> tuple[list[str], np.ndarray]:
     return names, cov
 
 
-def extras(result) -> dict[str, Any]:
-    """What the fit JSON holds beyond the report: see the module docstring."""
+def provenance(result) -> dict[str, Any]:
+    """Where a fit came from and what it was: layout and hdid version, the input file and
+    its SHA-256, the options as given, the model's structure, and the free parameters'
+    full correlation and covariance matrices. The same fields in the fit, driven and
+    diagnose JSON (for a diagnosis, those of its base fit)."""
     names, corr = correlation_matrix(result)
     _, cov = covariance_matrix(result)
     units = [result.parameters[n].unit for n in names]
@@ -163,6 +174,13 @@ def extras(result) -> dict[str, Any]:
         "model": model_structure(result.model),
         "correlation": {"parameters": names, "matrix": corr.tolist()},
         "covariance": {"parameters": names, "units": units, "matrix": cov.tolist()},
+    }
+
+
+def extras(result) -> dict[str, Any]:
+    """What the fit JSON holds beyond the report: see the module docstring."""
+    return {
+        **provenance(result),
         "resolution_known": bool(result.resolution_known),
         "sample_period_s": float(result.sample_period),
     }
@@ -174,6 +192,16 @@ def save(result, path) -> None:
 
 def load(path, effects: dict | None = None):
     """A :class:`FitResult` from its JSON (without the log: no predict/plot)."""
+    try:
+        return _load(path, effects)
+    except (KeyError, TypeError, IndexError) as exc:  # a field missing or of the wrong type
+        raise HdidError(
+            f"{path}: not a complete hdid fit JSON ({type(exc).__name__}: {exc}); write it "
+            "with hdid fit LOG.csv --json or FitResult.save"
+        ) from None
+
+
+def _load(path, effects):
     from ._result import FitResult, ParameterEstimate, RunSummary, StartSummary
 
     try:
@@ -184,6 +212,12 @@ def load(path, effects: dict | None = None):
         raise HdidError(
             f"{path}: not the JSON of one hdid fit (written by `hdid fit --json` or "
             "FitResult.save; a batch JSON is a list: load its entries one by one)"
+        )
+    if d.get("kind") in ("driven", "joint") or "verdict" in d:
+        what = f"a {d['kind']} fit" if "kind" in d else "a diagnosis (hdid diagnose --json)"
+        raise HdidError(
+            f"{path}: the JSON of {what}; FitResult.load and hdid simulate --from read the "
+            "JSON of a free-motion fit (hdid fit LOG.csv --json)"
         )
     if d.get("schema_version", 0) > SCHEMA_VERSION:
         raise HdidError(f"{path}: written by a newer hdid ({d.get('hdid_version')}); upgrade hdid")

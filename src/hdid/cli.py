@@ -102,7 +102,8 @@ def _with_start_values(model, guesses: dict):
 
 def _options_used(ctx) -> dict:
     """The fit options as given (defaults and output paths left out), for the JSON."""
-    skip = {"logs", "json_out", "plot_out", "summary_out", "chains_out", "corner_out", "quiet"}
+    skip = {"logs", "log", "json_out", "plot_out", "summary_out", "chains_out", "corner_out",
+            "residuals_out", "quiet"}
     out = {}
     for name, value in ctx.params.items():
         if name in skip or value is None or value is False or value == () or value == "":
@@ -264,13 +265,14 @@ def main():
 @click.option("--torque-constant", type=float, help="Driven log with a motor_current column: motor torque constant [N m/A].")
 @click.option("--output-counts-per-rev", type=float, help="Driven log: theta_out/output_counts holds raw output-encoder counts with this many per revolution.")
 @click.option("--order", type=click.IntRange(0, 32), help="Driven log: positional-error order (default: chosen by BIC up to 6).")
+@click.option("--input-hold", type=click.Choice(["zoh", "foh"]), help="Driven log: the motor torque between samples. zoh: held from each sample to the next (a drive's command; the default for a motor_torque column); foh: linear between samples (a sampled analog signal; the default for a motor_current column).")
 @click.option("--joint", is_flag=True, help="Several logs of ONE gear (a driven log and free-motion logs): one set of physical parameters for all.")
 @_QUIET
 def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_inertia,
             inertia_prior, fix, add_effects, remove_effects, effect_files, release_time,
             counts_per_rev, starts, posterior, steps, walkers, seed, chains_out, corner_out,
             quiet, band_bracket, workers, dask_address, torque_constant,
-            output_counts_per_rev, order, joint, ratio, resolution, start_values):
+            output_counts_per_rev, order, joint, ratio, resolution, start_values, input_hold):
     """Fit stiffness, friction (and inertia) jointly to all runs of LOG.csv.
 
     LOG.csv has a header with columns time [s] and theta [rad, WG/motor angle]; optional
@@ -284,18 +286,26 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
     model = _build_model(add_effects, remove_effects, effect_files, ratio)
     driven_options = {"torque_constant": torque_constant, "resolution": resolution,
                       "output_counts_per_rev": output_counts_per_rev}
+    fit_options = {"input_hold": input_hold} if input_hold else {}
     if joint:
         if len(logs) < 2:
             raise _Fail("--joint: give a driven log and at least one free-motion log of the same gear")
         if posterior or chains_out or corner_out or summary_out:
             raise _Fail("--joint: --posterior/--chains/--corner/--summary are not available for joint fits")
         return _fit_driven([Path(p) for p in logs], model, json_out, plot_out, fix,
-                           counts_per_rev, driven_options, order, release_time, quiet)
+                           counts_per_rev, driven_options, order, release_time, quiet,
+                           fit_options)
     if len(logs) == 1 and not summary_out and _is_driven(Path(logs[0])):
         if posterior or chains_out or corner_out:
             raise _Fail(f"{logs[0]}: --posterior is not available for driven logs yet; fit without it")
         return _fit_driven([Path(logs[0])], model, json_out, plot_out, fix, counts_per_rev,
-                           driven_options, order, release_time, quiet)
+                           driven_options, order, release_time, quiet, fit_options)
+    if input_hold:
+        what = (f"{logs[0]} has" if len(logs) == 1 else
+                "a batch fits free-motion logs, which have")
+        raise _Fail(f"--input-hold: {what} no motor_torque or motor_current column (a "
+                    "free-motion log has no input to hold); leave --input-hold out, or give "
+                    "it with one driven log (or --joint)")
     if start_values and (len(logs) > 1 or summary_out or joint):
         raise _Fail("--start takes one free-motion log; fit the logs one by one for it")
     if len(logs) > 1 or summary_out:
@@ -371,7 +381,9 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
         if not quiet:
             click.echo(f"\nwrote {json_out}")
     if plot_out:
+        phases.start(f"drawing {plot_out} (the model's band compiles once, ~10 s)")
         result.plot(plot_out)
+        phases.stop()
         if not quiet:
             click.echo(f"wrote {plot_out}")
 
@@ -384,6 +396,16 @@ def _emit(report: str, summary: dict, json_out: str | None, quiet: bool) -> None
         _write_text(json_out, json.dumps(_finite(summary), indent=2) + "\n", "--json")
         if not quiet:
             click.echo(f"\nwrote {json_out}")
+
+
+def _with_provenance(summary: dict, fit, path: Path) -> dict:
+    """A diagnosis's JSON with the fields the fit JSON has for reuse (version, input and
+    its SHA-256, options as given, the model and covariance of the base fit)."""
+    from ._saved import provenance, sha256
+
+    fit.input_sha256 = sha256(path)
+    fit.options = _options_used(click.get_current_context())
+    return {**provenance(fit), **summary}
 
 
 def _is_driven(path: Path) -> bool:
@@ -400,12 +422,16 @@ def _is_driven(path: Path) -> bool:
 
 
 def _fit_driven(paths, model, json_out, plot_out, fix, counts_per_rev, driven_options,
-                order, release_time, quiet):
+                order, release_time, quiet, fit_options=None):
     for option, out in (("--json", json_out), ("--plot", plot_out)):
         _check_output(out, paths, option, figure=option == "--plot")
     fixed = _parse_fix(fix)
+    options = _options_used(click.get_current_context())
     from . import _driven_fit, _io
     from ._errors import HdidError
+    from ._saved import sha256
+
+    digests = {str(p): sha256(p) for p in paths}
 
     fix_arg = {k: v for k, v in fixed.items() if v is not None} | {
         k: None for k, v in fixed.items() if v is None} or None
@@ -414,12 +440,14 @@ def _fit_driven(paths, model, json_out, plot_out, fix, counts_per_rev, driven_op
                              **{k: v for k, v in driven_options.items() if v is not None})
                 for p in paths]
         if len(logs) == 1:
-            result = _driven_fit.fit_driven(logs[0], model, order=order, fix=fix_arg)
+            result = _driven_fit.fit_driven(logs[0], model, order=order, fix=fix_arg,
+                                            **(fit_options or {}))
         else:
             result = _driven_fit.fit_joint(logs, model, order=order, fix=fix_arg,
-                                           release_time=release_time)
+                                           release_time=release_time, **(fit_options or {}))
     except (HdidError, ValueError, KeyError) as exc:
         raise _Fail.from_error(exc) from None
+    result.input_sha256, result.options = digests, options
     _emit(result.report(), result.to_dict(), json_out, quiet)
     if plot_out:
         import matplotlib
@@ -640,7 +668,7 @@ def diagnose_cmd(log, json_out, plot_out, residuals_out, candidates, steps, iner
         )
     except (HdidError, ValueError, KeyError) as exc:
         raise _Fail.from_error(exc) from None
-    _emit(result.report(), result.to_dict(), json_out, quiet)
+    _emit(result.report(), _with_provenance(result.to_dict(), result.base, log_path), json_out, quiet)
     if plot_out:
         result.plot_ladder(plot_out)
         if not quiet:
@@ -664,9 +692,10 @@ def diagnose_cmd(log, json_out, plot_out, residuals_out, candidates, steps, iner
 @click.option("--set", "values", multiple=True, metavar="NAME=VALUE", help="Model parameter, e.g. --set k1=1200 (repeatable).")
 @click.option("--counts", is_flag=True, help="Write theta as integer counts.")
 @click.option("--overwrite", is_flag=True, help="Replace OUT if it exists.")
+@_QUIET
 @click.option("--from", "from_json", metavar="FIT.json", help="Re-simulate a fitted model (the JSON of `hdid fit --json`): its effects and values, and by default its log's design (release angles, rate, length, encoder step, offset); options given here override.")
 def simulate_cmd(out, amplitudes, rate, duration, hold, offset, counts_per_rev, noise, seed,
-                 values, counts, overwrite, from_json):
+                 values, counts, overwrite, from_json, quiet):
     """Write a synthetic free-motion log (same format as `hdid fit` reads).
 
     \b
@@ -708,7 +737,7 @@ def simulate_cmd(out, amplitudes, rate, duration, hold, offset, counts_per_rev, 
         try:
             fitted = load(src)
         except (HdidError, ValueError, KeyError, TypeError) as exc:
-            raise _Fail(f"--from {from_json}: {exc}") from None
+            raise _Fail(f"--from: {exc}") from None
         model = fitted.model
         given = lambda name: (click.get_current_context().get_parameter_source(name)  # noqa: E731
                               != click.core.ParameterSource.DEFAULT)
@@ -730,7 +759,8 @@ def simulate_cmd(out, amplitudes, rate, duration, hold, offset, counts_per_rev, 
         )
     except (HdidError, ValueError, KeyError) as exc:
         raise _Fail.from_error(exc) from None
-    click.echo(f"wrote {out}: {len(amps)} run(s) at {rate:g} Hz")
+    if not quiet:
+        click.echo(f"wrote {out}: {len(amps)} run(s) at {rate:g} Hz")
 
 
 def _design_of(fitted) -> dict:
