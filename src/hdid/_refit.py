@@ -1,0 +1,186 @@
+"""Refits for :func:`hdid.diagnose`: every start of one model structure as lanes of one
+Levenberg–Marquardt program, results analysed only where they are needed.
+
+A candidate refit (a model with an effect added) is set up once per model structure; its
+starts are explicit unknown vectors (:func:`warm`: the current fit's optimum — release
+instants, start angles, offsets included — with the effect's parameters at a
+data-derived value) and the best points of :func:`hdid.fit`'s data-driven grid
+(:func:`grid`). All of them run as lanes of one program with :func:`hdid.fit`'s own
+schedule (every start a few iterations, the best to convergence), so models of the same
+structure share one compiled program. The full analysis (covariance, residual frame) is
+computed only for the fits whose residual :func:`hdid.diagnose` inspects
+(:meth:`StructureFit.result`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from . import _config  # noqa: F401
+from ._fit import _finish, _grid_starts, _local_fits, _setup, _Setup, _untrapped
+from ._problem import Problem
+from ._transforms import to_unconstrained
+
+#: Options of :func:`hdid.fit` that shape the problem (the rest belong to the schedule).
+SETUP_OPTIONS = ("inertia", "fix", "free_inertia", "inertia_prior", "release_time",
+                 "counts_per_rev", "max_substep", "ratio", "resolution")
+
+
+@eqx.filter_jit
+def _data_chi2(problem: Problem, u):
+    """χ² of the data residuals alone (no prior terms), in quantization variances."""
+    r = problem.data_residuals(u)
+    return jnp.sum(r**2)
+
+
+@eqx.filter_jit
+def _residuals_and_jacobian(problem: Problem, u):
+    return problem.residuals_and_jacobian(u)
+
+
+def setup(log, model, options: dict[str, Any]) -> _Setup:
+    """The least-squares problem of ``model`` on ``log`` (``fix`` limited to the model's
+    parameters: a candidate may replace a fixed one)."""
+    opts = {k: v for k, v in options.items() if k in SETUP_OPTIONS and v is not None}
+    fix = opts.get("fix")
+    specs = model.parameter_specs()
+    if isinstance(fix, dict):
+        opts["fix"] = {k: v for k, v in fix.items() if k in specs} or None
+    elif fix is not None:
+        opts["fix"] = [k for k in fix if k in specs] or None
+    return _setup(log, model, **opts)
+
+
+def warm(s: _Setup, values: dict[str, float], tail: np.ndarray) -> np.ndarray:
+    """An unknown vector of ``s``: physical parameters from ``values`` (the set-up model's
+    own where missing), the rest (release instants, start angles, offsets, initial
+    velocities) copied from another fit of the same log (``tail``)."""
+    problem = s.problem
+    specs = s.model.parameter_specs()
+    own = s.model.float_values()
+    phys = [float(to_unconstrained(specs[n], values.get(n, own[n]))) for n in problem.free]
+    out = np.concatenate([np.asarray(phys, dtype=float), np.asarray(tail, dtype=float)])
+    if out.size != problem.n_unknowns:
+        raise ValueError(f"warm start has {out.size} unknowns, the problem {problem.n_unknowns}")
+    return out
+
+
+def tail_of(result_problem: Problem, u) -> np.ndarray:
+    """The non-physical unknowns of a fit (release, start angles, offsets, velocities)."""
+    return np.asarray(u, dtype=float)[result_problem.n_physical:]
+
+
+def grid(s: _Setup, n_starts: int) -> np.ndarray:
+    """The ``n_starts`` best points of :func:`hdid.fit`'s data-driven grid (every free
+    parameter from its effect's ``Parameter.start`` rule at the log's own scales)."""
+    if n_starts <= 0:
+        return np.zeros((0, s.problem.n_unknowns))
+    U0, _ = _grid_starts(s.problem, s.prep, s.model, n_starts, False)
+    return np.asarray(U0)
+
+
+@dataclass
+class StructureFit:
+    """The multi-start refit of one model on one log."""
+
+    label: str
+    setup: _Setup
+    U: np.ndarray
+    costs: np.ndarray
+    ok: np.ndarray
+    steps: np.ndarray
+    #: which start each row came from ("warm", "grid", "reverse", …)
+    origins: list[str]
+    wall_s: float = 0.0
+    _result: Any = field(default=None, repr=False)
+
+    @property
+    def best(self) -> int:
+        c = np.where(np.isfinite(self.costs), self.costs, np.inf)
+        return int(np.argmin(c))
+
+    @property
+    def cost(self) -> float:
+        return float(self.costs[self.best])
+
+    @property
+    def u(self) -> np.ndarray:
+        return self.U[self.best]
+
+    @property
+    def finite(self) -> bool:
+        return bool(np.isfinite(self.cost))
+
+    @property
+    def n_unknowns(self) -> int:
+        return int(self.setup.problem.n_unknowns)
+
+    @property
+    def n_effective(self) -> float:
+        return float(self.setup.prep.n_effective)
+
+    @property
+    def model(self):
+        return self.setup.model
+
+    def values(self) -> dict[str, float]:
+        """Every parameter of the model at the best start (fixed ones included)."""
+        vals, *_ = self.setup.problem.unpack_np(self.u)
+        return {**self.setup.model.float_values(), **{k: float(v) for k, v in vals.items()}}
+
+    def rms_rad(self) -> float:
+        """RMS of the weighted data residual [rad], as :attr:`FitResult.rms_residual_rad`
+        defines it (``σ_q·√(χ²_data/n_eff)``)."""
+        if not self.finite:
+            return math.nan
+        chi2 = float(_data_chi2(self.setup.problem, jnp.asarray(self.u)))
+        sigma = float(self.setup.problem.sigma)
+        return sigma * math.sqrt(chi2 / self.n_effective)
+
+    def result(self):
+        """The analysed :class:`~hdid.FitResult` of the best start (computed once)."""
+        if self._result is None:
+            self._result = _finish(self.setup, self.U, self.costs, self.ok, self.steps,
+                                   time.perf_counter(), bracket=False)
+        return self._result
+
+
+def run(label: str, s: _Setup, starts: list[tuple[str, np.ndarray]],
+        max_steps: int = 300) -> StructureFit:
+    """Levenberg–Marquardt from every start (lanes of one program, :func:`hdid.fit`'s
+    schedule), with :func:`hdid.fit`'s restart of runs the optimum holds stuck."""
+    t0 = time.perf_counter()
+    origins = [o for o, _ in starts]
+    U0 = np.stack([np.asarray(u, dtype=float) for _, u in starts])
+    U, costs, ok, steps = _local_fits(s.problem, U0, max_steps)
+    c = np.where(np.isfinite(costs), costs, np.inf)
+    if np.isfinite(c).any():
+        retry = _untrapped(s.problem, s.prep, U[int(np.argmin(c))])
+        if retry is not None:
+            U1, c1, ok1, s1 = _local_fits(s.problem, retry[None, :], max_steps)
+            U, costs = np.concatenate([U, U1]), np.concatenate([costs, c1])
+            ok, steps = np.concatenate([ok, ok1]), np.concatenate([steps, s1])
+            origins.append("untrapped")
+    return StructureFit(label, s, np.asarray(U), np.asarray(costs, dtype=float),
+                        np.asarray(ok), np.asarray(steps), origins,
+                        time.perf_counter() - t0)
+
+
+def gauss_newton_step(s: _Setup, u: np.ndarray) -> tuple[float, np.ndarray]:
+    """χ² decrease predicted by one Gauss–Newton step from ``u`` (every unknown free),
+    ``rᵀJ (JᵀJ)⁺ Jᵀr``, and that step. At an optimum of the nested model extended by an
+    effect at zero this is the score statistic of the effect's parameters (Rao 1948): a
+    one-step screen of many discrete settings (ripple orders) before full refits."""
+    r, J = map(np.asarray, _residuals_and_jacobian(s.problem, jnp.asarray(u)))
+    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
+        return 0.0, np.zeros_like(np.asarray(u))
+    step, *_ = np.linalg.lstsq(J, -r, rcond=1e-10)
+    gain = float(-(J.T @ r) @ step)
+    return max(gain, 0.0), step
