@@ -563,7 +563,7 @@ def _phase_reporter(progress):
 
 
 def _base_starts(base_setup, current, cand_fits, values_reset):
-    """Starts for the current model from each candidate's optimum with its effect removed
+    """Starts for the current model from candidates' optima with the effect removed
     (parameters it shares with the current model, and its release instants, start angles
     and offsets), and from the catalog friction shape."""
     from . import _refit
@@ -721,7 +721,8 @@ def diagnose(
     say(f"fitting the base model ({' + '.join(model.effect_names)})")
     base_setup = _refit.setup(log, model, fit_options)
     current = _refit.run("base", base_setup,
-                         [("grid", u) for u in _refit.grid(base_setup, FULL_GRID_STARTS)])
+                         [("grid", u) for u in _refit.grid(base_setup, FULL_GRID_STARTS)],
+                         width=FULL_GRID_STARTS)
     if not current.finite:
         from ._errors import FitError
 
@@ -759,13 +760,20 @@ def diagnose(
         # The current model gets every start a candidate got: from each candidate's
         # optimum with the effect removed, and from the catalog friction shape. A
         # candidate is credited only with what the current model cannot reach.
-        cand_fits = [sf for v in by_key.values() if not isinstance(v, Exception) for sf in v]
+        # (only those that would be credited: strong evidence against the current fit)
+        k_now = current.n_unknowns
+        bic_now = bic_value(current.cost, current.n_effective, k_now)
+        cand_fits = sorted(
+            (sf for key, v in by_key.items() if not isinstance(v, Exception) for sf in v
+             if sf.finite and bic_value(sf.cost, sf.n_effective, sf.n_unknowns
+                                        + all_cands[key].scanned) - bic_now < STRONG_DBIC),
+            key=lambda sf: sf.cost)[: FULL_GRID_STARTS - 1]
         values = current.values()
         reset = _shape_reset(values) if _shape_is_unusual(values) else {}
         back = _base_starts(current.setup, current, cand_fits, reset)
         if back:
             say(f"  current model from {len(back)} candidate optima (effect removed)")
-            again = _refit.run(current.label, current.setup, back)
+            again = _refit.run(current.label, current.setup, back, width=FULL_GRID_STARTS)
             if again.finite and again.cost < current.cost - BASE_IMPROVED_DCHI2:
                 best_origin = again.origins[again.best]
                 notes.append(

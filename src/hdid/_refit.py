@@ -34,13 +34,6 @@ SETUP_OPTIONS = ("inertia", "fix", "free_inertia", "inertia_prior", "release_tim
 
 
 @eqx.filter_jit
-def _data_chi2(problem: Problem, u):
-    """χ² of the data residuals alone (no prior terms), in quantization variances."""
-    r = problem.data_residuals(u)
-    return jnp.sum(r**2)
-
-
-@eqx.filter_jit
 def _residuals_and_jacobian(problem: Problem, u):
     return problem.residuals_and_jacobian(u)
 
@@ -140,8 +133,13 @@ class StructureFit:
         defines it (``σ_q·√(χ²_data/n_eff)``)."""
         if not self.finite:
             return math.nan
-        chi2 = float(_data_chi2(self.setup.problem, jnp.asarray(self.u)))
-        sigma = float(self.setup.problem.sigma)
+        p = self.setup.problem
+        # the cost less its prior terms (NumPy: no program to compile for this)
+        P = p.n_physical
+        z = (self.u[:P] - np.asarray(p.prior_mean)) / np.asarray(p.prior_sd)
+        prior = float(np.sum(np.where(np.asarray(p.prior_on), z, 0.0) ** 2))
+        chi2 = max(self.cost - prior, 0.0)
+        sigma = float(p.sigma)
         return sigma * math.sqrt(chi2 / self.n_effective)
 
     def result(self):
@@ -153,10 +151,17 @@ class StructureFit:
 
 
 def run(label: str, s: _Setup, starts: list[tuple[str, np.ndarray]],
-        max_steps: int = 300) -> StructureFit:
+        max_steps: int = 300, width: int | None = None) -> StructureFit:
     """Levenberg–Marquardt from every start (lanes of one program, :func:`hdid.fit`'s
-    schedule), with :func:`hdid.fit`'s restart of runs the optimum holds stuck."""
+    schedule), with :func:`hdid.fit`'s restart of runs the optimum holds stuck.
+
+    ``width``: pad the lanes to a multiple of it (copies of the first start), so that
+    later runs of the same structure with another number of starts reuse its program.
+    """
     t0 = time.perf_counter()
+    starts = list(starts)
+    if width and len(starts) % width:
+        starts += [("pad", starts[0][1])] * (width - len(starts) % width)
     origins = [o for o, _ in starts]
     U0 = np.stack([np.asarray(u, dtype=float) for _, u in starts])
     U, costs, ok, steps = _local_fits(s.problem, U0, max_steps)
