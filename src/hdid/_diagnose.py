@@ -68,8 +68,9 @@ FULL_GRID_STARTS = 6
 AMBIGUOUS_DBIC = 10.0
 #: Discrete settings (orders) refitted after the one-step screen of all of them.
 SCAN_REFITS = 3
-#: Strong candidates whose residual is analysed (covariance, whiteness) per round.
-MAX_ANALYSED = 4
+#: Strong candidates whose residual is analysed (covariance, whiteness) per round: the
+#: verdict needs only the best one's (each analysis compiles programs of its own).
+MAX_ANALYSED = 1
 #: A restart of the current model counts as a better optimum when it lowers χ² by more
 #: than this (χ² in quantization variances: 1 is one standard error of the misfit).
 BASE_IMPROVED_DCHI2 = 1.0
@@ -624,7 +625,8 @@ def _candidate_fits(log, cand, current, hints, opts, n_grid, say, scans):
         for label, models in groups.items():
             s = setups[label]
             u0 = _refit.warm(s, models[0].float_values(), tail)
-            gains[label] = (*_refit.gauss_newton_step(s, u0), u0)
+            added = [n for n in s.problem.free if n not in current.setup.problem.free]
+            gains[label] = (*_refit.gauss_newton_step(s, u0, added), u0)
         order = sorted(gains, key=lambda lb: -gains[lb][0])
         scans[cand.key] = {lb: gains[lb][0] for lb in order}
         for label in order[:SCAN_REFITS]:

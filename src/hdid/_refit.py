@@ -169,23 +169,35 @@ def run(label: str, s: _Setup, starts: list[tuple[str, np.ndarray]],
     if np.isfinite(c).any():
         retry = _untrapped(s.problem, s.prep, U[int(np.argmin(c))])
         if retry is not None:
-            U1, c1, ok1, s1 = _local_fits(s.problem, retry[None, :], max_steps)
+            # as many lanes as the first call (copies): its compiled program is reused
+            U1, c1, ok1, s1 = _local_fits(s.problem, np.repeat(retry[None, :], len(U0), 0),
+                                          max_steps)
             U, costs = np.concatenate([U, U1]), np.concatenate([costs, c1])
             ok, steps = np.concatenate([ok, ok1]), np.concatenate([steps, s1])
-            origins.append("untrapped")
+            origins += ["untrapped"] * len(U1)
     return StructureFit(label, s, np.asarray(U), np.asarray(costs, dtype=float),
                         np.asarray(ok), np.asarray(steps), origins,
                         time.perf_counter() - t0)
 
 
-def gauss_newton_step(s: _Setup, u: np.ndarray) -> tuple[float, np.ndarray]:
-    """χ² decrease predicted by one Gauss–Newton step from ``u`` (every unknown free),
-    ``rᵀJ (JᵀJ)⁺ Jᵀr``, and that step. At an optimum of the nested model extended by an
-    effect at zero this is the score statistic of the effect's parameters (Rao 1948): a
-    one-step screen of many discrete settings (ripple orders) before full refits."""
+def gauss_newton_step(s: _Setup, u: np.ndarray, added: list[str]) -> tuple[float, np.ndarray]:
+    """Score screen of the parameters ``added`` at ``u``: the χ² decrease one Gauss–Newton
+    step predicts with every unknown free, less the decrease it predicts with ``added``
+    held (``rᵀJ(JᵀJ)⁺Jᵀr`` for the full and the reduced Jacobian), and the full step. At
+    an optimum of the nested model with the effect at zero this is Rao's score statistic
+    for the effect (1948): a one-step screen of many discrete settings (ripple orders)
+    before full refits, which sees the collinearity of a low order with stiffness and
+    offset (their columns are in both Jacobians)."""
     r, J = map(np.asarray, _residuals_and_jacobian(s.problem, jnp.asarray(u)))
     if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
         return 0.0, np.zeros_like(np.asarray(u))
-    step, *_ = np.linalg.lstsq(J, -r, rcond=1e-10)
-    gain = float(-(J.T @ r) @ step)
-    return max(gain, 0.0), step
+
+    def gain(M):
+        step, *_ = np.linalg.lstsq(M, -r, rcond=1e-10)
+        return float(-(M.T @ r) @ step), step
+
+    full, step = gain(J)
+    keep = [i for i in range(J.shape[1])
+            if i >= s.problem.n_physical or s.problem.free[i] not in added]
+    reduced, _ = gain(J[:, keep])
+    return max(full - reduced, 0.0), step
