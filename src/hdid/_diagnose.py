@@ -18,7 +18,9 @@ Orders
     (``RIPPLE_ORDERS`` plus the residual periodogram's two peaks; ``KINEMATIC_ORDERS``),
     low orders included: each is screened by one Gauss–Newton step from the current
     optimum (the score statistic, which sees the collinearity with stiffness and offset),
-    the best ``SCAN_REFITS`` are refitted, and the scan costs one parameter in the BIC.
+    the best ``SCAN_REFITS`` are refitted, and the scan costs one parameter in the BIC
+    plus ``2·ln M`` for choosing among ``M`` orders (a uniform prior over them: the
+    periodogram searches 120, so a ripple pays 9.6 for the freedom of its order).
     The scanned set and each order's one-step gain are in the report's notes.
 Evidence
     ``BIC = n·ln(max(χ², n − k)/n) + k·ln n`` (:func:`bic_value`), ``χ²`` in units of the
@@ -108,6 +110,14 @@ class Candidate:
     #: candidates of one family leave the same mark (a tie between them is no ambiguity
     #: about the physics, only about its form); "" = a family of its own
     family: str = ""
+    #: how many discrete settings the scan chooses from (M): choosing the best of M
+    #: costs ``2·ln M`` on the BIC's −2·ln L scale (a uniform prior over the settings),
+    #: besides the ``scanned`` parameter's ``ln n``
+    settings: int = 1
+
+    def penalty(self, n: float) -> float:
+        """BIC cost of the scanned settings: ``scanned·ln n + 2·ln M``."""
+        return self.scanned * math.log(n) + 2.0 * math.log(max(self.settings, 1))
 
 
 @dataclass
@@ -309,6 +319,9 @@ def _tau(values) -> float:
 #: the fit itself (one Gauss–Newton step, the score statistic) and the best
 #: ``SCAN_REFITS`` are refitted to convergence.
 RIPPLE_ORDERS = (1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0, 48.0)
+#: The residual periodogram searches integer orders 1 … this for peaks; with the fixed
+#: list inside that range, the ripple's order is chosen from this many settings.
+PERIODOGRAM_ORDERS = 120
 #: Orders of the kinematic error scanned (2 is the elliptical wave generator's).
 KINEMATIC_ORDERS = (1.0, 2.0, 3.0, 4.0)
 
@@ -393,7 +406,7 @@ def default_candidates() -> list[Candidate]:
         ),
         Candidate(
             "ripple", lambda m: not _has(m, "ripple"), _ripple_variants, scanned=1,
-            reset_shape=False, family="position-periodic",
+            reset_shape=False, family="position-periodic", settings=PERIODOGRAM_ORDERS,
             mark="the residual is periodic in the wave-generator angle, not in time, with the "
                  "same phase in every run",
             experiment="releases starting from different WG angles (shift the spring zero by "
@@ -411,7 +424,7 @@ def default_candidates() -> list[Candidate]:
         ),
         Candidate(
             "kinematic_error", cubic, _kinematic_variants, scanned=1, reset_shape=False,
-            family="position-periodic",
+            family="position-periodic", settings=len(KINEMATIC_ORDERS),
             mark="a spring torque modulated periodically in the WG angle",
             experiment="a driven input/output test with the output encoder: free motion "
                        "barely sees the positional error",
@@ -525,7 +538,7 @@ def _ripple_orders(frame, top: int = 2) -> list[float]:
         return []
     x = mov["theta_wg"].to_numpy()
     y = mov["residual_rad"].to_numpy() - mov["residual_rad"].mean()
-    orders = np.arange(1, 121, dtype=float)
+    orders = np.arange(1, PERIODOGRAM_ORDERS + 1, dtype=float)
     # sin(n·θ) with θ in rad has angular frequency n: the order per revolution
     power = lombscargle(x, y, orders)
     picks: list[float] = []
@@ -598,11 +611,14 @@ def _merge(a, b):
                         a.wall_s + b.wall_s)
 
 
-def _candidate_fits(log, cand, current, hints, opts, n_grid, say, scans):
+def _candidate_fits(log, cand, current, hints, opts, grid_points, say, scans):
     """Refit ``cand`` on ``log`` from ``current``: a list of StructureFits (one per
     discrete setting refitted) — warm starts from the current optimum with the effect at
     each variant's data-derived values (and from the catalog friction shape), plus the
-    best ``n_grid`` points of the data-driven grid. Scanned settings (orders) are first
+    best points of the base model's data-driven grid (``grid_points``: ``(values, tail)``
+    pairs) with the effect at its first variant's values. (The base grid's points, not
+    the candidate's own grid: the same data-driven rule, and one compiled grid program
+    instead of one per candidate.) Scanned settings (orders) are first
     screened by one Gauss–Newton step; the best ``SCAN_REFITS`` are refitted."""
     from . import _refit
 
@@ -637,15 +653,21 @@ def _candidate_fits(log, cand, current, hints, opts, n_grid, say, scans):
     for label, models in groups.items():
         s = setups[label]
         starts = [("warm", _refit.warm(s, m.float_values(), tail)) for m in models]
-        starts += [("grid", u) for u in _refit.grid(s, n_grid)]
+        first = models[0].float_values()
+        starts += [("grid", _refit.warm(s, {**first, **v}, t)) for v, t in grid_points]
         say(f"  + {label}  ({len(starts)} starts)")
         fits.append(_refit.run(label, s, starts))
     return fits
 
 
+def _cand_bic(sf, cand) -> float:
+    """BIC of a candidate's refit, its scan's cost included (:meth:`Candidate.penalty`)."""
+    return bic_value(sf.cost, sf.n_effective, sf.n_unknowns) + cand.penalty(sf.n_effective)
+
+
 def _record(cand, sf, current_fit, base_bic_k):
     """A :class:`CandidateResult` from a candidate's refit (ΔBIC against ``current_fit``)."""
-    dbic = (bic_value(sf.cost, sf.n_effective, sf.n_unknowns + cand.scanned)
+    dbic = (_cand_bic(sf, cand)
             - bic_value(current_fit.cost, current_fit.n_effective, base_bic_k))
     vals = sf.values()
     shown = {k: v for k, v in vals.items()
@@ -722,8 +744,8 @@ def diagnose(
 
     say(f"fitting the base model ({' + '.join(model.effect_names)})")
     base_setup = _refit.setup(log, model, fit_options)
-    current = _refit.run("base", base_setup,
-                         [("grid", u) for u in _refit.grid(base_setup, FULL_GRID_STARTS)],
+    base_grid = _refit.grid(base_setup, FULL_GRID_STARTS)
+    current = _refit.run("base", base_setup, [("grid", u) for u in base_grid],
                          width=FULL_GRID_STARTS)
     if not current.finite:
         from ._errors import FitError
@@ -749,6 +771,9 @@ def diagnose(
         # without static friction that never sticks): candidates get the full grid too.
         far = current.rms_rad() > FAR_FROM_FLOOR * floor
         n_grid = max(n_starts, FULL_GRID_STARTS) if far else n_starts
+        p0 = base_setup.problem
+        grid_points = [({k: float(v) for k, v in p0.unpack_np(u)[0].items()},
+                        _refit.tail_of(p0, u)) for u in base_grid[:n_grid]]
         by_key: dict[str, list] = {}
         for key in wanted:
             cand = all_cands[key]
@@ -756,7 +781,7 @@ def diagnose(
                 continue
             try:
                 by_key[key] = _candidate_fits(log, cand, current, hints, fit_options,
-                                              n_grid, say, scans)
+                                              grid_points, say, scans)
             except Exception as exc:  # one candidate failing must not stop the others
                 by_key[key] = exc
         # The current model gets every start a candidate got: from each candidate's
@@ -767,8 +792,7 @@ def diagnose(
         bic_now = bic_value(current.cost, current.n_effective, k_now)
         cand_fits = sorted(
             (sf for key, v in by_key.items() if not isinstance(v, Exception) for sf in v
-             if sf.finite and bic_value(sf.cost, sf.n_effective, sf.n_unknowns
-                                        + all_cands[key].scanned) - bic_now < STRONG_DBIC),
+             if sf.finite and _cand_bic(sf, all_cands[key]) - bic_now < STRONG_DBIC),
             key=lambda sf: sf.cost)[: FULL_GRID_STARTS - 1]
         values = current.values()
         reset = _shape_reset(values) if _shape_is_unusual(values) else {}
@@ -792,7 +816,7 @@ def diagnose(
                 current = _merge(current, again)
                 current._result = base_result
         if step == 0:
-            ladder.append(_ladder_step(" + ".join(current.model.effect_names), current, 0))
+            ladder.append(_ladder_step(" + ".join(current.model.effect_names), current, None))
         results: list[CandidateResult] = []
         k_base = current.n_unknowns
         for key, fits in by_key.items():
@@ -822,7 +846,7 @@ def diagnose(
         best = strong[0] if strong else None
         if best is None:
             break
-        ladder.append(_ladder_step(f"+ {best.label}", best.fit, all_cands[best.key].scanned))
+        ladder.append(_ladder_step(f"+ {best.label}", best.fit, all_cands[best.key]))
         if best.adequate_after or step + 1 >= steps or _rivals(best, strong, all_cands):
             break
         current = best.fit
@@ -857,26 +881,19 @@ def diagnose(
     )
 
 
-def cand_scanned(all_cands, c: CandidateResult) -> int:
-    return all_cands[c.key].scanned
-
-
-def _ladder_step(name: str, fit, scanned: int) -> dict[str, Any]:
-    """A ladder row from a FitResult or a refit (:class:`~hdid._refit.StructureFit`)."""
+def _ladder_step(name: str, fit, cand: Candidate | None) -> dict[str, Any]:
+    """A ladder row from a FitResult or a refit (:class:`~hdid._refit.StructureFit`); the
+    BIC includes the cost of ``cand``'s scan."""
     if hasattr(fit, "starts"):  # FitResult
-        return {
-            "model": name,
-            "effects": list(fit.model.effect_names),
-            "rms_rad": fit.rms_residual_rad,
-            "bic": bic(fit, scanned),
-            "n_unknowns": fit.n_unknowns,
-        }
+        chi2, n, k, rms = _chi2(fit), fit.n_effective, fit.n_unknowns, fit.rms_residual_rad
+    else:
+        chi2, n, k, rms = fit.cost, fit.n_effective, fit.n_unknowns, fit.rms_rad()
     return {
         "model": name,
         "effects": list(fit.model.effect_names),
-        "rms_rad": fit.rms_rad(),
-        "bic": bic_value(fit.cost, fit.n_effective, fit.n_unknowns + scanned),
-        "n_unknowns": fit.n_unknowns,
+        "rms_rad": rms,
+        "bic": bic_value(chi2, n, k) + (cand.penalty(n) if cand is not None else 0.0),
+        "n_unknowns": k,
     }
 
 
@@ -976,5 +993,5 @@ def model_ladder(log, models: Sequence, *, labels: Sequence[str] | None = None, 
     for i, m in enumerate(models):
         r = fit(log, m, **fit_options)
         name = labels[i] if labels else " + ".join(m.effect_names)
-        out.append({**_ladder_step(name, r, 0), "result": r})
+        out.append({**_ladder_step(name, r, None), "result": r})
     return out

@@ -19,12 +19,25 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from . import _config  # noqa: F401
-from ._fit import _finish, _grid_starts, _local_fits, _setup, _Setup, _untrapped
+from . import _programs
+from ._fit import (
+    LMState,
+    _choose_starts,
+    _finish,
+    _grid_candidates,
+    _lm_lanes,
+    _Schedule,
+    _setup,
+    _Setup,
+    _untrapped,
+    lanes_vmap,
+)
+from ._identifiability import band_limit, derived_quantities
 from ._problem import Problem
 from ._transforms import to_unconstrained
 
@@ -33,9 +46,54 @@ SETUP_OPTIONS = ("inertia", "fix", "free_inertia", "inertia_prior", "release_tim
                  "counts_per_rev", "max_substep", "ratio", "resolution")
 
 
-@eqx.filter_jit
 def _residuals_and_jacobian(problem: Problem, u):
     return problem.residuals_and_jacobian(u)
+
+
+def _costs(problem: Problem, U):
+    return jax.vmap(problem.cost)(U)
+
+
+def _solve_lanes(problem: Problem, U0, active, max_steps, state: LMState):
+    """:func:`hdid._fit._solve_lanes` (the same program), run through the program store."""
+    return _lm_lanes(
+        lanes_vmap(problem.residuals), lanes_vmap(problem.residuals_and_jacobian), U0, active,
+        max_steps, state,
+    )
+
+
+def _analysis_parts(p: Problem, u):
+    """The JAX parts of :func:`hdid._identifiability.analyse` at ``u`` (as
+    :func:`hdid._vfit._lane_analysis` computes them for one lane)."""
+    r, J = p.data_residuals_and_jacobian(u)
+    dense = p.simulate(u, full_output=True)
+    P = p.n_physical
+
+    def quantities(up):
+        return derived_quantities(p.model(jnp.concatenate([up, u[P:]])), band_limit(p))
+
+    return (J, r), dense, (quantities(u[:P]), jax.jacfwd(quantities)(u[:P]))
+
+
+def _local_fits(problem: Problem, U0, max_steps: int):
+    """:func:`hdid._fit._local_fits` with its program from :mod:`hdid._programs` (no
+    tracing in a process that finds it stored)."""
+    U = np.array(U0)
+    sched = _Schedule(len(U0), max_steps)
+    m = int(np.prod(problem.times.shape)) + problem.n_physical
+    state = LMState.empty(len(U0), m, U.shape[1])
+    while (task := sched.next()) is not None:
+        active, k, fresh = task
+        state = state._replace(fresh=np.where(active, fresh, np.asarray(state.fresh)))
+        U2, c2, done2, s2, state = _programs.call(
+            "solve_lanes", _solve_lanes, problem, jnp.asarray(U), jnp.asarray(active),
+            jnp.asarray(k), state,
+        )
+        state = LMState(*state)
+        U2 = np.asarray(U2)
+        U[active] = U2[active]
+        sched.update(np.asarray(c2), np.asarray(done2), np.asarray(s2))
+    return U, sched.costs, sched.ok, sched.steps
 
 
 def setup(log, model, options: dict[str, Any]) -> _Setup:
@@ -75,7 +133,9 @@ def grid(s: _Setup, n_starts: int) -> np.ndarray:
     parameter from its effect's ``Parameter.start`` rule at the log's own scales)."""
     if n_starts <= 0:
         return np.zeros((0, s.problem.n_unknowns))
-    U0, _ = _grid_starts(s.problem, s.prep, s.model, n_starts, False)
+    U, keys = _grid_candidates(s.problem, s.prep, s.model, False)
+    cost = np.asarray(_programs.call("grid_costs", _costs, s.problem, jnp.asarray(U)))
+    U0, _ = _choose_starts(U, cost, keys, n_starts, False)
     return np.asarray(U0)
 
 
@@ -145,8 +205,12 @@ class StructureFit:
     def result(self):
         """The analysed :class:`~hdid.FitResult` of the best start (computed once)."""
         if self._result is None:
+            parts = _programs.call("analysis", _analysis_parts, self.setup.problem,
+                                   jnp.asarray(self.u))
+            (J, r), dense, derived = jax.tree_util.tree_map(np.asarray, parts)
+            pre = {"jacobian": (J, r), "dense": dense, "derived": derived}
             self._result = _finish(self.setup, self.U, self.costs, self.ok, self.steps,
-                                   time.perf_counter(), bracket=False)
+                                   time.perf_counter(), bracket=False, precomputed=pre)
         return self._result
 
 
@@ -188,7 +252,8 @@ def gauss_newton_step(s: _Setup, u: np.ndarray, added: list[str]) -> tuple[float
     for the effect (1948): a one-step screen of many discrete settings (ripple orders)
     before full refits, which sees the collinearity of a low order with stiffness and
     offset (their columns are in both Jacobians)."""
-    r, J = map(np.asarray, _residuals_and_jacobian(s.problem, jnp.asarray(u)))
+    r, J = map(np.asarray, _programs.call("residuals_and_jacobian", _residuals_and_jacobian,
+                                          s.problem, jnp.asarray(u)))
     if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
         return 0.0, np.zeros_like(np.asarray(u))
 

@@ -69,10 +69,22 @@ def _state_at(problem, u, times):
     """Model WG angle from the spring zero, velocity and stuck flag at ``times`` (R, T')."""
     import jax.numpy as jnp
 
-    from ._identifiability import _dense
+    from . import _programs
 
-    theta, omega, stuck = _dense(problem, jnp.asarray(u), jnp.asarray(times, dtype=float))
+    theta, omega, stuck = _programs.call("dense", _dense, problem, jnp.asarray(u),
+                                         jnp.asarray(times, dtype=float))
     return np.asarray(theta), np.asarray(omega), np.asarray(stuck)
+
+
+def _dense(problem, u, times):
+    """:func:`hdid._identifiability._dense` (the same program), through the program
+    store (:mod:`hdid._programs`: a later process loads it instead of tracing)."""
+    return problem.simulate(u, times, full_output=True)
+
+
+def _data_jacobian(problem, u):
+    r, J = problem.data_residuals_and_jacobian(u)
+    return J, r
 
 
 def stick_times(result, fine_per_sample: int = FINE_PER_SAMPLE) -> np.ndarray:
@@ -258,10 +270,11 @@ def _null_moving_cov(result, frame: pd.DataFrame) -> list[np.ndarray]:
     """
     import jax.numpy as jnp
 
-    from ._identifiability import _jacobian
+    from . import _programs
 
     prob = result.problem
-    J, _ = map(np.asarray, _jacobian(prob, jnp.asarray(result.u)))
+    J, _ = map(np.asarray, _programs.call("jacobian", _data_jacobian, prob,
+                                          jnp.asarray(result.u)))
     R, T = np.asarray(prob.times).shape
     P = prob.n_physical
     prior = np.zeros(J.shape[1])
