@@ -9,8 +9,10 @@ structure (which holds every static field: model structure, free parameters, lay
 the shapes and dtypes of their arrays, the source of hdid and the versions of JAX and
 its backend — and keeps the serialized executable (``jax.experimental.
 serialize_executable``) under ``<cache>/programs``. A hit loads it without tracing. Any
-failure (a backend that cannot serialize, a stale file) falls back to the ordinary jit
-path, so results never depend on the store.
+failure (a backend that cannot serialize, a stale file, an executable XLA cannot restore
+— seen on CPU for small programs: "Function wrapped_iota not found") falls back to
+compiling in the process, and a program that failed to restore is never loaded again
+(``<key>.bad``), so results never depend on the store.
 """
 
 from __future__ import annotations
@@ -88,10 +90,29 @@ def call(name: str, fn: Callable, *args):
     except Exception:  # noqa: BLE001 - an unkeyable argument: the ordinary path
         return eqx.filter_jit(fn)(*args)
     prog = _LOADED.get(key)
-    if prog is None:
-        prog = _load(key) or _compile(key, fn, treedef, static, leaves)
-        _LOADED[key] = prog
+    if prog is not None:
+        return prog(*leaves)
+    prog = _load(key)
+    if prog is not None:
+        try:
+            out = prog(*leaves)
+            _LOADED[key] = prog
+            return out
+        except Exception:  # noqa: BLE001 - XLA could not restore it (seen on CPU:
+            # "Function wrapped_iota not found"): never load it again, compile here
+            _mark_bad(key)
+    prog = _compile(key, fn, treedef, static, leaves)
+    _LOADED[key] = prog
     return prog(*leaves)
+
+
+def _mark_bad(key: str) -> None:
+    store = _store()
+    if store is not None:
+        try:
+            (store / f"{key}.bad").touch()
+        except OSError:
+            pass
 
 
 def _load(key: str):
@@ -99,7 +120,7 @@ def _load(key: str):
     if store is None:
         return None
     path = store / f"{key}.bin"
-    if not path.exists():
+    if not path.exists() or (store / f"{key}.bad").exists():
         return None
     try:
         from jax.experimental import serialize_executable as se
@@ -129,7 +150,7 @@ def _compile(key: str, fn: Callable, treedef, static, leaves):
 
     compiled = jax.jit(flat).lower(*leaves).compile()
     store = _store()
-    if store is not None:
+    if store is not None and not (store / f"{key}.bad").exists():
         try:
             from jax.experimental import serialize_executable as se
 
