@@ -228,6 +228,11 @@ class Diagnosis:
         if self.notes:
             lines.append("[[notes]]")
             lines += [f"    - {n}" for n in self.notes]
+        if self.timing:
+            t = self.timing
+            lines += ["[[timing]]",
+                      f"    {t['total_s']:.1f} s: compiling/loading programs {t['compile_s']:.1f} s, "
+                      f"fitting {t['run_s']:.1f} s (CPU {t['cpu_s']:.1f} s)"]
         return "\n".join(lines)
 
     def __str__(self) -> str:
