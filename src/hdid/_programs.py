@@ -30,6 +30,10 @@ import jax
 
 from . import _config
 
+#: Modules that only orchestrate (no function of theirs is traced into a stored program:
+#: those come from ``_refit``, ``_residuals`` and the problem, model and effects they
+#: call): editing them does not invalidate the store.
+UNTRACED = frozenset({"_diagnose.py", "cli.py"})
 _ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
 _LOADED: dict[str, Any] = {}
 _SALT: str | None = None
@@ -42,6 +46,8 @@ def _salt() -> str:
         h = hashlib.sha256()
         root = Path(__file__).resolve().parent
         for f in sorted(root.rglob("*.py")):
+            if f.relative_to(root).as_posix() in UNTRACED:
+                continue
             h.update(str(f.relative_to(root)).encode())
             h.update(f.read_bytes())
         try:
