@@ -39,7 +39,7 @@ def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
     return lo, hi
 
 
-def run_design(name: str, n: int, gen, records: list) -> None:
+def run_design(name: str, n: int, gen, records: list, meta: dict | None = None) -> None:
     import hdid
     from hdid._synthetic import synthesize
 
@@ -72,6 +72,8 @@ def run_design(name: str, n: int, gen, records: list) -> None:
                 "compile_s": d.timing.get("compile_s"), "load1": load,
             }
             records.append(rec)
+            if meta is not None:  # results so far, in case the run is stopped
+                write(records, meta)
             print(f"{name} {i:3d} {d.verdict:15s} best {rec['best']} {rec['best_dbic']:.1f} "
                   f"RMS {rec['rms_before_floor']:.2f} {rec['wall_s']:.0f}s (load {load:.1f})",
                   flush=True)
@@ -127,7 +129,7 @@ def main(argv: list[str]) -> None:
             "src": src_fingerprint(), "n_per_design": n}
     records: list = []
     for design in designs:
-        run_design(design, n, gen, records)
+        run_design(design, n, gen, records, meta)
         write(records, meta)
     meta["load_end"] = " ".join(f"{x:.1f}" for x in os.getloadavg())
     write(records, meta)
