@@ -101,7 +101,8 @@ def call(name: str, fn: Callable, *args):
     prog = _load(key)
     if prog is not None:
         try:
-            out = prog(*leaves)
+            # (errors of a restored executable surface when its results are read)
+            out = jax.block_until_ready(prog(*leaves))
             _LOADED[key] = prog
             return out
         except Exception:  # noqa: BLE001 - XLA could not restore it (seen on CPU:
@@ -154,16 +155,26 @@ def _compile(key: str, fn: Callable, treedef, static, leaves):
     def flat(*xs):
         return fn(*eqx.combine(jax.tree_util.tree_unflatten(treedef, xs), static))
 
-    compiled = jax.jit(flat).lower(*leaves).compile()
     store = _store()
-    if store is not None and not (store / f"{key}.bad").exists():
-        try:
-            from jax.experimental import serialize_executable as se
+    lowered = jax.jit(flat).lower(*leaves)
+    if store is None or (store / f"{key}.bad").exists():
+        return lowered.compile()
+    # An executable read back from JAX's own persistent cache serializes without all of
+    # its kernels (restoring it fails: "Function broadcast_add_fusion not found"), so
+    # the program kept here is compiled afresh, once.
+    was = jax.config.jax_enable_compilation_cache
+    jax.config.update("jax_enable_compilation_cache", False)
+    try:
+        compiled = lowered.compile()
+    finally:
+        jax.config.update("jax_enable_compilation_cache", was)
+    try:
+        from jax.experimental import serialize_executable as se
 
-            blob = pickle.dumps(se.serialize(compiled))
-            tmp = store / f"{key}.{os.getpid()}.tmp"
-            tmp.write_bytes(blob)
-            os.replace(tmp, store / f"{key}.bin")
-        except Exception:  # noqa: BLE001 - cannot serialize here: in-process only
-            pass
+        blob = pickle.dumps(se.serialize(compiled))
+        tmp = store / f"{key}.{os.getpid()}.tmp"
+        tmp.write_bytes(blob)
+        os.replace(tmp, store / f"{key}.bin")
+    except Exception:  # noqa: BLE001 - cannot serialize here: in-process only
+        pass
     return compiled
