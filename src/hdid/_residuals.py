@@ -744,6 +744,7 @@ def _plot_run_rms(ax, frame: pd.DataFrame, n_bins: int) -> None:
         ax.plot(x, rms, "o", color="C0", label="moving RMS")
         ax.set_xticks(x, names, rotation=30, ha="right", fontsize=7)
     ax.axhline(floor, color="k", lw=0.8, ls="--", label="floor 1/√12 count")
+    ax.set_ylim(bottom=0.0)
     ax.set_ylabel("RMS [counts]")
     ax.legend(fontsize=7)
     ax.set_title(f"no spectrum ({n_bins} frequency bin(s)): RMS per run", fontsize=9)
