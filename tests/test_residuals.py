@@ -322,3 +322,34 @@ def test_plots_build_and_save(paper, no_stribeck, tmp_path):
     with pytest.raises(ValueError, match="6 axes"):
         R.plot_residuals(paper, axes=axes[0])
     plt.close("all")
+
+
+def test_residual_figure_shows_only_what_the_log_supports(paper, no_stribeck):
+    """At 250 Hz the gear moves 4–5 samples per run: whiteness gets 1 lag and the
+    periodogram 2 bins, which look like evidence and carry none (issue 18). Those panels
+    become the residual's distribution against ideal rounding and the per-run RMS against
+    the floor. A model that never sticks moves for the whole run (125 samples): there the
+    ACF (10 lags) and the spectrum (≥ 8 bins) are drawn."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    wt = R.whiteness(paper)
+    assert wt.max_lag < R.MIN_ACF_LAGS  # the premise: this log cannot support an ACF
+    fig = R.plot_residuals(paper)
+    ax_acf, ax_sp = fig.axes[4], fig.axes[5]
+    assert ax_acf.get_title().startswith("no ACF")
+    assert ax_sp.get_title().startswith("no spectrum")
+    assert ax_sp.get_yscale() == "linear"
+    # one point per run, each the run's moving RMS in counts
+    runs = R.residual_frame(paper).query("phase == 'moving'").groupby("run", observed=True)
+    pts = ax_sp.lines[0].get_ydata()
+    assert len(pts) == runs.ngroups
+    assert np.allclose(sorted(pts), sorted(np.sqrt((runs["residual_counts"]
+                                                    .apply(lambda r: np.mean(r**2)))).to_numpy()))
+    fig2 = R.plot_residuals(no_stribeck)
+    assert R.whiteness(no_stribeck).max_lag >= R.MIN_ACF_LAGS
+    assert fig2.axes[4].get_title().startswith("Ljung–Box")
+    assert fig2.axes[5].get_title() == "spectrum of moving residual"
+    plt.close("all")

@@ -52,6 +52,14 @@ LS_POINTS = 3000
 REST_WINDOW = (-0.1, 0.05)
 
 PHASES = ("hold", "moving", "stuck")
+#: The residual figure shows the ACF only when the shortest moving stretch gives at least
+#: this many lags (``whiteness``'s ``max_lag = n_min // 4``, i.e. ≥ 12 moving samples per
+#: run): a one- or two-lag ACF of a 250 Hz log (4–5 moving samples per run) is dominated
+#: by the fit's own projection (expected lag-1 value ≈ −0.5) and says nothing by eye.
+MIN_ACF_LAGS = 3
+#: ... and the spectrum only when the longest moving stretch gives at least this many
+#: frequency bins (``N // 2``): two or three points are no spectrum.
+MIN_SPECTRUM_BINS = 8
 
 
 # ---------------------------------------------------------------------------------------
@@ -61,10 +69,22 @@ def _state_at(problem, u, times):
     """Model WG angle from the spring zero, velocity and stuck flag at ``times`` (R, T')."""
     import jax.numpy as jnp
 
-    from ._identifiability import _dense
+    from . import _programs
 
-    theta, omega, stuck = _dense(problem, jnp.asarray(u), jnp.asarray(times, dtype=float))
+    theta, omega, stuck = _programs.call("dense", _dense, problem, jnp.asarray(u),
+                                         jnp.asarray(times, dtype=float))
     return np.asarray(theta), np.asarray(omega), np.asarray(stuck)
+
+
+def _dense(problem, u, times):
+    """:func:`hdid._identifiability._dense` (the same program), through the program
+    store (:mod:`hdid._programs`: a later process loads it instead of tracing)."""
+    return problem.simulate(u, times, full_output=True)
+
+
+def _data_jacobian(problem, u):
+    r, J = problem.data_residuals_and_jacobian(u)
+    return J, r
 
 
 def stick_times(result, fine_per_sample: int = FINE_PER_SAMPLE) -> np.ndarray:
@@ -250,10 +270,11 @@ def _null_moving_cov(result, frame: pd.DataFrame) -> list[np.ndarray]:
     """
     import jax.numpy as jnp
 
-    from ._identifiability import _jacobian
+    from . import _programs
 
     prob = result.problem
-    J, _ = map(np.asarray, _jacobian(prob, jnp.asarray(result.u)))
+    J, _ = map(np.asarray, _programs.call("jacobian", _data_jacobian, prob,
+                                          jnp.asarray(result.u)))
     R, T = np.asarray(prob.times).shape
     P = prob.n_physical
     prior = np.zeros(J.shape[1])
@@ -580,6 +601,12 @@ def _pyplot(path, axes):
 def plot_residuals(result, path=None, *, axes=None):
     """Residual [counts] against time, WG angle, velocity and output deflection; ACF; spectrum.
 
+    The ACF is drawn only with at least ``MIN_ACF_LAGS`` lags and the spectrum with at
+    least ``MIN_SPECTRUM_BINS`` frequency bins. A log with fewer moving samples per run
+    (250 Hz: 4–5) gets what it can support instead: the distribution of the pooled
+    moving residual against ideal rounding, and each run's moving RMS against the
+    floor with the range ideal rounding gives for that run's sample count.
+
     Parameters
     ----------
     result:
@@ -632,7 +659,7 @@ def plot_residuals(result, path=None, *, axes=None):
     ax_th.set_title("vs WG angle", fontsize=9)
     ax_om.set_title("vs velocity", fontsize=9)
     ax_def.set_title(f"vs output deflection ({len(mov)} moving samples)", fontsize=9)
-    if wt.n:
+    if wt.n and wt.max_lag >= MIN_ACF_LAGS:
         null = np.zeros(wt.max_lag) if wt.acf_null is None else wt.acf_null
         ax_acf.bar(wt.lags, 2 * wt.band, bottom=null - wt.band, width=0.8, color="0.85",
                    label="95 % white band")
@@ -640,20 +667,25 @@ def plot_residuals(result, path=None, *, axes=None):
         ax_acf.plot(wt.lags, null, "_", ms=18, mew=2, color="k", label="expected, correct model")
         ax_acf.set_xticks(wt.lags)
         ax_acf.legend(fontsize=7)
-    ax_acf.axhline(0, color="k", lw=0.5)
-    ax_acf.set_xlabel("lag [samples]")
-    ax_acf.set_ylabel("ACF of moving residual")
-    ax_acf.set_title(
-        f"Ljung–Box Q={wt.q:.2f}, p={wt.p_value:.3g}; RMS/floor {wt.rms_ratio:.2f}", fontsize=9
-    )
-    if sp.frequency.size:
+        ax_acf.axhline(0, color="k", lw=0.5)
+        ax_acf.set_xlabel("lag [samples]")
+        ax_acf.set_ylabel("ACF of moving residual")
+        ax_acf.set_title(
+            f"Ljung–Box Q={wt.q:.2f}, p={wt.p_value:.3g}; RMS/floor {wt.rms_ratio:.2f}",
+            fontsize=9,
+        )
+    else:
+        _plot_rounding_histogram(ax_acf, frame, wt)
+    if sp.frequency.size >= MIN_SPECTRUM_BINS:
         ax_sp.fill_between(sp.frequency, sp.lower, sp.upper, color="0.85", label="white 95 %")
         ax_sp.plot(sp.frequency, sp.power, "o-", ms=3, color="C0", label="periodogram")
         ax_sp.set_yscale("log")
         ax_sp.legend(fontsize=7)
-    ax_sp.set_xlabel("frequency [Hz]")
-    ax_sp.set_ylabel("power [rad²/Hz]")
-    ax_sp.set_title("spectrum of moving residual", fontsize=9)
+        ax_sp.set_xlabel("frequency [Hz]")
+        ax_sp.set_ylabel("power [rad²/Hz]")
+        ax_sp.set_title("spectrum of moving residual", fontsize=9)
+    else:
+        _plot_run_rms(ax_sp, frame, sp.frequency.size)
     verdict = "adequate" if wt.adequate else "NOT adequate"
     fig.suptitle(
         f"{result.source}: residuals — {verdict} (white={wt.white}, at floor={wt.at_floor})",
@@ -663,6 +695,59 @@ def plot_residuals(result, path=None, *, axes=None):
     if path is not None:
         fig.savefig(path, dpi=110)
     return fig
+
+
+def _plot_rounding_histogram(ax, frame: pd.DataFrame, wt) -> None:
+    """What a log too short per run for an ACF still supports: the distribution of the
+    pooled moving residual [counts] against ideal rounding (uniform on ±½ count)."""
+    mov = frame.loc[frame["phase"] == "moving", "residual_counts"].to_numpy(dtype=float)
+    if mov.size:
+        lim = max(1.0, float(np.ceil(np.max(np.abs(mov)) * 2) / 2))
+        ax.hist(mov, bins=np.arange(-lim, lim + 1e-9, 0.25), density=True, color="C0",
+                alpha=0.7, label=f"moving residual ({mov.size} samples)")
+    ax.plot([-0.5, -0.5, 0.5, 0.5], [0, 1, 1, 0], color="k", lw=1.2,
+            label="ideal rounding (uniform ±½ count)")
+    ax.set_xlabel("measured − model [counts]")
+    ax.set_ylabel("density")
+    ax.legend(fontsize=7)
+    lags = wt.max_lag if wt.n else 0
+    ax.set_title(
+        f"no ACF: {lags} lag(s) per run carry no evidence; RMS/floor {wt.rms_ratio:.2f}",
+        fontsize=9,
+    )
+
+
+def _plot_run_rms(ax, frame: pd.DataFrame, n_bins: int) -> None:
+    """Per-run RMS of the moving residual against the floor ``1/√12`` count, with the
+    95 % range of ``n`` ideal rounding errors (RMS² ~ σ²·χ²ₙ/n as a normal proxy:
+    ``σ²(1 ± 1.96·√(0.8/n))``, the uniform's fourth moment) — in place of a spectrum that
+    would have ``n_bins`` points."""
+    from scipy.stats import norm
+
+    z = norm.ppf(0.975)
+    floor = 1.0 / math.sqrt(12.0)
+    names, rms, lo, hi = [], [], [], []
+    mov = frame[frame["phase"] == "moving"]
+    for name, g in mov.groupby("run", sort=False, observed=True):
+        r = g["residual_counts"].to_numpy(dtype=float)
+        if r.size == 0:
+            continue
+        names.append(str(name))
+        rms.append(math.sqrt(float(np.mean(r**2))))
+        half = z * math.sqrt(0.8 / r.size)
+        lo.append(floor * math.sqrt(max(1.0 - half, 0.0)))
+        hi.append(floor * math.sqrt(1.0 + half))
+    x = np.arange(len(names))
+    if names:
+        ax.bar(x, np.array(hi) - np.array(lo), bottom=lo, width=0.8, color="0.85",
+               label="95 % range, ideal rounding")
+        ax.plot(x, rms, "o", color="C0", label="moving RMS")
+        ax.set_xticks(x, names, rotation=30, ha="right", fontsize=7)
+    ax.axhline(floor, color="k", lw=0.8, ls="--", label="floor 1/√12 count")
+    ax.set_ylim(bottom=0.0)
+    ax.set_ylabel("RMS [counts]")
+    ax.legend(fontsize=7)
+    ax.set_title(f"no spectrum ({n_bins} frequency bin(s)): RMS per run", fontsize=9)
 
 
 def plot_rest_approach(result, path=None, *, ax=None, window: tuple[float, float] = REST_WINDOW):

@@ -661,7 +661,9 @@ def diagnose_cmd(log, json_out, plot_out, residuals_out, candidates, steps, iner
             model,
             candidates=wanted,
             steps=steps,
-            progress=None if quiet else (lambda m: click.echo(m, err=True)),
+            # phases on a terminal only: redirected output gets the result alone
+            progress=(lambda m: click.echo(f"hdid: {m}", err=True))
+            if not quiet and _stderr_is_tty() else None,
             inertia=inertia,
             fix=fixed or None,
             release_time=release_time,

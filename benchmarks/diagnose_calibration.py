@@ -1,0 +1,140 @@
+"""False-alarm rate of ``hdid diagnose`` on clean logs, and its time per log.
+
+Per design (the paper's ±0.157 rad at 250 Hz, and a rich one: four amplitudes at 1 kHz):
+a log with nothing hidden is made with the independent generator
+(``data/synthetic/generate.py``) and fitted with the base model; then ``N`` clean logs
+are simulated *from that fitted model* with hdid's own simulator (``hdid.simulate``'s
+``synthesize``: the same release angles, rate and length, a random sub-sample release
+instant per run, rounded to the same 4000-count encoder) and diagnosed with every
+candidate. The base model is then exactly right, so every verdict other than
+``adequate`` and every candidate with ΔBIC < −10 is a false alarm. The rate is reported
+with its exact (Clopper–Pearson) 95 % binomial interval.
+
+Run: ``python benchmarks/diagnose_calibration.py [N] [paper|rich ...]``; writes
+``results/diagnose_calibration.{json,md}``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from _common import ROOT, cpu_model, import_generate, src_fingerprint
+
+OUT = ROOT / "benchmarks" / "results"
+RICH = dict(amplitudes=[0.157, -0.157, 0.12, -0.12, 0.08, -0.08, 0.05, -0.05], fs=1000.0,
+            duration=0.3, hold=0.04, offsets_by_setup={"A": 0.005})
+
+
+def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
+    from scipy.stats import beta
+
+    a = 1 - level
+    lo = 0.0 if k == 0 else float(beta.ppf(a / 2, k, n - k + 1))
+    hi = 1.0 if k == n else float(beta.ppf(1 - a / 2, k + 1, n - k))
+    return lo, hi
+
+
+def run_design(name: str, n: int, gen, records: list, meta: dict | None = None) -> None:
+    import hdid
+    from hdid._synthetic import synthesize
+
+    design = dict(RICH if name == "rich" else gen.PAPER_DESIGN)
+    truth = {k: v for k, v in gen.TRUTH_CSF8.items() if k != "ratio"}
+    seed_log = gen.make_log(truth, **{**design, "seed": 9001})
+    fitted = hdid.fit(seed_log)
+    amps = list(design["amplitudes"])
+    with tempfile.TemporaryDirectory() as tmp:
+        for i in range(n):
+            path = Path(tmp) / f"{name}_{i}.csv"
+            synthesize(path, amplitudes=amps, rate=design["fs"], duration=design["duration"],
+                       hold=design["hold"], offset=0.005, model=fitted.model, seed=1000 + i)
+            t0, c0 = time.perf_counter(), time.process_time()
+            load = os.getloadavg()[0]
+            try:
+                d = hdid.diagnose(path)
+            except Exception as exc:  # recorded: failures are results too
+                records.append({"design": name, "i": i, "error": repr(exc)})
+                print(f"{name} {i} FAILED {exc!r}", flush=True)
+                continue
+            best = d.best
+            rec = {
+                "design": name, "i": i, "verdict": d.verdict,
+                "best": best.key if best else None,
+                "best_dbic": best.delta_bic if best else None,
+                "strong": [c.key for c in d.candidates if c.error is None and c.delta_bic < -10],
+                "rms_before_floor": d.base.rms_residual_rad / d.floor_rad,
+                "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
+                "compile_s": d.timing.get("compile_s"), "load1": load,
+            }
+            records.append(rec)
+            if meta is not None:  # results so far, in case the run is stopped
+                write(records, meta)
+            print(f"{name} {i:3d} {d.verdict:15s} best {rec['best']} {rec['best_dbic']:.1f} "
+                  f"RMS {rec['rms_before_floor']:.2f} {rec['wall_s']:.0f}s (load {load:.1f})",
+                  flush=True)
+
+
+def write(records: list, meta: dict) -> None:
+    OUT.mkdir(exist_ok=True)
+    (OUT / "diagnose_calibration.json").write_text(
+        json.dumps({"meta": meta, "records": records}, indent=2) + "\n")
+    lines = [
+        "# `diagnose` false alarms on clean logs simulated from a fitted model",
+        "",
+        f"Run {meta['date']} on {meta['cpu']} ({meta['cores']} cores, load at start "
+        f"{meta['load']}), src {meta['src']}. `python benchmarks/diagnose_calibration.py`.",
+        "",
+        "A false alarm is any verdict other than `adequate`; `strong` counts logs where some "
+        "candidate had ΔBIC < −10. 95 % intervals are exact binomial (Clopper–Pearson).",
+        "",
+        "| design | logs | false alarms (verdict) | rate, 95 % interval | logs with a strong candidate | median s (wall) | median s (CPU) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for design in ("paper", "rich"):
+        rows = [r for r in records if r["design"] == design and "error" not in r]
+        if not rows:
+            continue
+        k = sum(r["verdict"] != "adequate" for r in rows)
+        s = sum(bool(r["strong"]) for r in rows)
+        lo, hi = clopper_pearson(k, len(rows))
+        wall = sorted(r["wall_s"] for r in rows)[len(rows) // 2]
+        cpu = sorted(r["cpu_s"] for r in rows)[len(rows) // 2]
+        lines.append(f"| {design} | {len(rows)} | {k} | {k / len(rows):.0%} [{lo:.0%}, {hi:.0%}] "
+                     f"| {s} | {wall:.0f} | {cpu:.0f} |")
+    fails = [r for r in records if "error" in r]
+    if fails:
+        lines += ["", f"{len(fails)} diagnose call(s) failed: "
+                  + "; ".join(f"{r['design']} {r['i']}: {r['error']}" for r in fails)]
+    lines += ["", "Per log:", "", "| design | # | verdict | best (ΔBIC) | RMS before / floor | s |",
+              "|---|---|---|---|---|---|"]
+    for r in records:
+        if "error" in r:
+            continue
+        lines.append(f"| {r['design']} | {r['i']} | {r['verdict']} | {r['best']} "
+                     f"({r['best_dbic']:.1f}) | {r['rms_before_floor']:.2f} | {r['wall_s']:.0f} |")
+    (OUT / "diagnose_calibration.md").write_text("\n".join(lines) + "\n")
+
+
+def main(argv: list[str]) -> None:
+    n = int(argv[0]) if argv and argv[0].isdigit() else 10
+    designs = [a for a in argv if not a.isdigit()] or ["paper", "rich"]
+    gen = import_generate()
+    meta = {"date": time.strftime("%Y-%m-%d %H:%M"), "cpu": cpu_model(),
+            "cores": os.cpu_count(), "load": " ".join(f"{x:.1f}" for x in os.getloadavg()),
+            "src": src_fingerprint(), "n_per_design": n}
+    records: list = []
+    for design in designs:
+        run_design(design, n, gen, records, meta)
+        write(records, meta)
+    meta["load_end"] = " ".join(f"{x:.1f}" for x in os.getloadavg())
+    write(records, meta)
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    main(sys.argv[1:])
