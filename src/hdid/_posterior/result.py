@@ -39,6 +39,8 @@ class PosteriorResult:
     widths: dict = field(default_factory=dict)  # name -> posterior/prior width, verdict
     compile_s: float = 0.0                   # first (compiling) log-posterior call
     stage_s: dict = field(default_factory=dict)  # wall time of each stage
+    method: str = "emcee"                    # "smc" (tempered SMC) or "emcee"
+    smc: dict = field(default_factory=dict)  # SMC: runs, particles, temperatures, evidence
 
     @property
     def converged(self) -> bool:
@@ -64,6 +66,8 @@ class PosteriorResult:
             "posterior": s,
             "posterior_width": dict(self.widths),
             "posterior_diagnostics": {
+                "method": self.method,
+                "smc": dict(self.smc) if self.smc else None,
                 "n_walkers": int(self.chain.shape[1]),
                 "n_steps": int(self.chain.shape[0]),
                 "burn_in": self.burn_in,
@@ -105,7 +109,18 @@ class PosteriorResult:
                 f"  {name:<26} {s['median']:12.5g}  [{s['ci68'][0]:.4g}, {s['ci68'][1]:.4g}]"
                 f"  [{s['ci95'][0]:.4g}, {s['ci95'][1]:.4g}]{tail}"
             )
-        lines.append(
+        if self.method == "smc":
+            z = self.smc.get("log_evidence", [])
+            lines.append(
+                f"  tempered SMC: {self.chain.shape[1]} independent runs × "
+                f"{self.chain.shape[0]} particles, {self.smc.get('temperatures')} temperatures, "
+                f"{self.smc.get('steps')} steps, random-walk acceptance "
+                f"{np.mean(self.acceptance):.2f}; log evidence {np.mean(z):.2f} ± "
+                f"{self.smc.get('log_evidence_sd', float('nan')):.2f} (sd between runs); "
+                f"{self.wall_time_s:.1f} s (of which compile {self.compile_s:.1f} s, mode "
+                f"search {self.mode_search_s:.1f} s)")
+        else:
+            lines.append(
             f"  {self.chain.shape[1]} walkers × {self.chain.shape[0]} steps (after "
             f"{self.burn_in} burn-in), max τ {np.nanmax(self.tau):.0f} = chain / "
             f"{self.chain.shape[0] / np.nanmax(self.tau):.1f}, acceptance {np.mean(self.acceptance):.2f}, "
