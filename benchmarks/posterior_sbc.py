@@ -82,7 +82,7 @@ def draw_truth(gen, rng, min_amplitude=None):
     raise RuntimeError("no truth with a band inside the design's smallest amplitude")
 
 
-def run_one(gen, design_name, design, seed, max_steps):
+def run_one(gen, design_name, design, seed, max_steps, method="smc"):
     import numpy as np
 
     import hdid
@@ -97,7 +97,7 @@ def run_one(gen, design_name, design, seed, max_steps):
     fit = hdid.fit(df, inertia=truth["inertia"])
     out["fit_s"] = time.perf_counter() - t0
     t1 = time.perf_counter()
-    post = hdid.sample_posterior(fit, seed=seed % 1000, max_steps=max_steps)
+    post = hdid.sample_posterior(fit, seed=seed % 1000, max_steps=max_steps, method=method)
     out["posterior_s"] = time.perf_counter() - t1
     out["load_end"] = _load()
     diag = post.to_dict()["posterior_diagnostics"]
@@ -108,7 +108,8 @@ def run_one(gen, design_name, design, seed, max_steps):
                tau_max=diag["tau_max"], compile_s=post.compile_s, stage_s=post.stage_s,
                mode_search_s=post.mode_search_s, n_modes=len(post.modes),
                move_acceptance=diag["move_acceptance"], warnings=list(post.warnings),
-               widths=post.to_dict()["posterior_width"])
+               widths=post.to_dict()["posterior_width"], method=post.method,
+               smc={k: v for k, v in post.smc.items() if k != "betas"})
     tv = {n: float(truth[n]) for n in REPORTED if n in truth}
     tv["stick_band_halfwidth_rad"] = float(info["stick_band_halfwidth"])
     values = {**post.samples, **post.derived}
@@ -206,6 +207,7 @@ def main(argv=None):
     ap.add_argument("--out-dir", type=Path, default=RESULTS)
     ap.add_argument("--name", default="posterior_sbc")
     ap.add_argument("--render", type=Path)
+    ap.add_argument("--method", default="smc", choices=("smc", "emcee"))
     args = ap.parse_args(argv)
     out_json = args.out_dir / f"{args.name}.json"
     out_md = args.out_dir / f"{args.name}.md"
@@ -229,7 +231,7 @@ def main(argv=None):
         if time.perf_counter() - t_start > 60 * args.budget_min:
             break
         try:
-            r = run_one(gen, name, design, seed, args.max_steps)
+            r = run_one(gen, name, design, seed, args.max_steps, args.method)
         except Exception:  # record and go on
             r = {"design": name, "seed": seed, "error": traceback.format_exc()}
         res["logs"].append(r)

@@ -89,12 +89,13 @@ def sample_posterior(
     modes="auto",
     linear_prior: tuple[str, ...] = LINEAR_PRIOR,
     sample_linear: tuple[str, ...] = SAMPLE_LINEAR,
-    method: str = "smc",
+    method: str = "auto",
     n_particles: int | None = None,
 ) -> PosteriorResult:
     """Sample the posterior of ``fit``'s parameters, until converged.
 
-    ``method="smc"`` (default): tempered sequential Monte Carlo from the optima's Laplace
+    ``method="auto"`` (default) is ``"smc"`` unless an emcee-only option (``n_steps``,
+    ``n_walkers``, ``moves``) is given. ``method="smc"``: tempered sequential Monte Carlo from the optima's Laplace
     mixture (:func:`~hdid._posterior.smc.sample_smc`: independent runs whose agreement is
     the convergence test; gives the log-evidence); ``n_particles`` per run. The other
     options below are emcee's (``method="emcee"``), kept for comparison
@@ -139,6 +140,10 @@ def sample_posterior(
         Log-transformed parameters the walkers move in the *value* of (default
         ``SAMPLE_LINEAR``); the density carries the Jacobian, so only the mixing changes.
     """
+    if method == "auto":
+        # emcee's own options ask for emcee (the CLI's --steps / --walkers); else SMC
+        emcee_asked = n_steps is not None or n_walkers is not None or moves is not None
+        method = "emcee" if emcee_asked else "smc"
     if method == "smc":
         from .smc import N_PARTICLES, sample_smc
 
