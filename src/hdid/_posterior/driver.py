@@ -149,7 +149,7 @@ def sample_posterior(
 
         progress = (sys.stderr.isatty() if progress is None else bool(progress)) and sys.stderr.isatty()
         return sample_smc(fit, n_particles=n_particles or N_PARTICLES, seed=seed,
-                          progress=progress, sigma_floor=sigma_floor)
+                          progress=progress, sigma_floor=sigma_floor, modes=modes)
     if method != "emcee":
         raise ValueError(f"method must be 'smc' or 'emcee', not {method!r}")
     import emcee

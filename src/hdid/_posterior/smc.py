@@ -168,7 +168,15 @@ def converge_smc(runs, lp, prob, labels):
 
 
 
-def _setup(fit, seed, sigma_floor=None):
+def _failed(conv):
+    """``conv`` marked as failing (tempering not finished: R-hat set to infinity)."""
+    from .diagnostics import Convergence
+
+    return Convergence(list(conv.names), np.full(len(conv.names), np.inf), conv.ess_bulk,
+                       conv.ess_tail)
+
+
+def _setup(fit, seed, sigma_floor=None, modes="auto"):
     """Log-posterior, optima and reference mixture, as :func:`sample_posterior` builds them."""
     from .density import LINEAR_PRIOR, PRIOR_HALF_WIDTH, SAMPLE_LINEAR, SIGMA_BOUNDS, LogPosterior
     from .density import residual_autocorrelation
@@ -198,7 +206,14 @@ def _setup(fit, seed, sigma_floor=None):
                       linear_prior=jnp.asarray(lin) if lin.any() else None,
                       sample_linear=jnp.asarray(samp) if samp.any() else None)
     t = time.perf_counter()
-    found = find_modes(fit, seed=seed)
+    if isinstance(modes, str):
+        if modes not in ("auto", "fit"):
+            raise ValueError(f"modes must be 'auto', 'fit' or a list of Mode, not {modes!r}")
+        found = find_modes(fit, seed=seed) if modes == "auto" else [_fit_mode(fit)]
+    else:
+        from dataclasses import replace
+
+        found = [replace(m) for m in modes]
     t_modes = time.perf_counter() - t
     P = prob.n_physical
     found = [m for m in found if np.all(np.abs(m.u[:P] - u_fit[:P]) < PRIOR_HALF_WIDTH)]
@@ -227,11 +242,15 @@ N_PARTICLES = 500
 N_RUNS = 4
 #: Random-walk Metropolis steps per tempering step (and per round at β = 1).
 N_MCMC = 10
+#: Steps in all (tempering, then rounds at β = 1 until converged). The rounds at β = 1
+#: only decorrelate clones; the runs' disagreement on the optima's weights (R-hat) is set
+#: at the tempering and falls only with more particles.
+MAX_ROUNDS = 25
 
 
 def sample_smc(fit, *, n_particles: int = N_PARTICLES, n_runs: int = N_RUNS,
-               n_mcmc: int = N_MCMC, max_rounds: int = 60, seed: int = 0,
-               progress: bool = False, sigma_floor: float | None = None):
+               n_mcmc: int = N_MCMC, max_rounds: int = MAX_ROUNDS, seed: int = 0,
+               progress: bool = False, sigma_floor: float | None = None, modes="auto"):
     """Tempered SMC posterior of ``fit`` (see the module docstring); a
     :class:`PosteriorResult` whose ``chain`` is ``(n_particles, n_runs, D)``."""
     from .._identifiability import unknown_labels
@@ -242,7 +261,7 @@ def sample_smc(fit, *, n_particles: int = N_PARTICLES, n_runs: int = N_RUNS,
 
     t0 = time.perf_counter()
     prob = fit.problem
-    lp, found, ref, warnings, temper, rho1, lin, t_modes = _setup(fit, seed, sigma_floor)
+    lp, found, ref, warnings, temper, rho1, lin, t_modes = _setup(fit, seed, sigma_floor, modes)
     D = lp.ndim
     labels = unknown_labels(prob, _RunNames(fit)) + ["log_noise_sigma"]
     t_c = time.perf_counter()
@@ -270,7 +289,13 @@ def sample_smc(fit, *, n_particles: int = N_PARTICLES, n_runs: int = N_RUNS,
     if conv is None:
         conv, C = converge_smc(list(zip(X, anc)), lp, prob, labels)
     n_temps = sum(1 for st in steps if min(st["beta"]) < 1.0) + 1
-    if not conv.converged:
+    reached = min(steps[-1]["beta"]) >= 1.0
+    if not reached:
+        warnings.append(
+            f"NOT CONVERGED: the tempering stopped at beta = {min(steps[-1]['beta']):.3g} < 1 "
+            f"after {len(steps)} steps (max_rounds): the particles are not posterior draws. "
+            "Raise max_rounds")
+    elif not conv.converged:
         name, what = conv.worst
         warnings.append(
             f"NOT CONVERGED: {n_runs} SMC runs of {n_particles} particles, {len(steps)} steps "
@@ -309,7 +334,7 @@ def sample_smc(fit, *, n_particles: int = N_PARTICLES, n_runs: int = N_RUNS,
         wall_time_s=time.perf_counter() - t0, temper=temper, residual_rho1=rho1, fit=fit,
         draws=U, burn_in=0, modes=found, mode_share=share, mode_search_s=t_modes,
         move_acceptance={"random_walk": float(np.mean(acc))}, n_components=len(found),
-        convergence=conv, widths=widths, compile_s=t_compile,
+        convergence=conv if reached else _failed(conv), widths=widths, compile_s=t_compile,
         stage_s={"mode_search": t_modes, "compile": t_compile, "smc": t_s,
                  "diagnostics": state["t_diag"]},
         method="smc",
