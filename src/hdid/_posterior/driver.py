@@ -89,17 +89,18 @@ def sample_posterior(
     modes="auto",
     linear_prior: tuple[str, ...] = LINEAR_PRIOR,
     sample_linear: tuple[str, ...] = SAMPLE_LINEAR,
-    method: str = "auto",
+    method: str = "emcee",
     n_particles: int | None = None,
 ) -> PosteriorResult:
     """Sample the posterior of ``fit``'s parameters, until converged.
 
-    ``method="auto"`` (default) is ``"smc"`` unless an emcee-only option (``n_steps``,
-    ``n_walkers``, ``moves``) is given. ``method="smc"``: tempered sequential Monte Carlo from the optima's Laplace
+    ``method="emcee"`` (default) is described below. ``method="smc"``: tempered
+    sequential Monte Carlo from the optima's Laplace
     mixture (:func:`~hdid._posterior.smc.sample_smc`: independent runs whose agreement is
     the convergence test; gives the log-evidence); ``n_particles`` per run. The other
-    options below are emcee's (``method="emcee"``), kept for comparison
-    (benchmarks/results/posterior_smc.md).
+    options below are emcee's. Neither is calibrated on the paper design yet, and SMC is
+    not measured on the rich design, where emcee converges in well under a minute
+    (benchmarks/README.md, "Posterior: tempered SMC").
 
     Modes: with ``modes="auto"`` (default) :func:`find_modes` restarts the local fit
     around ``fit`` and keeps every distinct optimum with its Laplace mass; the walkers
@@ -140,10 +141,6 @@ def sample_posterior(
         Log-transformed parameters the walkers move in the *value* of (default
         ``SAMPLE_LINEAR``); the density carries the Jacobian, so only the mixing changes.
     """
-    if method == "auto":
-        # emcee's own options ask for emcee (the CLI's --steps / --walkers); else SMC
-        emcee_asked = n_steps is not None or n_walkers is not None or moves is not None
-        method = "emcee" if emcee_asked else "smc"
     if method == "smc":
         from .smc import N_PARTICLES, sample_smc
 
