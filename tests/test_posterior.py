@@ -365,3 +365,63 @@ def test_no_progress_bar_unless_stderr_is_a_terminal(fit, capfd):
     sample_posterior(fit, n_steps=20, burn_in=0, seed=0, modes="fit", progress=True)
     err = capfd.readouterr().err
     assert "\r" not in err and "it/s" not in err
+
+
+# --- tempered SMC on the shipped log (the exact-target test is test_posterior_smc.py) ---
+
+
+@pytest.fixture(scope="module")
+def small_smc(fit):
+    """A deliberately small SMC on the shipped log (plumbing, not convergence)."""
+    from hdid._posterior.smc import sample_smc
+
+    return sample_smc(fit, n_particles=60, modes="fit", seed=2, max_rounds=12)
+
+
+def test_smc_result_reports_runs_evidence_and_convergence(small_smc):
+    post = small_smc
+    d = post.to_dict()["posterior_diagnostics"]
+    assert d["method"] == "smc" and post.chain.shape[:2] == (60, 4)
+    z = d["smc"]["log_evidence"]
+    assert len(z) == 4 and np.all(np.isfinite(z))
+    conv = d["convergence"]
+    assert "stick_band_halfwidth_rad" in conv["per_quantity"]
+    # 60 particles × 4 runs = 240 draws cannot reach ESS 400: it must say so, with the fix
+    assert d["converged"] is False
+    assert any("NOT CONVERGED" in w and "n_particles" in w for w in d["warnings"])
+    assert "tempered SMC" in post.report()
+
+
+def test_corner_has_units_no_offset_text_the_optimum_and_the_verdict(small_smc):
+    """k2 is ~5e7 and the band ~0.05: matplotlib's offset text ("1e7") overlapped between
+    panels; the power of ten goes into the label instead, with the unit."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    fig = small_smc.plot_corner()
+    fig.canvas.draw()
+    offsets = [t for ax in fig.axes for t in (ax.xaxis.get_offset_text().get_text(),
+                                              ax.yaxis.get_offset_text().get_text()) if t]
+    assert offsets == []
+    labels = [ax.get_xlabel() for ax in fig.axes if ax.get_xlabel()]
+    assert any(lbl.startswith("k2") and "10^{7}" in lbl and "N" in lbl for lbl in labels)
+    assert any("rad" in lbl for lbl in labels)
+    texts = [t.get_text() for t in fig.texts] + [
+        t.get_text() for lg in fig.legends for t in lg.get_texts()]
+    assert "least-squares optimum" in texts
+    assert any(t.startswith("NOT CONVERGED") for t in texts)
+
+
+def test_predictive_has_a_residual_row_in_encoder_steps(small_smc):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    R = len(small_smc.fit.runs)
+    fig = small_smc.plot_predictive(n_draws=20)
+    assert len(fig.axes) == 2 * R
+    assert fig.axes[R].get_ylabel() == "residual [encoder steps]"
+    # the band on the residual scale is visible: wider than a tenth of a step somewhere
+    coll = fig.axes[R].collections[0].get_paths()[0].vertices[:, 1]
+    assert np.ptp(coll) > 0.1
+    with pytest.raises(ValueError, match=r"\(2, 4\)"):
+        small_smc.plot_predictive(n_draws=5, axes=np.empty(3, dtype=object))

@@ -179,7 +179,17 @@ def plot_fit(result, path=None, *, axes=None, fine_rate: float = 20000.0):
 
 
 def plot_predictive(post, path=None, *, n_draws: int = 100, axes=None, seed: int = 0):
-    """Posterior-predictive band (5–95 % and 25–75 %) over each measured run."""
+    """Posterior-predictive check of each measured run, on two scales.
+
+    Top row: the readings and the model's 90 % / 50 % posterior band at full scale (there
+    the band is thinner than a marker). Bottom row, the residual scale: everything minus the
+    posterior-median model, in encoder steps — the readings (dots), the model's 90 % / 50 %
+    band (the parameters' uncertainty) and the 95 % predictive interval of a *reading*
+    (dashed: a draw of the model plus its noise ``σ_n`` and the rounding ``q²/12``), so a
+    reading outside the dashed lines is one the posterior does not expect.
+
+    ``axes``: ``(2, R)`` for both rows, or ``R`` axes for the residual row only.
+    """
     import jax.numpy as jnp
     import matplotlib
 
@@ -193,33 +203,69 @@ def plot_predictive(post, path=None, *, n_draws: int = 100, axes=None, seed: int
     prob = fit.problem
     times = np.asarray(prob.times)
     meas = np.asarray(prob.theta)
+    q = float(prob.step)
     R = times.shape[0]
     rng = np.random.default_rng(seed)
     idx = rng.choice(post.draws.shape[0], size=min(n_draws, post.draws.shape[0]), replace=False)
+    draws = post.draws[idx]
     fine = np.stack([np.linspace(t[0], t[-1], int((t[-1] - t[0]) * 5000) + 1) for t in times])
-    pred = np.asarray(_predict_batch(prob, jnp.asarray(post.draws[idx]), jnp.asarray(fine)))
+    pred = np.asarray(_predict_batch(prob, jnp.asarray(draws), jnp.asarray(fine)))
+    pred_s = np.asarray(_predict_batch(prob, jnp.asarray(draws), jnp.asarray(times)))
+    centre_f = np.median(pred, axis=0)
+    centre_s = np.median(pred_s, axis=0)
+    # a reading: model draw + noise (σ_n² + q²/12, as in the likelihood)
+    var = np.exp(2 * draws[:, -1])[:, None, None] + (q**2 / 12.0 if fit.resolution_known else 0.0)
+    readings = pred_s + np.sqrt(var) * rng.standard_normal(pred_s.shape)
     if axes is None:
-        fig, axes = plt.subplots(1, R, figsize=(3.2 * R + 1, 3.4), squeeze=False)
-        axes = axes[0]
+        fig, axes = plt.subplots(2, R, figsize=(3.2 * R + 1, 6.2), squeeze=False,
+                                 sharex="col")
+        top, bottom = axes[0], axes[1]
     else:
-        axes = np.atleast_1d(axes)
-        fig = axes[0].figure
+        axes = np.asarray(axes)
+        if axes.ndim == 2 and axes.shape == (2, R):
+            top, bottom = axes[0], axes[1]
+        elif axes.ndim == 1 and axes.size == R:
+            top, bottom = [None] * R, axes
+        else:
+            raise ValueError(f"axes: {R} (residual row) or shape (2, {R}) (both rows), "
+                             f"not {axes.shape}")
+        fig = bottom[0].figure
     for i, run in enumerate(fit.runs):
-        ax = axes[i]
         t0 = run.release_time
         sel = (fine[i] >= t0 - 0.01) & (fine[i] <= t0 + 0.05)
-        lo, q1, q3, hi = np.percentile(pred[:, i, sel], [5, 25, 75, 95], axis=0)
-        ax.fill_between(fine[i, sel], lo, hi, color="C0", alpha=0.25, label="90 % predictive")
-        ax.fill_between(fine[i, sel], q1, q3, color="C0", alpha=0.45, label="50 %")
         n = run.n_samples
         ms = (times[i, :n] >= t0 - 0.01) & (times[i, :n] <= t0 + 0.05)
-        ax.plot(times[i, :n][ms], meas[i, :n][ms], "o", ms=3.5, mfc="none", color="k", label="encoder")
-        ax.set_title(f"run {run.name}", fontsize=9)
+        ts = times[i, :n][ms]
+        if top[i] is not None:
+            ax = top[i]
+            lo, q1, q3, hi = np.percentile(pred[:, i, sel], [5, 25, 75, 95], axis=0)
+            ax.fill_between(fine[i, sel], lo, hi, color="C0", alpha=0.25, label="model 90 %")
+            ax.fill_between(fine[i, sel], q1, q3, color="C0", alpha=0.45, label="model 50 %")
+            ax.plot(ts, meas[i, :n][ms], "o", ms=3.5, mfc="none", color="k", label="encoder")
+            ax.set_title(f"run {run.name}", fontsize=9)
+            if i == 0:
+                ax.set_ylabel("encoder reading [rad]")
+                ax.legend(fontsize=7)
+        ax = bottom[i]
+        d = (pred[:, i, sel] - centre_f[i, sel]) / q
+        lo, q1, q3, hi = np.percentile(d, [5, 25, 75, 95], axis=0)
+        ax.fill_between(fine[i, sel], lo, hi, color="C0", alpha=0.25, label="model 90 %")
+        ax.fill_between(fine[i, sel], q1, q3, color="C0", alpha=0.45, label="model 50 %")
+        rd = (readings[:, i, :n][:, ms] - centre_s[i, :n][ms]) / q
+        plo, phi = np.percentile(rd, [2.5, 97.5], axis=0)
+        ax.plot(ts, plo, "--", color="C1", lw=1, label="reading 95 %")
+        ax.plot(ts, phi, "--", color="C1", lw=1)
+        ax.plot(ts, (meas[i, :n][ms] - centre_s[i, :n][ms]) / q, "o", ms=3.5, mfc="none",
+                color="k", label="encoder − median model")
+        ax.axhline(0.0, color="0.5", lw=0.6)
         ax.set_xlabel("time [s]")
+        if top[i] is None:
+            ax.set_title(f"run {run.name}", fontsize=9)
         if i == 0:
-            ax.set_ylabel("WG angle [rad]")
+            ax.set_ylabel("residual [encoder steps]")
             ax.legend(fontsize=7)
-    fig.suptitle(f"{fit.source}: posterior predictive ({len(idx)} draws)", fontsize=10)
+    fig.suptitle(f"{fit.source}: posterior predictive ({len(idx)} draws; bottom: minus the "
+                 "posterior-median model)", fontsize=10)
     fig.tight_layout()
     if path is not None:
         fig.savefig(path, dpi=110)

@@ -89,8 +89,18 @@ def sample_posterior(
     modes="auto",
     linear_prior: tuple[str, ...] = LINEAR_PRIOR,
     sample_linear: tuple[str, ...] = SAMPLE_LINEAR,
+    method: str = "emcee",
+    n_particles: int | None = None,
 ) -> PosteriorResult:
-    """Sample the posterior of ``fit``'s parameters with emcee, until converged.
+    """Sample the posterior of ``fit``'s parameters, until converged.
+
+    ``method="emcee"`` (default) is described below. ``method="smc"``: tempered
+    sequential Monte Carlo from the optima's Laplace
+    mixture (:func:`~hdid._posterior.smc.sample_smc`: independent runs whose agreement is
+    the convergence test; gives the log-evidence); ``n_particles`` per run. The other
+    options below are emcee's. Neither is calibrated on the paper design yet, and SMC is
+    not measured on the rich design, where emcee converges in well under a minute
+    (benchmarks/README.md, "Posterior: tempered SMC").
 
     Modes: with ``modes="auto"`` (default) :func:`find_modes` restarts the local fit
     around ``fit`` and keeps every distinct optimum with its Laplace mass; the walkers
@@ -131,6 +141,14 @@ def sample_posterior(
         Log-transformed parameters the walkers move in the *value* of (default
         ``SAMPLE_LINEAR``); the density carries the Jacobian, so only the mixing changes.
     """
+    if method == "smc":
+        from .smc import N_PARTICLES, sample_smc
+
+        progress = (sys.stderr.isatty() if progress is None else bool(progress)) and sys.stderr.isatty()
+        return sample_smc(fit, n_particles=n_particles or N_PARTICLES, seed=seed,
+                          progress=progress, sigma_floor=sigma_floor, modes=modes)
+    if method != "emcee":
+        raise ValueError(f"method must be 'smc' or 'emcee', not {method!r}")
     import emcee
 
     t0 = time.perf_counter()

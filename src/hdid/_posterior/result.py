@@ -39,6 +39,8 @@ class PosteriorResult:
     widths: dict = field(default_factory=dict)  # name -> posterior/prior width, verdict
     compile_s: float = 0.0                   # first (compiling) log-posterior call
     stage_s: dict = field(default_factory=dict)  # wall time of each stage
+    method: str = "emcee"                    # "smc" (tempered SMC) or "emcee"
+    smc: dict = field(default_factory=dict)  # SMC: runs, particles, temperatures, evidence
 
     @property
     def converged(self) -> bool:
@@ -64,6 +66,8 @@ class PosteriorResult:
             "posterior": s,
             "posterior_width": dict(self.widths),
             "posterior_diagnostics": {
+                "method": self.method,
+                "smc": dict(self.smc) if self.smc else None,
                 "n_walkers": int(self.chain.shape[1]),
                 "n_steps": int(self.chain.shape[0]),
                 "burn_in": self.burn_in,
@@ -105,7 +109,18 @@ class PosteriorResult:
                 f"  {name:<26} {s['median']:12.5g}  [{s['ci68'][0]:.4g}, {s['ci68'][1]:.4g}]"
                 f"  [{s['ci95'][0]:.4g}, {s['ci95'][1]:.4g}]{tail}"
             )
-        lines.append(
+        if self.method == "smc":
+            z = self.smc.get("log_evidence", [])
+            lines.append(
+                f"  tempered SMC: {self.chain.shape[1]} independent runs × "
+                f"{self.chain.shape[0]} particles, {self.smc.get('temperatures')} temperatures, "
+                f"{self.smc.get('steps')} steps, random-walk acceptance "
+                f"{np.mean(self.acceptance):.2f}; log evidence {np.mean(z):.2f} ± "
+                f"{self.smc.get('log_evidence_sd', float('nan')):.2f} (sd between runs); "
+                f"{self.wall_time_s:.1f} s (of which compile {self.compile_s:.1f} s, mode "
+                f"search {self.mode_search_s:.1f} s)")
+        else:
+            lines.append(
             f"  {self.chain.shape[1]} walkers × {self.chain.shape[0]} steps (after "
             f"{self.burn_in} burn-in), max τ {np.nanmax(self.tau):.0f} = chain / "
             f"{self.chain.shape[0] / np.nanmax(self.tau):.1f}, acceptance {np.mean(self.acceptance):.2f}, "
@@ -147,12 +162,53 @@ class PosteriorResult:
         self.to_inference_data().to_netcdf(str(path))
 
     def plot_corner(self, path=None, names=None, fig=None):
-        import corner
+        """Corner plot of the free parameters (and the stick-band half-width).
 
-        names = names or [n for n in self.samples if np.ptp(self.samples[n]) > 0]
-        data = np.column_stack([self.samples[n] for n in names])
-        fig = corner.corner(data, labels=names, quantiles=[0.16, 0.5, 0.84], fig=fig,
-                            show_titles=True, title_fmt=".3g")
+        Each axis is in the parameter's unit with its power of ten in the label (no
+        matplotlib offset text, which overlapped between panels); the least-squares optimum
+        is marked (orange lines); a posterior that did not converge says so in red.
+        """
+        import corner
+        import matplotlib.lines as mlines
+
+        specs = self.fit.model.parameter_specs()
+        names = names or ([n for n in self.samples if np.ptp(self.samples[n]) > 0]
+                          + ["stick_band_halfwidth_rad"])
+        values = {**self.samples, **self.derived}
+        lsq = dict(self.fit.model.float_values())
+        cols, labels, marks = [], [], []
+        for n in names:
+            v = np.asarray(values[n], dtype=float)
+            unit = specs[n].unit if n in specs else ("rad" if n.endswith("_rad") else "")
+            m = float(np.nanmedian(np.abs(v))) or 1.0
+            e = int(np.floor(np.log10(m))) if np.isfinite(m) and m > 0 else 0
+            e = e if abs(e) >= 3 else 0
+            f = 10.0 ** -e
+            cols.append(v * f)
+            scale = f"10^{{{e}}}\\," if e else ""
+            labels.append(f"{n}\n[${scale}$ {unit}]" if scale else f"{n}\n[{unit}]" if unit else n)
+            ref = lsq.get(n)
+            if ref is None and n in getattr(self.fit, "derived", {}):
+                ref = self.fit.derived[n][0]
+            marks.append(None if ref is None else float(ref) * f)
+        data = np.column_stack(cols)
+        fig = corner.corner(data, labels=labels, quantiles=[0.16, 0.5, 0.84], fig=fig,
+                            show_titles=True, title_fmt=".3g", truths=marks,
+                            truth_color="C1", max_n_ticks=3, label_kwargs={"fontsize": 9},
+                            title_kwargs={"fontsize": 8})
+        from matplotlib.ticker import ScalarFormatter
+
+        for ax in fig.axes:  # values are scaled to ~1–1000: no offset or exponent text
+            for axis in (ax.xaxis, ax.yaxis):
+                if isinstance(axis.get_major_formatter(), ScalarFormatter):
+                    axis.get_major_formatter().set_useOffset(False)
+                    axis.get_major_formatter().set_scientific(False)
+        handles = [mlines.Line2D([], [], color="C1", label="least-squares optimum")]
+        fig.legend(handles=handles, loc="upper right", fontsize=9, frameon=False)
+        if not self.converged:
+            name, what = self.convergence.worst if self.convergence is not None else ("?", "")
+            fig.text(0.5, 0.99, f"NOT CONVERGED (worst: {name}, {what}) — intervals unreliable",
+                     color="C3", ha="center", va="top", fontsize=11, weight="bold")
         if path is not None:
             fig.savefig(path, dpi=90)
         return fig

@@ -1,0 +1,347 @@
+"""Tempered sequential Monte Carlo (blackjax) from the optima's Laplace mixture to the posterior.
+
+Path: ``π_β ∝ q^{1−β} p^β``, ``β`` from 0 to 1, where ``p`` is the log-posterior of
+:mod:`.density` and ``q`` a normalised Student-t mixture with one component per optimum that
+:func:`~hdid._posterior.modes.find_modes` finds (Laplace mean and covariance, widened by
+``REF_SCALE``). Particles start as exact draws from ``q``; each step picks the next ``β``
+so that the incremental weights keep an ESS of ``TARGET_ESS`` × N (blackjax
+``adaptive_tempered_smc``), resamples (systematic) and moves every particle with
+``n_mcmc`` random-walk Metropolis steps at the current ``β`` whose proposal covariance is
+that of the particle's own cluster (a mixture refitted to the particles at every step, so a
+particle in one optimum is not proposed across to another). Because ``q`` is normalised,
+the sum of the steps' log mean incremental weights estimates ``log ∫ p`` — the evidence
+under the sampler's prior (up to the flat boxes' constant, the same for every model with
+the same free parameters).
+
+Convergence (the honest SMC analogue of the chain criterion): ``n_runs`` independent runs;
+their final particles, each run's sorted by ancestor (clones of one ancestor side by side,
+so that arviz's autocorrelation sees them), are taken as chains: every sampled quantity and
+the band must have rank-normalised R-hat ≤ 1.01 between runs and bulk and tail ESS ≥ 400.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+
+import jax.numpy as jnp
+import numpy as np
+
+#: Adaptive tempering keeps this fraction of the particles' ESS at every step.
+TARGET_ESS = 0.5
+#: Width of the reference mixture's components in units of the Laplace widths.
+REF_SCALE = 1.5
+#: Degrees of freedom of the reference t components (heavier tails than the posterior).
+REF_NU = 5.0
+
+
+def _proposal_chols(X, w, mix, scale):
+    """Per-particle random-walk Cholesky factors: each particle's cluster covariance (the
+    mixture refitted to the weighted particles), times ``scale``."""
+    idx = np.random.default_rng(0).choice(len(w), size=len(w), p=w / w.sum())
+    mix = mix.refit(X[idx])
+    comp = np.argmax(mix.component_logpdf(X), axis=1)
+    D = X.shape[1]
+    chols = np.empty((len(mix.weights), D, D))
+    for k, c in enumerate(mix.covs):
+        c = 0.5 * (c + c.T)
+        chols[k] = np.linalg.cholesky(c + 1e-10 * np.trace(c) / D * np.eye(D))
+    return mix, scale * chols[comp]
+
+
+def _systematic(rng, w, n):
+    u = (rng.random() + np.arange(n)) / n
+    return np.minimum(np.searchsorted(np.cumsum(w), u), len(w) - 1)
+
+
+def _next_delta(ll, beta, n_target):
+    """Largest ``Δβ ≤ 1 − β`` whose incremental weights ``exp(Δβ·ll)`` keep an ESS of
+    ``n_target`` (bisection; equal weights before the step, as after resampling)."""
+    ok = np.isfinite(ll)
+    if not ok.any():
+        return 1.0 - beta
+
+    def ess(d):
+        a = np.where(ok, d * np.where(ok, ll, 0.0), -np.inf)
+        a = np.exp(a - a.max())
+        return a.sum() ** 2 / np.sum(a * a)
+
+    hi = 1.0 - beta
+    if ess(hi) >= n_target:
+        return hi
+    lo = 0.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if ess(mid) >= n_target else (lo, mid)
+    return max(lo, 1e-12)
+
+
+def run_smc_np(lp, ref, n_particles: int, n_runs: int, seed: int, n_mcmc: int = 10,
+               max_steps: int = 100, progress=None, final_rounds: int = 1):
+    """``n_runs`` independent adaptive tempered SMC runs moved together (their particles in
+    one batched log-posterior call). Returns ``(X, ancestors, log_z, steps)``: final
+    particles ``(R, N, D)`` (sampled coordinates, equal weights: resampled and moved at
+    ``β = 1``), each one's ancestor at the last resampling ``(R, N)``, the log-evidence
+    estimate of each run ``(R,)`` and per-step diagnostics. Once every run is at ``β = 1``
+    the particles are moved ``final_rounds`` more times (rounds of ``n_mcmc`` steps, no
+    resampling: the weights are equal); ``max_steps`` steps in all at most."""
+    rng = np.random.default_rng(seed)
+    R, N = n_runs, n_particles
+    D = ref.ndim
+
+    def logp(X):
+        v = np.asarray(lp.batch(X.reshape(-1, D)), dtype=float).reshape(X.shape[:-1])
+        return np.where(np.isfinite(v), v, -np.inf)
+
+    def logq(X):
+        return ref.logpdf(X.reshape(-1, D)).reshape(X.shape[:-1])
+
+    X = ref.sample(R * N, rng).reshape(R, N, D)
+    LP, LQ = logp(X), logq(X)
+    beta = np.zeros(R)
+    log_z = np.zeros(R)
+    anc = np.tile(np.arange(N), (R, 1))
+    scale = np.full(R, 2.38 / math.sqrt(D))
+    mixes = [ref] * R
+    steps = []
+    rounds_at_one = 0
+    for it in range(max_steps):
+        t_step = time.perf_counter()
+        final = beta >= 1.0
+        # reweight to the next temperature, then resample
+        for r in range(R):
+            if final[r]:
+                continue
+            ll = LP[r] - LQ[r]
+            d = _next_delta(ll, beta[r], TARGET_ESS * N)
+            a = np.where(np.isfinite(ll), d * np.where(np.isfinite(ll), ll, 0.0), -np.inf)
+            m = a.max()
+            log_z[r] += m + math.log(np.mean(np.exp(a - m)))
+            w = np.exp(a - m)
+            beta[r] = min(1.0, beta[r] + d) if beta[r] + d < 1.0 - 1e-12 else 1.0
+            # systematic resampling, then a random order: the particles' position carries
+            # no genealogy, so that sorting by the last ancestor groups clones and only them
+            idx = _systematic(rng, w / w.sum(), N)[rng.permutation(N)]
+            X[r], LP[r], LQ[r], anc[r] = X[r, idx], LP[r, idx], LQ[r, idx], idx
+        # move: random-walk Metropolis at the new β with each particle's cluster covariance
+        chols = np.empty((R, N, D, D))
+        for r in range(R):
+            mixes[r], chols[r] = _proposal_chols(X[r], np.ones(N), mixes[r], 1.0)
+        acc = np.zeros(R)
+        for _ in range(n_mcmc):
+            Z = rng.standard_normal((R, N, D))
+            Y = X + scale[:, None, None] * np.einsum("rnij,rnj->rni", chols, Z)
+            LPy, LQy = logp(Y), logq(Y)
+            b = beta[:, None]
+            with np.errstate(invalid="ignore"):
+                la = (b * LPy + (1 - b) * LQy) - (b * LP + (1 - b) * LQ)
+            take = np.log(rng.random((R, N))) < np.where(np.isfinite(la), la, -np.inf)
+            X = np.where(take[..., None], Y, X)
+            LP, LQ = np.where(take, LPy, LP), np.where(take, LQy, LQ)
+            acc += take.mean(axis=1) / n_mcmc
+        scale *= np.clip(np.exp(2.0 * (acc - 0.25)), 0.5, 2.0)
+        steps.append({"beta": beta.tolist(), "acceptance": acc.tolist(),
+                      "wall_s": time.perf_counter() - t_step})
+        if progress is not None:
+            progress(it, steps[-1])
+        if np.all(final):
+            rounds_at_one += 1
+            if rounds_at_one >= final_rounds:
+                break
+    return X, anc, log_z, steps
+
+
+def converge_smc(runs, lp, prob, labels):
+    """arviz R-hat / ESS of independent SMC runs as chains (particles sorted by ancestor)."""
+    from .diagnostics import convergence
+    from .density import derived_np
+
+    chains = []
+    for X, anc in runs:
+        order = np.argsort(anc, kind="stable")
+        chains.append(X[order])
+    n = min(len(c) for c in chains)
+    C = np.stack([c[:n] for c in chains], axis=1)  # (N, runs, D) sampled coordinates
+    S, R, D = C.shape
+    U = lp.from_sampled_np(C.reshape(-1, D))
+    band = derived_np(prob, U)["stick_band_halfwidth_rad"].reshape(S, R, 1)
+    return convergence(np.concatenate([C, band], axis=2), labels + ["stick_band_halfwidth_rad"]), C
+
+
+
+
+def _failed(conv):
+    """``conv`` marked as failing (tempering not finished: R-hat set to infinity)."""
+    from .diagnostics import Convergence
+
+    return Convergence(list(conv.names), np.full(len(conv.names), np.inf), conv.ess_bulk,
+                       conv.ess_tail)
+
+
+def _setup(fit, seed, sigma_floor=None, modes="auto"):
+    """Log-posterior, optima and reference mixture, as :func:`sample_posterior` builds them."""
+    from .density import LINEAR_PRIOR, PRIOR_HALF_WIDTH, SAMPLE_LINEAR, SIGMA_BOUNDS, LogPosterior
+    from .density import residual_autocorrelation
+    from .modes import _fit_mode, find_modes
+    from .moves import MixtureProposal
+
+    prob = fit.problem
+    warnings = []
+    quant_var = float(prob.step) ** 2 / 12.0 if fit.resolution_known else 0.0
+    rho1 = residual_autocorrelation(fit)
+    n_moving = int(np.sum(np.asarray(prob.weight) >= 1.0))
+    temper = 1.0
+    if n_moving > 3 and rho1 > 2.0 / math.sqrt(n_moving):
+        temper = (1.0 - rho1) / (1.0 + rho1)
+        warnings.append(
+            f"fit residuals are autocorrelated (lag-1 r = {rho1:.2f}); the likelihood is "
+            f"tempered by the effective-sample-size factor {temper:.2f}")
+    bounds = (SIGMA_BOUNDS[0] if sigma_floor is None else float(sigma_floor), SIGMA_BOUNDS[1])
+    u_fit = np.asarray(fit.u, dtype=float)
+    specs = prob.base.parameter_specs()
+    lin = np.array([1.0 if (n in LINEAR_PRIOR and specs[n].transform == "log") else 0.0
+                    for n in prob.free])
+    samp = np.array([1.0 if (n in SAMPLE_LINEAR and specs[n].transform == "log") else 0.0
+                     for n in prob.free])
+    lp = LogPosterior(problem=prob, centre=jnp.asarray(u_fit), temper=jnp.asarray(temper),
+                      sigma_bounds=bounds, quant_var=quant_var,
+                      linear_prior=jnp.asarray(lin) if lin.any() else None,
+                      sample_linear=jnp.asarray(samp) if samp.any() else None)
+    t = time.perf_counter()
+    if isinstance(modes, str):
+        if modes not in ("auto", "fit"):
+            raise ValueError(f"modes must be 'auto', 'fit' or a list of Mode, not {modes!r}")
+        found = find_modes(fit, seed=seed) if modes == "auto" else [_fit_mode(fit)]
+    else:
+        from dataclasses import replace
+
+        found = [replace(m) for m in modes]
+    t_modes = time.perf_counter() - t
+    P = prob.n_physical
+    found = [m for m in found if np.all(np.abs(m.u[:P] - u_fit[:P]) < PRIOR_HALF_WIDTH)]
+    if not found:
+        found = [_fit_mode(fit)]
+    lz = np.array([m.log_evidence + float(lin @ (m.u[:P] - u_fit[:P])) for m in found])
+    wz = np.exp(lz - lz.max())
+    for m, wi in zip(found, wz / wz.sum()):
+        m.weight = float(wi)
+    q = float(prob.step)
+    log_lo = math.log(bounds[0] * q)
+    log_rms = math.log(max(fit.rms_residual_rad, bounds[0] * q))
+    s_mid, s_sd = 0.5 * (log_lo + max(log_rms, log_lo + 0.5)), 1.0
+    D = lp.ndim
+    means = lp.to_sampled_np(np.array([np.concatenate([m.u, [s_mid]]) for m in found]))
+    covs = np.zeros((len(found), D, D))
+    for k, m in enumerate(found):
+        covs[k, :-1, :-1] = lp.sampled_cov_np(m.u, REF_SCALE**2 * m.cov)
+        covs[k, -1, -1] = s_sd**2
+    ref = MixtureProposal(means, covs, [max(m.weight, 0.02) for m in found], nu=REF_NU)
+    return lp, found, ref, warnings, temper, rho1, lin, t_modes
+
+
+#: Particles per run and independent runs (the runs are the "chains" of the convergence test).
+N_PARTICLES = 500
+N_RUNS = 4
+#: Random-walk Metropolis steps per tempering step (and per round at β = 1).
+N_MCMC = 10
+#: Steps in all at most (tempering, then ``FINAL_ROUNDS``). The rounds at β = 1 only
+#: decorrelate clones; the runs' disagreement on the optima's weights (R-hat) is set at
+#: the tempering and falls only with more particles.
+MAX_ROUNDS = 40
+#: Rounds of moves at β = 1 after the tempering, before the single convergence test.
+FINAL_ROUNDS = 3
+
+
+def sample_smc(fit, *, n_particles: int = N_PARTICLES, n_runs: int = N_RUNS,
+               n_mcmc: int = N_MCMC, max_rounds: int = MAX_ROUNDS, seed: int = 0,
+               progress: bool = False, sigma_floor: float | None = None, modes="auto",
+               final_rounds: int = FINAL_ROUNDS):
+    """Tempered SMC posterior of ``fit`` (see the module docstring); a
+    :class:`PosteriorResult` whose ``chain`` is ``(n_particles, n_runs, D)``."""
+    from .._identifiability import unknown_labels
+    from .density import PRIOR_HALF_WIDTH, derived_np, to_physical
+    from .diagnostics import width_ratios
+    from .driver import BAND, _RunNames
+    from .result import PosteriorResult
+
+    t0 = time.perf_counter()
+    prob = fit.problem
+    lp, found, ref, warnings, temper, rho1, lin, t_modes = _setup(fit, seed, sigma_floor, modes)
+    D = lp.ndim
+    labels = unknown_labels(prob, _RunNames(fit)) + ["log_noise_sigma"]
+    t_c = time.perf_counter()
+    lp.batch(np.tile(ref.means[0], (n_runs * n_particles, 1)))  # compile (or cache read)
+    t_compile = time.perf_counter() - t_c
+
+    def show(i, st):
+        print(f"SMC step {i}: beta {min(st['beta']):.3f}, acceptance "
+              f"{np.mean(st['acceptance']):.2f}, {st['wall_s']:.1f} s", file=sys.stderr)
+
+    t_s = time.perf_counter()
+    X, anc, log_z, steps = run_smc_np(lp, ref, n_particles, n_runs, seed, n_mcmc,
+                                      max_steps=max_rounds, final_rounds=final_rounds,
+                                      progress=show if progress else None)
+    t_s = time.perf_counter() - t_s
+    # one test after a fixed protocol (testing after every round until R-hat dips below
+    # 1.01 would stop on a fluctuation)
+    td = time.perf_counter()
+    conv, C = converge_smc(list(zip(X, anc)), lp, prob, labels)
+    t_diag = time.perf_counter() - td
+    n_temps = sum(1 for st in steps if min(st["beta"]) < 1.0) + 1
+    reached = min(steps[-1]["beta"]) >= 1.0
+    if not reached:
+        warnings.append(
+            f"NOT CONVERGED: the tempering stopped at beta = {min(steps[-1]['beta']):.3g} < 1 "
+            f"after {len(steps)} steps (max_rounds): the particles are not posterior draws. "
+            "Raise max_rounds")
+    elif not conv.converged:
+        name, what = conv.worst
+        warnings.append(
+            f"NOT CONVERGED: {n_runs} SMC runs of {n_particles} particles, {len(steps)} steps "
+            f"({n_temps} temperatures, then {final_rounds} rounds of {n_mcmc} moves at beta = 1); the worst "
+            f"quantity is {name} ({what}); the criterion is R-hat <= 1.01 between runs and "
+            "bulk/tail ESS >= 400 (particles sorted by ancestor) on every sampled quantity "
+            f"and the band. Raise n_particles (to {2 * n_particles}): the runs disagree by more than their particles' spread")
+    sd_z = float(np.std(log_z, ddof=1)) if n_runs > 1 else float("nan")
+    if n_runs > 1 and sd_z > 1.0:
+        warnings.append(
+            f"the runs' log-evidence estimates disagree (sd {sd_z:.2f} > 1): a mode may be "
+            "found by some runs only; raise n_particles")
+    U = lp.from_sampled_np(C.reshape(-1, D))
+    chain = U.reshape(C.shape)
+    phys = to_physical(prob, U)
+    values = fit.model.float_values()
+    for n in values:
+        if n not in phys:
+            phys[n] = np.full(U.shape[0], values[n])
+    phys = {n: phys[n] for n in values}
+    der = derived_np(prob, U)
+    der["noise_sigma_rad"] = np.exp(U[:, -1])
+    comp = np.argmax(ref.component_logpdf(C.reshape(-1, D)), axis=1)
+    share = np.bincount(comp, minlength=len(found)) / comp.size
+    if len(found) > 1:
+        warnings.append(
+            f"MULTIMODAL: {len(found)} separate optima of the fit's cost (Laplace weights "
+            + ", ".join(f"{m.weight:.2f}" for m in found)
+            + "; share of the particles " + ", ".join(f"{s:.2f}" for s in share)
+            + "); SMC weighs them by their posterior mass — see `modes`")
+    acc = np.array([np.mean(st["acceptance"]) for st in steps])
+    widths = width_ratios(prob, U, np.asarray(fit.u, dtype=float), PRIOR_HALF_WIDTH, lin)
+    res = PosteriorResult(
+        samples=phys, derived=der, chain=chain, labels=labels,
+        tau=np.ones(D), acceptance=acc, burn=0, thin=1, warnings=warnings, seed=seed,
+        wall_time_s=time.perf_counter() - t0, temper=temper, residual_rho1=rho1, fit=fit,
+        draws=U, burn_in=0, modes=found, mode_share=share, mode_search_s=t_modes,
+        move_acceptance={"random_walk": float(np.mean(acc))}, n_components=len(found),
+        convergence=conv if reached else _failed(conv), widths=widths, compile_s=t_compile,
+        stage_s={"mode_search": t_modes, "compile": t_compile, "smc": t_s,
+                 "diagnostics": t_diag},
+        method="smc",
+        smc={"n_particles": n_particles, "n_runs": n_runs, "n_mcmc": n_mcmc,
+             "steps": len(steps), "temperatures": n_temps,
+             "log_evidence": [float(z) for z in log_z], "log_evidence_sd": sd_z,
+             "betas": [st["beta"] for st in steps]},
+    )
+    _ = BAND
+    return res
