@@ -425,3 +425,28 @@ def test_predictive_has_a_residual_row_in_encoder_steps(small_smc):
     assert np.ptp(coll) > 0.1
     with pytest.raises(ValueError, match=r"\(2, 4\)"):
         small_smc.plot_predictive(n_draws=5, axes=np.empty(3, dtype=object))
+
+
+def test_cli_sampler_option_reaches_the_library_and_refuses_emcee_options(tmp_path, monkeypatch):
+    # --sampler smc is passed on as method="smc"; emcee's --steps/--walkers with it are
+    # refused in one line, exit 2, before any fit.
+    from click.testing import CliRunner
+
+    import hdid._posterior as post_pkg
+    from hdid.cli import main
+
+    res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "-q", "--posterior", "--sampler", "smc",
+                                    "--steps", "100"])
+    assert res.exit_code == 2 and "--sampler smc" in res.output and "Traceback" not in res.output
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def fake(result, **kw):
+        seen.update(kw)
+        raise Stop
+
+    monkeypatch.setattr(post_pkg, "sample_posterior", fake)
+    res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "-q", "--posterior", "--sampler", "smc"])
+    assert isinstance(res.exception, Stop) and seen["method"] == "smc"

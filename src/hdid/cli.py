@@ -259,6 +259,7 @@ def main():
 @click.option("--posterior", is_flag=True, help="Also sample the posterior with emcee (slow; see README).")
 @click.option("--steps", type=click.IntRange(100, 10**6), help="Posterior chain length (default: until 50 autocorrelation times, at most 20000).")
 @click.option("--walkers", type=click.IntRange(4, 4096), help="emcee walkers (default max(32, 2·dim)).")
+@click.option("--sampler", type=click.Choice(["emcee", "smc"]), default="emcee", show_default=True, help="Posterior sampler: emcee (ensemble MCMC) or smc (tempered sequential Monte Carlo from the optima; gives the log-evidence). Neither is calibrated on the paper's 4-run design yet (README, Posterior).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Posterior seed.")
 @click.option("--chains", "chains_out", metavar="OUT.nc", help="Save the posterior chains (arviz NetCDF).")
 @click.option("--corner", "corner_out", metavar="OUT.png", help="Corner plot of the posterior.")
@@ -270,7 +271,7 @@ def main():
 @_QUIET
 def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_inertia,
             inertia_prior, fix, add_effects, remove_effects, effect_files, release_time,
-            counts_per_rev, starts, posterior, steps, walkers, seed, chains_out, corner_out,
+            counts_per_rev, starts, posterior, steps, walkers, sampler, seed, chains_out, corner_out,
             quiet, band_bracket, workers, dask_address, torque_constant,
             output_counts_per_rev, order, joint, ratio, resolution, start_values, input_hold):
     """Fit stiffness, friction (and inertia) jointly to all runs of LOG.csv.
@@ -283,6 +284,8 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
     tabulated; a bad file is reported in its row and the others complete. With --joint,
     a driven log and free-motion logs of one gear share one set of parameters.
     """
+    if sampler == "smc" and (steps or walkers):
+        raise _Fail("--steps/--walkers are emcee's options; leave them out with --sampler smc")
     model = _build_model(add_effects, remove_effects, effect_files, ratio)
     driven_options = {"torque_constant": torque_constant, "resolution": resolution,
                       "output_counts_per_rev": output_counts_per_rev}
@@ -366,7 +369,8 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
         from ._posterior import sample_posterior
 
         post = sample_posterior(
-            result, n_steps=steps, n_walkers=walkers, seed=seed, progress=not quiet
+            result, n_steps=steps, n_walkers=walkers, seed=seed, progress=not quiet,
+            method=sampler,
         )
         summary.update(post.to_dict())
         if not quiet:
