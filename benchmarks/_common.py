@@ -104,3 +104,30 @@ def add_log_args(ap, steps: int = 3000) -> None:
     ap.add_argument("--log", default=str(DATA / "csf8_paper.csv"))
     ap.add_argument("--steps", type=int, default=steps)
     ap.add_argument("--seed", type=int, default=0)
+
+
+def load_text() -> str:
+    """The 1/5/15-min load averages, as the results tables print them."""
+    import os
+
+    return " ".join(f"{x:.1f}" for x in os.getloadavg())
+
+
+def run_meta(**extra) -> dict:
+    """Date, CPU, cores, load and source fingerprint for a results file's header."""
+    import os
+    import time
+
+    return {"date": time.strftime("%Y-%m-%d %H:%M"), "cpu": cpu_model(),
+            "cores": os.cpu_count(), "load": load_text(), "src": src_fingerprint(), **extra}
+
+
+def run_designs(designs, run, write, records: list, meta: dict) -> None:
+    """``run(k, design)`` for each design, writing the records after each and at the end
+    (with the end load): a long benchmark leaves its partial results if stopped."""
+    for k, design in enumerate(designs):
+        run(k, design)
+        write(records, meta)
+    meta["load_end"] = load_text()
+    write(records, meta)
+

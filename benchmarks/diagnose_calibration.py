@@ -23,7 +23,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _common import ROOT, cpu_model, import_generate, src_fingerprint
+from _common import ROOT, import_generate, run_designs, run_meta
 
 OUT = ROOT / "benchmarks" / "results"
 RICH = dict(amplitudes=[0.157, -0.157, 0.12, -0.12, 0.08, -0.08, 0.05, -0.05], fs=1000.0,
@@ -124,16 +124,10 @@ def main(argv: list[str]) -> None:
     n = int(argv[0]) if argv and argv[0].isdigit() else 10
     designs = [a for a in argv if not a.isdigit()] or ["paper", "rich"]
     gen = import_generate()
-    meta = {"date": time.strftime("%Y-%m-%d %H:%M"), "cpu": cpu_model(),
-            "cores": os.cpu_count(), "load": " ".join(f"{x:.1f}" for x in os.getloadavg()),
-            "src": src_fingerprint(), "n_per_design": n}
+    meta = run_meta(n_per_design=n)
     records: list = []
-    for design in designs:
-        run_design(design, n, gen, records, meta)
-        write(records, meta)
-    meta["load_end"] = " ".join(f"{x:.1f}" for x in os.getloadavg())
-    write(records, meta)
-
+    run_designs(designs, lambda k, design: run_design(design, n, gen, records, meta),
+                write, records, meta)
 
 if __name__ == "__main__":
     sys.path.insert(0, str(Path(__file__).resolve().parent))

@@ -18,12 +18,11 @@ from __future__ import annotations
 
 import importlib.util
 import json
-import os
 import sys
 import time
 from pathlib import Path
 
-from _common import DATA, ROOT, cpu_model, import_generate, src_fingerprint
+from _common import DATA, ROOT, import_generate, run_designs, run_meta
 
 OUT = ROOT / "benchmarks" / "results"
 #: The richer design: four release amplitudes at 1 kHz, one set-up. Smallest amplitude
@@ -182,14 +181,9 @@ def main(argv: list[str]) -> None:
         old = json.loads((OUT / "diagnose_suite.json").read_text())["records"]
         records = [r for r in old if not (str(r.get("hidden", "")).startswith("removed:")
                                           and r["design"] in designs)]
-    meta = {
-        "date": time.strftime("%Y-%m-%d %H:%M"),
-        "cpu": cpu_model(),
-        "cores": os.cpu_count(),
-        "load": " ".join(f"{x:.1f}" for x in os.getloadavg()),
-        "src": src_fingerprint(),
-    }
-    for k, design in enumerate(designs):
+    meta = run_meta()
+
+    def run(k, design):
         # Compiled programs of the previous design are not needed again; a long process
         # that keeps them all ran out of memory mappings (LLVM "Cannot allocate memory").
         import jax
@@ -197,10 +191,8 @@ def main(argv: list[str]) -> None:
         jax.clear_caches()
         run_design(design, gen, hid, records, seed0=(7500 if removed else 7100) + 100 * k,
                    removed=removed)
-        write(records, meta)
-    meta["load_end"] = " ".join(f"{x:.1f}" for x in os.getloadavg())
-    write(records, meta)
 
+    run_designs(designs, run, write, records, meta)
 
 if __name__ == "__main__":
     sys.path.insert(0, str(Path(__file__).resolve().parent))

@@ -146,10 +146,12 @@ def fit(
     return result
 
 
-def _local_fits(problem: Problem, U0, max_steps: int):
+def _local_fits(problem: Problem, U0, max_steps: int, solve=None):
     """Levenberg–Marquardt from every row of ``U0``. Phase 1: every start a few
     iterations; phase 2: the best ones to convergence (:class:`_Schedule`). All starts are
-    lanes of one program; a call advances the live ones."""
+    lanes of one program; a call advances the live ones. ``solve`` runs that program
+    (default :func:`_solve_lanes`; diagnose passes one from its program store)."""
+    solve = _solve_lanes if solve is None else solve
     U = np.array(U0)
     sched = _Schedule(len(U0), max_steps)
     m = int(np.prod(problem.times.shape)) + problem.n_physical
@@ -157,9 +159,10 @@ def _local_fits(problem: Problem, U0, max_steps: int):
     while (task := sched.next()) is not None:
         active, k, fresh = task
         state = state._replace(fresh=np.where(active, fresh, np.asarray(state.fresh)))
-        U2, c2, done2, s2, state = _solve_lanes(
+        U2, c2, done2, s2, state = solve(
             problem, jnp.asarray(U), jnp.asarray(active), jnp.asarray(k), state
         )
+        state = LMState(*state)
         U2 = np.asarray(U2)
         U[active] = U2[active]
         sched.update(np.asarray(c2), np.asarray(done2), np.asarray(s2))

@@ -30,6 +30,7 @@ from ._fit import (
     _choose_starts,
     _finish,
     _grid_candidates,
+    _local_fits as _fit_local_fits,
     _lm_lanes,
     _Schedule,
     _setup,
@@ -75,25 +76,14 @@ def _analysis_parts(p: Problem, u):
     return (J, r), dense, (quantities(u[:P]), jax.jacfwd(quantities)(u[:P]))
 
 
+def _stored_solve(problem: Problem, U, active, k, state):
+    return _programs.call("solve_lanes", _solve_lanes, problem, U, active, k, state)
+
+
 def _local_fits(problem: Problem, U0, max_steps: int):
     """:func:`hdid._fit._local_fits` with its program from :mod:`hdid._programs` (no
     tracing in a process that finds it stored)."""
-    U = np.array(U0)
-    sched = _Schedule(len(U0), max_steps)
-    m = int(np.prod(problem.times.shape)) + problem.n_physical
-    state = LMState.empty(len(U0), m, U.shape[1])
-    while (task := sched.next()) is not None:
-        active, k, fresh = task
-        state = state._replace(fresh=np.where(active, fresh, np.asarray(state.fresh)))
-        U2, c2, done2, s2, state = _programs.call(
-            "solve_lanes", _solve_lanes, problem, jnp.asarray(U), jnp.asarray(active),
-            jnp.asarray(k), state,
-        )
-        state = LMState(*state)
-        U2 = np.asarray(U2)
-        U[active] = U2[active]
-        sched.update(np.asarray(c2), np.asarray(done2), np.asarray(s2))
-    return U, sched.costs, sched.ok, sched.steps
+    return _fit_local_fits(problem, U0, max_steps, solve=_stored_solve)
 
 
 def setup(log, model, options: dict[str, Any]) -> _Setup:

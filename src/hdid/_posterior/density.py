@@ -29,6 +29,8 @@ Priors (documented defaults, all in the sampled space):
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -233,3 +235,49 @@ def residual_autocorrelation(fit) -> float:
         num += float(np.sum(x[1:] * x[:-1]))
         den += float(np.sum(x * x))
     return num / den if den > 0 else 0.0
+
+
+class PosteriorDensity(NamedTuple):
+    """The log-posterior of a fit as both samplers build it, with what they report."""
+
+    lp: LogPosterior
+    warnings: list
+    temper: float
+    rho1: float
+    lin: np.ndarray
+    bounds: tuple[float, float]
+    u_fit: np.ndarray
+
+
+def posterior_density(fit, sigma_floor=None, linear_prior=LINEAR_PRIOR,
+                      sample_linear=SAMPLE_LINEAR) -> PosteriorDensity:
+    """:class:`LogPosterior` of ``fit``: tempered by the residuals' lag-1 autocorrelation
+    (effective sample size), σ bounded in steps, a flat prior in the value of the
+    log-transformed parameters named in ``linear_prior`` and sampling in the value of
+    those in ``sample_linear``."""
+    import math
+
+    prob = fit.problem
+    warnings: list[str] = []
+    quant_var = float(prob.step) ** 2 / 12.0 if fit.resolution_known else 0.0
+    rho1 = residual_autocorrelation(fit)
+    n_moving = int(np.sum(np.asarray(prob.weight) >= 1.0))
+    temper = 1.0
+    if n_moving > 3 and rho1 > 2.0 / math.sqrt(n_moving):
+        temper = (1.0 - rho1) / (1.0 + rho1)
+        warnings.append(
+            f"fit residuals are autocorrelated (lag-1 r = {rho1:.2f}); the likelihood is "
+            f"tempered by the effective-sample-size factor {temper:.2f}"
+        )
+    bounds = (SIGMA_BOUNDS[0] if sigma_floor is None else float(sigma_floor), SIGMA_BOUNDS[1])
+    u_fit = np.asarray(fit.u, dtype=float)
+    specs = prob.base.parameter_specs()
+    lin = np.array([1.0 if (n in linear_prior and specs[n].transform == "log") else 0.0
+                    for n in prob.free])
+    samp = np.array([1.0 if (n in sample_linear and specs[n].transform == "log") else 0.0
+                     for n in prob.free])
+    lp = LogPosterior(problem=prob, centre=jnp.asarray(u_fit), temper=jnp.asarray(temper),
+                      sigma_bounds=bounds, quant_var=quant_var,
+                      linear_prior=jnp.asarray(lin) if lin.any() else None,
+                      sample_linear=jnp.asarray(samp) if samp.any() else None)
+    return PosteriorDensity(lp, warnings, temper, rho1, lin, bounds, u_fit)

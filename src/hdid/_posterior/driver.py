@@ -16,10 +16,8 @@ from .density import (
     LINEAR_PRIOR,
     PRIOR_HALF_WIDTH,
     SAMPLE_LINEAR,
-    SIGMA_BOUNDS,
-    LogPosterior,
     derived_np,
-    residual_autocorrelation,
+    posterior_density,
     to_physical,
 )
 from .diagnostics import (
@@ -28,7 +26,7 @@ from .diagnostics import (
     tau_pooled,
     width_ratios,
 )
-from .modes import _fit_mode, find_modes
+from .modes import sampled_modes
 from .moves import (
     START_SCALE,
     MixtureProposal,
@@ -158,27 +156,10 @@ def sample_posterior(
     if likelihood not in ("auto", "gaussian"):
         raise ValueError(f"likelihood must be 'auto' or 'gaussian', not {likelihood!r} (the "
                          "interval likelihood was retired: benchmarks/README.md)")
-    quant_var = float(prob.step) ** 2 / 12.0 if fit.resolution_known else 0.0
-    rho1 = residual_autocorrelation(fit)
-    n_moving = int(np.sum(np.asarray(prob.weight) >= 1.0))
-    temper = 1.0
-    if n_moving > 3 and rho1 > 2.0 / math.sqrt(n_moving):
-        temper = (1.0 - rho1) / (1.0 + rho1)
-        warnings.append(
-            f"fit residuals are autocorrelated (lag-1 r = {rho1:.2f}); the likelihood is "
-            f"tempered by the effective-sample-size factor {temper:.2f}"
-        )
-    bounds = (SIGMA_BOUNDS[0] if sigma_floor is None else float(sigma_floor), SIGMA_BOUNDS[1])
-    u_fit = np.asarray(fit.u, dtype=float)
-    specs = prob.base.parameter_specs()
-    lin = np.array([1.0 if (n in linear_prior and specs[n].transform == "log") else 0.0
-                    for n in prob.free])
-    samp = np.array([1.0 if (n in sample_linear and specs[n].transform == "log") else 0.0
-                     for n in prob.free])
-    lp = LogPosterior(problem=prob, centre=jnp.asarray(u_fit), temper=jnp.asarray(temper),
-                      sigma_bounds=bounds, quant_var=quant_var,
-                      linear_prior=jnp.asarray(lin) if lin.any() else None,
-                      sample_linear=jnp.asarray(samp) if samp.any() else None)
+    dens = posterior_density(fit, sigma_floor, linear_prior, sample_linear)
+    lp, temper, rho1, lin, bounds, u_fit = (dens.lp, dens.temper, dens.rho1, dens.lin,
+                                            dens.bounds, dens.u_fit)
+    warnings += dens.warnings
     D = lp.ndim
     W = n_walkers or max(32, 2 * D)
     if W < 2 * D:
@@ -190,26 +171,8 @@ def sample_posterior(
     rng = np.random.default_rng(seed)
     q = float(prob.step)
     t_modes = time.perf_counter()
-    if isinstance(modes, str):
-        if modes == "auto":
-            found = find_modes(fit, seed=seed)
-        elif modes == "fit":
-            found = [_fit_mode(fit)]
-        else:
-            raise ValueError(f"modes must be 'auto', 'fit' or a list of Mode, not {modes!r}")
-    else:
-        found = [replace(m) for m in modes]  # weights are re-set below: leave the caller's
+    found = sampled_modes(fit, modes, seed, u_fit, lin)
     t_modes = time.perf_counter() - t_modes
-    # Modes outside the prior box around the fit (±PRIOR_HALF_WIDTH) cannot be sampled.
-    P = prob.n_physical
-    found = [m for m in found if np.all(np.abs(m.u[:P] - u_fit[:P]) < PRIOR_HALF_WIDTH)]
-    if not found:
-        found = [_fit_mode(fit)]
-    # Laplace weights under the sampled prior (the fit's cost has the log-flat one).
-    lz = np.array([m.log_evidence + float(lin @ (m.u[:P] - u_fit[:P])) for m in found])
-    wz = np.exp(lz - lz.max())
-    for m, wi in zip(found, wz / wz.sum()):
-        m.weight = float(wi)
     log_lo = math.log(bounds[0] * q)
     log_rms = math.log(max(fit.rms_residual_rad, bounds[0] * q))
     # compile the log-posterior for the two shapes emcee uses (half and whole ensemble)

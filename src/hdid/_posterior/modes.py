@@ -185,3 +185,28 @@ def _fit_mode(fit) -> Mode:
     cost, cov, logz = _laplace(fit.problem, np.asarray(fit.u, dtype=float))
     return Mode(u=np.asarray(fit.u, dtype=float), cost=cost, cov=cov, log_evidence=logz,
                 weight=1.0, values=fit.problem.values_np(fit.u))
+
+
+def sampled_modes(fit, modes, seed: int, u_fit: np.ndarray, lin: np.ndarray) -> list[Mode]:
+    """The optima a sampler starts from: ``modes`` ``"auto"`` (:func:`find_modes`),
+    ``"fit"`` or a list of :class:`Mode` (copied: their weights are re-set), kept inside
+    the prior box around the fit (±``PRIOR_HALF_WIDTH``, else they cannot be sampled; the
+    fit's own if none is), with Laplace weights under the sampled prior (the fit's cost
+    has the log-flat one; ``lin`` marks the parameters whose prior is flat in value)."""
+    from dataclasses import replace
+
+    if isinstance(modes, str):
+        if modes not in ("auto", "fit"):
+            raise ValueError(f"modes must be 'auto', 'fit' or a list of Mode, not {modes!r}")
+        found = find_modes(fit, seed=seed) if modes == "auto" else [_fit_mode(fit)]
+    else:
+        found = [replace(m) for m in modes]
+    P = fit.problem.n_physical
+    found = [m for m in found if np.all(np.abs(m.u[:P] - u_fit[:P]) < PRIOR_HALF_WIDTH)]
+    if not found:
+        found = [_fit_mode(fit)]
+    lz = np.array([m.log_evidence + float(lin @ (m.u[:P] - u_fit[:P])) for m in found])
+    wz = np.exp(lz - lz.max())
+    for m, wi in zip(found, wz / wz.sum()):
+        m.weight = float(wi)
+    return found

@@ -181,51 +181,19 @@ def _failed(conv):
 
 def _setup(fit, seed, sigma_floor=None, modes="auto"):
     """Log-posterior, optima and reference mixture, as :func:`sample_posterior` builds them."""
-    from .density import LINEAR_PRIOR, PRIOR_HALF_WIDTH, SAMPLE_LINEAR, SIGMA_BOUNDS, LogPosterior
-    from .density import residual_autocorrelation
-    from .modes import _fit_mode, find_modes
+    from .density import posterior_density
+    from .modes import sampled_modes
     from .moves import MixtureProposal
 
     prob = fit.problem
     warnings = []
-    quant_var = float(prob.step) ** 2 / 12.0 if fit.resolution_known else 0.0
-    rho1 = residual_autocorrelation(fit)
-    n_moving = int(np.sum(np.asarray(prob.weight) >= 1.0))
-    temper = 1.0
-    if n_moving > 3 and rho1 > 2.0 / math.sqrt(n_moving):
-        temper = (1.0 - rho1) / (1.0 + rho1)
-        warnings.append(
-            f"fit residuals are autocorrelated (lag-1 r = {rho1:.2f}); the likelihood is "
-            f"tempered by the effective-sample-size factor {temper:.2f}")
-    bounds = (SIGMA_BOUNDS[0] if sigma_floor is None else float(sigma_floor), SIGMA_BOUNDS[1])
-    u_fit = np.asarray(fit.u, dtype=float)
-    specs = prob.base.parameter_specs()
-    lin = np.array([1.0 if (n in LINEAR_PRIOR and specs[n].transform == "log") else 0.0
-                    for n in prob.free])
-    samp = np.array([1.0 if (n in SAMPLE_LINEAR and specs[n].transform == "log") else 0.0
-                     for n in prob.free])
-    lp = LogPosterior(problem=prob, centre=jnp.asarray(u_fit), temper=jnp.asarray(temper),
-                      sigma_bounds=bounds, quant_var=quant_var,
-                      linear_prior=jnp.asarray(lin) if lin.any() else None,
-                      sample_linear=jnp.asarray(samp) if samp.any() else None)
+    dens = posterior_density(fit, sigma_floor)
+    lp, temper, rho1, lin, bounds, u_fit = (dens.lp, dens.temper, dens.rho1, dens.lin,
+                                            dens.bounds, dens.u_fit)
+    warnings += dens.warnings
     t = time.perf_counter()
-    if isinstance(modes, str):
-        if modes not in ("auto", "fit"):
-            raise ValueError(f"modes must be 'auto', 'fit' or a list of Mode, not {modes!r}")
-        found = find_modes(fit, seed=seed) if modes == "auto" else [_fit_mode(fit)]
-    else:
-        from dataclasses import replace
-
-        found = [replace(m) for m in modes]
+    found = sampled_modes(fit, modes, seed, u_fit, lin)
     t_modes = time.perf_counter() - t
-    P = prob.n_physical
-    found = [m for m in found if np.all(np.abs(m.u[:P] - u_fit[:P]) < PRIOR_HALF_WIDTH)]
-    if not found:
-        found = [_fit_mode(fit)]
-    lz = np.array([m.log_evidence + float(lin @ (m.u[:P] - u_fit[:P])) for m in found])
-    wz = np.exp(lz - lz.max())
-    for m, wi in zip(found, wz / wz.sum()):
-        m.weight = float(wi)
     q = float(prob.step)
     log_lo = math.log(bounds[0] * q)
     log_rms = math.log(max(fit.rms_residual_rad, bounds[0] * q))
