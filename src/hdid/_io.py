@@ -64,6 +64,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from . import _units
 from ._errors import LogError
 
 __all__ = ["Log", "Run", "estimate_resolution", "read_log", "write_log"]
@@ -713,7 +714,7 @@ def _find_columns(
     path = table.path
     index: dict[str, int] = {}
     for i, name in enumerate(table.names):
-        key = name.lower()
+        key = _units.split(name)[0].lower()
         if key not in _KNOWN_COLUMNS:
             continue
         if key in index:
@@ -757,6 +758,25 @@ def _find_columns(
             path=path,
         )
     return index
+
+
+def _column_scales(table: _Table, cols: dict[str, int]) -> dict[str, float]:
+    """Per canonical key, the factor from its header's unit (``time [ms]``) to hdid's units
+    (:mod:`hdid._units`; 1 without a unit), or a LogError naming an unknown unit."""
+    out = {}
+    for key, i in cols.items():
+        header = table.names[i]
+        base, unit = _units.split(header)
+        f = _units.scale(base.lower(), unit)
+        if f is None:
+            raise LogError(
+                f"unknown unit {unit!r} for {base.lower()!r}: use one of "
+                f"{_units.known(base.lower())}, or drop the unit from the header and give the "
+                f"column in {_units.SI.get(base.lower(), 'consistent units')}",
+                path=table.path, column=header,
+            )
+        out[key] = f
+    return out
 
 
 def _find_driven_columns(
@@ -983,6 +1003,9 @@ def read_log(
     )
     table = _load_frame(source) if path is None else _load_csv(path)
     cols = _find_columns(table, cpr, out_cpr, kt)
+    unit_scale = _column_scales(table, cols)
+    if given_step is not None:  # in theta's units, as the header gives them
+        given_step *= unit_scale[_THETA]
     driven = _MOTOR in cols
     if not driven:  # a free-motion log: the driven-only arguments do not apply
         out_cpr = kt = None
@@ -1017,6 +1040,15 @@ def read_log(
     if driven and run_labels is not None:
         _check_not_mixed(table, cols[_MOTOR], run_labels)
     cells.raise_first()
+    time, theta = time * unit_scale[_TIME], theta * unit_scale[_THETA]
+    if inertia is not None:
+        inertia = inertia * unit_scale[_INERTIA]
+    if motor is not None:
+        motor = motor * unit_scale[_MOTOR]
+    if theta_out is not None:
+        theta_out = theta_out * unit_scale[_THETA_OUT]
+    if load is not None:
+        load = load * unit_scale[_LOAD_TORQUE]
     if motor is not None and kt is not None:
         motor = motor * kt
 
