@@ -126,3 +126,33 @@ def test_vectorized_band_bracket_and_diverged_rows(batch_logs, monkeypatch):
     assert table["result"].isna().all()
     assert table["error"].str.contains("every start diverged").all()
     assert "k1" not in table
+
+
+def test_a_log_one_octave_coarser_than_the_batch_shares_its_finer_substep(monkeypatch):
+    # Substeps are powers of two of each log's own frequency, so a log whose estimate
+    # falls just below an octave boundary gets twice the batch's substep and, being of
+    # another static structure, a program of its own. It is set up again with the finer
+    # one (never coarser: that would lose accuracy), and only when as many logs use it.
+    from types import SimpleNamespace
+
+    import hdid._vfit as V
+
+    calls = []
+
+    def fake_setup(item, **opts):
+        calls.append((item, opts.get("max_substep")))
+        return SimpleNamespace(problem=SimpleNamespace(max_substep=opts["max_substep"]))
+
+    monkeypatch.setattr(V, "_setup", fake_setup)
+
+    def made(hs):
+        return {i: SimpleNamespace(problem=SimpleNamespace(max_substep=h)) for i, h in enumerate(hs)}
+
+    setups = made([5e-4, 5e-4, 1e-3, 2.5e-4, 4e-3])
+    V._share_substeps(list(range(5)), setups, {"max_substep": None})
+    assert [s.problem.max_substep for s in setups.values()] == [5e-4, 5e-4, 5e-4, 2.5e-4, 4e-3]
+    assert calls == [(2, 5e-4)]
+    calls.clear()
+    setups = made([1e-3, 1e-3, 5e-4])  # the finer substep is the minority: kept apart
+    V._share_substeps(list(range(3)), setups, {})
+    assert [s.problem.max_substep for s in setups.values()] == [1e-3, 1e-3, 5e-4] and not calls

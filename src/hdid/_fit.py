@@ -587,7 +587,8 @@ class _Schedule:
             self.active[np.argsort(finite, kind="stable")[:CONTINUED_STARTS]] = True
         else:
             self.ok[a] = done[a]
-            self.active = a & ~done & (finite - finite.min() < DROP_DCHI2)
+            best = finite.min()  # inf when every lane diverged: none goes on
+            self.active = a & ~done & (finite - best < DROP_DCHI2) if np.isfinite(best) else a & False
 
 
 @eqx.filter_jit
