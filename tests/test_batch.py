@@ -156,3 +156,28 @@ def test_a_log_one_octave_coarser_than_the_batch_shares_its_finer_substep(monkey
     setups = made([1e-3, 1e-3, 5e-4])  # the finer substep is the minority: kept apart
     V._share_substeps(list(range(3)), setups, {})
     assert [s.problem.max_substep for s in setups.values()] == [1e-3, 1e-3, 5e-4] and not calls
+
+
+@pytest.mark.parametrize("nested, symptom, checked", [
+    ("auto", False, False), ("auto", True, True), (True, False, True), (False, True, False),
+])
+def test_the_batch_checks_the_nested_case_like_fit(monkeypatch, nested, symptom, checked):
+    # fit()'s nested Coulomb check (hdid._nested) in the vectorised batch: "auto" only on a
+    # symptom, True always, False never — with the log and the caller's options.
+    import hdid._vfit as V
+
+    seen = []
+
+    def check(res, log, setup, **kw):
+        seen.append((log, kw))
+        return res
+
+    monkeypatch.setattr(V, "needs_check", lambda res, fixed: symptom)
+    monkeypatch.setattr(V, "nested_check", check)
+    tab = hdid.fit_many([EXAMPLE], nested=nested, n_starts=2, fix={"delta": 1.0})
+    assert tab.error.isna().all()
+    assert len(seen) == int(checked)
+    if checked:
+        log, kw = seen[0]
+        assert isinstance(log, hdid.Log) and kw["nested"] == nested
+        assert kw["fix"] == {"delta": 1.0} and kw["n_starts"] == 2

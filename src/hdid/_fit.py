@@ -121,6 +121,8 @@ def fit(
         ``False`` never.
     """
     t_start = time.perf_counter()
+    if nested not in (True, False, "auto"):
+        raise ValueError(f"nested = {nested!r}: use True, False or 'auto'")
     if not isinstance(log, Log):
         log = read_log(log, counts_per_rev=counts_per_rev, resolution=resolution)
     elif resolution is not None:  # the log carries it (also into the nested refits)
@@ -143,36 +145,44 @@ def fit(
         U, costs = np.concatenate([U, U1]), np.concatenate([costs, c1])
         ok, steps = np.concatenate([ok, ok1]), np.concatenate([steps, s1])
     result = _finish(setup, U, costs, ok, steps, t_start)
+    result = nested_check(result, log, setup, nested=nested, fix=fix,
+                          inertia_prior=inertia_prior, release_time=release_time,
+                          max_substep=max_substep, n_starts=n_starts, max_steps=max_steps)
+    result.wall_time_s = time.perf_counter() - t_start
+    return result
+
+
+def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", fix=None,
+                 inertia_prior=None, release_time=None, max_substep=None, n_starts: int = 6,
+                 max_steps: int = 300) -> FitResult:
+    """:func:`hdid._nested.against_nested` for a fit of ``log`` (options as in :func:`fit`):
+    ``nested`` True always, ``"auto"`` on a symptom (:func:`hdid._nested.needs_check`)."""
     if nested not in (True, False, "auto"):
         raise ValueError(f"nested = {nested!r}: use True, False or 'auto'")
-    if nested is True and stribeck_pair(result.model, setup.fixed) is not None or (
-        nested == "auto" and needs_check(result, setup.fixed)
-    ):
-        names_of = lambda m: set(m.parameter_specs())  # noqa: E731
-        options = dict(
-            free_inertia="inertia" not in setup.fixed, inertia_prior=inertia_prior,
-            release_time=release_time, max_substep=max_substep,
-        )
+    if not (nested is True and stribeck_pair(result.model, setup.fixed) is not None
+            or nested == "auto" and needs_check(result, setup.fixed)):
+        return result
+    options = dict(free_inertia="inertia" not in setup.fixed, inertia_prior=inertia_prior,
+                   release_time=release_time, max_substep=max_substep)
 
-        def fixed_in(m: Model):
-            if isinstance(fix, Mapping):
-                return {n: v for n, v in fix.items() if n in names_of(m)} or None
-            return [n for n in (fix or ()) if n in names_of(m)] or None
+    def fixed_in(m: Model):
+        names = set(m.parameter_specs())
+        if isinstance(fix, Mapping):
+            return {n: v for n, v in fix.items() if n in names} or None
+        return [n for n in (fix or ()) if n in names] or None
 
-        def optimum(m: Model):
-            s = _setup(log, m, fix=fixed_in(m), **options)
-            U0, _ = _grid_starts(s.problem, s.prep, s.model, NESTED_STARTS + 1, True)
-            Un, cn, _, _ = _local_fits(s.problem, U0, max_steps)
-            best = int(np.argmin(np.where(np.isfinite(cn), cn, np.inf)))
-            return _data_rms(s.problem, Un[best], cn[best]), s.problem.values_np(Un[best])
+    def optimum(m: Model):
+        s = _setup(log, m, fix=fixed_in(m), **options)
+        U0, _ = _grid_starts(s.problem, s.prep, s.model, NESTED_STARTS + 1, True)
+        Un, cn, _, _ = _local_fits(s.problem, U0, max_steps)
+        best = int(np.argmin(np.where(np.isfinite(cn), cn, np.inf)))
+        return _data_rms(s.problem, Un[best], cn[best]), s.problem.values_np(Un[best])
 
-        def refit(m: Model) -> FitResult:
-            return fit(log, m, fix=fixed_in(m), n_starts=n_starts, max_steps=max_steps,
-                       start_from_model=True, nested=False, **options)
+    def refit(m: Model) -> FitResult:
+        return fit(log, m, fix=fixed_in(m), n_starts=n_starts, max_steps=max_steps,
+                   start_from_model=True, nested=False, **options)
 
-        result = against_nested(result, setup.fixed, optimum, refit)
-        result.wall_time_s = time.perf_counter() - t_start
-    return result
+    return against_nested(result, setup.fixed, optimum, refit)
 
 
 def _data_rms(problem: Problem, u, cost: float) -> float:
