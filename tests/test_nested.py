@@ -7,9 +7,11 @@ guarantee it gives on a real fit: a free Stribeck law never ends worse than Coul
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 from types import SimpleNamespace
 
 import hdid
+
 from hdid._nested import (
     CHECK_ABOVE_FLOOR,
     NESTED_MARGIN,
@@ -17,6 +19,9 @@ from hdid._nested import (
     against_nested,
     needs_check,
 )
+
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "data" / "synthetic" / "csf8_paper.csv"
 
 
 def _result(model, rms):
@@ -150,3 +155,20 @@ def test_a_fit_left_in_a_wrong_basin_is_rescued_by_its_nested_case():
     stuck = hdid.fit(log, wrong, nested=False, **kw)
     assert stuck.rms_residual_rad > CHECK_ABOVE_FLOOR * stuck.quantization_floor_rad
     _at_truth(hdid.fit(log, wrong, **kw))
+
+
+def test_a_residual_above_three_times_the_floor_is_a_warning():
+    # plausibility_warnings on the shipped paper log's own prepared data: an exact model
+    # leaves ≤ 1× step/√12 (0.6–0.9× measured at paper-design truths); the generator's
+    # poorer basins measured 4.2–11.9×. Just below the factor: no warning; above: one.
+    from hdid._fit import _setup
+    from hdid._identifiability import RESIDUAL_FLOOR_FACTOR, plausibility_warnings
+
+    s = _setup(hdid.read_log(EXAMPLE))
+    floor = s.prep.resolution / 12**0.5
+    values = s.model.float_values()
+    quiet = plausibility_warnings(s.prep, s.model, values, 0.95 * RESIDUAL_FLOOR_FACTOR * floor)
+    loud = plausibility_warnings(s.prep, s.model, values, 1.05 * RESIDUAL_FLOOR_FACTOR * floor)
+    assert not any("quantization floor" in w for w in quiet)
+    assert [w for w in loud if "quantization floor" in w and "basin" in w]
+    assert RESIDUAL_FLOOR_FACTOR * 0.9 < 4.2  # the generator's poorer basins are flagged
