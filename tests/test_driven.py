@@ -316,3 +316,17 @@ def test_driven_start_is_scale_free():
     for name, f in (("inertia", b / a), ("c_v", b / a), ("tau_c", b)):
         v0, v1 = r0.parameters[name].value, r1.parameters[name].value
         assert v1 / f == pytest.approx(v0, rel=0.02), (name, v0, v1 / f)
+
+
+def test_driven_fit_without_the_output_encoder_reaches_the_floor():
+    # The shipped driven log with theta_out dropped, the output friction given (the log
+    # cannot see it): the free WG friction and inertia must describe the WG readings to
+    # their quantization floor (1.3×: diagnose's ADEQUATE margin). Measured before the
+    # fix: 2.0× — the Stribeck fit inherited the residual scale its Coulomb start had set
+    # at a χ² of 7.7e8, so its statistical stop ended it early.
+    wg_only = pd.read_csv(DRIVEN).drop(columns=["theta_out"])
+    r = hdid.fit_driven(wg_only, fix={"tau_fout": P["tau_fout"]})
+    assert r.rms["wg_rad"] <= 1.3 * r.rms["wg_floor_rad"], r.notes
+    for name in ("tau_c", "tau_s", "c_v"):
+        est = r.parameters[name]
+        assert abs(est.value - P[name]) <= 3 * est.std, (name, est, P[name])

@@ -166,7 +166,7 @@ def _fit_nested_first(data, joint, free, max_substep, max_steps, warnings, notes
     start[ts] = 1.02 * at[tc]
     joint_g = joint.replace(**start)
     pg = build_driven_problem(data, joint_g, free, _priors(joint_g, free), max_substep, hold)
-    pg = eqx_tree_set(pg, direction0=pn.direction0, noise_scale=pn.noise_scale)
+    pg = eqx_tree_set(pg, direction0=pn.direction0)
     ug, pg = _solve(pg, _pack(pg, joint_g, nuisance=np.asarray(un[pn.n_physical:])),
                     data.source, max_steps, data)
     cost_g = _data_cost(pg, ug)
