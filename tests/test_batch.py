@@ -160,10 +160,12 @@ def test_a_log_one_octave_coarser_than_the_batch_shares_its_finer_substep(monkey
 
 @pytest.mark.parametrize("nested, symptom, checked", [
     ("auto", False, False), ("auto", True, True), (True, False, True), (False, True, False),
+    (None, True, False),
 ])
 def test_the_batch_checks_the_nested_case_like_fit(monkeypatch, nested, symptom, checked):
     # fit()'s nested Coulomb check (hdid._nested) in the vectorised batch: "auto" only on a
-    # symptom, True always, False never — with the log and the caller's options.
+    # symptom, True always, False never — with the log and the caller's options; the
+    # batch's default (None) warns on a symptom instead.
     import hdid._vfit as V
 
     seen = []
@@ -177,6 +179,8 @@ def test_the_batch_checks_the_nested_case_like_fit(monkeypatch, nested, symptom,
     tab = hdid.fit_many([EXAMPLE], nested=nested, n_starts=2, fix={"delta": 1.0})
     assert tab.error.isna().all()
     assert len(seen) == int(checked)
+    warned = any("nested Coulomb case" in w for w in tab.result.iloc[0].warnings)
+    assert warned == (nested is None and symptom)
     if checked:
         log, kw = seen[0]
         assert isinstance(log, hdid.Log) and kw["nested"] == nested

@@ -62,7 +62,9 @@ def fit_many(
         readable on the workers (or pass DataFrames).
     **options:
         Passed to :func:`hdid.fit` (``inertia``, ``fix``, ``counts_per_rev``, ``n_starts``,
-        …).
+        …). Vectorised, ``nested`` defaults to ``None``: a fit with a symptom of a poorer
+        optimum gets a warning instead of :func:`hdid.fit`'s check against the nested
+        Coulomb case, which runs one log at a time (``nested="auto"``: check them).
 
     Returns
     -------
