@@ -230,9 +230,11 @@ class Diagnosis:
             lines += [f"    - {n}" for n in self.notes]
         if self.timing:
             t = self.timing
+            progs = (f" ({t['programs_stored']:.0f} of {t['programs']:.0f} programs read from "
+                     "the store, the rest traced here)" if t.get("programs") else "")
             lines += ["[[timing]]",
-                      f"    {t['total_s']:.1f} s: compiling/loading programs {t['compile_s']:.1f} s, "
-                      f"fitting {t['run_s']:.1f} s (CPU {t['cpu_s']:.1f} s)"]
+                      f"    {t['total_s']:.1f} s: compiling/loading programs {t['compile_s']:.1f} s"
+                      f"{progs}, fitting {t['run_s']:.1f} s (CPU {t['cpu_s']:.1f} s)"]
         return "\n".join(lines)
 
     def __str__(self) -> str:
@@ -559,13 +561,15 @@ def _ripple_orders(frame, top: int = 2) -> list[float]:
 
 
 def _phase_reporter(progress):
-    """``say(msg)`` with the elapsed time, and a clock of JAX compile time."""
+    """``say(msg)`` with the elapsed time, and a clock of JAX compile time and of the
+    programs prepared (:data:`hdid._programs.STATS`: read from the store or traced)."""
     import time
 
-    from ._vfit import _clock
+    from . import _programs
+    from ._vfit import _clock, union_length
 
     clock = _clock()
-    mark = clock.mark()
+    mark, first = clock.mark(), len(_programs.STATS)
     t0, c0 = time.perf_counter(), time.process_time()
 
     def say(msg: str) -> None:
@@ -574,9 +578,17 @@ def _phase_reporter(progress):
 
     def timing() -> dict[str, float]:
         total = time.perf_counter() - t0
-        comp = clock.since(mark)
+        progs = _programs.STATS[first:]
+        # JAX's compile events and the store's own spans (reading or tracing a program,
+        # compiling it or reading JAX's cache), overlaps counted once
+        with clock.lock:
+            spans = list(clock.spans[mark:])
+        comp = union_length(spans + [p["span"] for p in progs])
         return {"total_s": total, "compile_s": comp, "run_s": max(total - comp, 0.0),
-                "cpu_s": time.process_time() - c0}
+                "cpu_s": time.process_time() - c0,
+                "programs": len(progs),
+                "programs_stored": sum(p["how"] == "stored" for p in progs),
+                "programs_traced": sum(p["how"] != "stored" for p in progs)}
 
     return say, timing
 
@@ -750,8 +762,7 @@ def diagnose(
     say(f"fitting the base model ({' + '.join(model.effect_names)})")
     base_setup = _refit.setup(log, model, fit_options)
     base_grid = _refit.grid(base_setup, FULL_GRID_STARTS)
-    current = _refit.run("base", base_setup, [("grid", u) for u in base_grid],
-                         width=FULL_GRID_STARTS)
+    current = _refit.run("base", base_setup, [("grid", u) for u in base_grid])
     if not current.finite:
         from ._errors import FitError
 
@@ -804,7 +815,7 @@ def diagnose(
         back = _base_starts(current.setup, current, cand_fits, reset)
         if back:
             say(f"  current model from {len(back)} candidate optima (effect removed)")
-            again = _refit.run(current.label, current.setup, back, width=FULL_GRID_STARTS)
+            again = _refit.run(current.label, current.setup, back)
             if again.finite and again.cost < current.cost - BASE_IMPROVED_DCHI2:
                 best_origin = again.origins[again.best]
                 notes.append(

@@ -30,15 +30,14 @@ from ._fit import (
     _choose_starts,
     _finish,
     _grid_candidates,
-    _local_fits as _fit_local_fits,
     _lm_lanes,
     _Schedule,
     _setup,
     _Setup,
-    _untrapped,
     lanes_vmap,
 )
-from ._identifiability import band_limit, derived_quantities
+from ._identifiability import MOVED_COUNTS, band_limit, derived_quantities
+from ._transforms import interval_to_u
 from ._problem import Problem
 from ._transforms import to_unconstrained
 
@@ -52,7 +51,9 @@ def _residuals_and_jacobian(problem: Problem, u):
 
 
 def _costs(problem: Problem, U):
-    return jax.vmap(problem.cost)(U)
+    # a loop, not a vmap: the simulator's event branch stays a branch (see LANES);
+    # 120 grid points of the shipped 1 kHz log: 0.03 s, vmapped 0.10 s
+    return jax.lax.map(problem.cost, U)
 
 
 def _solve_lanes(problem: Problem, U0, active, max_steps, state: LMState):
@@ -80,10 +81,87 @@ def _stored_solve(problem: Problem, U, active, k, state):
     return _programs.call("solve_lanes", _solve_lanes, problem, U, active, k, state)
 
 
-def _local_fits(problem: Problem, U0, max_steps: int):
-    """:func:`hdid._fit._local_fits` with its program from :mod:`hdid._programs` (no
-    tracing in a process that finds it stored)."""
-    return _fit_local_fits(problem, U0, max_steps, solve=_stored_solve)
+#: Lanes of every Levenberg–Marquardt program here: one. The stick-exact simulator takes
+#: its event branch (a ``lax.cond``) only in the substeps that need it; under ``vmap`` the
+#: branch becomes a select that runs every branch in every substep. Measured on the
+#: shipped 1 kHz log (base model, 6 grid starts, one core): 0.19 s for the whole
+#: multi-start fit one start at a time, 2.8 s as 3-lane programs. One lane also means
+#: one program per model structure whatever the number of starts.
+LANES = 1
+
+
+def _local_fits(problem: Problem, U0, max_steps: int, lanes: int = LANES, solve=None):
+    """:func:`hdid._fit._local_fits` (the same schedule, :class:`hdid._fit._Schedule`,
+    and, lanes not interacting, the same iterates for every start up to rounding: a
+    vmapped simulator selects where a one-lane one branches) run as calls of one
+    ``lanes``-wide program from :mod:`hdid._programs`: the starts a call advances are
+    taken ``lanes`` at a time, a short group padded with inactive copies. (``solve``:
+    another program with :func:`_solve_lanes`'s signature, for tests.) Returns
+    ``(U, costs, ok, steps, residuals)``, the residuals at each row of ``U`` (NaN where
+    none were computed)."""
+    solve = _stored_solve if solve is None else solve
+    U = np.array(U0, dtype=float)
+    N, n = U.shape
+    sched = _Schedule(N, max_steps)
+    m = int(np.prod(problem.times.shape)) + problem.n_physical
+    state = [np.asarray(f) for f in LMState.empty(N, m, n)]
+    while (task := sched.next()) is not None:
+        active, k, fresh = task
+        costs, done, steps = np.full(N, np.inf), np.zeros(N, dtype=bool), np.zeros(N, dtype=int)
+        idx = np.flatnonzero(active)
+        for g in range(0, len(idx), lanes):
+            rows = idx[g:g + lanes]
+            take = np.concatenate([rows, np.repeat(rows[:1], lanes - len(rows))])
+            on = np.arange(lanes) < len(rows)
+            st = LMState(*(f[take] for f in state))
+            st = st._replace(fresh=np.where(on, fresh, st.fresh))
+            U2, c2, d2, s2, st2 = solve(problem, jnp.asarray(U[take]), jnp.asarray(on),
+                                   jnp.asarray(k), st)
+            h = len(rows)
+            U[rows] = np.asarray(U2)[:h]
+            costs[rows], done[rows], steps[rows] = (np.asarray(c2)[:h], np.asarray(d2)[:h],
+                                                    np.asarray(s2)[:h])
+            for f, new in zip(state, st2):
+                f[rows] = np.asarray(new)[:h]
+        sched.update(costs, done, steps)
+    return U, sched.costs, sched.ok, sched.steps, np.where(state[2][:, None], state[0], np.nan)
+
+
+def trapped_runs(problem: Problem, prep, r) -> np.ndarray:
+    """:func:`hdid._fit.trapped_runs` from the residuals ``r`` at the optimum (the LM's
+    last ones: no simulation, no program): runs whose model reading is the same at every
+    weighted sample (the model never releases them) although the log shows them moving
+    (rest ≠ hold by more than ``MOVED_COUNTS``). The model reading is
+    ``θ + r·σ/w``; "the same" is within 10⁻⁶ of an encoder step (its rounding error is
+    ~10⁻¹⁷ rad, a run that moves spans many steps)."""
+    R, T = problem.times.shape
+    w = np.asarray(problem.weight)
+    seen = w > 0
+    model = np.asarray(problem.theta) + np.divide(
+        np.asarray(r)[: R * T].reshape(R, T) * float(problem.sigma), w,
+        out=np.zeros((R, T)), where=seen)
+    hi = np.max(np.where(seen, model, -np.inf), axis=1)
+    lo = np.min(np.where(seen, model, np.inf), axis=1)
+    still = (hi - lo) <= 1e-6 * float(prep.resolution)
+    moved = np.abs(prep.rest - prep.hold) > MOVED_COUNTS * prep.resolution
+    return np.flatnonzero(moved & still)
+
+
+def _untrapped(problem: Problem, prep, u, r):
+    """:func:`hdid._fit._untrapped` from the residuals ``r`` at ``u``: a restart for an
+    optimum that holds runs the log shows moving (their start angles back at their hold
+    readings, their release instants at the data's guess), or ``None``."""
+    trapped = trapped_runs(problem, prep, r)
+    if trapped.size == 0:
+        return None
+    v = np.array(u, dtype=float)
+    i = problem.n_physical
+    if problem.release_free:
+        lo, hi = np.asarray(problem.release_lo), np.asarray(problem.release_hi)
+        v[i + trapped] = np.asarray(interval_to_u(prep.release_guess, lo, hi))[trapped]
+        i += problem.n_runs
+    v[i + trapped] = 0.0
+    return v
 
 
 def setup(log, model, options: dict[str, Any]) -> _Setup:
@@ -205,27 +283,21 @@ class StructureFit:
 
 
 def run(label: str, s: _Setup, starts: list[tuple[str, np.ndarray]],
-        max_steps: int = 300, width: int | None = None) -> StructureFit:
-    """Levenberg–Marquardt from every start (lanes of one program, :func:`hdid.fit`'s
-    schedule), with :func:`hdid.fit`'s restart of runs the optimum holds stuck.
-
-    ``width``: pad the lanes to a multiple of it (copies of the first start), so that
-    later runs of the same structure with another number of starts reuse its program.
-    """
+        max_steps: int = 300) -> StructureFit:
+    """Levenberg–Marquardt from every start (:func:`hdid.fit`'s schedule, calls of one
+    program per model structure: :func:`_local_fits`), with :func:`hdid.fit`'s restart
+    of runs the optimum holds stuck."""
     t0 = time.perf_counter()
     starts = list(starts)
-    if width and len(starts) % width:
-        starts += [("pad", starts[0][1])] * (width - len(starts) % width)
     origins = [o for o, _ in starts]
     U0 = np.stack([np.asarray(u, dtype=float) for _, u in starts])
-    U, costs, ok, steps = _local_fits(s.problem, U0, max_steps)
+    U, costs, ok, steps, R = _local_fits(s.problem, U0, max_steps)
     c = np.where(np.isfinite(costs), costs, np.inf)
     if np.isfinite(c).any():
-        retry = _untrapped(s.problem, s.prep, U[int(np.argmin(c))])
+        b = int(np.argmin(c))
+        retry = _untrapped(s.problem, s.prep, U[b], R[b])
         if retry is not None:
-            # as many lanes as the first call (copies): its compiled program is reused
-            U1, c1, ok1, s1 = _local_fits(s.problem, np.repeat(retry[None, :], len(U0), 0),
-                                          max_steps)
+            U1, c1, ok1, s1, _ = _local_fits(s.problem, retry[None, :], max_steps)
             U, costs = np.concatenate([U, U1]), np.concatenate([costs, c1])
             ok, steps = np.concatenate([ok, ok1]), np.concatenate([steps, s1])
             origins += ["untrapped"] * len(U1)
