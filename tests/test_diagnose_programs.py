@@ -189,3 +189,48 @@ def test_trapped_runs_from_the_residuals_match_the_simulation():
         got = _refit.trapped_runs(p, s.prep, np.asarray(residuals(p, jnp.asarray(v))))
         np.testing.assert_array_equal(got, want)
     assert len(want) == p.n_runs  # the second case holds every run
+
+
+def test_residuals_and_jacobian_from_the_lm_program_are_the_problem_s():
+    """The order scan's one-step screen takes ``r`` and ``J`` from the structure's LM
+    program (a lane stopped at its start) instead of a program of its own: they must be
+    the problem's own, to rounding (forward mode in both: 1e-9 relative)."""
+    import hdid
+    from hdid import _refit
+    from hdid._io import read_log
+
+    log = read_log(SRC.parent / "data" / "synthetic" / "hidden_hysteresis_1khz.csv")
+    s = _refit.setup(log, hdid.Model.default(), {})
+    u = _refit.grid(s, 1)[0]
+    r, J = _refit.residuals_and_jacobian(s.problem, u)
+    r0, J0 = map(np.asarray, eqx.filter_jit(lambda p, u: p.residuals_and_jacobian(u))(
+        s.problem, jnp.asarray(u)))
+    assert r.shape == r0.shape and J.shape == J0.shape
+    np.testing.assert_allclose(r, r0, rtol=1e-9, atol=1e-9 * np.max(np.abs(r0)))
+    np.testing.assert_allclose(J, J0, rtol=1e-9, atol=1e-9 * np.max(np.abs(J0)))
+
+
+def test_residual_frame_and_whiteness_reuse_the_analysis_parts_unchanged():
+    """A refit's analysed result carries the Jacobian and simulations its analysis
+    program computed (``hdid._residuals.PARTS``); the residual frame and the whiteness
+    test must give the same numbers from them as from their own programs."""
+    import pandas as pd
+
+    import hdid
+    from hdid import _refit, _residuals
+    from hdid._io import read_log
+
+    log = read_log(SRC.parent / "data" / "synthetic" / "hidden_hysteresis_1khz.csv")
+    s = _refit.setup(log, hdid.Model.default(), {})
+    sf = _refit.run("base", s, [("grid", u) for u in _refit.grid(s, 2)])
+    res = sf.result()
+    assert _residuals._parts(res)  # computed at the result's u
+    first = len(_programs.STATS)
+    frame, white = _residuals.residual_frame(res), _residuals.whiteness(res)
+    # no program of their own was needed (none prepared, none reused from before)
+    assert len(_programs.STATS) == first
+    delattr(res, _residuals.PARTS)
+    frame0, white0 = _residuals.residual_frame(res), _residuals.whiteness(res)
+    pd.testing.assert_frame_equal(frame, frame0, rtol=1e-9)
+    assert white.p_value == pytest.approx(white0.p_value, rel=1e-6)
+    assert white.rms_ratio == pytest.approx(white0.rms_ratio, rel=1e-9)

@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _config  # noqa: F401
-from . import _programs
+from . import _programs, _residuals
 from ._fit import (
     LMState,
     _choose_starts,
@@ -46,8 +46,16 @@ SETUP_OPTIONS = ("inertia", "fix", "free_inertia", "inertia_prior", "release_tim
                  "counts_per_rev", "max_substep", "ratio", "resolution")
 
 
-def _residuals_and_jacobian(problem: Problem, u):
-    return problem.residuals_and_jacobian(u)
+def residuals_and_jacobian(problem: Problem, u) -> tuple[np.ndarray, np.ndarray]:
+    """Residuals and Jacobian at ``u`` from the structure's Levenberg–Marquardt program
+    (no program of their own: a fresh lane evaluates both at its start, and with an
+    iteration budget of one — the start counts as one — it stops there)."""
+    n = int(problem.n_unknowns)
+    m = int(np.prod(problem.times.shape)) + problem.n_physical
+    U = np.asarray(u, dtype=float)[None, :]
+    *_, state = _stored_solve(problem, jnp.asarray(U), jnp.asarray(np.ones(1, dtype=bool)),
+                              jnp.asarray(1), LMState.empty(1, m, n))
+    return np.asarray(state[0])[0], np.asarray(state[1])[0]
 
 
 def _costs(problem: Problem, U):
@@ -64,9 +72,10 @@ def _solve_lanes(problem: Problem, U0, active, max_steps, state: LMState):
     )
 
 
-def _analysis_parts(p: Problem, u):
+def _analysis_parts(p: Problem, u, fine):
     """The JAX parts of :func:`hdid._identifiability.analyse` at ``u`` (as
-    :func:`hdid._vfit._lane_analysis` computes them for one lane)."""
+    :func:`hdid._vfit._lane_analysis` computes them for one lane), and the simulation on
+    :func:`hdid._residuals.stick_times`'s grid ``fine`` (one program for both)."""
     r, J = p.data_residuals_and_jacobian(u)
     dense = p.simulate(u, full_output=True)
     P = p.n_physical
@@ -74,7 +83,8 @@ def _analysis_parts(p: Problem, u):
     def quantities(up):
         return derived_quantities(p.model(jnp.concatenate([up, u[P:]])), band_limit(p))
 
-    return (J, r), dense, (quantities(u[:P]), jax.jacfwd(quantities)(u[:P]))
+    return ((J, r), dense, (quantities(u[:P]), jax.jacfwd(quantities)(u[:P])),
+            p.simulate(u, fine, full_output=True))
 
 
 def _stored_solve(problem: Problem, U, active, k, state):
@@ -273,12 +283,19 @@ class StructureFit:
     def result(self):
         """The analysed :class:`~hdid.FitResult` of the best start (computed once)."""
         if self._result is None:
-            parts = _programs.call("analysis", _analysis_parts, self.setup.problem,
-                                   jnp.asarray(self.u))
-            (J, r), dense, derived = jax.tree_util.tree_map(np.asarray, parts)
+            p, prep = self.setup.problem, self.setup.prep
+            _, release, *_ = p.unpack_np(self.u)
+            fine = _residuals.fine_times(p.times, release, prep.lengths, prep.sample_period)
+            parts = _programs.call("analysis", _analysis_parts, p, jnp.asarray(self.u),
+                                   jnp.asarray(fine))
+            (J, r), dense, derived, dense_fine = jax.tree_util.tree_map(np.asarray, parts)
             pre = {"jacobian": (J, r), "dense": dense, "derived": derived}
             self._result = _finish(self.setup, self.U, self.costs, self.ok, self.steps,
                                    time.perf_counter(), bracket=False, precomputed=pre)
+            # the residual frame and the whiteness test reuse them (no programs of theirs)
+            setattr(self._result, _residuals.PARTS,
+                    {"u": np.array(self.u), "jacobian": (J, r), "dense": dense,
+                     "dense_fine": (fine, dense_fine)})
         return self._result
 
 
@@ -314,8 +331,7 @@ def gauss_newton_step(s: _Setup, u: np.ndarray, added: list[str]) -> tuple[float
     for the effect (1948): a one-step screen of many discrete settings (ripple orders)
     before full refits, which sees the collinearity of a low order with stiffness and
     offset (their columns are in both Jacobians)."""
-    r, J = map(np.asarray, _programs.call("residuals_and_jacobian", _residuals_and_jacobian,
-                                          s.problem, jnp.asarray(u)))
+    r, J = residuals_and_jacobian(s.problem, u)
     if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
         return 0.0, np.zeros_like(np.asarray(u))
 
