@@ -9,7 +9,7 @@ Refits (:mod:`hdid._refit`)
     offsets included) with its new parameters at data-derived values (several where the
     effect's basin is narrow), from the catalog friction shape when the current fit's is
     unusual, and from the best points of :func:`hdid.fit`'s data-driven grid; all starts
-    of one model structure are lanes of one program. The current model gets every start
+    of one model structure run through one program. The current model gets every start
     a candidate gets: its own grid (``FULL_GRID_STARTS``, more than any candidate), the
     catalog shape, and each candidate's optimum with the added effect removed. A
     candidate is credited only with what the current model cannot reach from there.
@@ -560,39 +560,6 @@ def _ripple_orders(frame, top: int = 2) -> list[float]:
 # -- the driver -----------------------------------------------------------------------
 
 
-def _phase_reporter(progress):
-    """``say(msg)`` with the elapsed time, and a clock of JAX compile time and of the
-    programs prepared (:data:`hdid._programs.STATS`: read from the store or traced)."""
-    import time
-
-    from . import _programs
-    from ._vfit import _clock, union_length
-
-    clock = _clock()
-    mark, first = clock.mark(), len(_programs.STATS)
-    t0, c0 = time.perf_counter(), time.process_time()
-
-    def say(msg: str) -> None:
-        if progress is not None:
-            progress(f"[{time.perf_counter() - t0:5.1f} s] {msg}")
-
-    def timing() -> dict[str, float]:
-        total = time.perf_counter() - t0
-        progs = _programs.STATS[first:]
-        # JAX's compile events and the store's own spans (reading or tracing a program,
-        # compiling it or reading JAX's cache), overlaps counted once
-        with clock.lock:
-            spans = list(clock.spans[mark:])
-        comp = union_length(spans + [p["span"] for p in progs])
-        return {"total_s": total, "compile_s": comp, "run_s": max(total - comp, 0.0),
-                "cpu_s": time.process_time() - c0,
-                "programs": len(progs),
-                "programs_stored": sum(p["how"] == "stored" for p in progs),
-                "programs_traced": sum(p["how"] != "stored" for p in progs)}
-
-    return say, timing
-
-
 def _base_starts(base_setup, current, cand_fits, values_reset):
     """Starts for the current model from candidates' optima with the effect removed
     (parameters it shares with the current model, and its release instants, start angles
@@ -734,12 +701,12 @@ def diagnose(
     Diagnosis
         ``verdict`` and its rules: see the module docstring.
     """
-    from . import _refit
+    from . import _programs, _refit
     from ._io import Log, read_log
     from ._model import Model
     from ._residuals import residual_features, residual_frame, whiteness
 
-    say, clock = _phase_reporter(progress)
+    say, clock = _programs.phase_reporter(progress)
     if not isinstance(log, Log):
         log = read_log(log, counts_per_rev=fit_options.pop("counts_per_rev", None),
                        resolution=fit_options.pop("resolution", None))

@@ -237,3 +237,35 @@ def _load(key: str):
         return pickle.loads(path.read_bytes())
     except Exception:  # noqa: BLE001 - stale or unreadable: trace again
         return None
+
+
+def phase_reporter(progress):
+    """For :func:`hdid.diagnose`: ``say(msg)`` with the elapsed time, and ``timing()``:
+    wall seconds in all, compiling/loading programs (JAX's compile events and this
+    store's :data:`STATS` spans: reading or tracing, compiling or reading JAX's cache)
+    and the rest, CPU seconds, and how many programs were read from the store."""
+    from ._vfit import _clock, union_length
+
+    clock = _clock()
+    mark, first = clock.mark(), len(STATS)
+    t0, c0 = time.perf_counter(), time.process_time()
+
+    def say(msg: str) -> None:
+        if progress is not None:
+            progress(f"[{time.perf_counter() - t0:5.1f} s] {msg}")
+
+    def timing() -> dict[str, float]:
+        total = time.perf_counter() - t0
+        progs = STATS[first:]
+        # JAX's compile events and the store's own spans (reading or tracing a program,
+        # compiling it or reading JAX's cache), overlaps counted once
+        with clock.lock:
+            spans = list(clock.spans[mark:])
+        comp = union_length(spans + [p["span"] for p in progs])
+        return {"total_s": total, "compile_s": comp, "run_s": max(total - comp, 0.0),
+                "cpu_s": time.process_time() - c0,
+                "programs": len(progs),
+                "programs_stored": sum(p["how"] == "stored" for p in progs),
+                "programs_traced": sum(p["how"] != "stored" for p in progs)}
+
+    return say, timing

@@ -1,16 +1,17 @@
-"""Refits for :func:`hdid.diagnose`: every start of one model structure as lanes of one
+"""Refits for :func:`hdid.diagnose`: every start of one model structure through one
 Levenberg–Marquardt program, results analysed only where they are needed.
 
 A candidate refit (a model with an effect added) is set up once per model structure; its
 starts are explicit unknown vectors (:func:`warm`: the current fit's optimum — release
 instants, start angles, offsets included — with the effect's parameters at a
 data-derived value) and the best points of :func:`hdid.fit`'s data-driven grid
-(:func:`grid`). All of them run as lanes of one program with :func:`hdid.fit`'s own
-schedule (every start a few iterations, the best to convergence), so models of the same
-structure share one compiled program. The full analysis (covariance, residual frame) is
-computed only for the fits whose residual :func:`hdid.diagnose` inspects
-(:meth:`StructureFit.result`).
-"""
+(:func:`grid`). All of them run with :func:`hdid.fit`'s own schedule (every start a few
+iterations, the best to convergence), one start per call of a one-lane program
+(:data:`LANES`), so models of the same structure share one compiled program whatever
+their number of starts, and :mod:`hdid._programs` keeps it for later processes. The
+full analysis (covariance, residual frame) is computed only for the fits whose residual
+:func:`hdid.diagnose` inspects (:meth:`StructureFit.result`), in one program that also
+simulates what the residual frame needs."""
 
 from __future__ import annotations
 
