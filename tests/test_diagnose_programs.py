@@ -1,7 +1,7 @@
 """The program store (:mod:`hdid._programs`) that lets ``hdid diagnose`` skip tracing in a
 later process: same numbers as the jit path, keyed by everything that shapes the program,
-and a stored program that uses LAPACK runs in a fresh process (it segfaulted before the
-CPU handlers were registered on load)."""
+a stored program that uses LAPACK runs in a fresh process without tracing, and the store
+is on by default."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import os
 import subprocess
 import sys
 import textwrap
+from collections import OrderedDict
 from pathlib import Path
 
 import equinox as eqx
@@ -42,10 +43,10 @@ def _wave(spring, a, b):
 @pytest.fixture
 def store(tmp_path, monkeypatch):
     monkeypatch.setenv("HDID_CACHE_DIR", str(tmp_path))
-    monkeypatch.setenv("HDID_PROGRAM_STORE", "1")
+    monkeypatch.delenv("HDID_PROGRAM_STORE", raising=False)  # on by default
     monkeypatch.delenv("HDID_NO_CACHE", raising=False)
-    monkeypatch.setattr(_programs, "_LOADED", {})
-    return tmp_path / "programs"
+    monkeypatch.setattr(_programs, "_LOADED", OrderedDict())
+    return tmp_path / "programs" / _programs._salt()[:16]
 
 
 def _args(power=2.0, n=3):
@@ -57,7 +58,7 @@ def test_same_numbers_as_jit_and_a_stored_program(store):
     args = _args()
     out = _programs.call("solve", _solve, *args)
     np.testing.assert_allclose(out, eqx.filter_jit(_solve)(*args), rtol=1e-14)
-    assert len(list(store.glob("*.bin"))) == 1
+    assert len(list(store.glob("*.exp"))) == 1
 
 
 def test_key_follows_static_fields_and_shapes(store, monkeypatch):
@@ -65,56 +66,171 @@ def test_key_follows_static_fields_and_shapes(store, monkeypatch):
     _programs.call("wave", _wave, *_args(power=3.0))  # static field: another program
     _programs.call("wave", _wave, *_args(n=4))  # another shape: another program
     _programs.call("wave", _wave, *_args())  # the first again: no new file
-    assert len(list(store.glob("*.bin"))) == 3
-    # a new process (nothing loaded) reads the file (or, where XLA cannot restore it,
-    # compiles again: seen with several programs sharing kernel names) — same numbers
-    monkeypatch.setattr(_programs, "_LOADED", {})
+    assert len(list(store.glob("*.exp"))) == 3
+    # a new process (nothing loaded) reads the file — same numbers
+    monkeypatch.setattr(_programs, "_LOADED", OrderedDict())
     args = _args(power=3.0)
     np.testing.assert_allclose(_programs.call("wave", _wave, *args),
                                eqx.filter_jit(_wave)(*args), rtol=1e-14)
 
 
 def test_stored_lapack_program_runs_in_a_fresh_process(store, tmp_path):
-    """A fresh process loads (or, where XLA cannot restore it, recompiles) the program and
-    gets the same numbers: before the CPU LAPACK handlers were registered on load this
-    was a segfault, and an unrestorable executable an exception."""
+    """A fresh process reads the program from the store (it does not trace ``_solve``)
+    and gets the same numbers; the LAPACK kernels it calls are registered on load (a
+    segfault when they were not)."""
     _programs.call("solve", _solve, *_args())
     code = textwrap.dedent(f"""
         import sys, numpy as np
         sys.path.insert(0, {str(Path(__file__).parent)!r})
         from hdid import _programs
         import test_diagnose_programs as t
-        print(repr(np.asarray(_programs.call("solve", t._solve, *t._args())).tolist()))
+        def untraceable(*a):
+            raise AssertionError("traced although stored")
+        print([s["how"] for s in _programs.STATS])
+        print(repr(np.asarray(_programs.call("solve", untraceable, *t._args())).tolist()))
+        print([s["how"] for s in _programs.STATS])
     """)
-    env = {**os.environ, "HDID_CACHE_DIR": str(tmp_path), "HDID_PROGRAM_STORE": "1",
+    env = {**os.environ, "HDID_CACHE_DIR": str(tmp_path),
            "PYTHONPATH": os.pathsep.join([str(SRC), os.environ.get("PYTHONPATH", "")])}
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
                        timeout=120)
     assert r.returncode == 0, r.stderr[-2000:]
-    got = np.array(eval(r.stdout.strip().splitlines()[-1]))
+    lines = r.stdout.strip().splitlines()
+    assert lines[-1] == "['stored']", r.stdout
+    got = np.array(eval(lines[-2]))
     np.testing.assert_allclose(got, eqx.filter_jit(_solve)(*_args()), rtol=1e-14)
 
 
 def test_a_program_that_fails_to_restore_is_compiled_and_never_loaded_again(store, monkeypatch):
     _programs.call("solve", _solve, *_args())
-    monkeypatch.setattr(_programs, "_LOADED", {})
+    monkeypatch.setattr(_programs, "_LOADED", OrderedDict())
 
-    def broken(*a):
-        raise RuntimeError("NOT_FOUND: Function wrapped_iota not found")
+    class Broken:  # a stored program whose call fails (a stale file, say)
+        def call(self, *a):
+            raise RuntimeError("NOT_FOUND: Function wrapped_iota not found")
 
     real_load = _programs._load
-    monkeypatch.setattr(_programs, "_load", lambda key: broken if real_load(key) else None)
+    monkeypatch.setattr(_programs, "_load", lambda key: Broken() if real_load(key) else None)
     args = _args()
     np.testing.assert_allclose(_programs.call("solve", _solve, *args),
                                eqx.filter_jit(_solve)(*args), rtol=1e-14)
     assert len(list(store.glob("*.bad"))) == 1
     monkeypatch.setattr(_programs, "_load", real_load)
-    monkeypatch.setattr(_programs, "_LOADED", {})
+    monkeypatch.setattr(_programs, "_LOADED", OrderedDict())
     key = next(store.glob("*.bad")).stem
     assert _programs._load(key) is None
 
 
-def test_no_store_when_caching_is_off(store, monkeypatch):
-    monkeypatch.setenv("HDID_NO_CACHE", "1")
-    _programs.call("solve", _solve, *_args())
-    assert not store.exists() or not list(store.glob("*.bin"))
+@pytest.mark.parametrize("env", [("HDID_NO_CACHE", "1"), ("HDID_PROGRAM_STORE", "0")])
+def test_no_store_when_caching_is_off(store, monkeypatch, env):
+    monkeypatch.setenv(*env)
+    args = _args()
+    np.testing.assert_allclose(_programs.call("solve", _solve, *args),
+                               eqx.filter_jit(_solve)(*args), rtol=1e-14)
+    assert not store.exists() or not list(store.glob("*.exp"))
+
+
+def test_starts_in_groups_of_one_program_give_fit_s_iterates():
+    """:func:`hdid._refit._local_fits` runs the starts ``LANES`` at a time (one program
+    per structure, any number of starts); lanes do not interact, so every start must end
+    where :func:`hdid._fit._local_fits` (all starts in one call) leaves it: same point,
+    cost, convergence flag and iteration count (Rosenbrock from 7 starts: 3 groups in
+    phase 1, the 3 best in phase 2)."""
+    import types
+
+    import jax
+
+    from hdid import _refit
+    from hdid._fit import _lm_lanes, _local_fits
+
+    def res(U):
+        return jnp.stack([10.0 * (U[:, 1] - U[:, 0] ** 2), 1.0 - U[:, 0]], axis=1)
+
+    def res_jac(U):
+        J = jax.vmap(jax.jacfwd(lambda u: res(u[None])[0]))(U)
+        return res(U), J
+
+    program = jax.jit(lambda U, active, k, state: _lm_lanes(res, res_jac, U, active, k, state))
+
+    def solve(problem, U, active, k, state):
+        return program(U, active, k, state)
+
+    problem = types.SimpleNamespace(times=np.zeros((1, 2)), n_physical=0)
+    U0 = np.random.default_rng(3).normal(size=(7, 2)) * 1.5
+    want = _local_fits(problem, U0, 60, solve=solve)
+    got = _refit._local_fits(problem, U0, 60, lanes=3, solve=solve)
+    for w, g in zip(want, got[:4]):
+        np.testing.assert_array_equal(np.asarray(g), np.asarray(w))
+    assert np.sum(np.asarray(want[2])) >= 1  # some start converged: the schedule ran
+
+
+def test_trapped_runs_from_the_residuals_match_the_simulation():
+    """:func:`hdid._refit.trapped_runs` reads the runs the model never releases off the
+    residuals the LM already has (no simulation program per structure); it must name the
+    runs :func:`hdid._fit.trapped_runs` finds by simulating: none at a fitted-like start,
+    all of them where static friction exceeds every release's spring torque."""
+    import hdid
+    from hdid import _refit
+    from hdid._fit import trapped_runs
+    from hdid._io import read_log
+    from hdid._transforms import to_unconstrained
+
+    log = read_log(SRC.parent / "data" / "synthetic" / "hidden_hysteresis_1khz.csv")
+    s = _refit.setup(log, hdid.Model.default(), {})
+    p = s.problem
+    u = _refit.grid(s, 1)[0]
+    residuals = eqx.filter_jit(lambda p, u: p.residuals(u))
+    specs = s.model.parameter_specs()
+    stuck = np.array(u)
+    for name, value in (("tau_c", 1.0), ("tau_s", 2.0)):  # N m: far above k·θ at release
+        stuck[p.free.index(name)] = float(to_unconstrained(specs[name], value))
+    for v in (u, stuck):
+        want = trapped_runs(p, s.prep, jnp.asarray(v))
+        got = _refit.trapped_runs(p, s.prep, np.asarray(residuals(p, jnp.asarray(v))))
+        np.testing.assert_array_equal(got, want)
+    assert len(want) == p.n_runs  # the second case holds every run
+
+
+def test_residuals_and_jacobian_from_the_lm_program_are_the_problem_s():
+    """The order scan's one-step screen takes ``r`` and ``J`` from the structure's LM
+    program (a lane stopped at its start) instead of a program of its own: they must be
+    the problem's own, to rounding (forward mode in both: 1e-9 relative)."""
+    import hdid
+    from hdid import _refit
+    from hdid._io import read_log
+
+    log = read_log(SRC.parent / "data" / "synthetic" / "hidden_hysteresis_1khz.csv")
+    s = _refit.setup(log, hdid.Model.default(), {})
+    u = _refit.grid(s, 1)[0]
+    r, J = _refit.residuals_and_jacobian(s.problem, u)
+    r0, J0 = map(np.asarray, eqx.filter_jit(lambda p, u: p.residuals_and_jacobian(u))(
+        s.problem, jnp.asarray(u)))
+    assert r.shape == r0.shape and J.shape == J0.shape
+    np.testing.assert_allclose(r, r0, rtol=1e-9, atol=1e-9 * np.max(np.abs(r0)))
+    np.testing.assert_allclose(J, J0, rtol=1e-9, atol=1e-9 * np.max(np.abs(J0)))
+
+
+def test_residual_frame_and_whiteness_reuse_the_analysis_parts_unchanged():
+    """A refit's analysed result carries the Jacobian and simulations its analysis
+    program computed (``hdid._residuals.PARTS``); the residual frame and the whiteness
+    test must give the same numbers from them as from their own programs."""
+    import pandas as pd
+
+    import hdid
+    from hdid import _refit, _residuals
+    from hdid._io import read_log
+
+    log = read_log(SRC.parent / "data" / "synthetic" / "hidden_hysteresis_1khz.csv")
+    s = _refit.setup(log, hdid.Model.default(), {})
+    sf = _refit.run("base", s, [("grid", u) for u in _refit.grid(s, 2)])
+    res = sf.result()
+    assert _residuals._parts(res)  # computed at the result's u
+    first = len(_programs.STATS)
+    frame, white = _residuals.residual_frame(res), _residuals.whiteness(res)
+    # no program of their own was needed (none prepared, none reused from before)
+    assert len(_programs.STATS) == first
+    delattr(res, _residuals.PARTS)
+    frame0, white0 = _residuals.residual_frame(res), _residuals.whiteness(res)
+    pd.testing.assert_frame_equal(frame, frame0, rtol=1e-9)
+    assert white.p_value == pytest.approx(white0.p_value, rel=1e-6)
+    assert white.rms_ratio == pytest.approx(white0.rms_ratio, rel=1e-9)

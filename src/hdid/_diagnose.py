@@ -9,7 +9,7 @@ Refits (:mod:`hdid._refit`)
     offsets included) with its new parameters at data-derived values (several where the
     effect's basin is narrow), from the catalog friction shape when the current fit's is
     unusual, and from the best points of :func:`hdid.fit`'s data-driven grid; all starts
-    of one model structure are lanes of one program. The current model gets every start
+    of one model structure run through one program. The current model gets every start
     a candidate gets: its own grid (``FULL_GRID_STARTS``, more than any candidate), the
     catalog shape, and each candidate's optimum with the added effect removed. A
     candidate is credited only with what the current model cannot reach from there.
@@ -230,9 +230,11 @@ class Diagnosis:
             lines += [f"    - {n}" for n in self.notes]
         if self.timing:
             t = self.timing
+            progs = (f" ({t['programs_stored']:.0f} of {t['programs']:.0f} programs read from "
+                     "the store, the rest traced here)" if t.get("programs") else "")
             lines += ["[[timing]]",
-                      f"    {t['total_s']:.1f} s: compiling/loading programs {t['compile_s']:.1f} s, "
-                      f"fitting {t['run_s']:.1f} s (CPU {t['cpu_s']:.1f} s)"]
+                      f"    {t['total_s']:.1f} s: compiling/loading programs {t['compile_s']:.1f} s"
+                      f"{progs}, fitting {t['run_s']:.1f} s (CPU {t['cpu_s']:.1f} s)"]
         return "\n".join(lines)
 
     def __str__(self) -> str:
@@ -558,29 +560,6 @@ def _ripple_orders(frame, top: int = 2) -> list[float]:
 # -- the driver -----------------------------------------------------------------------
 
 
-def _phase_reporter(progress):
-    """``say(msg)`` with the elapsed time, and a clock of JAX compile time."""
-    import time
-
-    from ._vfit import _clock
-
-    clock = _clock()
-    mark = clock.mark()
-    t0, c0 = time.perf_counter(), time.process_time()
-
-    def say(msg: str) -> None:
-        if progress is not None:
-            progress(f"[{time.perf_counter() - t0:5.1f} s] {msg}")
-
-    def timing() -> dict[str, float]:
-        total = time.perf_counter() - t0
-        comp = clock.since(mark)
-        return {"total_s": total, "compile_s": comp, "run_s": max(total - comp, 0.0),
-                "cpu_s": time.process_time() - c0}
-
-    return say, timing
-
-
 def _base_starts(base_setup, current, cand_fits, values_reset):
     """Starts for the current model from candidates' optima with the effect removed
     (parameters it shares with the current model, and its release instants, start angles
@@ -722,12 +701,12 @@ def diagnose(
     Diagnosis
         ``verdict`` and its rules: see the module docstring.
     """
-    from . import _refit
+    from . import _programs, _refit
     from ._io import Log, read_log
     from ._model import Model
     from ._residuals import residual_features, residual_frame, whiteness
 
-    say, clock = _phase_reporter(progress)
+    say, clock = _programs.phase_reporter(progress)
     if not isinstance(log, Log):
         log = read_log(log, counts_per_rev=fit_options.pop("counts_per_rev", None),
                        resolution=fit_options.pop("resolution", None))
@@ -750,8 +729,7 @@ def diagnose(
     say(f"fitting the base model ({' + '.join(model.effect_names)})")
     base_setup = _refit.setup(log, model, fit_options)
     base_grid = _refit.grid(base_setup, FULL_GRID_STARTS)
-    current = _refit.run("base", base_setup, [("grid", u) for u in base_grid],
-                         width=FULL_GRID_STARTS)
+    current = _refit.run("base", base_setup, [("grid", u) for u in base_grid])
     if not current.finite:
         from ._errors import FitError
 
@@ -792,19 +770,20 @@ def diagnose(
         # The current model gets every start a candidate got: from each candidate's
         # optimum with the effect removed, and from the catalog friction shape. A
         # candidate is credited only with what the current model cannot reach.
-        # (only those that would be credited: strong evidence against the current fit)
+        # (every one that would be credited, i.e. has strong evidence against the current
+        # fit: one start each, ~0.1–0.5 s with one-lane programs)
         k_now = current.n_unknowns
         bic_now = bic_value(current.cost, current.n_effective, k_now)
         cand_fits = sorted(
             (sf for key, v in by_key.items() if not isinstance(v, Exception) for sf in v
              if sf.finite and _cand_bic(sf, all_cands[key]) - bic_now < STRONG_DBIC),
-            key=lambda sf: sf.cost)[: FULL_GRID_STARTS - 1]
+            key=lambda sf: sf.cost)
         values = current.values()
         reset = _shape_reset(values) if _shape_is_unusual(values) else {}
         back = _base_starts(current.setup, current, cand_fits, reset)
         if back:
             say(f"  current model from {len(back)} candidate optima (effect removed)")
-            again = _refit.run(current.label, current.setup, back, width=FULL_GRID_STARTS)
+            again = _refit.run(current.label, current.setup, back)
             if again.finite and again.cost < current.cost - BASE_IMPROVED_DCHI2:
                 best_origin = again.origins[again.best]
                 notes.append(

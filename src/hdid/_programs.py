@@ -1,4 +1,4 @@
-"""Compiled programs kept on disk under hdid's own key, so a later process skips tracing.
+"""Programs kept on disk under hdid's own key, so that a later process skips tracing.
 
 JAX's persistent compilation cache (:mod:`hdid._config`) saves the XLA compile, but its
 key is the lowered program: every new process still traces and lowers each program
@@ -7,29 +7,33 @@ per model structure on a shared 2-core machine, most of a warm ``hdid diagnose``
 :func:`call` keys a program by what determines it — a name, the arguments' tree
 structure (which holds every static field: model structure, free parameters, layout),
 the shapes and dtypes of their arrays, the source of hdid and the versions of JAX and
-its backend — and keeps the serialized executable (``jax.experimental.
-serialize_executable``) under ``<cache>/programs``. A hit loads it without tracing. Any
-failure (a backend that cannot serialize, a stale file, an executable XLA cannot restore
-— seen on CPU for small programs: "Function wrapped_iota not found") falls back to
-compiling in the process, and a program that failed to restore is never loaded again
-(``<key>.bad``), so results never depend on the store.
+its backend — and keeps the traced and lowered program (a :mod:`jax.export`
+``Exported``: StableHLO plus its calling convention) under ``<cache>/programs``. A later
+process reads it instead of tracing: it only wraps the StableHLO in a call, and the XLA
+compile of that call is read from JAX's persistent cache, so what runs is compiled by
+JAX's ordinary path. (An earlier version kept serialized *executables*; some of them did
+not restore on jax 0.10's CPU backend — "Function multiply_sine_fusion not found" — so
+it was off by default.)
 
-Status (measured, jax 0.10.2, CPU): a program restored in a fresh process ran with the
-same numbers (the base model's grid and Levenberg–Marquardt programs of a 250 Hz log:
-0.3 s and 2.7 s instead of 18 s and 106 s of tracing and compiling), but some
-executables do not restore ("Function multiply_sine_fusion not found" when several
-programs with the same kernel names are loaded in one process). The fallback keeps the
-results right, but the end-to-end gain on ``hdid diagnose`` is not yet measured, so the
-store is off by default: ``HDID_PROGRAM_STORE=1`` turns it on. Without it :func:`call`
-is a per-process cache of compiled programs on top of JAX's persistent cache.
+Any failure (a program that cannot be exported, a stale or unreadable file, a call that
+fails) falls back to compiling in the process, and a program that failed is never loaded
+again (``<key>.bad``), so results never depend on the store. The store is on unless
+``HDID_NO_CACHE=1`` or ``HDID_PROGRAM_STORE=0``.
+
+:data:`STATS` records, per call that had to prepare a program, where the time went
+(read from the store or traced and lowered; compiled or read from JAX's cache), for
+``benchmarks/diagnose_speed.py``.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import os
 import pickle
 import re
+import time
+from collections import OrderedDict
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -42,10 +46,19 @@ from . import _config
 #: Modules that only orchestrate (no function of theirs is traced into a stored program:
 #: those come from ``_refit``, ``_residuals`` and the problem, model and effects they
 #: call): editing them does not invalidate the store.
-UNTRACED = frozenset({"_diagnose.py", "cli.py"})
+UNTRACED = frozenset({"_diagnose.py", "cli.py", "_verdicts.py"})
 _ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
-_LOADED: dict[str, Any] = {}
+#: Compiled programs of this process, most recently used last. Bounded: every XLA:CPU
+#: executable holds memory mappings for its code (see tests/conftest.py).
+_LOADED: OrderedDict[str, Any] = OrderedDict()
+MAX_LOADED = 64
 _SALT: str | None = None
+#: One dict per program prepared in this process: name, how (``stored``: read from the
+#: store; ``traced``: traced and lowered here; ``jit``: store off), and seconds spent
+#: reading/tracing (``prepare_s``), wrapping the program in a call and lowering it
+#: (``wrap_s``) and compiling or reading JAX's cache (``compile_s``),
+#: and the wall-clock ``span`` (``time.time()``, as JAX's compile events) of both.
+STATS: list[dict[str, Any]] = []
 
 
 def _salt() -> str:
@@ -73,17 +86,38 @@ def _salt() -> str:
     return _SALT
 
 
+#: A folder of programs of another source (or JAX) not used for this long is removed.
+STALE_DAYS = 7.0
+
+
 def _store() -> Path | None:
-    """The store's folder, or ``None``: off unless ``HDID_PROGRAM_STORE=1`` (see the
-    module docstring: on jax 0.10's CPU backend some executables do not restore)."""
-    if os.environ.get("HDID_NO_CACHE") or os.environ.get("HDID_PROGRAM_STORE") != "1":
+    """The store's folder for this source and JAX (``<cache>/programs/<salt>``), or
+    ``None`` (``HDID_NO_CACHE=1`` or ``HDID_PROGRAM_STORE=0``)."""
+    if os.environ.get("HDID_NO_CACHE") or os.environ.get("HDID_PROGRAM_STORE") == "0":
         return None
-    path = _config._cache_dir() / "programs"
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        return None
+    root = _config._cache_dir() / "programs"
+    path = root / _salt()[:16]
+    if not path.is_dir():
+        try:
+            path.mkdir(parents=True, exist_ok=True)
+        except OSError:
+            return None
+        _prune(root, path)
     return path
+
+
+def _prune(root: Path, keep: Path) -> None:
+    """Remove other sources' folders unused for :data:`STALE_DAYS` (a new folder is made
+    for every edit of hdid's source)."""
+    now = time.time()
+    for d in root.iterdir():
+        try:
+            if d != keep and d.is_dir() and now - d.stat().st_mtime > STALE_DAYS * 86400:
+                for f in d.iterdir():
+                    f.unlink()
+                d.rmdir()
+        except OSError:
+            pass
 
 
 def _key(name: str, treedef, static, leaves) -> str:
@@ -99,7 +133,7 @@ def _key(name: str, treedef, static, leaves) -> str:
 
 def call(name: str, fn: Callable, *args):
     """``fn(*args)`` compiled once per key (arrays dynamic, everything else static) and
-    loaded from the store in later processes."""
+    read from the store in later processes."""
     dyn, static = eqx.partition(args, eqx.is_array)
     leaves, treedef = jax.tree_util.tree_flatten(dyn)
     try:
@@ -108,21 +142,78 @@ def call(name: str, fn: Callable, *args):
         return eqx.filter_jit(fn)(*args)
     prog = _LOADED.get(key)
     if prog is not None:
+        _LOADED.move_to_end(key)
         return prog(*leaves)
-    prog = _load(key)
-    if prog is not None:
-        try:
-            # (errors of a restored executable surface when its results are read)
-            out = jax.block_until_ready(prog(*leaves))
-            _LOADED[key] = prog
-            return out
-        except Exception as exc:  # noqa: BLE001 - XLA could not restore it (seen on CPU:
-            # "Function wrapped_iota not found"): never load it again, compile here
-            del exc
-            _mark_bad(key)
-    prog = _compile(key, fn, treedef, static, leaves)
+    prog, out = _prepare(name, key, fn, treedef, static, leaves)
     _LOADED[key] = prog
-    return prog(*leaves)
+    while len(_LOADED) > MAX_LOADED:
+        _LOADED.popitem(last=False)
+    return out
+
+
+def _prepare(name, key, fn, treedef, static, leaves):
+    """A compiled program for ``key`` and its first result."""
+    w0 = time.time()  # (the clock of JAX's compile events, for hdid._vfit's union)
+    t0 = time.perf_counter()
+    exported = _load(key)
+    how = "stored" if exported is not None else "traced"
+    if exported is None:
+        exported = _export(key, fn, treedef, static, leaves)
+    t1 = time.perf_counter()
+    if exported is not None:
+        try:
+            lowered = jax.jit(exported.call).lower(*leaves)
+            t2 = time.perf_counter()
+            prog = lowered.compile()
+            t3 = time.perf_counter()
+            out = jax.block_until_ready(prog(*leaves))
+            STATS.append({"name": name, "how": how, "prepare_s": t1 - t0, "wrap_s": t2 - t1,
+                          "compile_s": t3 - t2, "key": key[:12], "span": (w0, w0 + t3 - t0)})
+            return prog, out
+        except Exception:  # noqa: BLE001 - never load it again; compile it here
+            _mark_bad(key)
+    t1 = time.perf_counter()
+    prog = _compile(fn, treedef, static, leaves)
+    t2 = time.perf_counter()
+    STATS.append({"name": name, "how": "jit", "prepare_s": 0.0, "wrap_s": 0.0, "compile_s": t2 - t1,
+                  "key": key[:12], "span": (w0, w0 + t2 - t0)})
+    return prog, prog(*leaves)
+
+
+def _flat(fn, treedef, static):
+    def flat(*xs):
+        return fn(*eqx.combine(jax.tree_util.tree_unflatten(treedef, xs), static))
+
+    return flat
+
+
+def _compile(fn, treedef, static, leaves):
+    return jax.jit(_flat(fn, treedef, static)).lower(*leaves).compile()
+
+
+def _export(key: str, fn, treedef, static, leaves):
+    """Trace and lower ``fn`` once (a :mod:`jax.export` ``Exported``) and keep it, or
+    ``None`` where the store is off, marked bad, or the program cannot be exported."""
+    store = _store()
+    if store is None or (store / f"{key}.bad").exists():
+        return None
+    try:
+        from jax import export
+
+        exported = export.export(jax.jit(_flat(fn, treedef, static)))(*leaves)
+        # (the VJP hook is a closure and cannot be pickled; the store only calls)
+        blob = pickle.dumps(dataclasses.replace(exported, _get_vjp=None))
+    except Exception:  # noqa: BLE001 - cannot export here: in-process only
+        _mark_bad(key)
+        return None
+    try:
+        tmp = store / f"{key}.{os.getpid()}.tmp"
+        tmp.write_bytes(blob)
+        os.replace(tmp, store / f"{key}.exp")
+        os.utime(store)  # in use: not stale
+    except OSError:
+        pass
+    return exported
 
 
 def _mark_bad(key: str) -> None:
@@ -135,58 +226,46 @@ def _mark_bad(key: str) -> None:
 
 
 def _load(key: str):
+    """The stored ``Exported`` of ``key``, or ``None``."""
     store = _store()
     if store is None:
         return None
-    path = store / f"{key}.bin"
+    path = store / f"{key}.exp"
     if not path.exists() or (store / f"{key}.bad").exists():
         return None
     try:
-        from jax.experimental import serialize_executable as se
-
-        _ensure_backend_handlers()
-        payload, in_tree, out_tree = pickle.loads(path.read_bytes())
-        return se.deserialize_and_load(payload, in_tree, out_tree)
-    except Exception:  # noqa: BLE001 - stale or unreadable: compile again
+        return pickle.loads(path.read_bytes())
+    except Exception:  # noqa: BLE001 - stale or unreadable: trace again
         return None
 
 
-def _ensure_backend_handlers() -> None:
-    """Register the CPU LAPACK kernels before loading an executable that calls them.
+def phase_reporter(progress):
+    """For :func:`hdid.diagnose`: ``say(msg)`` with the elapsed time, and ``timing()``:
+    wall seconds in all, compiling/loading programs (JAX's compile events and this
+    store's :data:`STATS` spans: reading or tracing, compiling or reading JAX's cache)
+    and the rest, CPU seconds, and how many programs were read from the store."""
+    from ._vfit import _clock, union_length
 
-    JAX registers them lazily, when it first *lowers* a linear-algebra op; a program
-    loaded without lowering would call an unregistered handler (a segfault, seen with
-    jax 0.10). ``jax.export`` does the same before running a deserialized program.
-    """
-    from jax._src.lax import linalg
+    clock = _clock()
+    mark, first = clock.mark(), len(STATS)
+    t0, c0 = time.perf_counter(), time.process_time()
 
-    linalg.initialize_lapack()
+    def say(msg: str) -> None:
+        if progress is not None:
+            progress(f"[{time.perf_counter() - t0:5.1f} s] {msg}")
 
+    def timing() -> dict[str, float]:
+        total = time.perf_counter() - t0
+        progs = STATS[first:]
+        # JAX's compile events and the store's own spans (reading or tracing a program,
+        # compiling it or reading JAX's cache), overlaps counted once
+        with clock.lock:
+            spans = list(clock.spans[mark:])
+        comp = union_length(spans + [p["span"] for p in progs])
+        return {"total_s": total, "compile_s": comp, "run_s": max(total - comp, 0.0),
+                "cpu_s": time.process_time() - c0,
+                "programs": len(progs),
+                "programs_stored": sum(p["how"] == "stored" for p in progs),
+                "programs_traced": sum(p["how"] != "stored" for p in progs)}
 
-def _compile(key: str, fn: Callable, treedef, static, leaves):
-    def flat(*xs):
-        return fn(*eqx.combine(jax.tree_util.tree_unflatten(treedef, xs), static))
-
-    store = _store()
-    lowered = jax.jit(flat).lower(*leaves)
-    if store is None or (store / f"{key}.bad").exists():
-        return lowered.compile()
-    # An executable read back from JAX's own persistent cache serializes without all of
-    # its kernels (restoring it fails: "Function broadcast_add_fusion not found"), so
-    # the program kept here is compiled afresh, once.
-    was = jax.config.jax_enable_compilation_cache
-    jax.config.update("jax_enable_compilation_cache", False)
-    try:
-        compiled = lowered.compile()
-    finally:
-        jax.config.update("jax_enable_compilation_cache", was)
-    try:
-        from jax.experimental import serialize_executable as se
-
-        blob = pickle.dumps(se.serialize(compiled))
-        tmp = store / f"{key}.{os.getpid()}.tmp"
-        tmp.write_bytes(blob)
-        os.replace(tmp, store / f"{key}.bin")
-    except Exception:  # noqa: BLE001 - cannot serialize here: in-process only
-        pass
-    return compiled
+    return say, timing

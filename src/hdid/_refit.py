@@ -1,16 +1,17 @@
-"""Refits for :func:`hdid.diagnose`: every start of one model structure as lanes of one
+"""Refits for :func:`hdid.diagnose`: every start of one model structure through one
 Levenberg–Marquardt program, results analysed only where they are needed.
 
 A candidate refit (a model with an effect added) is set up once per model structure; its
 starts are explicit unknown vectors (:func:`warm`: the current fit's optimum — release
 instants, start angles, offsets included — with the effect's parameters at a
 data-derived value) and the best points of :func:`hdid.fit`'s data-driven grid
-(:func:`grid`). All of them run as lanes of one program with :func:`hdid.fit`'s own
-schedule (every start a few iterations, the best to convergence), so models of the same
-structure share one compiled program. The full analysis (covariance, residual frame) is
-computed only for the fits whose residual :func:`hdid.diagnose` inspects
-(:meth:`StructureFit.result`).
-"""
+(:func:`grid`). All of them run with :func:`hdid.fit`'s own schedule (every start a few
+iterations, the best to convergence), one start per call of a one-lane program
+(:data:`LANES`), so models of the same structure share one compiled program whatever
+their number of starts, and :mod:`hdid._programs` keeps it for later processes. The
+full analysis (covariance, residual frame) is computed only for the fits whose residual
+:func:`hdid.diagnose` inspects (:meth:`StructureFit.result`), in one program that also
+simulates what the residual frame needs."""
 
 from __future__ import annotations
 
@@ -24,21 +25,20 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _config  # noqa: F401
-from . import _programs
+from . import _programs, _residuals
 from ._fit import (
     LMState,
     _choose_starts,
     _finish,
     _grid_candidates,
-    _local_fits as _fit_local_fits,
     _lm_lanes,
     _Schedule,
     _setup,
     _Setup,
-    _untrapped,
     lanes_vmap,
 )
-from ._identifiability import band_limit, derived_quantities
+from ._identifiability import MOVED_COUNTS, band_limit, derived_quantities
+from ._transforms import interval_to_u
 from ._problem import Problem
 from ._transforms import to_unconstrained
 
@@ -47,12 +47,22 @@ SETUP_OPTIONS = ("inertia", "fix", "free_inertia", "inertia_prior", "release_tim
                  "counts_per_rev", "max_substep", "ratio", "resolution")
 
 
-def _residuals_and_jacobian(problem: Problem, u):
-    return problem.residuals_and_jacobian(u)
+def residuals_and_jacobian(problem: Problem, u) -> tuple[np.ndarray, np.ndarray]:
+    """Residuals and Jacobian at ``u`` from the structure's Levenberg–Marquardt program
+    (no program of their own: a fresh lane evaluates both at its start, and with an
+    iteration budget of one — the start counts as one — it stops there)."""
+    n = int(problem.n_unknowns)
+    m = int(np.prod(problem.times.shape)) + problem.n_physical
+    U = np.asarray(u, dtype=float)[None, :]
+    *_, state = _stored_solve(problem, jnp.asarray(U), jnp.asarray(np.ones(1, dtype=bool)),
+                              jnp.asarray(1), LMState.empty(1, m, n))
+    return np.asarray(state[0])[0], np.asarray(state[1])[0]
 
 
 def _costs(problem: Problem, U):
-    return jax.vmap(problem.cost)(U)
+    # a loop, not a vmap: the simulator's event branch stays a branch (see LANES);
+    # 120 grid points of the shipped 1 kHz log: 0.03 s, vmapped 0.10 s
+    return jax.lax.map(problem.cost, U)
 
 
 def _solve_lanes(problem: Problem, U0, active, max_steps, state: LMState):
@@ -63,9 +73,10 @@ def _solve_lanes(problem: Problem, U0, active, max_steps, state: LMState):
     )
 
 
-def _analysis_parts(p: Problem, u):
+def _analysis_parts(p: Problem, u, fine):
     """The JAX parts of :func:`hdid._identifiability.analyse` at ``u`` (as
-    :func:`hdid._vfit._lane_analysis` computes them for one lane)."""
+    :func:`hdid._vfit._lane_analysis` computes them for one lane), and the simulation on
+    :func:`hdid._residuals.stick_times`'s grid ``fine`` (one program for both)."""
     r, J = p.data_residuals_and_jacobian(u)
     dense = p.simulate(u, full_output=True)
     P = p.n_physical
@@ -73,17 +84,95 @@ def _analysis_parts(p: Problem, u):
     def quantities(up):
         return derived_quantities(p.model(jnp.concatenate([up, u[P:]])), band_limit(p))
 
-    return (J, r), dense, (quantities(u[:P]), jax.jacfwd(quantities)(u[:P]))
+    return ((J, r), dense, (quantities(u[:P]), jax.jacfwd(quantities)(u[:P])),
+            p.simulate(u, fine, full_output=True))
 
 
 def _stored_solve(problem: Problem, U, active, k, state):
     return _programs.call("solve_lanes", _solve_lanes, problem, U, active, k, state)
 
 
-def _local_fits(problem: Problem, U0, max_steps: int):
-    """:func:`hdid._fit._local_fits` with its program from :mod:`hdid._programs` (no
-    tracing in a process that finds it stored)."""
-    return _fit_local_fits(problem, U0, max_steps, solve=_stored_solve)
+#: Lanes of every Levenberg–Marquardt program here: one. The stick-exact simulator takes
+#: its event branch (a ``lax.cond``) only in the substeps that need it; under ``vmap`` the
+#: branch becomes a select that runs every branch in every substep. Measured on the
+#: shipped 1 kHz log (base model, 6 grid starts, one core): 0.19 s for the whole
+#: multi-start fit one start at a time, 2.8 s as 3-lane programs. One lane also means
+#: one program per model structure whatever the number of starts.
+LANES = 1
+
+
+def _local_fits(problem: Problem, U0, max_steps: int, lanes: int = LANES, solve=None):
+    """:func:`hdid._fit._local_fits` (the same schedule, :class:`hdid._fit._Schedule`,
+    and, lanes not interacting, the same iterates for every start up to rounding: a
+    vmapped simulator selects where a one-lane one branches) run as calls of one
+    ``lanes``-wide program from :mod:`hdid._programs`: the starts a call advances are
+    taken ``lanes`` at a time, a short group padded with inactive copies. (``solve``:
+    another program with :func:`_solve_lanes`'s signature, for tests.) Returns
+    ``(U, costs, ok, steps, residuals)``, the residuals at each row of ``U`` (NaN where
+    none were computed)."""
+    solve = _stored_solve if solve is None else solve
+    U = np.array(U0, dtype=float)
+    N, n = U.shape
+    sched = _Schedule(N, max_steps)
+    m = int(np.prod(problem.times.shape)) + problem.n_physical
+    state = [np.asarray(f) for f in LMState.empty(N, m, n)]
+    while (task := sched.next()) is not None:
+        active, k, fresh = task
+        costs, done, steps = np.full(N, np.inf), np.zeros(N, dtype=bool), np.zeros(N, dtype=int)
+        idx = np.flatnonzero(active)
+        for g in range(0, len(idx), lanes):
+            rows = idx[g:g + lanes]
+            take = np.concatenate([rows, np.repeat(rows[:1], lanes - len(rows))])
+            on = np.arange(lanes) < len(rows)
+            st = LMState(*(f[take] for f in state))
+            st = st._replace(fresh=np.where(on, fresh, st.fresh))
+            U2, c2, d2, s2, st2 = solve(problem, jnp.asarray(U[take]), jnp.asarray(on),
+                                   jnp.asarray(k), st)
+            h = len(rows)
+            U[rows] = np.asarray(U2)[:h]
+            costs[rows], done[rows], steps[rows] = (np.asarray(c2)[:h], np.asarray(d2)[:h],
+                                                    np.asarray(s2)[:h])
+            for f, new in zip(state, st2):
+                f[rows] = np.asarray(new)[:h]
+        sched.update(costs, done, steps)
+    return U, sched.costs, sched.ok, sched.steps, np.where(state[2][:, None], state[0], np.nan)
+
+
+def trapped_runs(problem: Problem, prep, r) -> np.ndarray:
+    """:func:`hdid._fit.trapped_runs` from the residuals ``r`` at the optimum (the LM's
+    last ones: no simulation, no program): runs whose model reading is the same at every
+    weighted sample (the model never releases them) although the log shows them moving
+    (rest ≠ hold by more than ``MOVED_COUNTS``). The model reading is
+    ``θ + r·σ/w``; "the same" is within 10⁻⁶ of an encoder step (its rounding error is
+    ~10⁻¹⁷ rad, a run that moves spans many steps)."""
+    R, T = problem.times.shape
+    w = np.asarray(problem.weight)
+    seen = w > 0
+    model = np.asarray(problem.theta) + np.divide(
+        np.asarray(r)[: R * T].reshape(R, T) * float(problem.sigma), w,
+        out=np.zeros((R, T)), where=seen)
+    hi = np.max(np.where(seen, model, -np.inf), axis=1)
+    lo = np.min(np.where(seen, model, np.inf), axis=1)
+    still = (hi - lo) <= 1e-6 * float(prep.resolution)
+    moved = np.abs(prep.rest - prep.hold) > MOVED_COUNTS * prep.resolution
+    return np.flatnonzero(moved & still)
+
+
+def _untrapped(problem: Problem, prep, u, r):
+    """:func:`hdid._fit._untrapped` from the residuals ``r`` at ``u``: a restart for an
+    optimum that holds runs the log shows moving (their start angles back at their hold
+    readings, their release instants at the data's guess), or ``None``."""
+    trapped = trapped_runs(problem, prep, r)
+    if trapped.size == 0:
+        return None
+    v = np.array(u, dtype=float)
+    i = problem.n_physical
+    if problem.release_free:
+        lo, hi = np.asarray(problem.release_lo), np.asarray(problem.release_hi)
+        v[i + trapped] = np.asarray(interval_to_u(prep.release_guess, lo, hi))[trapped]
+        i += problem.n_runs
+    v[i + trapped] = 0.0
+    return v
 
 
 def setup(log, model, options: dict[str, Any]) -> _Setup:
@@ -195,37 +284,38 @@ class StructureFit:
     def result(self):
         """The analysed :class:`~hdid.FitResult` of the best start (computed once)."""
         if self._result is None:
-            parts = _programs.call("analysis", _analysis_parts, self.setup.problem,
-                                   jnp.asarray(self.u))
-            (J, r), dense, derived = jax.tree_util.tree_map(np.asarray, parts)
+            p, prep = self.setup.problem, self.setup.prep
+            _, release, *_ = p.unpack_np(self.u)
+            fine = _residuals.fine_times(p.times, release, prep.lengths, prep.sample_period)
+            parts = _programs.call("analysis", _analysis_parts, p, jnp.asarray(self.u),
+                                   jnp.asarray(fine))
+            (J, r), dense, derived, dense_fine = jax.tree_util.tree_map(np.asarray, parts)
             pre = {"jacobian": (J, r), "dense": dense, "derived": derived}
             self._result = _finish(self.setup, self.U, self.costs, self.ok, self.steps,
                                    time.perf_counter(), bracket=False, precomputed=pre)
+            # the residual frame and the whiteness test reuse them (no programs of theirs)
+            setattr(self._result, _residuals.PARTS,
+                    {"u": np.array(self.u), "jacobian": (J, r), "dense": dense,
+                     "dense_fine": (fine, dense_fine)})
         return self._result
 
 
 def run(label: str, s: _Setup, starts: list[tuple[str, np.ndarray]],
-        max_steps: int = 300, width: int | None = None) -> StructureFit:
-    """Levenberg–Marquardt from every start (lanes of one program, :func:`hdid.fit`'s
-    schedule), with :func:`hdid.fit`'s restart of runs the optimum holds stuck.
-
-    ``width``: pad the lanes to a multiple of it (copies of the first start), so that
-    later runs of the same structure with another number of starts reuse its program.
-    """
+        max_steps: int = 300) -> StructureFit:
+    """Levenberg–Marquardt from every start (:func:`hdid.fit`'s schedule, calls of one
+    program per model structure: :func:`_local_fits`), with :func:`hdid.fit`'s restart
+    of runs the optimum holds stuck."""
     t0 = time.perf_counter()
     starts = list(starts)
-    if width and len(starts) % width:
-        starts += [("pad", starts[0][1])] * (width - len(starts) % width)
     origins = [o for o, _ in starts]
     U0 = np.stack([np.asarray(u, dtype=float) for _, u in starts])
-    U, costs, ok, steps = _local_fits(s.problem, U0, max_steps)
+    U, costs, ok, steps, R = _local_fits(s.problem, U0, max_steps)
     c = np.where(np.isfinite(costs), costs, np.inf)
     if np.isfinite(c).any():
-        retry = _untrapped(s.problem, s.prep, U[int(np.argmin(c))])
+        b = int(np.argmin(c))
+        retry = _untrapped(s.problem, s.prep, U[b], R[b])
         if retry is not None:
-            # as many lanes as the first call (copies): its compiled program is reused
-            U1, c1, ok1, s1 = _local_fits(s.problem, np.repeat(retry[None, :], len(U0), 0),
-                                          max_steps)
+            U1, c1, ok1, s1, _ = _local_fits(s.problem, retry[None, :], max_steps)
             U, costs = np.concatenate([U, U1]), np.concatenate([costs, c1])
             ok, steps = np.concatenate([ok, ok1]), np.concatenate([steps, s1])
             origins += ["untrapped"] * len(U1)
@@ -242,8 +332,7 @@ def gauss_newton_step(s: _Setup, u: np.ndarray, added: list[str]) -> tuple[float
     for the effect (1948): a one-step screen of many discrete settings (ripple orders)
     before full refits, which sees the collinearity of a low order with stiffness and
     offset (their columns are in both Jacobians)."""
-    r, J = map(np.asarray, _programs.call("residuals_and_jacobian", _residuals_and_jacobian,
-                                          s.problem, jnp.asarray(u)))
+    r, J = residuals_and_jacobian(s.problem, u)
     if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
         return 0.0, np.zeros_like(np.asarray(u))
 

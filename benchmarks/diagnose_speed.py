@@ -1,0 +1,163 @@
+"""`hdid diagnose` of the shipped 1 kHz hidden-effect log: cold and warm time, per code.
+
+Each measured call is a fresh process that runs the CLI's diagnose command in-process
+(``hdid.cli.main(["diagnose", LOG, "--json", …])``, what a user's ``hdid diagnose`` runs)
+pinned to one core (``taskset -c CORE``) with its own cache folder (``HDID_CACHE_DIR``):
+"cold" = an empty cache, "warm" = a second process with the cache the first one left.
+Each code is given as a source folder (``--code LABEL=SRC``, e.g. a ``git worktree`` of
+an older commit); all codes are measured in one run, one after the other, each row with
+the load average before and after it (the machine is shared: wall time moves with the
+load, CPU seconds less so).
+
+Where the time goes: diagnose's own ``timing`` (JAX tracing, lowering and compiling, or
+reading JAX's cache, against fitting) and, where the code has one, the program store's
+record (:data:`hdid._programs.STATS`: per program, read from the store or traced, and
+the compile or cache read).
+
+    python benchmarks/diagnose_speed.py --code before=/tmp/wt_before/src \
+        --code after=src [--core 1] [--out diagnose_speed]
+    python benchmarks/diagnose_speed.py --render
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import DATA, RESULTS, interpretation_section, load_text, parse_or_render, run_meta  # noqa: E402
+
+LOG = DATA / "hidden_hysteresis_1khz.csv"
+
+CHILD = r"""
+import json, resource, sys, time
+t0 = time.perf_counter()
+from hdid.cli import main
+out = sys.argv[2]
+try:
+    main(["diagnose", sys.argv[1], "--json", out, "--quiet"], standalone_mode=False)
+except SystemExit:
+    pass
+wall = time.perf_counter() - t0
+ru = resource.getrusage(resource.RUSAGE_SELF)
+try:
+    from hdid import _programs
+    stats = list(getattr(_programs, "STATS", []))
+except Exception:
+    stats = []
+d = json.load(open(out))
+print("@@" + json.dumps({"wall_s": wall, "cpu_s": ru.ru_utime + ru.ru_stime,
+                         "timing": d.get("timing", {}), "verdict": d["verdict"],
+                         "summary": d["summary"],
+                         "candidates": [(c["variant"], c["delta_bic"]) for c in d["candidates"]],
+                         "scanned": d.get("scanned", {}), "programs": stats}))
+"""
+
+
+def measure(src: str, cache: Path, core: int, log: Path) -> dict:
+    env = {**os.environ, "HDID_CACHE_DIR": str(cache), "PYTHONPATH": str(Path(src).resolve())}
+    env.pop("HDID_NO_CACHE", None)
+    with tempfile.TemporaryDirectory() as tmp:
+        load0 = load_text()
+        t0 = time.perf_counter()
+        r = subprocess.run(["taskset", "-c", str(core), sys.executable, "-c", CHILD, str(log),
+                            str(Path(tmp) / "d.json")], capture_output=True, text=True, env=env)
+        wall = time.perf_counter() - t0
+        load1 = load_text()
+    line = next((x for x in r.stdout.splitlines() if x.startswith("@@")), None)
+    if line is None:
+        return {"error": (r.stderr or r.stdout)[-3000:], "process_wall_s": wall,
+                "load_start": load0, "load_end": load1}
+    rec = json.loads(line[2:])
+    rec.update(process_wall_s=wall, load_start=load0, load_end=load1)
+    return rec
+
+
+def summarize_programs(progs: list[dict]) -> dict:
+    out: dict[str, dict] = {}
+    for p in progs:
+        o = out.setdefault(p["how"], {"n": 0, "prepare_s": 0.0, "compile_s": 0.0})
+        o["n"] += 1
+        o["prepare_s"] += p["prepare_s"]
+        o["compile_s"] += p["compile_s"]
+    return out
+
+
+def render(res: dict) -> str:
+    m = res["meta"]
+    lines = [
+        f"# `hdid diagnose {Path(res['log']).name}`: time per code, cold and warm", "",
+        f"Measured {m['date']} on {m['cpu']} ({m['cores']} cores, shared), each process pinned "
+        f"to core {res['core']} with its own cache folder; load average (1/5/15 min) at start "
+        f"{m['load']}, at end {m.get('load_end', '?')}. Source fingerprint of this checkout "
+        f"{m['src']}. \"cold\" = empty cache; \"warm\" = a second process with the cache the "
+        "first left. Compile = JAX tracing, lowering and compiling or reading its cache "
+        "(diagnose's own `timing`); the program store's rows say how many programs were "
+        "read from it or traced, and the seconds of each.", "",
+        "| code | cache | wall s | CPU s | compile s | fitting s | programs (store) | load start → end | verdict (first candidates) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in res["rows"]:
+        if "error" in r:
+            lines.append(f"| {r['code']} | {r['cache']} | {r['process_wall_s']:.0f} | — | — | — | — "
+                         f"| {r['load_start']} → {r['load_end']} | error: "
+                         f"{r['error'].strip().splitlines()[-1][:120]} |")
+            continue
+        t = r["timing"]
+        ps = summarize_programs(r.get("programs", []))
+        prog = "; ".join(f"{k} {v['n']}: {v['prepare_s']:.1f} + {v['compile_s']:.1f} s"
+                         for k, v in sorted(ps.items())) or "—"
+        cands = ", ".join(f"{lb} {d:.1f}" for lb, d in r["candidates"][:3])
+        lines.append(
+            f"| {r['code']} | {r['cache']} | {r['process_wall_s']:.1f} | {r['cpu_s']:.1f} | "
+            f"{t.get('compile_s', float('nan')):.1f} | {t.get('run_s', float('nan')):.1f} | {prog} | "
+            f"{r['load_start']} → {r['load_end']} | {r['verdict']} ({cands}) |")
+    lines += ["", "Programs column: `how n: prepare + compile s` — `stored`: read from the "
+              "program store, `traced`: traced and lowered in this process, `jit`: the store "
+              "off or failed; compile = XLA compile or a read of JAX's persistent cache.", ""]
+    lines += interpretation_section(res)
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--code", action="append", required=False, default=[],
+                    metavar="LABEL=SRC", help="a label and a source folder (holding hdid/)")
+    ap.add_argument("--core", type=int, default=1)
+    ap.add_argument("--log", default=str(LOG))
+    ap.add_argument("--runs", default="cold,warm", help="cache states, in order")
+    ap.add_argument("--out", default="diagnose_speed")
+    args = parse_or_render(ap, argv, lambda a: a.out, render)
+    if args is None:
+        return 0
+    res = {"meta": run_meta(), "log": args.log, "core": args.core, "rows": []}
+    out_json = RESULTS / f"{args.out}.json"
+
+    def write():
+        out_json.write_text(json.dumps(res, indent=2) + "\n")
+        (RESULTS / f"{args.out}.md").write_text(render(res))
+
+    for spec in args.code:
+        label, src = spec.split("=", 1)
+        with tempfile.TemporaryDirectory(prefix=f"diag_speed_{label}_") as cache:
+            for state in args.runs.split(","):
+                rec = measure(src, Path(cache), args.core, Path(args.log))
+                rec.update(code=label, cache=state, src=src)
+                res["rows"].append(rec)
+                print(f"{label} {state}: {rec.get('process_wall_s', 0):.1f} s "
+                      f"(load {rec['load_start']} → {rec['load_end']}) "
+                      f"{rec.get('verdict', rec.get('error', '')[-300:])}", flush=True)
+                write()
+    res["meta"]["load_end"] = load_text()
+    write()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
