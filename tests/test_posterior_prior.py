@@ -93,3 +93,28 @@ def test_chunked_batch_equals_one_loop(fit, monkeypatch):
     chunked = np.asarray(jax.jit(density._batch)(lp, jnp.asarray(X)))
     assert np.isfinite(one).sum() >= 30
     np.testing.assert_allclose(chunked, one, rtol=1e-11)
+
+
+def test_mode_search_under_a_user_prior_minimises_the_posterior(fit):
+    """With a user prior the optima are sought on the posterior's cost: the view's prior
+    rows are the user's (its cost at the fit rises by exactly z² for v_s put 3 sd off),
+    its starts are the prior's centre and draws from it, and the fit is not changed."""
+    from hdid._posterior.density import gaussian_prior
+    from hdid._posterior.modes import N_PRIOR_STARTS, with_user_prior
+
+    prob = fit.problem
+    i = list(prob.free).index("v_s")
+    v = fit.values["v_s"]
+    G, _ = gaussian_prior(prob, {"v_s": (v * math.exp(0.9), 0.3)})
+    view, starts = with_user_prior(fit, G, seed=1)
+    u = np.asarray(fit.u, dtype=float)
+    base_rows = float(np.sum(np.asarray(prob.prior_residuals(u)) ** 2))
+    own_vs = float(((u[i] - prob.prior_mean[i]) / prob.prior_sd[i]) ** 2)
+    got = float(view.problem.cost(jnp.asarray(u)) - prob.cost(jnp.asarray(u)))
+    assert got == pytest.approx(9.0 - own_vs, abs=1e-9)
+    assert base_rows >= own_vs
+    assert starts.shape == (1 + N_PRIOR_STARTS, u.size)
+    assert starts[0, i] == pytest.approx(u[i] + 0.9)
+    assert np.all(starts[:, : i] == u[:i]) and np.all(starts[:, i + 1:] == u[i + 1:])
+    assert np.array_equal(np.asarray(view.u), u) and fit.problem is prob
+    assert with_user_prior(fit, None) == (fit, None)

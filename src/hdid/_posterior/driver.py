@@ -185,7 +185,7 @@ def sample_posterior(
     rng = np.random.default_rng(seed)
     q = float(prob.step)
     t_modes = time.perf_counter()
-    found = sampled_modes(fit, modes, seed, u_fit, lin)
+    found = sampled_modes(fit, modes, seed, u_fit, lin, lp.gauss_prior)
     t_modes = time.perf_counter() - t_modes
     log_lo = math.log(bounds[0] * q)
     log_rms = math.log(max(fit.rms_residual_rad, bounds[0] * q))

@@ -275,7 +275,7 @@ def _setup(fit, seed, sigma_floor=None, modes="auto", prior=None):
                                             dens.bounds, dens.u_fit)
     warnings += dens.warnings
     t = time.perf_counter()
-    found = sampled_modes(fit, modes, seed, u_fit, lin)
+    found = sampled_modes(fit, modes, seed, u_fit, lin, lp.gauss_prior)
     t_modes = time.perf_counter() - t
     q = float(prob.step)
     log_lo = math.log(bounds[0] * q)
@@ -287,7 +287,8 @@ def _setup(fit, seed, sigma_floor=None, modes="auto", prior=None):
     for k, m in enumerate(found):
         covs[k, :-1, :-1] = lp.sampled_cov_np(m.u, REF_SCALE**2 * m.cov)
         covs[k, -1, -1] = s_sd**2
-    ref = MixtureProposal(means, covs, [max(m.weight, 0.02) for m in found], nu=REF_NU)
+    weights = [max(m.weight, 0.02) for m in found]
+    ref = MixtureProposal(means, covs, weights, nu=REF_NU)
     return lp, found, ref, warnings, temper, rho1, lin, t_modes
 
 
