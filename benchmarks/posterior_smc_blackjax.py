@@ -32,7 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from hdid._posterior.density import _batch
-from hdid._posterior.smc import TARGET_ESS, _proposal_chols, _setup
+from hdid._posterior.smc import TARGET_ESS, _rw_chols, _setup
 
 
 def _jax_logp(lp):
@@ -126,7 +126,11 @@ def run_smc(kernels, ref, n_particles: int, seed: int, max_steps: int = 200, pro
     for i in range(max_steps):
         X = np.asarray(state.particles)
         w = np.asarray(state.weights)
-        mix, chols = _proposal_chols(X, w, mix, scale)
+        # the weighted particles resampled, the mixture refitted (EM), each particle's
+        # cluster covariance (what the library's loop did when this was measured)
+        idx = np.random.default_rng(0).choice(len(w), size=len(w), p=w / w.sum())
+        mix = mix.refit(X[idx])
+        chols = _rw_chols(X, mix, scale)
         key, sub = jax.random.split(key)
         t_step = time.perf_counter()
         beta_before = float(state.tempering_param)

@@ -85,8 +85,8 @@ def modes(fit):
 
 
 def test_short_chain_is_reproducible_and_summarised(fit, modes):
-    a = sample_posterior(fit, n_steps=100, burn_in=40, seed=3, modes=modes)
-    b = sample_posterior(fit, n_steps=100, burn_in=40, seed=3, modes=modes)
+    a = sample_posterior(fit, n_steps=100, burn_in=40, seed=3, modes=modes, method="emcee")
+    b = sample_posterior(fit, n_steps=100, burn_in=40, seed=3, modes=modes, method="emcee")
     np.testing.assert_array_equal(a.chain, b.chain)
     s = a.to_dict()
     assert set(s["posterior"]) >= {"k1", "tau_c", "stick_band_halfwidth_rad", "natural_frequency_hz"}
@@ -127,7 +127,8 @@ def test_moves_factory_gets_the_log_posterior_and_burn_in_hook_is_called(fit, mo
         return [Recording()]
 
     burn = 40 * BURN_IN_STAGES
-    post = sample_posterior(fit, n_steps=30, burn_in=burn, seed=1, modes=modes, moves=factory)
+    post = sample_posterior(fit, n_steps=30, burn_in=burn, seed=1, modes=modes, moves=factory,
+                            method="emcee")
     assert isinstance(seen["lp"], LogPosterior) and seen["lp"].ndim == post.chain.shape[2]
     assert len(seen["updates"]) == BURN_IN_STAGES
     for rate, shape in seen["updates"]:
@@ -137,7 +138,7 @@ def test_moves_factory_gets_the_log_posterior_and_burn_in_hook_is_called(fit, mo
 
 def test_too_short_chain_does_not_crash(fit, modes):
     # 5 steps: some walkers never move, τ is NaN; the sampler must warn, not crash.
-    post = sample_posterior(fit, n_steps=5, burn_in=0, seed=1, modes=modes)
+    post = sample_posterior(fit, n_steps=5, burn_in=0, seed=1, modes=modes, method="emcee")
     assert post.draws.shape[0] > 0
     assert post.warnings
 
@@ -362,7 +363,8 @@ def test_width_ratio_tells_measured_from_assumed(fit):
 def test_no_progress_bar_unless_stderr_is_a_terminal(fit, capfd):
     """tqdm's carriage-return updates must not reach a redirected stderr (a log file),
     even when progress is asked for (the CLI asks unless -q)."""
-    sample_posterior(fit, n_steps=20, burn_in=0, seed=0, modes="fit", progress=True)
+    sample_posterior(fit, n_steps=20, burn_in=0, seed=0, modes="fit", progress=True,
+                     method="emcee")
     err = capfd.readouterr().err
     assert "\r" not in err and "it/s" not in err
 

@@ -81,6 +81,12 @@ class LogPosterior(eqx.Module):
     #: least-squares one (``y = exp(u − centre)``, see ``SAMPLE_LINEAR``); ``None``: the
     #: sampled vector is ``u`` itself
     sample_linear: jax.Array | None = None
+    #: ``(3, P)``: mean, sd and on/off (1/0) of a Gaussian prior in the transformed space
+    #: of each free physical parameter given one (``sample_posterior(prior=...)``); it
+    #: replaces the default prior (box, weak prior, linear prior) of that parameter
+    gauss_prior: jax.Array | None = None
+    #: ``(i, j)`` indices of (tau_c, tau_s) when the prior asks ``tau_s ≥ tau_c``
+    order: jax.Array | None = None
 
     @property
     def ndim(self) -> int:
@@ -145,11 +151,22 @@ class LogPosterior(eqx.Module):
     def _log_prior(self, u, log_sigma):
         p = self.problem
         P, R = p.n_physical, p.n_runs
-        lp = -0.5 * jnp.sum(p.prior_residuals(u) ** 2)
+        default = jnp.ones(P, dtype=bool)
+        lp = 0.0
+        if self.gauss_prior is not None:
+            mean, sd, on = self.gauss_prior
+            default = on <= 0
+            z = (u[:P] - mean) / sd
+            # normalised, so that the evidence is comparable between priors
+            lp += jnp.sum(jnp.where(default, 0.0, -0.5 * z * z - jnp.log(sd)
+                                    - 0.5 * jnp.log(2 * jnp.pi)))
+        lp += -0.5 * jnp.sum(jnp.where(default, p.prior_residuals(u), 0.0) ** 2)
         if self.linear_prior is not None:
             # flat in x = exp(u): density in u is ∝ exp(u)
-            lp += jnp.sum(self.linear_prior * (u[:P] - self.centre[:P]))
-        outside = jnp.any(jnp.abs(u[:P] - self.centre[:P]) > PRIOR_HALF_WIDTH)
+            lp += jnp.sum(jnp.where(default, self.linear_prior * (u[:P] - self.centre[:P]), 0.0))
+        outside = jnp.any(default & (jnp.abs(u[:P] - self.centre[:P]) > PRIOR_HALF_WIDTH))
+        if self.order is not None:
+            outside |= u[self.order[1]] < u[self.order[0]]
         q = p.step
         lo, hi = jnp.log(self.sigma_bounds[0] * q), jnp.log(self.sigma_bounds[1] * q)
         outside |= (log_sigma < lo) | (log_sigma > hi)
@@ -169,9 +186,34 @@ class LogPosterior(eqx.Module):
         return _batch_jit(self, X)
 
 
+#: Rows per simulation loop in :meth:`LogPosterior.batch` (0: all rows in one loop). The
+#: batched simulator integrates until *every* run of the batch has stuck, so one slow row
+#: (little friction: it rings for the whole log) makes every row pay for its length; in
+#: chunks each loop ends with its own slowest row (benchmarks/results/posterior_profile.json).
+BATCH_CHUNK = 128
+
+
+def _batch_rows(lp: LogPosterior, X):
+    U, _, inside = jax.vmap(lp.to_u)(X)
+    # Rows of zero prior density are not simulated: their runs are replaced by the
+    # least-squares optimum's (which sticks within a few samples). The batched loop lasts
+    # until its slowest run sticks, and such rows (Stribeck velocity 10⁴ rad/s, static
+    # friction near zero: a ring-down over the whole log) made one call of 2000 SMC
+    # reference draws cost 4 s instead of 0.4 s (benchmarks/results/posterior_profile.md).
+    ok = inside & jnp.isfinite(jax.vmap(lp._log_prior)(U, X[:, -1]))
+    U_sim = jnp.where(ok[:, None], U, lp.centre[None, :])
+    out = jax.vmap(lp._log_prob_given)(X, lp.problem.predict_many(U_sim))
+    return jnp.where(ok, out, -jnp.inf)
+
+
 def _batch(lp: LogPosterior, X):
-    U = jax.vmap(lambda x: lp.to_u(x)[0])(X)
-    return jax.vmap(lp._log_prob_given)(X, lp.problem.predict_many(U))
+    n, c = X.shape[0], BATCH_CHUNK
+    if c <= 0 or n <= c:
+        return _batch_rows(lp, X)
+    k = -(-n // c)
+    Xp = jnp.concatenate([X, jnp.broadcast_to(X[:1], (k * c - n, X.shape[1]))]) if k * c > n else X
+    out = jax.lax.map(lambda Xc: _batch_rows(lp, Xc), Xp.reshape(k, c, X.shape[1]))
+    return out.reshape(-1)[:n]
 
 
 # Plain jax.jit, not eqx.filter_jit: every leaf of a LogPosterior is an array or a float,
@@ -249,12 +291,44 @@ class PosteriorDensity(NamedTuple):
     u_fit: np.ndarray
 
 
+def gaussian_prior(problem: Problem, prior: dict | None):
+    """``(3, P)`` array (mean, sd, on) of the Gaussian prior in the transformed space that
+    ``prior`` asks for, and the ``(tau_c, tau_s)`` indices when both are given one (then
+    ``tau_s ≥ tau_c`` is imposed). ``prior`` maps a free physical parameter's name to
+    ``(centre value, sd)``: the centre in the parameter's unit, the sd in its transformed
+    space — log for positive parameters (a log-normal: 0.2 is ±20 %), logit of the
+    interval for ``delta``. ``None``: ``(None, None)``."""
+    if not prior:
+        return None, None
+    from .._transforms import to_unconstrained
+
+    specs = problem.base.parameter_specs()
+    free = list(problem.free)
+    unknown = [n for n in prior if n not in free]
+    if unknown:
+        raise ValueError(f"prior: {unknown} are not free physical parameters of this fit "
+                         f"(free: {free})")
+    G = np.zeros((3, len(free)))
+    G[1] = 1.0
+    for n, (centre, sd) in prior.items():
+        if not (np.isfinite(centre) and np.isfinite(sd) and sd > 0):
+            raise ValueError(f"prior[{n!r}] = {(centre, sd)}: the centre must be finite and the sd > 0")
+        i = free.index(n)
+        G[:, i] = float(to_unconstrained(specs[n], centre)), float(sd), 1.0
+    order = None
+    if "tau_c" in prior and "tau_s" in prior and all(
+            specs[n].transform == "log" for n in ("tau_c", "tau_s")):
+        order = np.array([free.index("tau_c"), free.index("tau_s")])
+    return G, order
+
+
 def posterior_density(fit, sigma_floor=None, linear_prior=LINEAR_PRIOR,
-                      sample_linear=SAMPLE_LINEAR) -> PosteriorDensity:
+                      sample_linear=SAMPLE_LINEAR, prior=None) -> PosteriorDensity:
     """:class:`LogPosterior` of ``fit``: tempered by the residuals' lag-1 autocorrelation
     (effective sample size), σ bounded in steps, a flat prior in the value of the
     log-transformed parameters named in ``linear_prior`` and sampling in the value of
-    those in ``sample_linear``."""
+    those in ``sample_linear``; ``prior`` (:func:`gaussian_prior`) replaces the default
+    prior of the parameters it names."""
     import math
 
     prob = fit.problem
@@ -276,8 +350,13 @@ def posterior_density(fit, sigma_floor=None, linear_prior=LINEAR_PRIOR,
                     for n in prob.free])
     samp = np.array([1.0 if (n in sample_linear and specs[n].transform == "log") else 0.0
                      for n in prob.free])
+    G, order = gaussian_prior(prob, prior)
+    if G is not None:
+        lin = np.where(G[2] > 0, 0.0, lin)
     lp = LogPosterior(problem=prob, centre=jnp.asarray(u_fit), temper=jnp.asarray(temper),
                       sigma_bounds=bounds, quant_var=quant_var,
                       linear_prior=jnp.asarray(lin) if lin.any() else None,
-                      sample_linear=jnp.asarray(samp) if samp.any() else None)
+                      sample_linear=jnp.asarray(samp) if samp.any() else None,
+                      gauss_prior=None if G is None else jnp.asarray(G),
+                      order=None if order is None else jnp.asarray(order))
     return PosteriorDensity(lp, warnings, temper, rho1, lin, bounds, u_fit)

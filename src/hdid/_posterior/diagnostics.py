@@ -149,11 +149,16 @@ ASSUMED_MIN = math.sqrt(0.8)
 
 
 def width_ratios(problem, draws_u: np.ndarray, centre, half_width: float,
-                 linear_prior: np.ndarray) -> dict[str, dict]:
+                 linear_prior: np.ndarray, gauss_prior=None) -> dict[str, dict]:
     """For each free physical parameter: posterior sd / prior sd in the fit's transformed
     coordinates, and the verdict ``measured`` (≤ ``MEASURED_MAX``), ``assumed``
-    (> ``ASSUMED_MIN``: the prior, not the data, sets the interval) or ``partly measured``."""
+    (> ``ASSUMED_MIN``: the prior, not the data, sets the interval) or ``partly measured``.
+    ``gauss_prior`` (``(3, P)``: mean, sd, on) gives the sd of parameters with a Gaussian
+    prior of the user's."""
     psd = prior_sd(problem, np.asarray(centre, dtype=float), half_width, linear_prior)
+    if gauss_prior is not None:
+        G = np.asarray(gauss_prior, dtype=float)
+        psd = np.where(G[2] > 0, G[1], psd)
     out = {}
     for i, n in enumerate(problem.free):
         r = float(np.std(draws_u[:, i]) / psd[i])

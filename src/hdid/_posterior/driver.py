@@ -87,18 +87,19 @@ def sample_posterior(
     modes="auto",
     linear_prior: tuple[str, ...] = LINEAR_PRIOR,
     sample_linear: tuple[str, ...] = SAMPLE_LINEAR,
-    method: str = "emcee",
+    method: str = "smc",
     n_particles: int | None = None,
+    prior: dict | None = None,
 ) -> PosteriorResult:
     """Sample the posterior of ``fit``'s parameters, until converged.
 
-    ``method="emcee"`` (default) is described below. ``method="smc"``: tempered
-    sequential Monte Carlo from the optima's Laplace
-    mixture (:func:`~hdid._posterior.smc.sample_smc`: independent runs whose agreement is
-    the convergence test; gives the log-evidence); ``n_particles`` per run. The other
-    options below are emcee's. Neither is calibrated on the paper design yet, and SMC is
-    not measured on the rich design, where emcee converges in well under a minute
-    (benchmarks/README.md, "Posterior: tempered SMC").
+    ``method="smc"`` (default): tempered sequential Monte Carlo from the optima's Laplace
+    mixture with independence and random-walk moves
+    (:func:`~hdid._posterior.smc.sample_smc`: 4 independent runs whose agreement is the
+    convergence test; gives the log-evidence); ``n_particles`` per run. On the shipped
+    paper log it converges in ≈ 10 s of sampling where emcee did not in 20 000 steps
+    (benchmarks/results/posterior_profile.md). ``method="emcee"`` is described below; the
+    options from ``n_walkers`` to ``sample_linear`` other than ``prior`` are emcee's.
 
     Modes: with ``modes="auto"`` (default) :func:`find_modes` restarts the local fit
     around ``fit`` and keeps every distinct optimum with its Laplace mass; the walkers
@@ -135,6 +136,13 @@ def sample_posterior(
         ``(log_posterior, proposal) -> moves``; default :func:`default_moves`. A move with
         a ``burn_in_update(acceptance, draws)`` method is given its acceptance rate and the
         stage's draws after each burn-in stage.
+    prior:
+        Gaussian priors of your own, replacing the default (flat box, weak priors) of the
+        parameters named: ``{name: (centre value, sd)}``, the sd in the parameter's
+        transformed space — log for positive parameters (``{"v_s": (5.0, 0.3)}`` is a
+        log-normal of median 5 rad/s and ±30 %), logit for ``delta``. With both ``tau_c``
+        and ``tau_s`` given, ``tau_s ≥ tau_c`` is imposed. What the data then narrowed is
+        in ``widths`` (posterior / prior sd).
     sample_linear:
         Log-transformed parameters the walkers move in the *value* of (default
         ``SAMPLE_LINEAR``); the density carries the Jacobian, so only the mixing changes.
@@ -142,9 +150,15 @@ def sample_posterior(
     if method == "smc":
         from .smc import N_PARTICLES, sample_smc
 
+        given = [k for k, v in (("n_walkers", n_walkers), ("n_steps", n_steps), ("moves", moves))
+                 if v is not None]
+        if given:
+            raise ValueError(f"{', '.join(given)}: emcee's options; pass method='emcee' with "
+                             "them (the default sampler is method='smc')")
+
         progress = (sys.stderr.isatty() if progress is None else bool(progress)) and sys.stderr.isatty()
         return sample_smc(fit, n_particles=n_particles or N_PARTICLES, seed=seed,
-                          progress=progress, sigma_floor=sigma_floor, modes=modes)
+                          progress=progress, sigma_floor=sigma_floor, modes=modes, prior=prior)
     if method != "emcee":
         raise ValueError(f"method must be 'smc' or 'emcee', not {method!r}")
     import emcee
@@ -156,7 +170,7 @@ def sample_posterior(
     if likelihood not in ("auto", "gaussian"):
         raise ValueError(f"likelihood must be 'auto' or 'gaussian', not {likelihood!r} (the "
                          "interval likelihood was retired: benchmarks/README.md)")
-    dens = posterior_density(fit, sigma_floor, linear_prior, sample_linear)
+    dens = posterior_density(fit, sigma_floor, linear_prior, sample_linear, prior)
     lp, temper, rho1, lin, bounds, u_fit = (dens.lp, dens.temper, dens.rho1, dens.lin,
                                             dens.bounds, dens.u_fit)
     warnings += dens.warnings
@@ -171,7 +185,7 @@ def sample_posterior(
     rng = np.random.default_rng(seed)
     q = float(prob.step)
     t_modes = time.perf_counter()
-    found = sampled_modes(fit, modes, seed, u_fit, lin)
+    found = sampled_modes(fit, modes, seed, u_fit, lin, lp.gauss_prior)
     t_modes = time.perf_counter() - t_modes
     log_lo = math.log(bounds[0] * q)
     log_rms = math.log(max(fit.rms_residual_rad, bounds[0] * q))
@@ -314,7 +328,8 @@ def sample_posterior(
     phys = {n: phys[n] for n in values}
     der = derived_np(prob, draws)
     der["noise_sigma_rad"] = np.exp(draws[:, -1])
-    widths = width_ratios(prob, chain.reshape(-1, D), u_fit, PRIOR_HALF_WIDTH, lin)
+    widths = width_ratios(prob, chain.reshape(-1, D), u_fit, PRIOR_HALF_WIDTH, lin,
+                          lp.gauss_prior)
     return PosteriorResult(
         samples=phys,
         derived=der,

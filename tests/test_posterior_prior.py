@@ -1,0 +1,120 @@
+"""The user's Gaussian prior (``sample_posterior(prior=...)``), the chunked batch and the
+SMC's independence moves: exact identities, no statistics beyond what is written beside."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import hdid
+from hdid._posterior import PRIOR_HALF_WIDTH, density
+from hdid._posterior.density import posterior_density
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "data" / "synthetic" / "csf8_paper.csv"
+
+
+@pytest.fixture(scope="module")
+def fit():
+    return hdid.fit(EXAMPLE)
+
+
+def _x(fit, du=None):
+    x = np.concatenate([np.asarray(fit.u, dtype=float), [np.log(0.3 * fit.resolution_rad)]])
+    if du is not None:
+        for i, d in du.items():
+            x[i] += d
+    return x
+
+
+def test_gaussian_prior_replaces_the_default_and_orders_the_friction(fit):
+    """With ``prior={"v_s": (c, s)}`` the log-density differs from the default one by
+    exactly (normalised Gaussian in log v_s) − (default weak prior of v_s), at two points;
+    v_s may leave the ±7 box (the Gaussian is proper, the box is the default's); with
+    priors on tau_c and tau_s, tau_s < tau_c has zero density."""
+    prob = fit.problem
+    free = list(prob.free)
+    i = free.index("v_s")
+    c, s = 5.0, 0.3
+    base = posterior_density(fit, sample_linear=()).lp
+    user = posterior_density(fit, sample_linear=(), prior={"v_s": (c, s)}).lp
+    for d in (0.0, 0.4):
+        x = _x(fit, {i: d})
+        u = x[i]
+        gauss = -0.5 * ((u - math.log(c)) / s) ** 2 - math.log(s) - 0.5 * math.log(2 * math.pi)
+        weak = -0.5 * float(((u - prob.prior_mean[i]) / prob.prior_sd[i]) ** 2)
+        diff = float(user.log_prob(jnp.asarray(x)) - base.log_prob(jnp.asarray(x)))
+        assert diff == pytest.approx(gauss - weak, abs=1e-9)
+    far = _x(fit, {i: PRIOR_HALF_WIDTH + 1.0})
+    assert float(base.log_prob(jnp.asarray(far))) == -np.inf
+    assert np.isfinite(float(user.log_prob(jnp.asarray(far))))
+    vals = fit.values
+    ordered = posterior_density(fit, sample_linear=(), prior={
+        "tau_c": (vals["tau_c"], 1.0), "tau_s": (vals["tau_s"], 1.0)}).lp
+    jc, js = free.index("tau_c"), free.index("tau_s")
+    x = _x(fit)
+    assert np.isfinite(float(ordered.log_prob(jnp.asarray(x))))
+    x[jc] = x[js] + 0.01  # tau_c just above tau_s
+    assert float(ordered.log_prob(jnp.asarray(x))) == -np.inf
+    with pytest.raises(ValueError, match="not free"):
+        posterior_density(fit, prior={"inertia": (1e-6, 0.1)})
+
+
+def test_width_ratio_uses_the_user_prior_sd(fit):
+    from hdid._posterior.diagnostics import width_ratios
+
+    prob = fit.problem
+    dens = posterior_density(fit, prior={"v_s": (5.0, 0.3)})
+    i = list(prob.free).index("v_s")
+    rng = np.random.default_rng(0)
+    u = np.asarray(fit.u, dtype=float)
+    draws = np.tile(u, (4000, 1))
+    draws[:, i] += 0.3 * rng.standard_normal(4000)
+    w = width_ratios(prob, draws, u, PRIOR_HALF_WIDTH, dens.lin, dens.lp.gauss_prior)
+    # sd of 4000 normal draws: relative se 1/√8000 ≈ 0.011; 0.05 is > 4 se
+    assert w["v_s"]["posterior_over_prior_width"] == pytest.approx(1.0, abs=0.05)
+    assert w["v_s"]["verdict"] == "assumed"
+
+
+def test_chunked_batch_equals_one_loop(fit, monkeypatch):
+    """Chunks of rows each end their own simulation loop: same densities to rounding, for a
+    row count that is not a multiple of the chunk (padding)."""
+    lp = posterior_density(fit).lp
+    rng = np.random.default_rng(0)
+    x0 = lp.to_sampled_np(_x(fit))
+    X = x0 + 0.02 * np.abs(x0) * rng.standard_normal((37, x0.size))
+    one = np.asarray(density._batch_rows(lp, jnp.asarray(X)))
+    monkeypatch.setattr(density, "BATCH_CHUNK", 8)
+    import jax
+
+    chunked = np.asarray(jax.jit(density._batch)(lp, jnp.asarray(X)))
+    assert np.isfinite(one).sum() >= 30
+    np.testing.assert_allclose(chunked, one, rtol=1e-11)
+
+
+def test_mode_search_under_a_user_prior_minimises_the_posterior(fit):
+    """With a user prior the optima are sought on the posterior's cost: the view's prior
+    rows are the user's (its cost at the fit rises by exactly z² for v_s put 3 sd off),
+    its starts are the prior's centre and draws from it, and the fit is not changed."""
+    from hdid._posterior.density import gaussian_prior
+    from hdid._posterior.modes import N_PRIOR_STARTS, with_user_prior
+
+    prob = fit.problem
+    i = list(prob.free).index("v_s")
+    v = fit.values["v_s"]
+    G, _ = gaussian_prior(prob, {"v_s": (v * math.exp(0.9), 0.3)})
+    view, starts = with_user_prior(fit, G, seed=1)
+    u = np.asarray(fit.u, dtype=float)
+    base_rows = float(np.sum(np.asarray(prob.prior_residuals(u)) ** 2))
+    own_vs = float(((u[i] - prob.prior_mean[i]) / prob.prior_sd[i]) ** 2)
+    got = float(view.problem.cost(jnp.asarray(u)) - prob.cost(jnp.asarray(u)))
+    assert got == pytest.approx(9.0 - own_vs, abs=1e-9)
+    assert base_rows >= own_vs
+    assert starts.shape == (1 + N_PRIOR_STARTS, u.size)
+    assert starts[0, i] == pytest.approx(u[i] + 0.9)
+    assert np.all(starts[:, : i] == u[:i]) and np.all(starts[:, i + 1:] == u[i + 1:])
+    assert np.array_equal(np.asarray(view.u), u) and fit.problem is prob
+    assert with_user_prior(fit, None) == (fit, None)
