@@ -101,7 +101,7 @@ def measure(args, save) -> dict:
     if ref:
         pos = np.asarray(ref["positions"])
     else:
-        short = sample_posterior(fit, n_steps=300, seed=0, progress=False)
+        short = sample_posterior(fit, method="emcee", n_steps=300, seed=0, progress=False)
         pos = np.asarray(short.chain[-1])[:N_POSITIONS]
     res["positions"] = pos.tolist()
     batch = jax.jit(lambda X: lp.batch(X))
@@ -126,9 +126,9 @@ def measure(args, save) -> dict:
     # 3. sampler -----------------------------------------------------------------------
     res["posterior"] = []
     for W in (None, 8 * 36):
-        sample_posterior(fit, n_steps=20, n_walkers=W, seed=1, progress=False)  # compile
+        sample_posterior(fit, method="emcee", n_steps=20, n_walkers=W, seed=1, progress=False)  # compile
         with _Clock() as c:
-            post = sample_posterior(fit, n_steps=POST_STEPS, n_walkers=W, seed=0, progress=False)
+            post = sample_posterior(fit, method="emcee", n_steps=POST_STEPS, n_walkers=W, seed=0, progress=False)
         tau = np.asarray(post.tau)
         info = {"n_walkers": int(post.chain.shape[1]), "n_steps": int(post.chain.shape[0]),
                 "wall_s": c.wall, "ms_per_step": c.wall / POST_STEPS * 1e3,

@@ -188,7 +188,7 @@ def test_cli_posterior_json_and_chains(tmp_path):
     from hdid.cli import main
 
     out, nc = tmp_path / "fit.json", tmp_path / "chains.nc"
-    res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "-q", "--posterior", "--steps", "100",
+    res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "-q", "--posterior", "--sampler", "emcee", "--steps", "100",
                                     "--json", str(out), "--chains", str(nc)])
     assert res.exit_code == 0, res.output
     d = json.loads(out.read_text())
