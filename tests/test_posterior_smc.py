@@ -29,6 +29,25 @@ class _Target:
         return np.logaddexp(*comp)
 
 
+def _wrong_weights_reference():
+    """The modes' places, the wrong weights (0.5 / 0.5) and 1.5× their widths."""
+    covs = np.array([np.diag((1.5 * s) ** 2) for s in SD])
+    return MixtureProposal(MU, covs, [0.5, 0.5], nu=5.0)
+
+
+def _check_weights_evidence_and_moments(X, log_z):
+    """The heavier mode's share, log Z = 0, and that mode's mean and sd (tolerances in the
+    first test's docstring; within the mode 400·4·0.8 ≈ 1280 particles, ESS ≥ ~300: the
+    mean's se ≤ sd/√300 ≈ 0.06 sd, the sd's relative se ≤ 0.04; 4 se)."""
+    share = np.mean(X[..., 0] > 6.0)
+    assert share == pytest.approx(W_TRUE[1], abs=0.06)
+    se = max(np.std(log_z, ddof=1) / 2.0, 0.005)
+    assert abs(np.mean(log_z)) <= 4 * se + 0.02
+    Y = X[X[..., 0] > 6.0]
+    np.testing.assert_allclose(Y.mean(axis=0), MU[1], atol=4 * 0.06 * SD[1].max())
+    np.testing.assert_allclose(Y.std(axis=0), SD[1], rtol=0.16)
+
+
 def test_smc_weighs_modes_and_estimates_the_evidence():
     """The reference mixture has the right places but the wrong weights (0.5 / 0.5) and is
     1.5× too wide; the random walk cannot cross between modes, so the 0.2 / 0.8 split can
@@ -38,20 +57,11 @@ def test_smc_weighs_modes_and_estimates_the_evidence():
     √(0.16/400) = 0.02, inflated by resampling (measured over 8 seeds: between-run sd 0.012–0.037), so the
     pooled share's sd is ≤ 0.04/√4 = 0.02: 0.06 is 3 sd or more. log Z: tolerance 4 × the runs'
     own standard error (sd/√4), floored at 0.02 (four runs' sd can come out tiny)."""
-    covs = np.array([np.diag((1.5 * s) ** 2) for s in SD])
-    ref = MixtureProposal(MU, covs, [0.5, 0.5], nu=5.0)
+    ref = _wrong_weights_reference()
     X, anc, log_z, steps = run_smc_np(_Target(), ref, n_particles=400, n_runs=4, seed=1)
     assert X.shape == (4, 400, 3) and anc.shape == (4, 400)
     assert all(st["beta"] == [1.0] * 4 for st in steps[-1:])
-    share = np.mean(X[..., 0] > 6.0)
-    assert share == pytest.approx(W_TRUE[1], abs=0.06)
-    se = max(np.std(log_z, ddof=1) / 2.0, 0.005)
-    assert abs(np.mean(log_z)) <= 4 * se + 0.02
-    # within the heavier mode: its mean and sd (400·4·0.8 ≈ 1280 particles, ESS ≥ ~300:
-    # the mean's se ≤ sd/√300 ≈ 0.06 sd, the sd's relative se ≤ 0.04; 4 se)
-    Y = X[X[..., 0] > 6.0]
-    np.testing.assert_allclose(Y.mean(axis=0), MU[1], atol=4 * 0.06 * SD[1].max())
-    np.testing.assert_allclose(Y.std(axis=0), SD[1], rtol=0.16)
+    _check_weights_evidence_and_moments(X, log_z)
 
 
 def test_independence_moves_with_kmeans_mixture_keep_the_target():
@@ -59,8 +69,7 @@ def test_independence_moves_with_kmeans_mixture_keep_the_target():
     the two modes) and independence moves: weights and per-mode moments as above (same
     tolerances); the IMH proposal is exact whatever the mixture, so only efficiency may
     change. With ``check`` always true the rounds at β = 1 stop after two passes."""
-    covs = np.array([np.diag((1.5 * s) ** 2) for s in SD])
-    ref = MixtureProposal(MU, covs, [0.5, 0.5], nu=5.0)
+    ref = _wrong_weights_reference()
     calls = []
 
     def check(X, anc):
@@ -72,10 +81,4 @@ def test_independence_moves_with_kmeans_mixture_keep_the_target():
                                       max_final=10)
     assert len(calls) == 2 and [st.get("check") for st in steps[-2:]] == [True, True]
     assert all("acceptance_imh" in st for st in steps)
-    share = np.mean(X[..., 0] > 6.0)
-    assert share == pytest.approx(W_TRUE[1], abs=0.06)
-    se = max(np.std(log_z, ddof=1) / 2.0, 0.005)
-    assert abs(np.mean(log_z)) <= 4 * se + 0.02
-    Y = X[X[..., 0] > 6.0]
-    np.testing.assert_allclose(Y.mean(axis=0), MU[1], atol=4 * 0.06 * SD[1].max())
-    np.testing.assert_allclose(Y.std(axis=0), SD[1], rtol=0.16)
+    _check_weights_evidence_and_moments(X, log_z)
