@@ -37,7 +37,6 @@ Writes ``benchmarks/results/simulator_schemes.md``.
 
 from __future__ import annotations
 
-import _common  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
 import os
 
 os.environ.setdefault("HDID_NO_CACHE", "1")  # measure real compile times
@@ -48,7 +47,7 @@ import statistics
 import time
 from pathlib import Path
 
-import hdid._config  # noqa: F401,E402  (float64)
+import _common  # noqa: E402  (on sys.path as a script; configures the process: float64)
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 

@@ -7,6 +7,13 @@ import sys
 
 import pytest
 
+import hdid
+
+# The suite tests hdid's internals directly (simulators, effects, problems), not only its
+# float64 entry points: configure the process as the CLI does, before JAX is imported.
+# (tests/test_config.py checks the library without this, in fresh processes.)
+hdid.configure()
+
 
 @pytest.fixture(autouse=True, scope="module")
 def _release_compiled_programs():

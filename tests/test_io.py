@@ -248,7 +248,7 @@ def test_numbers_are_read_correctly_rounded_whatever_pandas_parses(good, monkeyp
     under a pandas whose text parser is one unit in the last place off — pandas 3.0.6 read
     ``repr(0.036)`` as 0.036000000000000004 (seen on the GPU machine's image). Here the
     parser is made off by one ulp on purpose; ``to_numeric`` still decides what is a number."""
-    import hdid._io as io_mod
+    import hdid._io._table as io_mod
 
     real = pd.to_numeric
 

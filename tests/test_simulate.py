@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import math
 
-import hdid._config  # noqa: F401  (float64 before anything touches JAX)
+import hdid._config  # noqa: F401  (the process is configured in conftest.py)
 import jax
 import jax.numpy as jnp
 import numpy as np

@@ -1,6 +1,8 @@
 """hdid — identify the physics of a harmonic drive from encoder logs.
 
 Heavy modules (jax, optimistix) load on first use so that ``hdid --help`` stays fast.
+Importing hdid changes no process-wide setting: hdid's own calls compute in float64
+(thread-local); :func:`hdid.configure` sets up a whole process (the CLI calls it).
 """
 
 from __future__ import annotations
@@ -8,7 +10,17 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING
 
-__version__ = "0.1.0"
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("hdid")
+    except PackageNotFoundError:  # a source tree on sys.path, not installed
+        return "0+unknown"
+
+
+__version__ = _version()
 
 _LAZY = {
     "fit": "._fit",
@@ -55,7 +67,15 @@ _LAZY = {
     "DrivenJoint": "._driven",
     "simulate_driven": "._driven",
     "PositionalError": "._positional",
+    "configure": "._config",
 }
+
+#: Public functions that compute with JAX: they run in float64 (thread-local, see
+#: :func:`hdid._config.float64`) whatever the caller's JAX precision.
+_FLOAT64 = frozenset({
+    "fit", "fit_many", "fit_driven", "fit_joint", "simulate", "simulate_driven",
+    "diagnose", "model_ladder", "sample_posterior",
+})
 
 __all__ = sorted(_LAZY)
 
@@ -64,19 +84,24 @@ def __getattr__(name: str):
     if name in _LAZY:
         module = importlib.import_module(_LAZY[name], __name__)
         value = module if name == "effects" else getattr(module, name)
+        if name in _FLOAT64:
+            from ._config import float64
+
+            value = float64(value)
         globals()[name] = value
         return value
     raise AttributeError(f"module 'hdid' has no attribute {name!r}")
 
 
 def __dir__():
-    return __all__
+    return [*__all__, "__version__"]
 
 
 if TYPE_CHECKING:  # pragma: no cover
     from . import effects
     from ._errors import FitError, HdidError, LogError
     from ._batch import fit_many
+    from ._config import configure
     from ._posterior import sample_posterior
     from ._diagnose import Diagnosis, diagnose, model_ladder
     from ._driven import DrivenJoint, simulate_driven

@@ -8,6 +8,8 @@ import os
 from collections.abc import Iterable
 from typing import Any
 
+from ._config import float64
+
 #: Logs per dask task (each worker runs the vectorised batch fit on its chunk).
 DASK_CHUNK = 64
 #: ``workers=N``: the logs are cut into about this many chunks per worker process.
@@ -173,6 +175,7 @@ def _local_client(workers: int):
         yield client
 
 
+@float64  # a worker process: hdid's arithmetic, whatever its JAX settings
 def _fit_chunk(items, names, options):
     """One dask task: the vectorised fit of a chunk of logs (runs on a worker)."""
     opts = dict(options)

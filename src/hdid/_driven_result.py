@@ -11,6 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._config import float64_methods
 from ._result import ParameterEstimate
 from ._transforms import derivative
 
@@ -22,6 +23,7 @@ HIGH_CORRELATION = 0.95
 _CORRELATED_NOTE = "the WG residual is correlated in time"
 
 
+@float64_methods
 @dataclass
 class DrivenFitResult:
     """Outcome of :func:`hdid.fit_driven` / :func:`hdid.fit_joint`.

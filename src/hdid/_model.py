@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Iterable, Mapping
 from typing import Any
 
 import equinox as eqx
@@ -269,25 +268,3 @@ def _excess(model: Model, side: float, x):
     states = model.init_state(theta)
     motion = Motion(theta=theta, omega=jnp.zeros(()), direction=jnp.zeros(()), ratio=model.ratio)
     return jnp.abs(model.torque(motion, states)) - model.holding_torque(motion, states)
-
-
-def as_model(model: Model | None, **values: float) -> Model:
-    model = Model.default() if model is None else model
-    return model.replace(**values) if values else model
-
-
-def parameter_table(models: Iterable[Model]) -> dict[str, np.ndarray]:
-    """Stack parameter values of several models into arrays by name."""
-    rows = [m.float_values() for m in models]
-    return {k: np.array([r[k] for r in rows]) for k in rows[0]}
-
-
-def check_values(values: Mapping[str, float], specs: Mapping[str, Parameter]) -> None:
-    """Raise a clear error if a value lies outside its parameter's transform domain."""
-    for name, v in values.items():
-        spec = specs[name]
-        t = spec.transform
-        if t == "log" and not v > 0:
-            raise ValueError(f"{name} = {v!r}: must be > 0 ({spec.unit}); {spec.doc}")
-        if isinstance(t, tuple) and not (t[1] < v < t[2]):
-            raise ValueError(f"{name} = {v!r}: must lie in ({t[1]}, {t[2]}); {spec.doc}")

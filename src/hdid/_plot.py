@@ -191,11 +191,11 @@ def plot_predictive(post, path=None, *, n_draws: int = 100, axes=None, seed: int
     ``axes``: ``(2, R)`` for both rows, or ``R`` axes for the residual row only.
     """
     import jax.numpy as jnp
-    import matplotlib
 
-    if path is not None and axes is None:
-        matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
+    if path is None or axes is not None:
+        import matplotlib.pyplot as plt
+    else:  # only saved: no pyplot, no backend chosen
+        plt = None
 
     from ._posterior import _predict_batch
 
@@ -217,8 +217,8 @@ def plot_predictive(post, path=None, *, n_draws: int = 100, axes=None, seed: int
     var = np.exp(2 * draws[:, -1])[:, None, None] + (q**2 / 12.0 if fit.resolution_known else 0.0)
     readings = pred_s + np.sqrt(var) * rng.standard_normal(pred_s.shape)
     if axes is None:
-        fig, axes = plt.subplots(2, R, figsize=(3.2 * R + 1, 6.2), squeeze=False,
-                                 sharex="col")
+        fig = _new_figure(plt, figsize=(3.2 * R + 1, 6.2))
+        axes = fig.subplots(2, R, squeeze=False, sharex="col")
         top, bottom = axes[0], axes[1]
     else:
         axes = np.asarray(axes)
@@ -274,16 +274,16 @@ def plot_predictive(post, path=None, *, n_draws: int = 100, axes=None, seed: int
 
 def plot_band(post, path=None, *, ax=None):
     """Posterior of the stick-band edges beside the rest points actually logged."""
-    import matplotlib
-
-    if path is not None and ax is None:
-        matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
+    if path is None or ax is not None:
+        import matplotlib.pyplot as plt
+    else:  # only saved: no pyplot, no backend chosen
+        plt = None
 
     fit = post.fit
     hw = post.derived["stick_band_halfwidth_rad"]
     if ax is None:
-        fig, ax = plt.subplots(figsize=(6.5, 3.4))
+        fig = _new_figure(plt, figsize=(6.5, 3.4))
+        ax = fig.subplots()
     else:
         fig = ax.figure
     bins = np.linspace(-1.3 * np.percentile(hw, 99.5), 1.3 * np.percentile(hw, 99.5), 120)

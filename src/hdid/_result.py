@@ -8,6 +8,8 @@ from typing import Any
 
 import numpy as np
 
+from ._config import float64_methods
+
 
 @dataclass
 class ParameterEstimate:
@@ -92,6 +94,7 @@ class StartSummary:
         }
 
 
+@float64_methods
 @dataclass
 class FitResult:
     """Outcome of :func:`hdid.fit`.

@@ -71,12 +71,9 @@ def sha256(path) -> str | None:
 
 
 def hdid_version() -> str:
-    try:
-        from importlib.metadata import version
+    from . import __version__
 
-        return version("hdid")
-    except Exception:  # not installed (a source checkout on sys.path)
-        return "unknown"
+    return __version__
 
 
 def model_structure(model) -> dict[str, Any]:

@@ -47,7 +47,7 @@ import equinox as eqx
 import jax
 import numpy as np
 
-from . import _config  # noqa: F401
+from ._config import float64
 from ._errors import HdidError
 from ._fit import (
     _choose_starts,
@@ -340,7 +340,8 @@ class _Runner:
         if self.pool is None or len(calls) < 2:
             out.extend(fn(*c) for c in calls)
         else:
-            out.extend(self.pool.map(lambda c: fn(*c), calls))
+            # Worker threads do not inherit the caller's thread-local float64: enter it.
+            out.extend(self.pool.map(float64(lambda c: fn(*c)), calls))
         return out
 
 

@@ -235,6 +235,11 @@ def _usage_fail(exc: click.UsageError) -> _Fail:
 def main():
     """hdid — identify harmonic-drive physics (stiffness, Stribeck friction, stick band,
     inertia) from encoder logs of the elastic-slide-free-motion test."""
+    # An application configures its process before JAX and equinox are imported:
+    # float64, the compilation cache, equinox's checks as NaN (cacheable programs).
+    from ._config import configure
+
+    configure()
 
 
 @main.command("fit")

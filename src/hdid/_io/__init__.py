@@ -1,0 +1,62 @@
+"""Reading, validating and writing encoder logs: free-motion and driven.
+
+A free-motion test twists the wave generator (the motor side of the harmonic
+drive) by about ±0.157 rad, releases it and logs its encoder at a constant rate
+(~250 Hz) while it springs back and sticks. A *log* is a CSV file with a header
+line and the columns
+
+``time``
+    Sample time [s]; strictly increasing within a run (it may restart at each
+    run).
+``theta``
+    Wave-generator angle [rad], or raw encoder counts when ``counts_per_rev`` is
+    given (``counts`` is accepted as an alias in that case).
+``run`` (optional)
+    Label of the release the row belongs to; the rows of one run must be
+    contiguous. Without it the whole file is one run named ``"1"``.
+``setup`` (optional)
+    Set-up label, constant within a run (default ``"1"``).
+``added_inertia`` (optional)
+    Known inertia added at the wave generator for this run [kg m^2] (an inertia
+    mounted at the output counts divided by N²), ``>= 0`` and constant within a run
+    (default 0).
+
+Driven logs (paper eqs. 8–9: the motor drives the gear, the output turns against a
+load) add the columns
+
+``motor_torque`` (driven logs)
+    Motor torque at the wave generator [N m], zero-order hold: the value of row
+    ``k`` acts from ``time[k]`` until ``time[k+1]`` (a digital drive's command).
+``motor_current`` (instead of ``motor_torque``)
+    Motor current [A]; needs ``torque_constant`` (N m/A) and is converted to
+    ``motor_torque = torque_constant * motor_current``. Both columns at once is an
+    error.
+``theta_out`` (optional, driven logs only)
+    Output-shaft angle [rad, output encoder's frame], or raw output encoder counts
+    when ``output_counts_per_rev`` is given (``output_counts`` is accepted as an
+    alias in that case).
+``load_torque`` (optional, driven logs only)
+    External torque applied on the output shaft [N m, output side], linearly
+    interpolated between samples (a measured signal); absent means zero load.
+
+A log is driven when it has a motor-torque column; then every run must have it
+(a log mixing driven and free-motion runs is an error) and every cell of a driven
+column must be filled. ``theta_out`` and ``load_torque`` without a motor torque
+are errors. A driven run need not show motion (it may stay stuck).
+
+Column names are matched case-insensitively after stripping whitespace; other
+columns are ignored. :func:`read_log` checks everything and raises
+:class:`~hdid._errors.LogError` with a one-line message naming the file, the
+column and/or the CSV line and the fix. The file is only ever read.
+
+This module must stay light: it imports numpy and pandas only (no JAX).
+"""
+
+from __future__ import annotations
+
+from ._read import read_log
+from ._resolution import estimate_resolution
+from ._types import Log, Run
+from ._write import write_log
+
+__all__ = ["Log", "Run", "estimate_resolution", "read_log", "write_log"]

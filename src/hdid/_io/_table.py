@@ -1,0 +1,306 @@
+"""Loading a CSV file or a DataFrame into a table of text cells and numbers."""
+
+from __future__ import annotations
+
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .._errors import LogError
+from ._names import _NA_TOKENS
+
+
+# ---------------------------------------------------------------------- loading
+
+
+@dataclass
+class _Table:
+    """Raw table: stripped header names, raw column values and CSV line numbers.
+
+    ``columns`` holds object arrays of the cell text (CSV input) or the
+    DataFrame's own columns.
+    """
+
+    source: str
+    path: str | os.PathLike[str] | None
+    names: list[str]
+    columns: list[np.ndarray | pd.Series]
+    lines: np.ndarray
+
+
+def _show(text: object, limit: int = 20) -> str:
+    """Quote a cell's text for a message: truncated, escaped, one line."""
+    text = str(text)
+    if len(text) > limit:
+        text = text[:limit] + "…"
+    return repr(text)
+
+
+#: Bytes read to recognise the file type and the delimiter before parsing.
+_SNIFF_BYTES = 65536
+#: A number written with a decimal comma (``-0,157``, ``1,5e-3``).
+_DECIMAL_COMMA = re.compile(r"^\s*[-+]?\d*,\d+(?:[eE][-+]?\d+)?\s*$")
+
+
+def _sniff(path, err) -> str:
+    """Recognise what the file is from its first bytes; return the cell delimiter.
+
+    Spreadsheets renamed ``.csv``, UTF-16 text, other 8-bit encodings and binary
+    files get a one-line error naming what the file is. The delimiter is ``;`` (a
+    European export, possibly with decimal commas) or a tab when the header line
+    has one of those and no comma; else ``,``. Errors opening the file are left to
+    the reader, whose messages already name them.
+    """
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(_SNIFF_BYTES)
+    except (OSError, ValueError):
+        return ","
+    if head.startswith(b"PK\x03\x04") or head.startswith(b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1"):
+        raise err(
+            "this is a spreadsheet (Excel/OpenDocument) file, not CSV text — in the "
+            "spreadsheet program use 'Save as' CSV (comma-separated)"
+        )
+    if head.startswith((b"\xff\xfe", b"\xfe\xff")) or (
+        len(head) >= 4 and head[1::2].count(0) > len(head) // 4 and head[0::2].count(0) == 0
+    ) or (len(head) >= 4 and head[0::2].count(0) > len(head) // 4 and head[1::2].count(0) == 0):
+        raise err("this is UTF-16 text — save the log as a UTF-8 CSV file (comma-separated)")
+    if b"\x00" in head:
+        raise err("this is a binary file, not a CSV text file — give the exported CSV log")
+    try:
+        text = head.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        if exc.start >= len(head) - 3 and len(head) == _SNIFF_BYTES:
+            text = head[: exc.start].decode("utf-8-sig")  # a character cut at the end
+        elif sum(b < 9 or 13 < b < 32 for b in head) > len(head) // 100:
+            raise err(
+                "this is a binary file, not a CSV text file — give the exported CSV log"
+            ) from None
+        else:
+            raise err(
+                "this text is not UTF-8 (Latin-1 or Windows-1252?) — save the log as a "
+                "UTF-8 CSV file (comma-separated)"
+            ) from None
+    if sum(ord(c) < 9 or 13 < ord(c) < 32 for c in text) > len(text) // 100:
+        raise err("this is a binary file, not a CSV text file — give the exported CSV log")
+    header = next((line for line in text.splitlines() if line.strip()), "")
+    if "," not in header:
+        if ";" in header:
+            return ";"
+        if "\t" in header:
+            return "\t"
+    return ","
+
+
+def _decimal_commas(values: np.ndarray) -> np.ndarray:
+    """Cells like ``0,157`` as ``0.157`` (a ';'- or tab-separated European export)."""
+    cells = pd.Series(values, dtype=object)
+    has = cells.str.contains(",", regex=False, na=False)
+    if not has.any():
+        return values
+    hit = cells[has]
+    match = hit.str.match(_DECIMAL_COMMA, na=False)
+    cells.loc[match[match].index] = hit[match].str.replace(",", ".", regex=False)
+    return cells.to_numpy(dtype=object)
+
+
+def _load_csv(path: str | os.PathLike[str]) -> _Table:
+    source = os.fspath(path)
+    err = lambda message, **kw: LogError(message, path=path, **kw)  # noqa: E731
+    suffix = Path(source).suffix.lower()
+    if suffix in {".xlsx", ".xlsm", ".xls", ".ods"}:
+        raise err("this is a spreadsheet, not a CSV file — export it as CSV (comma-separated)")
+    sep = _sniff(source, err)
+    try:
+        # header=None: the header line is handled here, so that names are not
+        # mangled by pandas and frame row i is exactly file line i + 1.
+        frame = pd.read_csv(
+            source,
+            header=None,
+            sep=sep,
+            dtype=object,
+            keep_default_na=False,
+            na_filter=False,
+            skip_blank_lines=False,
+            encoding="utf-8-sig",
+            engine="c",
+        )
+    except FileNotFoundError:
+        raise err("file not found — check the path") from None
+    except IsADirectoryError:
+        raise err("is a directory, not a CSV file — give the path of the log file") from None
+    except PermissionError:
+        raise err("cannot read the file (permission denied) — check its permissions") from None
+    except UnicodeDecodeError:
+        raise err(
+            "not a text CSV file (cannot decode it as UTF-8) — export the log as a "
+            "UTF-8 CSV file with a header line"
+        ) from None
+    except pd.errors.EmptyDataError:
+        raise err(
+            "file is empty — expected a CSV file with a header line such as 'time,theta'"
+        ) from None
+    except pd.errors.ParserError as exc:
+        raise _parser_error(exc, path) from None
+    except OSError as exc:
+        raise err(f"cannot read the file ({exc.strerror or exc}) — check the path") from None
+    except Exception as exc:  # pandas may raise assorted errors on garbage input
+        raise err(
+            f"cannot parse the file as CSV ({type(exc).__name__}: {_show(exc, 80)}) — "
+            "check that it is a comma-separated text file with a header line"
+        ) from None
+
+    raw = [frame[col].to_numpy(dtype=object) for col in frame.columns]
+    if sep != ",":
+        raw = [_decimal_commas(values) for values in raw]
+    blank = np.ones(len(frame), dtype=bool)
+    for values in raw:
+        blank &= values == ""
+    nonblank = np.flatnonzero(~blank)
+    if nonblank.size == 0:
+        raise err("file holds only blank lines — expected a header line such as 'time,theta'")
+    header_at = int(nonblank[0])
+    names = [str(values[header_at]).strip() for values in raw]
+    keep = nonblank[1:]
+    lines = keep.astype(np.int64) + 1
+    return _Table(source, path, names, [values[keep] for values in raw], lines)
+
+
+def _parser_error(exc: Exception, path) -> LogError:
+    text = " ".join(str(exc).split())
+    m = re.search(r"Expected (\d+) fields in line (\d+), saw (\d+)", text)
+    if m:
+        expected, line, saw = (int(g) for g in m.groups())
+        return LogError(
+            f"has {saw} cells but the header has {expected} — check the delimiter and "
+            "quoting, or remove the extra cells",
+            path=path,
+            row=line,
+        )
+    m = re.search(r"inside string starting at row (\d+)", text)
+    if m:
+        return LogError(
+            "a quote (\") opened here is never closed — remove or close the quote",
+            path=path,
+            row=int(m.group(1)) + 1,
+        )
+    return LogError(
+        f"cannot parse the file as CSV ({_show(text, 80)}) — check that it is a "
+        "comma-separated text file with a header line",
+        path=path,
+    )
+
+
+def _load_frame(frame: pd.DataFrame) -> _Table:
+    names = [str(c).strip() for c in frame.columns]
+    columns = [frame.iloc[:, i] for i in range(frame.shape[1])]
+    lines = np.arange(2, len(frame) + 2, dtype=np.int64)
+    return _Table("<DataFrame>", None, names, columns, lines)
+
+
+# ---------------------------------------------------------------------- parsing
+
+
+def _cell_text(cell: object) -> str:
+    """Stripped text of one raw cell ('' for a missing value)."""
+    if cell is None:
+        return ""
+    if not isinstance(cell, str):
+        try:
+            if pd.isna(cell):
+                return ""
+        except (TypeError, ValueError):
+            pass
+    return str(cell).strip()
+
+
+def _exact(raw: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """``values`` with every finite text cell re-read by Python's ``float`` (correctly
+    rounded). pandas' fast text-to-float parser is not: pandas 3.0.6 read
+    ``repr(0.036)`` as 0.036000000000000004, one unit in the last place off, so a log
+    written with ``repr`` would not read back to the same numbers. ``to_numeric`` still
+    decides which cells are numbers."""
+    ok = np.isfinite(values)
+    try:
+        values[ok] = np.asarray(raw[ok], dtype=np.float64)  # float() of each cell, in C
+    except (TypeError, ValueError):  # a form pandas reads and Python does not: cell by cell
+        for i in np.flatnonzero(ok):
+            try:
+                values[i] = float(raw[i])
+            except (TypeError, ValueError):
+                pass
+    return values
+
+
+class _Cells:
+    """Parses columns and remembers the first bad cell (earliest row, then column)."""
+
+    def __init__(self, table: _Table) -> None:
+        self.table = table
+        self.first_bad: tuple[int, int, str] | None = None  # (row_pos, col_idx, message)
+
+    def _note(self, pos: int, col: int, msg: str) -> None:
+        if self.first_bad is None or (pos, col) < self.first_bad[:2]:
+            self.first_bad = (pos, col, msg)
+
+    def labels(self, col: int) -> np.ndarray:
+        """Column as an object array of stripped label strings."""
+        raw = self.table.columns[col]
+        codes, uniques = pd.factorize(np.asarray(raw, dtype=object), use_na_sentinel=False)
+        text = np.array([_cell_text(u) for u in uniques], dtype=object)
+        values = text[codes]
+        empty = values == ""
+        if empty.any():
+            self._note(int(np.argmax(empty)), col, "cell is empty — fill it or drop the row")
+        return values
+
+    def numbers(self, col: int) -> np.ndarray:
+        """Column as float64; non-finite entries mark bad cells."""
+        column = self.table.columns[col]
+        if (
+            isinstance(column, pd.Series)
+            and pd.api.types.is_numeric_dtype(column.dtype)
+            and not pd.api.types.is_bool_dtype(column.dtype)
+        ):
+            values = column.to_numpy(dtype=np.float64, na_value=np.nan)
+            raw = None
+        else:
+            raw = np.asarray(column, dtype=object)
+            if isinstance(column, pd.Series) and pd.api.types.is_bool_dtype(column.dtype):
+                raw = raw.astype(str)  # True/False are not numbers here
+            values = np.asarray(pd.to_numeric(raw, errors="coerce"), dtype=np.float64)
+            values = _exact(raw, values)
+        bad = ~np.isfinite(values)
+        if bad.any():
+            pos = int(np.argmax(bad))
+            text = None if raw is None else _cell_text(raw[pos])
+            self._note(pos, col, self._describe(values[pos], text))
+        return values
+
+    @staticmethod
+    def _describe(value: float, text: str | None) -> str:
+        if np.isinf(value):
+            shown = f" ({_show(text)})" if text else ""
+            return f"value is infinite{shown} — replace it with a finite number or drop the row"
+        if not text:
+            return "cell is empty — fill it or drop the row"
+        if text.lower() in _NA_TOKENS:
+            return f"cell holds the missing value {_show(text)} — fill it or drop the row"
+        return (
+            f"cell holds the text {_show(text)} where a number is expected — write a "
+            "plain number with '.' as decimal separator"
+        )
+
+    def raise_first(self) -> None:
+        if self.first_bad is not None:
+            pos, col, msg = self.first_bad
+            raise LogError(
+                msg,
+                path=self.table.path,
+                column=self.table.names[col],
+                row=int(self.table.lines[pos]),
+            )

@@ -1,0 +1,79 @@
+"""The public API, locked: what ``dir(hdid)`` offers and how each callable is called.
+
+Issue 20 moves every module; a user's code must not notice. A change here is a change of
+the public API: make it on purpose, in this file and in the README, never by accident.
+(After pyhf's ``tests/test_public_api.py``.)
+"""
+
+from __future__ import annotations
+
+import inspect
+import subprocess
+import sys
+
+import hdid
+
+PUBLIC = [
+    "AbstractEffect", "AsymmetricStribeckFriction", "AsymmetricViscousFriction",
+    "CoulombFriction", "CubicStiffness", "DEFAULT_INERTIA", "DEFAULT_RATIO", "DahlHysteresis",
+    "Diagnosis", "DrivenFitResult", "DrivenJoint", "FitError", "FitResult",
+    "FreePlayStiffness", "Gravity", "HdidError", "KinematicErrorStiffness",
+    "LinearStiffness", "LoadDependentFriction", "Log", "LogError", "Model", "Motion",
+    "Parameter", "PositionRipple", "PositionalError", "Run", "Scales", "StribeckFriction",
+    "ThreeSegmentStiffness", "TorqueOffset", "ViscousFriction", "__version__", "configure", "diagnose",
+    "effects", "fit", "fit_driven", "fit_joint", "fit_many", "model_ladder", "read_log",
+    "sample_posterior", "simulate", "simulate_driven", "write_log",
+]
+
+#: The first arguments of each public function, by position, then the keywords a user may
+#: pass. Added keywords are fine (append them here); renamed or removed ones break users.
+CALLS = {
+    "fit": ["log", "model"],
+    "fit_many": ["logs"],
+    "fit_driven": ["log", "model"],
+    "fit_joint": ["logs", "model"],
+    "diagnose": ["log", "model"],
+    "model_ladder": ["log", "models"],
+    "read_log": ["source"],
+    "write_log": ["path", "runs"],
+    "simulate": ["model", "times", "theta0", "t_release"],
+    "simulate_driven": ["joint", "times", "motor_torque", "load_torque"],
+    "sample_posterior": ["fit"],
+}
+KEYWORDS = {
+    "fit": {"inertia", "fix", "free_inertia", "inertia_prior", "release_time",
+            "counts_per_rev", "ratio", "resolution", "n_starts", "max_substep", "max_steps",
+            "start_from_model", "nested"},
+    "fit_driven": {"order", "max_order", "fix", "counts_per_rev", "torque_constant",
+                   "output_counts_per_rev", "max_substep", "max_steps", "input_hold"},
+    "sample_posterior": {"seed", "progress", "prior"},
+}
+
+
+def test_dir_is_the_public_api():
+    assert sorted(dir(hdid)) == sorted(PUBLIC)
+    for name in PUBLIC:
+        assert getattr(hdid, name) is not None, name
+
+
+def test_public_functions_keep_their_calls():
+    for name, positional in CALLS.items():
+        params = inspect.signature(getattr(hdid, name)).parameters
+        names = list(params)
+        assert names[: len(positional)] == positional, (name, names)
+        missing = KEYWORDS.get(name, set()) - set(names)
+        assert not missing, f"hdid.{name} lost keyword(s) {sorted(missing)}"
+
+
+def test_version_comes_from_the_installed_package():
+    from importlib.metadata import version
+
+    assert hdid.__version__ == version("hdid")
+
+
+def test_bare_import_loads_no_numerics():
+    """``import hdid`` stays instant: JAX, equinox and matplotlib load on first use."""
+    code = ("import sys, hdid; hdid.__version__; "
+            "print(sorted(m for m in ('jax', 'equinox', 'matplotlib', 'pandas') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]", out.stdout
