@@ -319,7 +319,7 @@ def test_phases_on_a_terminal_only(monkeypatch, tty):
     import hdid.cli
 
     monkeypatch.setattr(hdid._fit, "fit", _stub_fit_error)
-    monkeypatch.setattr(hdid.cli, "_stderr_is_tty", lambda: tty)
+    monkeypatch.setattr(hdid.cli._common, "_stderr_is_tty", lambda: tty)
     res = CliRunner().invoke(main, ["fit", str(EXAMPLE)])
     assert res.exit_code == 2
     lines = res.stderr.strip().splitlines()
@@ -331,7 +331,7 @@ def test_phases_on_a_terminal_only(monkeypatch, tty):
     else:
         assert len(lines) == 1 and lines[0].startswith("hdid: error: ")
     res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "-q"])  # -q: no phases either
-    monkeypatch.setattr(hdid.cli, "_stderr_is_tty", lambda: True)
+    monkeypatch.setattr(hdid.cli._common, "_stderr_is_tty", lambda: True)
     assert len(res.stderr.strip().splitlines()) == 1
 
 
@@ -344,7 +344,7 @@ def test_too_long_log_refused_at_once(monkeypatch):
 
     monkeypatch.setattr(hdid._fit, "fit", no_fit)
     # The example has 125 samples per run: a limit of 100 refuses it, with the hint.
-    monkeypatch.setattr(hdid.cli, "MAX_SAMPLES_PER_RUN", 100)
+    monkeypatch.setattr(hdid.cli._common, "MAX_SAMPLES_PER_RUN", 100)
     res = CliRunner().invoke(main, ["fit", str(EXAMPLE)])
     line = _one_line_exit_2(res, "125 samples")
     assert "crop" in line and "one row in 2" in line and "250 Hz" in line

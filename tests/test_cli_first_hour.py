@@ -26,7 +26,7 @@ def test_drawing_the_figure_is_a_phase_on_a_terminal(monkeypatch, tmp_path, tty)
     fake = SimpleNamespace(report=lambda: "report", to_dict=lambda: {},
                            plot=lambda path: drawn.append(path))
     monkeypatch.setattr(hdid._fit, "fit", lambda *a, **k: fake)
-    monkeypatch.setattr(hdid.cli, "_stderr_is_tty", lambda: tty)
+    monkeypatch.setattr(hdid.cli._common, "_stderr_is_tty", lambda: tty)
     out = tmp_path / "fit.png"
     res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "--plot", str(out)])
     assert res.exit_code == 0, res.output

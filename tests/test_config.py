@@ -73,3 +73,23 @@ print(json.dumps({"x64": bool(jax.config.jax_enable_x64), "dtype": str(jnp.ones(
     got = _fresh(code, tmp_path)
     assert got == {"x64": True, "dtype": "float64", "eqx_env": "nan",
                    "cache_dir": str(tmp_path / "cache")}
+
+
+def test_to_dict_is_strict_json_whatever_the_values():
+    """A NaN or infinite number (an undetermined std, a bracket that does not exist) is
+    written as null by the library itself, not only by the CLI: ``allow_nan=False``."""
+    import dataclasses
+    import math
+
+    import hdid
+    from hdid._summaries import ParameterEstimate
+
+    r = hdid.fit(PAPER, n_starts=1, max_steps=3, nested=False)  # any fit will do
+    p = r.parameters["k1"]
+    r.parameters["k1"] = dataclasses.replace(p, std=math.inf)
+    r.derived["stick_band_halfwidth_rad"] = (math.nan, math.nan)
+    assert isinstance(r.parameters["k1"], ParameterEstimate)
+    d = r.to_dict()
+    json.dumps(d, allow_nan=False)
+    assert d["parameters"]["k1"]["std"] is None
+    assert d["stick_band_halfwidth_std_rad"] is None

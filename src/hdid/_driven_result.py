@@ -7,12 +7,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from ._config import float64_methods
-from ._result import ParameterEstimate
+from ._summaries import ParameterEstimate
 from ._transforms import derivative
 
 #: Correlations above this are listed in the report.
@@ -175,7 +174,11 @@ class DrivenFitResult:
         }
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        """Strict-JSON summary (the ``--json`` schema of a driven or joint fit): a NaN or
+        infinite value as ``None``."""
+        from ._saved import finite
+
+        return finite({
             "source": self.source,
             "kind": self.kind,
             "parameters": {n: p.to_dict() for n, p in self.parameters.items()},
@@ -188,7 +191,7 @@ class DrivenFitResult:
             "notes": list(self.notes),
             "wall_time_s": self.wall_time_s,
             **self._provenance(),
-        }
+        })
 
     def _provenance(self) -> dict[str, Any]:
         """The fields the fit JSON has for reuse (``hdid._saved.provenance``): version, the
@@ -312,7 +315,7 @@ def analyse_driven(
     problem, u, *, data, notes, order_bic=None, free_preps=(), extra_names=(),
 ) -> DrivenFitResult:
     """Covariance (Gauss–Newton, null directions undetermined), estimates, RMS, flags."""
-    from ._identifiability import _covariance
+    from ._covariance import _covariance
 
     u = np.asarray(u, dtype=float)
     joint_problem = hasattr(problem, "parts")
@@ -481,7 +484,7 @@ def _parameter_flags(params, specs, u, where, dproblem) -> list[str]:
 
 
 def _scaled_covariance(fisher: np.ndarray, covariance):
-    """:func:`hdid._identifiability._covariance` after Jacobi scaling.
+    """:func:`hdid._covariance._covariance` after Jacobi scaling.
 
     The unknowns of a driven or joint fit differ in sensitivity by ~10 orders (the
     inertia of a driven log against an output-friction sign flip), so an eigenvalue cut
@@ -500,7 +503,7 @@ def _undetermined_scaled(g: np.ndarray, null_s: np.ndarray, d: np.ndarray) -> bo
     null direction — tested in the scaled space, where the null basis is orthonormal
     (in the original space a null direction's physical components can be 1e-5 of its
     nuisance components and would slip under any threshold)."""
-    from ._identifiability import _undetermined
+    from ._covariance import _undetermined
 
     return _undetermined(g / d, null_s)
 

@@ -9,9 +9,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._covariance import _covariance, _undetermined
+from ._evaluate import dense as _dense
+from ._evaluate import jacobian as _jacobian
 from ._prepare import Prepared
 from ._problem import Problem
-from ._result import FitResult, ParameterEstimate, RunSummary, StartSummary
+from ._result import FitResult
+from ._summaries import ParameterEstimate, RunSummary, StartSummary
 from ._transforms import derivative
 
 #: A direction in the optimiser's space whose data-only standard deviation exceeds this
@@ -25,15 +29,6 @@ HIGH_CORRELATION = 0.95
 STRIBECK_VISIBLE = 5.0
 
 
-@eqx.filter_jit
-def _jacobian(problem: Problem, u):
-    r, J = problem.data_residuals_and_jacobian(u)
-    return J, r
-
-
-@eqx.filter_jit
-def _dense(problem: Problem, u, times):
-    return problem.simulate(u, times, full_output=True)
 
 #: A run whose rest reading differs from its hold reading by more than this many encoder
 #: counts moved (one count of flicker is not motion).
@@ -522,37 +517,6 @@ def _release_std(problem: Problem, u, std_u, i: int) -> float:
     lo, hi = float(np.asarray(problem.release_lo)[i]), float(np.asarray(problem.release_hi)[i])
     s = 1.0 / (1.0 + math.exp(-float(u[j])))
     return float((hi - lo) * s * (1 - s) * std_u[j])
-
-
-def _covariance(fisher: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pseudo-inverse of a Fisher matrix and the basis of its null space.
-
-    A plain pseudo-inverse gives directions the data cannot see zero variance — exactly
-    backwards (e.g. the joint scale of every torque and the inertia in free motion).
-    Callers treat any quantity with a component along ``null`` as undetermined
-    (infinite variance); quantities orthogonal to it (like ``k1/inertia``) keep the
-    pseudo-inverse variance, which is then the right one.
-    """
-    a = 0.5 * (fisher + fisher.T)
-    w, v = np.linalg.eigh(a)
-    tol = max(float(w.max()), 0.0) * 1e-10 if w.size else 0.0
-    ok = w > tol
-    inv = np.where(ok, 1.0 / np.where(ok, w, 1.0), 0.0)
-    return (v * inv) @ v.T, v[:, ~ok]
-
-
-#: A quantity whose gradient has more than this relative component in the null space
-#: of the Fisher matrix is undetermined. Genuine components are O(0.1–1) (the free-motion
-#: scale direction has equal weights 1/√6 on six log-parameters); numerical mixing
-#: between near-null eigenvectors is orders of magnitude smaller.
-NULL_COMPONENT = 1e-2
-
-
-def _undetermined(g: np.ndarray, null: np.ndarray) -> bool:
-    if null.size == 0:
-        return False
-    norm = np.linalg.norm(g)
-    return bool(norm > 0 and np.linalg.norm(g @ null) > NULL_COMPONENT * norm)
 
 
 def _pct(x: float) -> str:

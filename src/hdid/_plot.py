@@ -197,7 +197,7 @@ def plot_predictive(post, path=None, *, n_draws: int = 100, axes=None, seed: int
     else:  # only saved: no pyplot, no backend chosen
         plt = None
 
-    from ._posterior import _predict_batch
+    from ._evaluate import predict_rows as _predict_batch
 
     fit = post.fit
     prob = fit.problem

@@ -244,7 +244,7 @@ def phase_reporter(progress):
     wall seconds in all, compiling/loading programs (JAX's compile events and this
     store's :data:`STATS` spans: reading or tracing, compiling or reading JAX's cache)
     and the rest, CPU seconds, and how many programs were read from the store."""
-    from ._vfit import _clock, union_length
+    from ._compile_clock import _clock, union_length
 
     clock = _clock()
     mark, first = clock.mark(), len(STATS)

@@ -9,89 +9,7 @@ from typing import Any
 import numpy as np
 
 from ._config import float64_methods
-
-
-@dataclass
-class ParameterEstimate:
-    name: str
-    value: float
-    std: float
-    unit: str
-    fixed: bool
-    doc: str = ""
-    note: str = ""
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "value": self.value,
-            "unit": self.unit,
-            "std": None if self.fixed else self.std,
-            "fixed": self.fixed,
-            **({"note": self.note} if self.note else {}),
-        }
-
-
-@dataclass
-class RunSummary:
-    name: str
-    setup: str
-    n_samples: int
-    release_time: float
-    release_time_std: float
-    theta0: float
-    offset: float
-    rms_rad: float
-    rest_logged: float
-    rest_model: float
-    stuck_at_end: bool
-    peak_speed: float
-
-    def to_dict(self) -> dict[str, Any]:
-        return {k: getattr(self, k) for k in self.__dataclass_fields__}
-
-
-@dataclass
-class StartSummary:
-    """What the multi-start local fits found."""
-
-    costs: np.ndarray
-    converged: np.ndarray
-    steps: np.ndarray
-    values: dict[str, np.ndarray]
-    best: int
-
-    @classmethod
-    def from_solutions(cls, problem, U, costs, ok, steps, best) -> StartSummary:
-        values = problem.free_values_np(U)
-        return cls(np.asarray(costs), np.asarray(ok), np.asarray(steps), values, int(best))
-
-    def same_minimum(self, dchi2: float = 1.0) -> np.ndarray:
-        """Starts whose χ² is within ``dchi2`` of the best: statistically the same optimum
-        (χ² is in units of the quantization variance, so Δχ² = 1 is one standard error)."""
-        c = self.costs
-        return np.isfinite(c) & (c - c[self.best] < dchi2)
-
-    def spread(self) -> dict[str, float]:
-        """Largest relative deviation from the best among starts that reached its cost."""
-        same = self.same_minimum()
-        out = {}
-        for n, v in self.values.items():
-            ref = v[self.best]
-            out[n] = float(np.max(np.abs(v[same] - ref)) / abs(ref)) if ref else 0.0
-        return out
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "n_starts": int(len(self.costs)),
-            "n_within_dchi2_1_of_best": int(self.same_minimum().sum()),
-            "dchi2_to_best": [float(c - self.costs[self.best]) for c in self.costs],
-            "costs": [float(c) for c in self.costs],
-            "converged": [bool(x) for x in self.converged],
-            "iterations": [int(s) for s in self.steps],
-            "relative_spread_at_best_cost": self.spread(),
-            "best": int(self.best),
-            "parameter_values": {n: [float(x) for x in v] for n, v in self.values.items()},
-        }
+from ._summaries import ParameterEstimate, RunSummary, StartSummary
 
 
 @float64_methods
@@ -153,7 +71,7 @@ class FitResult:
         """Model encoder readings per run at the logged times, or at ``times`` ``(R, T')``."""
         import jax.numpy as jnp
 
-        from ._identifiability import _dense
+        from ._evaluate import dense as _dense
 
         self._need_log("predict()")
         t = self.problem.times if times is None else jnp.asarray(times)
@@ -179,15 +97,20 @@ class FitResult:
 
         self._need_log("predict_std()")
         t = self.problem.times if times is None else jnp.asarray(times)
-        pred, J = map(np.asarray, _prediction_and_jacobian(self.problem, jnp.asarray(self.u), t))
+        from ._evaluate import prediction_and_jacobian
+
+        pred, J = map(np.asarray, prediction_and_jacobian(self.problem, jnp.asarray(self.u), t))
         C = np.asarray(self.covariance)
         var = np.einsum("rtk,kl,rtl->rt", J, C, J)
         return pred, np.sqrt(np.clip(var, 0.0, None))
 
     # -- output -----------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
-        """JSON-able summary (the ``hdid fit --json`` schema)."""
-        return {
+        """Strict-JSON summary (the ``hdid fit --json`` schema): plain Python numbers, a
+        NaN or infinite value (an undetermined std) as ``None``."""
+        from ._saved import finite
+
+        return finite({
             "source": self.source,
             "parameters": {n: p.to_dict() for n, p in self.parameters.items()},
             "nuisance": {
@@ -219,7 +142,7 @@ class FitResult:
             "noise_scale_vs_quantization": self.noise_scale,
             "wall_time_s": self.wall_time_s,
             **self._reuse_dict(),
-        }
+        })
 
     def report(self) -> str:
         """A readable text report."""
@@ -343,7 +266,7 @@ class FitResult:
         """
         from ._saved import load
 
-        return load(path, effects)
+        return load(path, effects, cls)
 
     def _need_log(self, what: str) -> None:
         if self.problem is None:
@@ -390,28 +313,3 @@ class FitResult:
         from ._residuals import plot_residuals
 
         return plot_residuals(self, path=path, axes=axes)
-
-
-_PRED_JAC = None
-
-
-def _prediction_and_jacobian(problem, u, times):
-    """Predicted encoder readings ``(R, T)`` and their Jacobian ``(R, T, n)`` in the
-    unknowns (one forward-mode pass; one jit-compiled function, built on first use so that
-    importing this module stays free of JAX)."""
-    global _PRED_JAC
-    if _PRED_JAC is None:
-        import equinox as eqx
-        import jax
-
-        @eqx.filter_jit
-        def run(problem, u, times):
-            def f(v):
-                p = problem.predict(v, times)
-                return p, p
-
-            J, p = jax.jacfwd(f, has_aux=True)(u)
-            return p, J
-
-        _PRED_JAC = run
-    return _PRED_JAC(problem, u, times)

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from ._errors import HdidError
+from ._summaries import ParameterEstimate, RunSummary, StartSummary
 
 #: Version of the JSON layout; raised when a field changes meaning or goes away.
 SCHEMA_VERSION = 1
@@ -187,10 +188,12 @@ def save(result, path) -> None:
     Path(path).write_text(json.dumps(finite(result.to_dict()), indent=2) + "\n")
 
 
-def load(path, effects: dict | None = None):
-    """A :class:`FitResult` from its JSON (without the log: no predict/plot)."""
+def load(path, effects: dict | None, cls):
+    """A ``cls`` (:class:`~hdid.FitResult`) from its JSON (without the log: no
+    predict/plot). The class comes from :meth:`FitResult.load`: this module is below the
+    results and does not import them."""
     try:
-        return _load(path, effects)
+        return _load(path, effects, cls)
     except (KeyError, TypeError, IndexError) as exc:  # a field missing or of the wrong type
         raise HdidError(
             f"{path}: not a complete hdid fit JSON ({type(exc).__name__}: {exc}); write it "
@@ -198,8 +201,7 @@ def load(path, effects: dict | None = None):
         ) from None
 
 
-def _load(path, effects):
-    from ._result import FitResult, ParameterEstimate, RunSummary, StartSummary
+def _load(path, effects, FitResult):
 
     try:
         d = json.loads(Path(path).read_text())

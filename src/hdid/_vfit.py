@@ -36,7 +36,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import threading
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -47,24 +46,16 @@ import equinox as eqx
 import jax
 import numpy as np
 
+from ._compile_clock import _clock
 from ._config import float64
 from ._errors import HdidError
-from ._fit import (
-    _choose_starts,
-    _finish,
-    _grid_candidates,
-    LMState,
-    _lm_lanes,
-    lanes_vmap,
-    _Schedule,
-    _Setup,
-    _setup,
-    nested_check,
-)
+from ._fit import _finish, _Setup, _setup, nested_check
 from ._identifiability import band_limit, derived_quantities
 from ._io import Log, read_log
+from ._lm import LMState, _lm_lanes, _Schedule, lanes_vmap
 from ._nested import CHECK_ABOVE_FLOOR, needs_check
 from ._problem import Problem
+from ._starts import _choose_starts, _grid_candidates
 
 #: Lanes per compiled call of the Levenberg–Marquardt program. One: the LM's Jacobian is
 #: then computed only where its lane needs it (module docstring). Measured on 40 paper
@@ -88,69 +79,6 @@ def error_text(exc: BaseException) -> str:
     """One line for a failed log's ``error`` column."""
     msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else str(exc)
     return str(msg).replace("\n", " ") or type(exc).__name__
-
-
-# ----------------------------------------------------------------------------- timing
-
-
-class _CompileClock:
-    """Wall time spent tracing, lowering and compiling (or reading the persistent cache).
-
-    JAX reports these phases as monitoring events; nested jits overlap, so the union of
-    the spans is kept.
-    """
-
-    KEYS = (
-        "/jax/core/compile/jaxpr_trace_duration",
-        "/jax/core/compile/jaxpr_to_mlir_module_duration",
-        "/jax/core/compile/backend_compile_duration",
-    )
-
-    def __init__(self):
-        self.spans: list[tuple[float, float]] = []
-        self.lock = threading.Lock()
-        from jax import monitoring
-
-        monitoring.register_event_time_span_listener(self._span)
-
-    def _span(self, event, start, end, **_):
-        if event in self.KEYS:
-            with self.lock:
-                self.spans.append((start, end))
-
-    def mark(self) -> int:
-        with self.lock:
-            return len(self.spans)
-
-    def since(self, mark: int) -> float:
-        with self.lock:
-            spans = list(self.spans[mark:])
-        return union_length(spans)
-
-
-def union_length(spans) -> float:
-    """Total length of the union of ``(start, end)`` intervals (nested traces overlap)."""
-    total, cur_s, cur_e = 0.0, None, None
-    for s, e in sorted(spans):
-        if cur_e is None or s > cur_e:
-            if cur_e is not None:
-                total += cur_e - cur_s
-            cur_s, cur_e = s, e
-        else:
-            cur_e = max(cur_e, e)
-    if cur_e is not None:
-        total += cur_e - cur_s
-    return total
-
-
-_CLOCK: _CompileClock | None = None
-
-
-def _clock() -> _CompileClock:
-    global _CLOCK
-    if _CLOCK is None:
-        _CLOCK = _CompileClock()
-    return _CLOCK
 
 
 # ----------------------------------------------------------------------------- programs
