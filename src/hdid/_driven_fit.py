@@ -397,7 +397,7 @@ LM_CHUNK = 25
 def _solve(problem, u0, source: str, max_steps: int, data: DrivenData | None = None):
     """Levenberg–Marquardt from ``u0``; for a driven part, rounds that make each
     window's starting output-friction sign agree with the previous window's end."""
-    from ._fit import _solve_many
+    from ._lm import solve_fresh
 
     u = jnp.asarray(u0)
     rounds = DIRECTION_ROUNDS if data is not None else 1
@@ -409,7 +409,7 @@ def _solve(problem, u0, source: str, max_steps: int, data: DrivenData | None = N
         # can shrink the trust region to nothing, and a fresh start recovers it.
         used = 0
         while used < max_steps:
-            U, cost, done, steps = _solve_many(
+            U, cost, done, steps = solve_fresh(
                 problem, u[None], jnp.ones(1, dtype=bool), jnp.asarray(LM_CHUNK)
             )
             u = U[0]

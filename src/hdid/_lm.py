@@ -316,3 +316,16 @@ def _solve_lanes(problem: Problem, U0, active, max_steps, state: LMState):
         lanes_vmap(problem.residuals), lanes_vmap(problem.residuals_and_jacobian), U0, active,
         max_steps, state,
     )
+
+
+def solve_fresh(problem, U0, active, max_steps):
+    """Levenberg–Marquardt from every row of ``U0``, at most ``max_steps`` iterations,
+    every lane started fresh: ``(U, cost, done, iterations)``. The one engine
+    (:func:`_lm_lanes`) for any problem with ``residuals`` and ``residuals_and_jacobian``
+    (free, driven, joint) — what the driven fit calls in chunks."""
+    U0 = jnp.asarray(U0)
+    L, n = U0.shape
+    m = jax.eval_shape(problem.residuals, U0[0]).shape[0]
+    U, cost, done, k, _ = _solve_lanes(problem, U0, jnp.asarray(active), jnp.asarray(max_steps),
+                                       LMState.empty(L, m, n))
+    return U, cost, done, k
