@@ -156,4 +156,4 @@ def test_the_walk_sees_function_level_and_relative_imports():
     edges = _imports(mods)
     assert ("_result", "_evaluate") in edges  # inside FitResult.predict
     assert ("_posterior.density", "_identifiability") in edges  # `from .._identifiability`
-    assert ("effects._stiffness", "effects._base") in edges
+    assert ("effects.stiffness", "effects._base") in edges

@@ -118,8 +118,11 @@ def model_from_structure(d: dict, classes: dict | None = None):
                     f"{e['module']}); pass it: FitResult.load(path, effects={{'{e['class']}': "
                     f"{e['class']}}})"
                 )
-            try:
-                cls = getattr(importlib.import_module(e["module"]), e["class"])
+            try:  # a library class by its public name (its file may have moved)
+                import hdid.effects
+
+                cls = getattr(hdid.effects, e["class"], None) or getattr(
+                    importlib.import_module(e["module"]), e["class"])
             except (ImportError, AttributeError):
                 raise HdidError(
                     f"effect {e['name']!r}: class {e['class']} is not in this hdid "

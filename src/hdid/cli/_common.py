@@ -192,10 +192,23 @@ _RESOLUTION = click.option("--resolution", type=float, metavar="STEP", help="Enc
 _QUIET = click.option("--quiet", "-q", is_flag=True, help="No report on stdout.")
 
 
+def _effect_keys() -> list[str]:
+    """The ``--add`` names — hdid/effects' file stems and the installed plugins' entry
+    points — read without importing the effects (``hdid --help`` stays fast)."""
+    import importlib.util
+    import pkgutil
+    from importlib.metadata import entry_points
+
+    spec = importlib.util.find_spec("hdid.effects")
+    files = [m.name for m in pkgutil.iter_modules(spec.submodule_search_locations)
+             if not m.name.startswith("_")]
+    return sorted(set(files) | {ep.name for ep in entry_points(group="hdid.effects")})
+
+
 def _MODEL_OPTIONS(fn):
     """--add / --remove / --effect-file: the model to start from."""
     for opt in reversed((
-        click.option("--add", "add_effects", multiple=True, metavar="EFFECT", help="Add a library effect (repeatable; ripple:ORDER sets the order): asymmetric_friction, asymmetric_viscous, backlash, coulomb, gravity, hysteresis, kinematic_error, linear_stiffness, load_friction, ripple, soft_windup, stiffness, stribeck, torque_offset, viscous."),
+        click.option("--add", "add_effects", multiple=True, metavar="EFFECT", help="Add a library effect (repeatable; ripple:ORDER sets the order): " + ", ".join(_effect_keys()) + "."),
         click.option("--remove", "remove_effects", multiple=True, metavar="EFFECT", help="Remove an effect of the base model (repeatable), e.g. viscous."),
         click.option("--effect-file", "effect_files", multiple=True, metavar="FILE.py", help="Your own effect: a Python file defining AbstractEffect instances (repeatable)."),
         click.option("--ratio", type=click.FloatRange(min=0, min_open=True), help="Gear ratio N between the logged axis and the output (default 100; 1: the logged angle is the output's, no gear)."),

@@ -12,7 +12,7 @@ import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -154,6 +154,29 @@ class Motion(eqx.Module):
     ratio: Float[ArrayLike, ""]
 
 
+class StartValues(NamedTuple):
+    """Starting values that several library effects share, from a model's values (a
+    fitted one's, or the defaults): the spring, the Stribeck law, the small-swing
+    stiffness at the logged axis (``_k_wg``, as the caller measured it; ``k1/N²`` with
+    N = 100 only as a last resort)."""
+
+    k1: float
+    k2: float
+    tau_c: float
+    tau_s: float
+    k_wg: float
+    stribeck: dict
+
+    @classmethod
+    def of(cls, v: dict[str, float]) -> StartValues:
+        k1 = v.get("k1", v.get("K1", 940.0))
+        tau_c, tau_s = v.get("tau_c", 3e-3), v.get("tau_s", 4.5e-3)
+        return cls(k1=k1, k2=v.get("k2", 6.5e7), tau_c=tau_c, tau_s=tau_s,
+                   k_wg=v.get("_k_wg", k1 / 1e4),
+                   stribeck=dict(tau_c=tau_c, tau_s=tau_s, v_s=v.get("v_s", 3.0),
+                                 delta=v.get("delta", 1.0)))
+
+
 class AbstractEffect(eqx.Module):
     """A physical effect acting on the wave generator.
 
@@ -176,6 +199,16 @@ class AbstractEffect(eqx.Module):
 
     name: eqx.AbstractClassVar[str]
     parameters: eqx.AbstractClassVar[tuple[Parameter, ...]]
+    #: The ``--add`` name of a library or plugin effect: its module's file stem (or its
+    #: ``hdid.effects`` entry point's name). ``None``: not offered by ``--add``.
+    key: ClassVar[str | None] = None
+
+    @classmethod
+    def start_from(cls, values: dict[str, float]) -> AbstractEffect:
+        """This effect with starting values from ``values`` (a fitted or default model's
+        parameter values; see :func:`hdid.effects.library`). Library effects define it."""
+        raise NotImplementedError(
+            f"{cls.__name__}: define start_from(values) to offer it as `--add {cls.key}`")
 
     @abc.abstractmethod
     def torque(self, motion: Motion, state: PyTree) -> Float[Array, ""]:

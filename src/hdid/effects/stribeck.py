@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter, positive_power
+from ._base import AbstractEffect, Motion, Parameter, StartValues, positive_power
 
 
 class StribeckFriction(AbstractEffect):
@@ -29,6 +29,7 @@ class StribeckFriction(AbstractEffect):
     delta: Float[ArrayLike, ""]
 
     name: ClassVar[str] = "stribeck"
+    key: ClassVar[str] = "stribeck"
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter("tau_c", "N m", "Coulomb friction torque at the wave generator",
                   start=lambda s: s.torque),
@@ -44,6 +45,12 @@ class StribeckFriction(AbstractEffect):
         Parameter("delta", "1", "Stribeck shape exponent",
                   transform=("interval", 0.3, 4.0), prior=(0.0, 2.0)),
     )
+
+    @classmethod
+    def start_from(cls, values: dict[str, float]) -> StribeckFriction:
+        """Starting values for ``--add stribeck`` (see :func:`hdid.effects.library`)."""
+        s = StartValues.of(values)
+        return cls(**s.stribeck)
 
     def sliding_magnitude(self, omega: Float[Array, ""]) -> Float[Array, ""]:
         """Friction magnitude [N m] while sliding at ``omega`` [rad/s]."""

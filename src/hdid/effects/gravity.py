@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter
+from ._base import AbstractEffect, Motion, Parameter, StartValues
 
 
 class Gravity(AbstractEffect):
@@ -35,10 +35,17 @@ class Gravity(AbstractEffect):
     mgl: Float[ArrayLike, ""]
 
     name: ClassVar[str] = "gravity"
+    key: ClassVar[str] = "gravity"
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter("mgl", "N m", "pendulum gravity torque m·g·l at the output (mass × g × arm)",
                   start=lambda s: s.k_out),
     )
+
+    @classmethod
+    def start_from(cls, values: dict[str, float]) -> Gravity:
+        """Starting values for ``--add gravity`` (see :func:`hdid.effects.library`)."""
+        s = StartValues.of(values)
+        return cls(mgl=values.get("mgl", s.k1))
 
     def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
         del state

@@ -6,7 +6,7 @@ from typing import ClassVar
 
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter
+from ._base import AbstractEffect, Motion, Parameter, StartValues
 
 
 class AsymmetricViscousFriction(AbstractEffect):
@@ -30,12 +30,20 @@ class AsymmetricViscousFriction(AbstractEffect):
     c_vn: Float[ArrayLike, ""]
 
     name: ClassVar[str] = "viscous"
+    key: ClassVar[str] = "asymmetric_viscous"
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter("c_vp", "N m s/rad", "viscous friction coefficient sliding in +θ (wave generator)",
                   start=lambda s: 0.05 * s.c_crit),
         Parameter("c_vn", "N m s/rad", "viscous friction coefficient sliding in −θ (wave generator)",
                   start=lambda s: 0.05 * s.c_crit),
     )
+
+    @classmethod
+    def start_from(cls, values: dict[str, float]) -> AsymmetricViscousFriction:
+        """Starting values for ``--add asymmetric_viscous`` (see :func:`hdid.effects.library`)."""
+        s = StartValues.of(values)
+        return cls(c_vp=values.get("c_vp", values.get("c_v", 2e-5)),
+                   c_vn=values.get("c_vn", values.get("c_v", 2e-5)))
 
     def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
         del state

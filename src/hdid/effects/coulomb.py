@@ -7,8 +7,8 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter
-from ._stribeck import StribeckFriction
+from ._base import AbstractEffect, Motion, Parameter, StartValues
+from .stribeck import StribeckFriction
 
 
 class CoulombFriction(AbstractEffect):
@@ -31,7 +31,14 @@ class CoulombFriction(AbstractEffect):
     tau_c: Float[ArrayLike, ""]
 
     name: ClassVar[str] = "stribeck"
+    key: ClassVar[str] = "coulomb"
     parameters: ClassVar[tuple[Parameter, ...]] = StribeckFriction.parameters[:1]
+
+    @classmethod
+    def start_from(cls, values: dict[str, float]) -> CoulombFriction:
+        """Starting values for ``--add coulomb`` (see :func:`hdid.effects.library`)."""
+        s = StartValues.of(values)
+        return cls(tau_c=s.tau_c)
 
     def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
         del state

@@ -7,8 +7,8 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter
-from ._stiffness import CubicStiffness
+from ._base import AbstractEffect, Motion, Parameter, StartValues
+from .stiffness import CubicStiffness
 
 
 class KinematicErrorStiffness(AbstractEffect):
@@ -33,12 +33,20 @@ class KinematicErrorStiffness(AbstractEffect):
     order: Float[ArrayLike, ""] = 2.0
 
     name: ClassVar[str] = "stiffness"
+    key: ClassVar[str] = "kinematic_error"
     parameters: ClassVar[tuple[Parameter, ...]] = CubicStiffness.parameters + (
         Parameter("ke_a", "rad", "sine amplitude of the kinematic error, output side",
                   transform="identity", scale=lambda s: 0.05 * s.twist),
         Parameter("ke_b", "rad", "cosine amplitude of the kinematic error, output side",
                   transform="identity", scale=lambda s: 0.05 * s.twist),
     )
+
+    @classmethod
+    def start_from(cls, values: dict[str, float]) -> KinematicErrorStiffness:
+        """Starting values for ``--add kinematic_error`` (see :func:`hdid.effects.library`)."""
+        s = StartValues.of(values)
+        return cls(k1=s.k1, k2=s.k2, ke_a=values.get("ke_a", 0.0), ke_b=values.get("ke_b", 0.0),
+                   order=values.get("order", 2.0))
 
     def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
         del state

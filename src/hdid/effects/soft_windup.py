@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter
+from ._base import AbstractEffect, Motion, Parameter, StartValues
 
 
 class ThreeSegmentStiffness(AbstractEffect):
@@ -32,6 +32,7 @@ class ThreeSegmentStiffness(AbstractEffect):
     dT12: Float[ArrayLike, ""]
 
     name: ClassVar[str] = "stiffness"
+    key: ClassVar[str] = "soft_windup"
     parameters: ClassVar[tuple[Parameter, ...]] = (
         # the CSF-8 catalog's segments relative to its cubic fit (physics notes)
         Parameter("K1", "N m/rad", "stiffness of the first segment (|T| ≤ T1), output side",
@@ -45,6 +46,15 @@ class ThreeSegmentStiffness(AbstractEffect):
         Parameter("dT12", "N m", "T2 − T1: output torque between the corners",
                   start=lambda s: 0.31 * s.k_out * s.twist),
     )
+
+    @classmethod
+    def start_from(cls, values: dict[str, float]) -> ThreeSegmentStiffness:
+        """Starting values for ``--add soft_windup`` (see :func:`hdid.effects.library`)."""
+        s = StartValues.of(values)
+        k1 = s.k1
+        return cls(K1=values.get("K1", 0.97 * k1), K2=values.get("K2", 1.06 * k1),
+                   K3=values.get("K3", 1.28 * k1), T1=values.get("T1", 0.29 * k1 / 940.0),
+                   dT12=values.get("dT12", 0.46 * k1 / 940.0))
 
     def spring_torque(self, twist: Float[Array, ""]) -> Float[Array, ""]:
         """Output-side torque [N m] at output twist ``twist`` [rad]."""

@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter
+from ._base import AbstractEffect, Motion, Parameter, StartValues
 
 
 class CubicStiffness(AbstractEffect):
@@ -24,6 +24,7 @@ class CubicStiffness(AbstractEffect):
     k2: Float[ArrayLike, ""]
 
     name: ClassVar[str] = "stiffness"
+    key: ClassVar[str] = "stiffness"
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter("k1", "N m/rad", "linear torsional stiffness, output side",
                   start=lambda s: s.k_out),
@@ -31,6 +32,12 @@ class CubicStiffness(AbstractEffect):
         Parameter("k2", "N m/rad^3", "cubic torsional stiffness, output side",
                   start=lambda s: 0.17 * s.k_out / s.twist**2),
     )
+
+    @classmethod
+    def start_from(cls, values: dict[str, float]) -> CubicStiffness:
+        """Starting values for ``--add stiffness`` (see :func:`hdid.effects.library`)."""
+        s = StartValues.of(values)
+        return cls(k1=s.k1, k2=s.k2)
 
     def spring_torque(self, twist: Float[Array, ""]) -> Float[Array, ""]:
         """Output-side torque ``T_k`` [N m] at output twist ``twist`` [rad]."""

@@ -7,8 +7,8 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter
-from ._stiffness import CubicStiffness
+from ._base import AbstractEffect, Motion, Parameter, StartValues
+from .stiffness import CubicStiffness
 
 
 class FreePlayStiffness(AbstractEffect):
@@ -28,10 +28,17 @@ class FreePlayStiffness(AbstractEffect):
     backlash: Float[ArrayLike, ""]
 
     name: ClassVar[str] = "stiffness"
+    key: ClassVar[str] = "backlash"
     parameters: ClassVar[tuple[Parameter, ...]] = CubicStiffness.parameters + (
         Parameter("backlash", "rad", "total free play at the wave generator",
                   start=lambda s: 0.06 * s.amplitude),
     )
+
+    @classmethod
+    def start_from(cls, values: dict[str, float]) -> FreePlayStiffness:
+        """Starting values for ``--add backlash`` (see :func:`hdid.effects.library`)."""
+        s = StartValues.of(values)
+        return cls(k1=s.k1, k2=s.k2, backlash=values.get("backlash", 0.01))
 
     def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
         del state

@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter
+from ._base import AbstractEffect, Motion, Parameter, StartValues
 
 
 class LoadDependentFriction(AbstractEffect):
@@ -29,10 +29,17 @@ class LoadDependentFriction(AbstractEffect):
     c_load: Float[ArrayLike, ""]
 
     name: ClassVar[str] = "load_friction"
+    key: ClassVar[str] = "load_friction"
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter("c_load", "N m/rad", "friction increase per rad of WG twist (μ·k1/N²)",
                   start=lambda s: 0.05 * s.k_wg),
     )
+
+    @classmethod
+    def start_from(cls, values: dict[str, float]) -> LoadDependentFriction:
+        """Starting values for ``--add load_friction`` (see :func:`hdid.effects.library`)."""
+        s = StartValues.of(values)
+        return cls(c_load=values.get("c_load", 0.05 * s.k_wg))
 
     def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
         del state

@@ -6,7 +6,7 @@ from typing import ClassVar
 
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter
+from ._base import AbstractEffect, Motion, Parameter, StartValues
 
 
 class ViscousFriction(AbstractEffect):
@@ -19,10 +19,17 @@ class ViscousFriction(AbstractEffect):
     c_v: Float[ArrayLike, ""]
 
     name: ClassVar[str] = "viscous"
+    key: ClassVar[str] = "viscous"
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter("c_v", "N m s/rad", "viscous friction coefficient at the wave generator",
                   start=lambda s: 0.05 * s.c_crit),
     )
+
+    @classmethod
+    def start_from(cls, values: dict[str, float]) -> ViscousFriction:
+        """Starting values for ``--add viscous`` (see :func:`hdid.effects.library`)."""
+        s = StartValues.of(values)
+        return cls(c_v=values.get("c_v", 2e-5))
 
     def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
         del state

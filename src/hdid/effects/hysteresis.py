@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float, PyTree
 
-from ._base import AbstractEffect, Motion, Parameter
+from ._base import AbstractEffect, Motion, Parameter, StartValues
 
 
 class DahlHysteresis(AbstractEffect):
@@ -36,12 +36,19 @@ class DahlHysteresis(AbstractEffect):
     sigma_h: Float[ArrayLike, ""]
 
     name: ClassVar[str] = "hysteresis"
+    key: ClassVar[str] = "hysteresis"
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter("f_h", "N m", "saturation torque of the Dahl element at the wave generator",
                   start=lambda s: 0.2 * s.torque),
         Parameter("sigma_h", "N m/rad", "initial (rest) stiffness of the Dahl element, WG side",
                   start=lambda s: s.k_wg),
     )
+
+    @classmethod
+    def start_from(cls, values: dict[str, float]) -> DahlHysteresis:
+        """Starting values for ``--add hysteresis`` (see :func:`hdid.effects.library`)."""
+        s = StartValues.of(values)
+        return cls(f_h=values.get("f_h", 0.2 * s.tau_c), sigma_h=values.get("sigma_h", s.k_wg))
 
     def _z(self, theta, theta_a, z_a, s):
         moved = jnp.maximum(s * (theta - theta_a), 0.0)

@@ -6,8 +6,8 @@ from typing import ClassVar
 
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter
-from ._stribeck import StribeckFriction
+from ._base import AbstractEffect, Motion, Parameter, StartValues
+from .stribeck import StribeckFriction
 
 
 class AsymmetricStribeckFriction(AbstractEffect):
@@ -35,10 +35,17 @@ class AsymmetricStribeckFriction(AbstractEffect):
     asym: Float[ArrayLike, ""]
 
     name: ClassVar[str] = "stribeck"
+    key: ClassVar[str] = "asymmetric_friction"
     parameters: ClassVar[tuple[Parameter, ...]] = StribeckFriction.parameters + (
         Parameter("asym", "1", "friction asymmetry: +θ is (1+asym), −θ is (1−asym) times",
                   transform=("interval", -0.9, 0.9)),
     )
+
+    @classmethod
+    def start_from(cls, values: dict[str, float]) -> AsymmetricStribeckFriction:
+        """Starting values for ``--add asymmetric_friction`` (see :func:`hdid.effects.library`)."""
+        s = StartValues.of(values)
+        return cls(**s.stribeck, asym=values.get("asym", 0.0))
 
     def _symmetric(self) -> StribeckFriction:
         return StribeckFriction(tau_c=self.tau_c, tau_s=self.tau_s, v_s=self.v_s, delta=self.delta)

@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter
+from ._base import AbstractEffect, Motion, Parameter, StartValues
 
 
 class PositionRipple(AbstractEffect):
@@ -31,12 +31,20 @@ class PositionRipple(AbstractEffect):
     order: Float[ArrayLike, ""] = 24.0
 
     name: ClassVar[str] = "ripple"
+    key: ClassVar[str] = "ripple"
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter("ripple_a", "N m", "sine amplitude of the position-periodic torque (WG)",
                   transform="identity", scale=lambda s: 0.03 * s.torque),
         Parameter("ripple_b", "N m", "cosine amplitude of the position-periodic torque (WG)",
                   transform="identity", scale=lambda s: 0.03 * s.torque),
     )
+
+    @classmethod
+    def start_from(cls, values: dict[str, float]) -> PositionRipple:
+        """Starting values for ``--add ripple`` (see :func:`hdid.effects.library`)."""
+        s = StartValues.of(values)
+        return cls(ripple_a=values.get("ripple_a", 0.0), ripple_b=values.get("ripple_b", 0.0),
+                   order=values.get("order", 24.0))
 
     def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
         del state

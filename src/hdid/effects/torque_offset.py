@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter
+from ._base import AbstractEffect, Motion, Parameter, StartValues
 
 
 class TorqueOffset(AbstractEffect):
@@ -31,10 +31,17 @@ class TorqueOffset(AbstractEffect):
     tau_0: Float[ArrayLike, ""]
 
     name: ClassVar[str] = "torque_offset"
+    key: ClassVar[str] = "torque_offset"
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter("tau_0", "N m", "constant torque the drive supplies at rest (offset, gravity bias), WG side",
                   transform="identity", scale=lambda s: s.torque, start=lambda s: 0.0),
     )
+
+    @classmethod
+    def start_from(cls, values: dict[str, float]) -> TorqueOffset:
+        """Starting values for ``--add torque_offset`` (see :func:`hdid.effects.library`)."""
+        s = StartValues.of(values)
+        return cls(tau_0=values.get("tau_0", 0.0))
 
     def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
         del state

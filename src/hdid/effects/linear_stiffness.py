@@ -6,8 +6,8 @@ from typing import ClassVar
 
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter
-from ._stiffness import CubicStiffness
+from ._base import AbstractEffect, Motion, Parameter, StartValues
+from .stiffness import CubicStiffness
 
 
 class LinearStiffness(AbstractEffect):
@@ -24,7 +24,14 @@ class LinearStiffness(AbstractEffect):
     k1: Float[ArrayLike, ""]
 
     name: ClassVar[str] = "stiffness"
+    key: ClassVar[str] = "linear_stiffness"
     parameters: ClassVar[tuple[Parameter, ...]] = CubicStiffness.parameters[:1]
+
+    @classmethod
+    def start_from(cls, values: dict[str, float]) -> LinearStiffness:
+        """Starting values for ``--add linear_stiffness`` (see :func:`hdid.effects.library`)."""
+        s = StartValues.of(values)
+        return cls(k1=s.k1)
 
     def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
         del state

@@ -1,0 +1,104 @@
+"""Adding an effect is one file: a module with one ``AbstractEffect`` whose ``key`` is the
+file stem (the library's own, ``hdid/effects/<key>.py``) or an installed package's module
+under the ``hdid.effects`` entry-point group. Here a plugin package is "installed" on
+``PYTHONPATH`` (a ``.dist-info`` with its entry point beside the module) and seen by
+``--add``'s help, by ``hdid.effects.library`` and by a fit, with no other edit.
+(Still to come, issue 20: diagnose's candidates, derived quantities and the posterior's
+coordinates read from the registry too.)
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import hdid
+from hdid.effects import _registry
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER = ROOT / "data" / "synthetic" / "csf8_paper.csv"
+
+COGGING = '''
+from typing import ClassVar
+
+import jax.numpy as jnp
+
+import hdid
+
+
+class Cogging(hdid.AbstractEffect):
+    """Cogging: ``T = −a·sin(24 θ)`` [N m]. Residual mark: a 24-per-turn ripple."""
+
+    amplitude: float
+    name: ClassVar[str] = "cogging"
+    key: ClassVar[str] = "cogging"
+    parameters: ClassVar = (hdid.Parameter("amplitude", "N m", "cogging torque",
+                                           transform="identity", scale=1e-4),)
+
+    @classmethod
+    def start_from(cls, values):
+        return cls(amplitude=values.get("amplitude", 0.0))
+
+    def torque(self, motion, state):
+        return -self.amplitude * jnp.sin(24.0 * motion.theta)
+'''
+
+
+@pytest.fixture(scope="module")
+def plugin(tmp_path_factory):
+    site = tmp_path_factory.mktemp("site")
+    (site / "hdid_cogging.py").write_text(COGGING)
+    info = site / "hdid_cogging-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: hdid-cogging\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[hdid.effects]\ncogging = hdid_cogging\n")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")])}
+    return site, env
+
+
+def _run(args, env, cwd):
+    out = subprocess.run(args, capture_output=True, text=True, env=env, cwd=cwd, timeout=900)
+    assert out.returncode == 0, out.stderr[-2000:]
+    return out.stdout
+
+
+def test_library_is_built_from_the_files():
+    files = sorted(p.stem for p in (ROOT / "src" / "hdid" / "effects").glob("*.py")
+                   if not p.stem.startswith("_"))
+    assert _registry.builtin_keys() == files
+    reg = _registry.registry()
+    for key in files:
+        assert reg[key].key == key and reg[key].__module__ == f"hdid.effects.{key}"
+    assert sorted(hdid.effects.library(hdid.Model.default().float_values())) == sorted(reg)
+
+
+def test_a_plugin_package_adds_an_effect_everywhere(plugin, tmp_path):
+    site, env = plugin
+    cli = [sys.executable, "-m", "hdid.cli"]
+    assert "cogging" in _run([*cli, "fit", "--help"], env, tmp_path).replace("\n", " ")
+    keys = _run([sys.executable, "-c", "import hdid; print(sorted(hdid.effects.library({})))"],
+                env, tmp_path)
+    assert "'cogging'" in keys
+    _run([*cli, "fit", str(PAPER), "--add", "cogging", "--starts", "2", "-q", "--json",
+          "fit.json"], env, tmp_path)
+    d = json.loads((tmp_path / "fit.json").read_text())
+    assert "amplitude" in d["parameters"]
+    assert any(e["class"] == "Cogging" for e in d["model"]["effects"])
+
+
+def test_a_plugin_may_not_take_a_library_key(tmp_path):
+    site = tmp_path
+    (site / "bad_plugin.py").write_text(COGGING.replace('"cogging"', '"viscous"'))
+    info = site / "bad_plugin-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: bad-plugin\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text("[hdid.effects]\nviscous = bad_plugin\n")
+    env = {**os.environ, "PYTHONPATH": str(site)}
+    out = subprocess.run([sys.executable, "-c", "import hdid; hdid.effects.library({})"],
+                         capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
+    assert out.returncode != 0 and "the name of a library effect" in out.stderr
