@@ -85,8 +85,8 @@ def modes(fit):
 
 
 def test_short_chain_is_reproducible_and_summarised(fit, modes):
-    a = sample_posterior(fit, n_steps=100, burn_in=40, seed=3, modes=modes, pilot="modes")
-    b = sample_posterior(fit, n_steps=100, burn_in=40, seed=3, modes=modes, pilot="modes")
+    a = sample_posterior(fit, n_steps=100, burn_in=40, seed=3, modes=modes, method="emcee")
+    b = sample_posterior(fit, n_steps=100, burn_in=40, seed=3, modes=modes, method="emcee")
     np.testing.assert_array_equal(a.chain, b.chain)
     s = a.to_dict()
     assert set(s["posterior"]) >= {"k1", "tau_c", "stick_band_halfwidth_rad", "natural_frequency_hz"}
@@ -128,7 +128,7 @@ def test_moves_factory_gets_the_log_posterior_and_burn_in_hook_is_called(fit, mo
 
     burn = 40 * BURN_IN_STAGES
     post = sample_posterior(fit, n_steps=30, burn_in=burn, seed=1, modes=modes, moves=factory,
-                            pilot="modes")
+                            method="emcee")
     assert isinstance(seen["lp"], LogPosterior) and seen["lp"].ndim == post.chain.shape[2]
     assert len(seen["updates"]) == BURN_IN_STAGES
     for rate, shape in seen["updates"]:
@@ -138,7 +138,7 @@ def test_moves_factory_gets_the_log_posterior_and_burn_in_hook_is_called(fit, mo
 
 def test_too_short_chain_does_not_crash(fit, modes):
     # 5 steps: some walkers never move, τ is NaN; the sampler must warn, not crash.
-    post = sample_posterior(fit, n_steps=5, burn_in=0, seed=1, modes=modes, pilot="modes")
+    post = sample_posterior(fit, n_steps=5, burn_in=0, seed=1, modes=modes, method="emcee")
     assert post.draws.shape[0] > 0
     assert post.warnings
 
@@ -188,7 +188,7 @@ def test_cli_posterior_json_and_chains(tmp_path):
     from hdid.cli import main
 
     out, nc = tmp_path / "fit.json", tmp_path / "chains.nc"
-    # the default sampler (emcee after an SMC pilot)
+    # the default sampler (emcee)
     res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "-q", "--posterior", "--steps", "100",
                                     "--json", str(out), "--chains", str(nc)])
     assert res.exit_code == 0, res.output
@@ -197,7 +197,6 @@ def test_cli_posterior_json_and_chains(tmp_path):
     assert set(band) == {"median", "ci68", "ci95"} and band["ci95"][0] <= band["median"]
     assert d["posterior_diagnostics"]["converged"] is False
     assert d["posterior_diagnostics"]["method"] == "emcee"
-    assert d["posterior_diagnostics"]["smc"]["pilot"] == "smc"
     assert "k1" in az.from_netcdf(str(nc)).posterior
 
 
@@ -367,7 +366,7 @@ def test_no_progress_bar_unless_stderr_is_a_terminal(fit, capfd):
     """tqdm's carriage-return updates must not reach a redirected stderr (a log file),
     even when progress is asked for (the CLI asks unless -q)."""
     sample_posterior(fit, n_steps=20, burn_in=0, seed=0, modes="fit", progress=True,
-                     pilot="modes")
+                     method="emcee")
     err = capfd.readouterr().err
     assert "\r" not in err and "it/s" not in err
 

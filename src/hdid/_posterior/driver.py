@@ -36,27 +36,9 @@ from .moves import (
     _move_name,
     _reset_outliers,
     default_moves,
-    pilot_moves,
 )
 from .result import PosteriorResult
 
-#: Pilot SMC particles per run (``n_particles`` overrides; 2 runs), burn-in steps and the first
-#: convergence check with ``pilot="smc"``: the walkers start as (nearly) posterior draws.
-PILOT_PARTICLES = 300
-PILOT_BURN_IN = 400
-#: With ``pilot="smc"`` the independence proposal is the t-mixture fitted to the pilot's
-#: particles plus the optima's reference mixture at weight ``DEFENSIVE`` (bounded
-#: importance ratios where the particles did not go).
-DEFENSIVE = 0.05
-#: The pilot's mixture is widened by this factor (its covariances by its square) and given
-#: ``MIX_NU`` degrees of freedom: an independence proposal lighter-tailed than the
-#: posterior strands walkers where ``p/q`` is large.
-MIX_INFLATE = 1.5
-MIX_NU = 3.0
-PILOT_CHUNK = 100
-#: The same with ``pilot="modes"`` (walkers from the optima's Laplace approximations).
-MODES_BURN_IN = 400
-MODES_CHUNK = 500
 #: The burn-in is run in this many stages, the proposal adapted after each.
 BURN_IN_STAGES = 4
 #: τ multiple reported beside the arviz criterion (the ensemble rule of thumb).
@@ -95,8 +77,8 @@ def sample_posterior(
     n_walkers: int | None = None,
     n_steps: int | None = None,
     max_steps: int = 20000,
-    burn_in: int | None = None,
-    chunk: int | None = None,
+    burn_in: int = 400,
+    chunk: int = 500,
     seed: int = 0,
     progress: bool | None = None,
     likelihood: str = "auto",
@@ -108,42 +90,37 @@ def sample_posterior(
     method: str = "emcee",
     n_particles: int | None = None,
     prior: dict | None = None,
-    pilot: str = "smc",
 ) -> PosteriorResult:
     """Sample the posterior of ``fit``'s parameters with emcee, until converged.
 
-    ``method="emcee"`` (default) with ``pilot="smc"`` (default): a short tempered SMC
-    (:func:`~hdid._posterior.smc.pilot`: 2 runs × ``n_particles`` (300) from the optima's
-    Laplace mixture to the posterior, one round of moves at β = 1, no convergence test of
-    its own) locates and weighs the optima; emcee's walkers start from distinct SMC
-    particles, and its moves are independence Metropolis–Hastings from a Student-t mixture
-    fitted to the particles (widened ``MIX_INFLATE``, ``MIX_NU`` degrees of freedom, plus
-    the optima's reference mixture at weight ``DEFENSIVE``) and differential evolution
-    (:func:`~hdid._posterior.moves.pilot_moves`). The reported draws are emcee's chain and
-    the verdict is arviz's on it. ``pilot="modes"``: walkers from the optima's Laplace
-    approximations and the staged burn-in below (the sampler before issue 17's SMC).
+    ``method="emcee"`` (default, the engine of the reported draws): an ensemble of walkers
+    started from the optima's Laplace approximations, differential-evolution moves plus an
+    independence Metropolis–Hastings move from a t-mixture over the optima (below); the
+    verdict is arviz's on its chain. Measured side by side on the same logs
+    (benchmarks/README.md, issue 17, branch ``post3``) it mixed better than emcee started
+    from a tempered-SMC pilot with a proposal fitted to the SMC particles (retired).
 
-    ``method="smc"``: the tempered SMC alone, run to its own test (4 runs that must agree,
-    :func:`~hdid._posterior.smc.sample_smc`; gives the log-evidence). Measured beside
-    emcee on the same logs it reports narrower intervals that move with its particle
-    count (benchmarks/README.md): it is kept as the pilot and for comparison, not as the
-    default.
+    ``method="smc"``: tempered sequential Monte Carlo alone from the optima's Laplace
+    mixture (:func:`~hdid._posterior.smc.sample_smc`: 4 independent runs whose agreement is
+    its convergence test; gives the log-evidence); ``n_particles`` per run. It passes its
+    own test in seconds, but on the shipped paper log its intervals are narrower than the
+    emcee chains' (v_s, tau_c) and widen with its particle count
+    (benchmarks/results/posterior_engine_scratch.md): kept for comparison and the evidence,
+    not as the default. The options from ``n_walkers`` to ``sample_linear`` other than
+    ``prior`` are emcee's.
 
     Modes: with ``modes="auto"`` (default) :func:`find_modes` restarts the local fit
     around ``fit`` and keeps every distinct optimum with its Laplace mass; the walkers
     start spread over them in proportion to that mass. ``modes="fit"`` uses the fit's
     optimum only; a list of :class:`Mode` is used as given.
 
-    Burn-in (discarded; default 400 steps): with ``pilot="smc"`` one stage (DE step
-    tuned after it), the proposal kept. With ``pilot="modes"``: ``burn_in`` steps of
-    differential evolution plus independence
+    Burn-in (discarded): ``burn_in`` steps of differential evolution plus independence
     Metropolis–Hastings from a t-mixture over the optima (:class:`MixtureProposal`),
     refitted after each of ``BURN_IN_STAGES`` stages; the kept chain uses the last mixture,
     fixed. (A normalizing flow fitted to the burn-in draws in its place was measured and
     lost: benchmarks/results/posterior_flow.md.)
 
-    The kept chain grows (checked after ``chunk`` steps — 100 after an SMC pilot, 500
-    otherwise — then at every growth by
+    The kept chain grows (checked after ``chunk`` steps, then at every growth by
     ``CHECK_GROWTH``) until it converges — every sampled quantity and the stick-band
     half-width has a rank-normalised R-hat ≤ 1.01 and bulk and tail ESS
     ≥ 400 (arviz; :func:`~hdid._posterior.diagnostics.convergence`) — or reaches
@@ -164,8 +141,7 @@ def sample_posterior(
         benchmarks/README.md).
     moves:
         emcee moves (a move, a list of moves or of ``(move, weight)``), or a callable
-        ``(log_posterior, proposal) -> moves``; default :func:`pilot_moves` after an SMC
-        pilot, :func:`default_moves` otherwise. A move with
+        ``(log_posterior, proposal) -> moves``; default :func:`default_moves`. A move with
         a ``burn_in_update(acceptance, draws)`` method is given its acceptance rate and the
         stage's draws after each burn-in stage.
     prior:
@@ -227,6 +203,11 @@ def sample_posterior(
     log_prob(np.tile(x_fit, (W // 2, 1)))
     log_prob(np.tile(x_fit, (W, 1)))
     t_compile = time.perf_counter() - t_compile
+    P0, lp0 = _mode_start(found, lambda U: log_prob(lp.to_sampled_np(U)), W, rng,
+                          log_lo + 0.05, log_rms)
+    P0 = lp.to_sampled_np(P0)
+    if not np.all(np.isfinite(lp0)):
+        raise _no_start(fit)
     # Independence proposal: one t component per mode; log σ_n from the start spread.
     s_mid, s_sd = 0.5 * (log_lo + max(log_rms, log_lo + 0.5)), 0.6
     means = lp.to_sampled_np(np.array([np.concatenate([m.u, [s_mid]]) for m in found]))
@@ -235,49 +216,9 @@ def sample_posterior(
         covs[k, :-1, :-1] = lp.sampled_cov_np(m.u, START_SCALE**2 * m.cov)
         covs[k, -1, -1] = s_sd**2
     start_mix = MixtureProposal(means, covs, [m.weight for m in found])
-    t_pilot = 0.0
-    pilot_info: dict = {}
-    if pilot == "smc":
-        # Tempered SMC locates and weighs the optima; emcee's walkers start from its
-        # particles and its independence move proposes from a t-mixture fitted to them.
-        from .smc import pilot as smc_pilot
-        from .smc import reference_mixture
-
-        t_p = time.perf_counter()
-        ref = reference_mixture(lp, found, fit, bounds)
-        parts, mix, pilot_info = smc_pilot(lp, ref, seed,
-                                           n_particles=n_particles or PILOT_PARTICLES)
-        mix = MixtureProposal(mix.means, MIX_INFLATE**2 * mix.covs, mix.weights, nu=MIX_NU)
-        if DEFENSIVE > 0:
-            mix = MixtureProposal(np.concatenate([mix.means, ref.means]),
-                                  np.concatenate([mix.covs, ref.covs]),
-                                  np.concatenate([(1 - DEFENSIVE) * mix.weights,
-                                                  DEFENSIVE * ref.weights]), nu=mix.nu)
-        uniq = np.unique(parts, axis=0)
-        pick = rng.choice(len(uniq), size=W, replace=len(uniq) < W)
-        P0 = uniq[pick]
-        if len(uniq) < W:  # clones: jitter them apart by a hundredth of the spread
-            P0 = P0 + 1e-2 * np.std(uniq, axis=0) * rng.standard_normal(P0.shape)
-        lp0 = log_prob(P0)
-        t_pilot = time.perf_counter() - t_p
-        if not np.all(np.isfinite(lp0)):
-            raise _no_start(fit)
-        proposal = _Adaptive(mix)
-    elif pilot == "modes":
-        P0, lp0 = _mode_start(found, lambda U: log_prob(lp.to_sampled_np(U)), W, rng,
-                              log_lo + 0.05, log_rms)
-        P0 = lp.to_sampled_np(P0)
-        if not np.all(np.isfinite(lp0)):
-            raise _no_start(fit)
-        proposal = _Adaptive(start_mix)
-    else:
-        raise ValueError(f"pilot must be 'smc' or 'modes', not {pilot!r}")
-    if burn_in is None:
-        burn_in = PILOT_BURN_IN if pilot == "smc" else MODES_BURN_IN
-    if chunk is None:
-        chunk = PILOT_CHUNK if pilot == "smc" else MODES_CHUNK
+    proposal = _Adaptive(start_mix)
     if moves is None:
-        moves = pilot_moves(proposal) if pilot == "smc" else default_moves(proposal)
+        moves = default_moves(proposal)
     elif callable(moves) and not hasattr(moves, "propose"):
         # a factory for moves that need the log-posterior itself (e.g. gradient-based)
         moves = moves(lp, proposal)
@@ -295,7 +236,7 @@ def sample_posterior(
         # Burn-in in stages; after each: re-seed stranded walkers, refit the mixture to the
         # walkers' positions, and scale the local DE step towards ~25 % acceptance (emcee's
         # 2.38/√(2D) is tuned for a Gaussian; on this thin curved ridge it accepts < 1 %).
-        n_stage = BURN_IN_STAGES if burn_in >= 20 * BURN_IN_STAGES else 1
+        n_stage = BURN_IN_STAGES if burn_in >= 40 * BURN_IN_STAGES else 1
         sizes = [burn_in // n_stage] * n_stage
         sizes[-1] += burn_in - sum(sizes)
         for h in sizes:
@@ -305,11 +246,7 @@ def sample_posterior(
             if nr:
                 state.log_prob = log_prob(state.coords)
             burn_draws = sampler.get_chain()[h // 2 :].reshape(-1, D)
-            if pilot != "smc":
-                # (the pilot's mixture is kept: refitted after each stage to the stage's
-                # draws plus the particles it accepted 3–6 % against 5–10 % unrefitted on
-                # the shipped log and two paper logs; benchmarks/README.md)
-                proposal.mix = proposal.mix.refit(burn_draws)
+            proposal.mix = proposal.mix.refit(burn_draws)
             _tune(counted, burn_draws, D)
             sampler.reset()
     t_burn = time.perf_counter() - t_burn
@@ -427,10 +364,8 @@ def sample_posterior(
         convergence=conv,
         widths=widths,
         compile_s=t_compile,
-        stage_s={"mode_search": t_modes, "compile": t_compile, "pilot_smc": t_pilot,
-                 "burn_in": t_burn, "kept_chain": t_kept, "diagnostics": t_diag},
-        method="emcee",
-        smc={"pilot": pilot, **pilot_info},
+        stage_s={"mode_search": t_modes, "compile": t_compile, "burn_in": t_burn,
+                 "kept_chain": t_kept, "diagnostics": t_diag},
     )
 
 

@@ -101,15 +101,6 @@ class MixtureProposal:
         return cur
 
 
-def pilot_moves(proposal):
-    """emcee moves after an SMC pilot (``sample_posterior(pilot="smc")``): independence
-    Metropolis–Hastings from the t-mixture fitted to the pilot's particles (60 %) and
-    differential evolution (40 %, local: the ridge between the mixture's components)."""
-    import emcee
-
-    return [(emcee.moves.MHMove(proposal), 0.6), (emcee.moves.DEMove(), 0.4)]
-
-
 def default_moves(proposal=None):
     """emcee moves used by default: differential evolution (+ snooker, mode jumps) and,
     given a :class:`MixtureProposal`, independence Metropolis–Hastings from it.

@@ -68,8 +68,6 @@ class PosteriorResult:
             "posterior_diagnostics": {
                 "method": self.method,
                 "engine": ("tempered SMC alone" if self.method == "smc" else
-                           "emcee, walkers and independence proposal from a tempered-SMC pilot"
-                           if self.smc.get("pilot") == "smc" else
                            "emcee, walkers from the optima's Laplace approximations"),
                 "smc": dict(self.smc) if self.smc else None,
                 "n_walkers": int(self.chain.shape[1]),
@@ -127,14 +125,11 @@ class PosteriorResult:
                 f"{self.wall_time_s:.1f} s (of which compile {self.compile_s:.1f} s, mode "
                 f"search {self.mode_search_s:.1f} s)")
         else:
-            pil = self.smc if self.smc.get("pilot") == "smc" else None
             lines.append(
-                "  engine: emcee (ensemble MCMC"
-                + (f"; walkers started from a tempered-SMC pilot of {pil.get('n_runs')} × "
-                   f"{pil.get('n_particles')} particles, independence moves from a t-mixture "
-                   "fitted to them + differential evolution)" if pil else ")")
-                + "; convergence: arviz rank-normalised R-hat <= 1.01 and bulk/tail ESS >= 400 "
-                "on every sampled quantity and the band, walkers as chains")
+                "  engine: emcee (ensemble MCMC: differential evolution + independence moves "
+                "from a t-mixture over the optima); convergence: arviz rank-normalised R-hat "
+                "<= 1.01 and bulk/tail ESS >= 400 on every sampled quantity and the band, "
+                "walkers as chains")
             lines.append(
             f"  {self.chain.shape[1]} walkers × {self.chain.shape[0]} steps (after "
             f"{self.burn_in} burn-in), max τ {np.nanmax(self.tau):.0f} = chain / "

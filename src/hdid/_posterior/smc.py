@@ -277,17 +277,7 @@ def _setup(fit, seed, sigma_floor=None, modes="auto", prior=None):
     t = time.perf_counter()
     found = sampled_modes(fit, modes, seed, u_fit, lin, lp.gauss_prior)
     t_modes = time.perf_counter() - t
-    ref = reference_mixture(lp, found, fit, bounds)
-    return lp, found, ref, warnings, temper, rho1, lin, t_modes
-
-
-def reference_mixture(lp, found, fit, bounds):
-    """The tempering's reference ``q``: one Student-t component per optimum (Laplace mean,
-    ``REF_SCALE`` × its covariance, in the sampled coordinates), ``log σ_n`` with sd 1
-    around the middle of its plausible range; weights the Laplace ones (at least 0.02)."""
-    from .moves import MixtureProposal
-
-    q = float(fit.problem.step)
+    q = float(prob.step)
     log_lo = math.log(bounds[0] * q)
     log_rms = math.log(max(fit.rms_residual_rad, bounds[0] * q))
     s_mid, s_sd = 0.5 * (log_lo + max(log_rms, log_lo + 0.5)), 1.0
@@ -298,37 +288,8 @@ def reference_mixture(lp, found, fit, bounds):
         covs[k, :-1, :-1] = lp.sampled_cov_np(m.u, REF_SCALE**2 * m.cov)
         covs[k, -1, -1] = s_sd**2
     weights = [max(m.weight, 0.02) for m in found]
-    return MixtureProposal(means, covs, weights, nu=REF_NU)
-
-
-#: Pilot for emcee (``sample_posterior(pilot="smc")``): runs × particles of the tempering
-#: that locates and weighs the optima, and the components of the t-mixture fitted to its
-#: particles (emcee's independence proposal).
-PILOT_RUNS = 2
-PILOT_PARTICLES = 300
-PILOT_COMPONENTS = 6
-
-
-def pilot(lp, ref, seed: int, n_particles: int = PILOT_PARTICLES, n_runs: int = PILOT_RUNS,
-          n_components: int = PILOT_COMPONENTS):
-    """Tempered SMC from ``ref`` to the posterior (no convergence test: one round of moves
-    at β = 1), then a ``n_components`` t-mixture fitted to the particles (k-means start,
-    EM). Returns ``(particles (R·N, D), their log-posterior, mixture, info)``; the particles
-    are where emcee's walkers start, the mixture its independence proposal."""
-    t = time.perf_counter()
-    X, anc, log_z, steps = run_smc_np(lp, ref, n_particles, n_runs, seed, N_MCMC,
-                                      max_steps=MAX_ROUNDS, final_rounds=1, imh=IMH,
-                                      k_min=K_MIN)
-    D = X.shape[-1]
-    P = X.reshape(-1, D)
-    rng = np.random.default_rng(seed + 7919)
-    mix = _kmeans_mixture(P, n_components, rng, REF_NU).refit(P)
-    info = {"n_runs": n_runs, "n_particles": n_particles, "steps": len(steps),
-            "temperatures": sum(1 for st in steps if min(st["beta"]) < 1.0) + 1,
-            "reached_beta_1": bool(min(steps[-1]["beta"]) >= 1.0),
-            "log_evidence": [float(z) for z in log_z],
-            "n_components": len(mix.weights), "wall_s": time.perf_counter() - t}
-    return P, mix, info
+    ref = MixtureProposal(means, covs, weights, nu=REF_NU)
+    return lp, found, ref, warnings, temper, rho1, lin, t_modes
 
 
 #: Particles per run and independent runs (the runs are the "chains" of the convergence test).
