@@ -17,7 +17,9 @@ leaves both represented):
    simulator ``hdid.reference``, independent of hdid's JAX simulator — with the paper design
    (4 runs ±0.157 rad, 250 Hz, two set-ups) or the four-amplitude one (8 runs, 1 kHz),
    seed ``seed0 + i`` (new seeds), quantized to 4000 counts/rev, no added noise;
-3. ``hdid.fit(log, inertia=truth)`` then ``hdid.sample_posterior(fit, seed=i)``, adaptive:
+3. ``hdid.fit(log, inertia=truth)``, its optima sought once, then for each sampler of
+   ``--method`` (default ``emcee,smc``: side by side on the same fit and optima)
+   ``hdid.sample_posterior(fit, seed=i, method=..., modes=optima)``, adaptive:
    runs until converged by its criterion (arviz R-hat ≤ 1.01, bulk/tail ESS ≥ 400 on every
    sampled quantity and the band) or ``--max-steps``;
 4. per quantity: does the central 95 % / 68 % interval hold the truth, and the truth's
