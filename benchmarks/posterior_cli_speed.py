@@ -59,6 +59,7 @@ def run_cli(src, log, out, timeout):
                  mode_search_s=d.get("mode_search_s"), converged=d["converged"],
                  criterion=conv.get("criterion", "chain >= 50 tau (old sampler)"),
                  steps=d["n_steps"], burn_in=d["burn_in"], tau_max=d["tau_max"],
+                 method=d.get("method"), engine=d.get("engine"), stage_s=d.get("stage_s"),
                  chain_in_tau=d["chain_in_tau_max"], rhat_max=conv.get("rhat_max"),
                  ess_bulk_min=conv.get("ess_bulk_min"), ess_tail_min=conv.get("ess_tail_min"),
                  band95=json.loads(Path(out).read_text())["posterior"]["stick_band_halfwidth_rad"]["ci95"])
@@ -117,6 +118,7 @@ def main(argv=None):
     ap.add_argument("--timeout", type=float, default=900)
     ap.add_argument("--only", default="new,old")
     ap.add_argument("--out-dir", type=Path, default=RESULTS)
+    ap.add_argument("--name", default="posterior_cli_speed")
     args = ap.parse_args(argv)
     import posterior_sbc as sbc
 
@@ -134,7 +136,7 @@ def main(argv=None):
         logs.append((p.name, p))
     res = {"generated": _dt.datetime.now().isoformat(timespec="seconds"),
            "new_src": str(args.new_src), "old_src": str(args.old_src), "rows": []}
-    out = args.out_dir / "posterior_cli_speed.json"
+    out = args.out_dir / f"{args.name}.json"
     for name, path in logs:
         row = {"log": name}
         for k in args.only.split(","):
@@ -144,7 +146,7 @@ def main(argv=None):
                   _load(), flush=True)
         res["rows"].append(row)
         out.write_text(json.dumps(res, indent=1))
-        (args.out_dir / "posterior_cli_speed.md").write_text(render(res))
+        (args.out_dir / f"{args.name}.md").write_text(render(res))
 
 
 if __name__ == "__main__":

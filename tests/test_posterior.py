@@ -188,13 +188,15 @@ def test_cli_posterior_json_and_chains(tmp_path):
     from hdid.cli import main
 
     out, nc = tmp_path / "fit.json", tmp_path / "chains.nc"
-    res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "-q", "--posterior", "--sampler", "emcee", "--steps", "100",
+    # the default sampler (emcee)
+    res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "-q", "--posterior", "--steps", "100",
                                     "--json", str(out), "--chains", str(nc)])
     assert res.exit_code == 0, res.output
     d = json.loads(out.read_text())
     band = d["posterior"]["stick_band_halfwidth_rad"]
     assert set(band) == {"median", "ci68", "ci95"} and band["ci95"][0] <= band["median"]
     assert d["posterior_diagnostics"]["converged"] is False
+    assert d["posterior_diagnostics"]["method"] == "emcee"
     assert "k1" in az.from_netcdf(str(nc)).posterior
 
 
@@ -452,3 +454,7 @@ def test_cli_sampler_option_reaches_the_library_and_refuses_emcee_options(tmp_pa
     monkeypatch.setattr(post_pkg, "sample_posterior", fake)
     res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "-q", "--posterior", "--sampler", "smc"])
     assert isinstance(res.exception, Stop) and seen["method"] == "smc"
+    # without --sampler: emcee, the engine the user asked for (issue 17)
+    seen.clear()
+    res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "-q", "--posterior"])
+    assert isinstance(res.exception, Stop) and seen["method"] == "emcee"
