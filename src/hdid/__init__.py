@@ -1,6 +1,6 @@
 """hdid — identify the physics of a harmonic drive from encoder logs.
 
-Heavy modules (jax, optimistix) load on first use so that ``hdid --help`` stays fast.
+Heavy modules (jax, equinox) load on first use so that ``hdid --help`` stays fast.
 Importing hdid changes no process-wide setting: hdid's own calls compute in float64
 (thread-local); :func:`hdid.configure` sets up a whole process (the CLI calls it).
 """

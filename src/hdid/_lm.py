@@ -9,10 +9,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import lineax as lx
-import optimistix as optx
 
-from ._problem import Problem, with_jacobian
+from ._problem import Problem
 
 
 def _local_fits(problem: Problem, U0, max_steps: int, solve=None):
@@ -104,56 +102,6 @@ class _Schedule:
             self.ok[a] = done[a]
             best = finite.min()  # inf when every lane diverged: none goes on
             self.active = a & ~done & (finite - best < DROP_DCHI2) if np.isfinite(best) else a & False
-
-
-@eqx.filter_jit
-def _solve_many(problem: Problem, U0, active, max_steps):
-    return jax.vmap(lambda u0, a: _levenberg_marquardt(problem, u0, a, max_steps))(U0, active)
-
-
-def _levenberg_marquardt(problem: Problem, u0, active, max_steps):
-    """optimistix's Levenberg–Marquardt, stepped by hand to add a statistical stop."""
-    residuals = with_jacobian(problem.residuals, problem.residuals_and_jacobian)
-
-    def fn(u, args):
-        del args
-        return residuals(u), None
-
-    # Normal equations + Cholesky: lineax's QR of the tall (samples × unknowns) matrix
-    # costs ~50× more here, and the damping keeps JᵀJ + λI positive definite even where
-    # J is rank-deficient (the identifiability report names those directions).
-    solver = optx.LevenbergMarquardt(
-        rtol=1e-8, atol=1e-8, linear_solver=lx.Normal(lx.Cholesky())
-    )
-    tags = frozenset()
-    f_struct = jax.eval_shape(problem.residuals, u0)
-    state = solver.init(fn, u0, None, {}, f_struct, None, tags)
-    dynamic0, static = eqx.partition(state, eqx.is_array)
-    # (no separate cost evaluations: each would trace the simulator once more, which is
-    # what a cold CLI call pays for)
-    cost0 = jnp.asarray(jnp.inf)
-
-    def cond(carry):
-        _, _, k, _, _, done = carry
-        return (~done) & (k < max_steps)
-
-    def body(carry):
-        u, dynamic, k, cost, stall, _ = carry
-        state = eqx.combine(static, dynamic)
-        u, state, _ = solver.step(fn, u, None, {}, state, tags)
-        terminate, _ = solver.terminate(fn, u, None, {}, state, tags)
-        new_cost = jnp.sum(state.f_info.residual**2)
-        improved = new_cost < cost
-        small = improved & (cost - new_cost < CHI2_STALL)
-        stall = jnp.where(small, stall + 1, jnp.where(improved, 0, stall))
-        done = terminate | (stall >= 2) | ~jnp.isfinite(new_cost)
-        dynamic, _ = eqx.partition(state, eqx.is_array)
-        return u, dynamic, k + 1, jnp.minimum(cost, new_cost), stall, done
-
-    init = (u0, dynamic0, jnp.array(0), cost0, jnp.array(0), ~active)
-    u, _, k, cost, stall, done = jax.lax.while_loop(cond, body, init)
-    return u, cost, done, k
-
 
 
 # ------------------------------------------------------------------ hand-stepped LM

@@ -37,6 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _config  # noqa: F401
+from .._evaluate import predict_rows
 from .._identifiability import band_limit, derived_quantities
 from .._problem import Problem
 from .._transforms import from_unconstrained
@@ -250,9 +251,7 @@ def derived_np(problem: Problem, X) -> dict[str, np.ndarray]:
     return {name: np.concatenate(v) for name, v in out.items()}
 
 
-@eqx.filter_jit
-def _predict_batch(problem: Problem, X, times):
-    return jax.vmap(lambda x: problem.predict(x[:-1], times))(X)
+_predict_batch = predict_rows  # predictions of every row (unknowns, then log σ_n)
 
 
 def to_physical(problem: Problem, flat: np.ndarray) -> dict[str, np.ndarray]:

@@ -37,7 +37,7 @@ from .moves import (
     _reset_outliers,
     default_moves,
 )
-from .result import PosteriorResult
+from .result import BAND, PosteriorResult, _RunNames
 
 #: The burn-in is run in this many stages, the proposal adapted after each.
 BURN_IN_STAGES = 4
@@ -46,7 +46,6 @@ MIN_TAU_MULTIPLE = 50
 #: A chain this far (log p) above the least-squares optimum has found another mode
 #: (Δχ² = 10 in the fit's units: beyond the 99.8 % point of χ²₁).
 MODE_GAP = 5.0
-BAND = "stick_band_halfwidth_rad"
 #: The convergence check runs after ``chunk`` steps, then each time the chain has grown by
 #: this factor (at least ``chunk`` more steps): at most ~10 checks up to 20 000 steps.
 CHECK_GROWTH = 1.4
@@ -61,14 +60,6 @@ def _no_start(fit):
         "density, so the fit itself is likely bad: read its warnings, refit (other starts, "
         "fixed parameters) or check the log"
     )
-
-
-class _RunNames:
-    """Adapter giving ``unknown_labels`` the run and set-up names of a FitResult."""
-
-    def __init__(self, fit):
-        self.run_names = [r.name for r in fit.runs]
-        self.setup_names = list(fit.setups)
 
 
 def sample_posterior(

@@ -136,24 +136,24 @@ def find_modes(fit, *, n_random: int = N_RANDOM_RESTARTS, seed: int = 0, max_ste
     than ``MODE_BARRIER``, and each remaining one is weighted by its Laplace evidence.
     Sorted by weight, largest first.
     """
-    from .. import _fit as fitmod
+    from .._lm import PHASE1_STEPS, PHASE2_CHUNK, solve_fresh
 
     prob: Problem = fit.problem
     rng = np.random.default_rng(seed)
     U0 = _restart_candidates(fit, rng, n_random)
     if extra_starts is not None:
         U0 = np.concatenate([U0, np.atleast_2d(np.asarray(extra_starts, dtype=float))])
-    U, costs, ok, _ = map(np.asarray, fitmod._solve_many(
-        prob, jnp.asarray(U0), jnp.ones(len(U0), dtype=bool), jnp.asarray(fitmod.PHASE1_STEPS)))
+    U, costs, ok, _ = map(np.asarray, solve_fresh(
+        prob, jnp.asarray(U0), jnp.ones(len(U0), dtype=bool), PHASE1_STEPS))
     U, costs = np.array(U), np.array(costs)
     costs[~np.isfinite(costs)] = np.inf
     active = (costs - np.min(costs) < 10 * dchi2_max) & ~ok
-    used = fitmod.PHASE1_STEPS
+    used = PHASE1_STEPS
     while active.any() and used < max_steps:
-        U2, c2, d2, _ = map(np.asarray, fitmod._solve_many(
-            prob, jnp.asarray(U), jnp.asarray(active), jnp.asarray(fitmod.PHASE2_CHUNK)))
+        U2, c2, d2, _ = map(np.asarray, solve_fresh(
+            prob, jnp.asarray(U), jnp.asarray(active), PHASE2_CHUNK))
         U[active], costs[active] = U2[active], np.where(np.isfinite(c2[active]), c2[active], np.inf)
-        used += fitmod.PHASE2_CHUNK
+        used += PHASE2_CHUNK
         active = active & ~d2 & (costs - np.min(costs) < dchi2_max)
     # the fit's own optimum is always a candidate at its own cost
     keep = np.flatnonzero(costs - np.min(costs) < dchi2_max)

@@ -7,8 +7,22 @@ from typing import Any
 
 import numpy as np
 
+from .._config import float64_methods
 from .density import derived_np, to_physical
 
+#: The stick-band half-width: sampled quantities' companion in every convergence test.
+BAND = "stick_band_halfwidth_rad"
+
+
+class _RunNames:
+    """Adapter giving ``unknown_labels`` the run and set-up names of a FitResult."""
+
+    def __init__(self, fit):
+        self.run_names = [r.name for r in fit.runs]
+        self.setup_names = list(fit.setups)
+
+
+@float64_methods
 @dataclass
 class PosteriorResult:
     """Samples and summaries of the posterior (see :func:`sample_posterior`)."""

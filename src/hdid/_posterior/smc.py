@@ -328,7 +328,7 @@ def sample_smc(fit, *, n_particles: int = N_PARTICLES, n_runs: int = N_RUNS,
     from .._identifiability import unknown_labels
     from .density import PRIOR_HALF_WIDTH, derived_np, to_physical
     from .diagnostics import width_ratios
-    from .driver import BAND, _RunNames
+    from .result import BAND, _RunNames
     from .result import PosteriorResult
 
     n_mcmc = N_MCMC if n_mcmc is None else n_mcmc
