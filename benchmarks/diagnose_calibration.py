@@ -52,7 +52,8 @@ def _second_setup(path: Path) -> None:
     df.to_csv(path, index=False)
 
 
-def run_design(name: str, n: int, gen, records: list, meta: dict | None = None) -> None:
+def run_design(name: str, n: int, gen, records: list, meta: dict | None = None,
+               first: int = 0) -> None:
     import hdid
     from hdid._synthetic import synthesize
 
@@ -62,7 +63,7 @@ def run_design(name: str, n: int, gen, records: list, meta: dict | None = None) 
     fitted = hdid.fit(seed_log)
     amps = list(design["amplitudes"])
     with tempfile.TemporaryDirectory() as tmp:
-        for i in range(n):
+        for i in range(first, n):
             path = Path(tmp) / f"{name}_{i}.csv"
             synthesize(path, amplitudes=amps, rate=design["fs"], duration=design["duration"],
                        hold=design["hold"], offset=0.005, model=fitted.model, seed=1000 + i)
@@ -162,11 +163,14 @@ def main(argv: list[str]) -> None:
                     + " ".join(argv))
     records: list = []
     old = OUT / "diagnose_calibration.json"
+    # --from K: logs K … N−1 only, adding to this design's earlier records (seeds 1000+i)
+    first = int(argv[argv.index("--from") + 1]) if "--from" in argv else 0
     if old.exists() and "--fresh" not in argv:  # keep the other designs' records
         prev = json.loads(old.read_text())
-        records = [r for r in prev["records"] if r["design"] not in designs]
+        records = [r for r in prev["records"] if r["design"] not in designs
+                   or (first and r["i"] < first)]
         meta["earlier"] = {k: prev["meta"].get(k) for k in ("date", "load", "load_end", "src")}
-    run_designs(designs, lambda k, design: run_design(design, n, gen, records, meta),
+    run_designs(designs, lambda k, design: run_design(design, n, gen, records, meta, first),
                 write, records, meta)
 
 if __name__ == "__main__":

@@ -183,16 +183,38 @@ def _named(d) -> str:
     return d.verdict
 
 
-def _right(r) -> bool:
-    """The verdict follows the truth: ``adequate`` for nothing hidden; the hidden effect
-    named alone for a library effect; for the outside effect, never one confident name
-    (``unexplained``/``ambiguous``/``adequate``, or a candidate that truly reaches the
-    floor — then the model is adequate in the log's own terms)."""
+FAMILY = {"ripple": "position-periodic", "kinematic_error": "position-periodic"}
+
+
+def _grade(r) -> str:
+    """``right``: adequate on nothing hidden; the hidden effect named alone; no confident
+    name for the outside effect (``unexplained``/``ambiguous``/``adequate``, or a stand-in
+    that truly brings the residual to the floor). ``honest``: not the truth's name but
+    nothing false claimed — ``adequate`` where the base model is already at the floor
+    (RMS ≤ 1.3×: the log cannot show the effect), ``ambiguous`` between candidates that
+    include the truth, or its look-alike of the same family named with the tie noted.
+    ``wrong``: anything else (a false alarm, a confident wrong name, ``unexplained`` for a
+    library effect that a candidate fixes, a missed detectable effect)."""
+    v, named, exp = r["verdict"], r["named"], r["expected"]
     if r["hidden"] == "none":
-        return r["verdict"] == "adequate"
-    if r["expected"] is None:
-        return r["verdict"] != "missing_effect" or bool(r["candidates"][0]["adequate_after"])
-    return r["verdict"] == "missing_effect" and r["named"] == r["expected"]
+        return "right" if v == "adequate" else "wrong"
+    if exp is None:
+        if v != "missing_effect" or r["candidates"][0]["adequate_after"]:
+            return "right"
+        return "wrong"
+    if v == "missing_effect" and named == exp:
+        return "right"
+    if v == "adequate" and r["rms_before_floor"] <= 1.3:
+        return "honest"
+    if v == "ambiguous" and exp in named.split("|"):
+        return "honest"
+    if v == "missing_effect" and FAMILY.get(named) and FAMILY.get(named) == FAMILY.get(exp):
+        return "honest"
+    return "wrong"
+
+
+def _right(r) -> bool:
+    return _grade(r) == "right"
 
 
 def write(records: list, meta: dict) -> None:
@@ -207,9 +229,12 @@ def write(records: list, meta: dict) -> None:
              "Each log draws its plant, design and hidden-effect magnitude (see the script's "
              "docstring; seeds 8800+). `named` = what the verdict names (`A|B` = ambiguous "
              "between them). RMS in quantization floors (step/√12); `after` = the first "
-             "candidate's refit. ✓ = the verdict follows the truth (adequate on nothing "
-             "hidden, the hidden effect named alone, no confident name for the outside "
-             "effect unless its stand-in reaches the floor).", ""]
+             "candidate's refit. Grade: ✓ = right (adequate on nothing hidden, the hidden "
+             "effect named alone, no confident name for the outside effect unless its "
+             "stand-in reaches the floor); ~ = honest but not the name (adequate where the "
+             "base is already at the floor, so the log cannot show the effect; ambiguous "
+             "between candidates including the truth; the same-family look-alike named with "
+             "the tie noted); ✗ = wrong.", ""]
     for design in ("rich", "paper"):
         rows = [r for r in records if r["design"] == design]
         if not rows:
@@ -231,12 +256,18 @@ def write(records: list, meta: dict) -> None:
                 f"{tr['v_s']:.1f} | {tr['delta']:.2f} | {r['verdict']} | {r['named']} | "
                 f"{c0.get('variant', '')} ({c0.get('delta_bic', math.nan):.0f}) | "
                 f"{r['rms_before_floor']:.2f} → {c0.get('rms_after_floor', math.nan):.2f} | "
-                f"{'✓' if _right(r) else '✗'} | {r['wall_s']:.0f} | {r['load1_after']:.1f} |")
+                f"{ {'right': '✓', 'honest': '~', 'wrong': '✗'}[_grade(r)]} | {r['wall_s']:.0f} | "
+                f"{r['load1_after']:.1f} |")
         lib = [r for r in ok if r["expected"] not in (None, "none")]
         first = [r for r in lib if r["top"] == r["expected"]]
         floor = [r for r in first if r["candidates"][0]["rms_after_floor"] <= 1.3]
         lines += ["",
-                  f"- verdict follows the truth: {sum(_right(r) for r in ok)}/{len(ok)}",
+                  f"- verdict follows the truth: {sum(_right(r) for r in ok)}/{len(ok)} right, "
+                  f"{sum(_grade(r) == 'honest' for r in ok)} honest, "
+                  f"{sum(_grade(r) == 'wrong' for r in ok)} wrong",
+                  f"- detectable (base RMS > 1.3× floor) library effects: "
+                  f"{sum(r['rms_before_floor'] > 1.3 for r in lib)}/{len(lib)}, of which named "
+                  f"alone {sum(r['rms_before_floor'] > 1.3 and _right(r) for r in lib)}",
                   f"- hidden library effect ranked first: {len(first)}/{len(lib)}; first and "
                   f"brought to ≤ 1.3× the floor: {len(floor)}/{len(lib)}; named alone by the "
                   f"verdict: {sum(r['verdict'] == 'missing_effect' and r['named'] == r['expected'] for r in lib)}/{len(lib)}",

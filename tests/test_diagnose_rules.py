@@ -85,6 +85,8 @@ def test_tie_within_one_family_is_not_ambiguous_but_noted():
     verdict, summary, notes = D._verdict(rounds, CANDS)
     assert verdict == "missing_effect" and "ripple" in summary
     assert any("kinematic_error" in n for n in notes)
+    # the summary itself names the look-alike: the physics is named, its form is not
+    assert "or kinematic_error" in summary and "same mark" in summary
 
 
 def test_floor_reached_with_a_powerless_whiteness_test_is_not_unexplained():

@@ -102,6 +102,7 @@ class Diagnosis:
             f"{self.base.rms_residual_rad / fl:.2f}× the quantization floor "
             f"({fl:.2e} rad); moving residual {w.rms_ratio:.2f}× floor, Ljung–Box p = "
             f"{w.p_value:.2g}",
+            *([f"    rules' {_false_alarm_text(self.false_alarm)}"] if self.false_alarm else []),
             "[[candidates]] (best first; ΔBIC < −10 is strong evidence)",
             f"    {'effect':22s} {'RMS before':>11s} {'RMS after':>10s} {'ΔBIC':>9s}  fixes it",
         ]
@@ -170,3 +171,9 @@ class Diagnosis:
             fig.savefig(path, dpi=120)
         return fig
 
+
+def _false_alarm_text(fa: dict[str, Any]) -> str:
+    lo, hi = fa["interval_95"]
+    return (f"false alarms on clean logs of the {fa['design']} design ({fa['rate_hz']:g} Hz, "
+            f"{fa['runs']} runs): {fa['false_alarms']} of {fa['clean_logs']} (95 % interval "
+            f"{100 * lo:.1f}–{100 * hi:.1f} %)")

@@ -110,9 +110,12 @@ def _verdict(rounds, all_cands) -> tuple[str, str, list[str]]:
                 f"after adding {best.label} the residual is at the floor but not white: a "
                 "second, smaller effect may remain"
             )
+        alt = (f" — or {', '.join(c.label for c in same)}: the same mark "
+               f"({all_cands[best.key].family}), its form not told apart by this log"
+               if same else "")
         return "missing_effect", (
             f"add {best.label}: RMS {best.rms_before_rad / floor:.2f} → "
-            f"{best.rms_after_rad / floor:.2f}× floor, ΔBIC {best.delta_bic:.1f}"
+            f"{best.rms_after_rad / floor:.2f}× floor, ΔBIC {best.delta_bic:.1f}{alt}"
         ), notes
     # several effects missing at once: the ladder may reach the floor in more steps
     if len(rounds) > 1:
