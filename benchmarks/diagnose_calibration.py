@@ -64,6 +64,16 @@ def run_design(name: str, n: int, gen, records: list, meta: dict | None = None,
     amps = list(design["amplitudes"])
     with tempfile.TemporaryDirectory() as tmp:
         for i in range(first, n):
+            if i > first and i % 10 == 0:
+                # A long process that keeps every compiled program ran out of memory
+                # mappings at the 39th rich log ("LLVM compilation error: Cannot allocate
+                # memory", then a segfault): drop them; the store reloads them.
+                import jax
+
+                from hdid import _programs
+
+                jax.clear_caches()
+                _programs._LOADED.clear()
             path = Path(tmp) / f"{name}_{i}.csv"
             synthesize(path, amplitudes=amps, rate=design["fs"], duration=design["duration"],
                        hold=design["hold"], offset=0.005, model=fitted.model, seed=1000 + i)

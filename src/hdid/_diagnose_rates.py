@@ -47,7 +47,9 @@ class DesignRate:
 
 #: Filled from ``benchmarks/results/diagnose_calibration.json`` (see the module docstring).
 MEASURED: tuple[DesignRate, ...] = (
-    DesignRate("paper", 250.0, 4, 0, 40, 0.0, 0.0881,
+    DesignRate("paper", 250.0, 4, 1, 80, 0.0003, 0.0677,
+               "measured 2026-11-24 on commit 368461b"),
+    DesignRate("rich", 1000.0, 8, 0, 46, 0.0, 0.0771,
                "measured 2026-11-24 on commit 368461b"),
 )
 
