@@ -31,15 +31,29 @@ RICH = dict(amplitudes=[0.157, -0.157, 0.12, -0.12, 0.08, -0.08, 0.05, -0.05], f
 
 
 def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
-    from scipy.stats import beta
+    from hdid._diagnose_rates import clopper_pearson as cp
 
-    a = 1 - level
-    lo = 0.0 if k == 0 else float(beta.ppf(a / 2, k, n - k + 1))
-    hi = 1.0 if k == n else float(beta.ppf(1 - a / 2, k + 1, n - k))
-    return lo, hi
+    return cp(k, n, level)
 
 
-def run_design(name: str, n: int, gen, records: list, meta: dict | None = None) -> None:
+def _second_setup(path: Path) -> None:
+    """The paper design's second set-up: runs of the second half re-labelled ``B`` with
+    their readings shifted by a whole number of encoder steps (−17: a different offset,
+    rounded exactly as if the encoder had read it, since round(x + k) = round(x) + k)."""
+    import numpy as np
+    import pandas as pd
+
+    df = pd.read_csv(path)
+    runs = sorted(df["run"].unique())
+    late = df["run"].isin(runs[len(runs) // 2:])
+    step = 2 * np.pi / 4000
+    df["setup"] = np.where(late, "B", "A")
+    df.loc[late, "theta"] = df.loc[late, "theta"] - 17 * step
+    df.to_csv(path, index=False)
+
+
+def run_design(name: str, n: int, gen, records: list, meta: dict | None = None,
+               first: int = 0) -> None:
     import hdid
     from hdid._synthetic import synthesize
 
@@ -49,10 +63,22 @@ def run_design(name: str, n: int, gen, records: list, meta: dict | None = None) 
     fitted = hdid.fit(seed_log)
     amps = list(design["amplitudes"])
     with tempfile.TemporaryDirectory() as tmp:
-        for i in range(n):
+        for i in range(first, n):
+            if i > first and i % 10 == 0:
+                # A long process that keeps every compiled program ran out of memory
+                # mappings at the 39th rich log ("LLVM compilation error: Cannot allocate
+                # memory", then a segfault): drop them; the store reloads them.
+                import jax
+
+                from hdid import _programs
+
+                jax.clear_caches()
+                _programs._LOADED.clear()
             path = Path(tmp) / f"{name}_{i}.csv"
             synthesize(path, amplitudes=amps, rate=design["fs"], duration=design["duration"],
                        hold=design["hold"], offset=0.005, model=fitted.model, seed=1000 + i)
+            if len(design["offsets_by_setup"]) > 1:
+                _second_setup(path)
             t0, c0 = time.perf_counter(), time.process_time()
             load = os.getloadavg()[0]
             try:
@@ -67,9 +93,12 @@ def run_design(name: str, n: int, gen, records: list, meta: dict | None = None) 
                 "best": best.key if best else None,
                 "best_dbic": best.delta_bic if best else None,
                 "strong": [c.key for c in d.candidates if c.error is None and c.delta_bic < -10],
+                "candidates": [(c.label, c.delta_bic) for c in d.candidates if c.error is None],
+                "warnings": d.warnings,
                 "rms_before_floor": d.base.rms_residual_rad / d.floor_rad,
                 "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
                 "compile_s": d.timing.get("compile_s"), "load1": load,
+                "load1_after": os.getloadavg()[0],
             }
             records.append(rec)
             if meta is not None:  # results so far, in case the run is stopped
@@ -86,8 +115,12 @@ def write(records: list, meta: dict) -> None:
     lines = [
         "# `diagnose` false alarms on clean logs simulated from a fitted model",
         "",
-        f"Run {meta['date']} on {meta['cpu']} ({meta['cores']} cores, load at start "
-        f"{meta['load']}), src {meta['src']}. `python benchmarks/diagnose_calibration.py`.",
+        f"Run {meta['date']} on {meta['cpu']} ({meta['cores']} cores, shared; pinned to one "
+        f"core), load at start {meta['load']}"
+        + (f", at end {meta['load_end']}" if meta.get("load_end") else "")
+        + f"; src {meta['src']}. `{meta.get('cmd', 'python benchmarks/diagnose_calibration.py')}`. "
+        "Paper design: 4 runs at 250 Hz, two set-ups (the second half's readings shifted by "
+        "17 whole encoder steps); rich: 8 runs (±0.157/0.12/0.08/0.05 rad) at 1 kHz.",
         "",
         "A false alarm is any verdict other than `adequate`; `strong` counts logs where some "
         "candidate had ΔBIC < −10. 95 % intervals are exact binomial (Clopper–Pearson).",
@@ -110,23 +143,44 @@ def write(records: list, meta: dict) -> None:
     if fails:
         lines += ["", f"{len(fails)} diagnose call(s) failed: "
                   + "; ".join(f"{r['design']} {r['i']}: {r['error']}" for r in fails)]
-    lines += ["", "Per log:", "", "| design | # | verdict | best (ΔBIC) | RMS before / floor | s |",
-              "|---|---|---|---|---|---|"]
+    lines += ["", "For `hdid._diagnose_rates.MEASURED`:", "", "```python"]
+    for design in ("paper", "rich"):
+        rows = [r for r in records if r["design"] == design and "error" not in r]
+        if rows:
+            k = sum(r["verdict"] != "adequate" for r in rows)
+            lo, hi = clopper_pearson(k, len(rows))
+            rate = 250.0 if design == "paper" else 1000.0
+            runs = 4 if design == "paper" else 8
+            lines.append(f'DesignRate("{design}", {rate}, {runs}, {k}, {len(rows)}, {lo:.4f}, '
+                         f'{hi:.4f}, "{meta["date"][:10]}, src {meta["src"]}"),')
+    lines += ["```", "", "Per log:", "",
+              "| design | # | verdict | best (ΔBIC) | RMS before / floor | s | load before → after |",
+              "|---|---|---|---|---|---|---|"]
     for r in records:
         if "error" in r:
             continue
         lines.append(f"| {r['design']} | {r['i']} | {r['verdict']} | {r['best']} "
-                     f"({r['best_dbic']:.1f}) | {r['rms_before_floor']:.2f} | {r['wall_s']:.0f} |")
+                     f"({r['best_dbic']:.1f}) | {r['rms_before_floor']:.2f} | {r['wall_s']:.0f} "
+                     f"| {r['load1']:.1f} → {r.get('load1_after', float('nan')):.1f} |")
     (OUT / "diagnose_calibration.md").write_text("\n".join(lines) + "\n")
 
 
 def main(argv: list[str]) -> None:
     n = int(argv[0]) if argv and argv[0].isdigit() else 10
-    designs = [a for a in argv if not a.isdigit()] or ["paper", "rich"]
+    designs = [a for a in argv if a in ("paper", "rich")] or ["paper", "rich"]
     gen = import_generate()
-    meta = run_meta(n_per_design=n)
+    meta = run_meta(n_per_design=n, cmd="taskset -c 0 python benchmarks/diagnose_calibration.py "
+                    + " ".join(argv))
     records: list = []
-    run_designs(designs, lambda k, design: run_design(design, n, gen, records, meta),
+    old = OUT / "diagnose_calibration.json"
+    # --from K: logs K … N−1 only, adding to this design's earlier records (seeds 1000+i)
+    first = int(argv[argv.index("--from") + 1]) if "--from" in argv else 0
+    if old.exists() and "--fresh" not in argv:  # keep the other designs' records
+        prev = json.loads(old.read_text())
+        records = [r for r in prev["records"] if r["design"] not in designs
+                   or (first and r["i"] < first)]
+        meta["earlier"] = {k: prev["meta"].get(k) for k in ("date", "load", "load_end", "src")}
+    run_designs(designs, lambda k, design: run_design(design, n, gen, records, meta, first),
                 write, records, meta)
 
 if __name__ == "__main__":

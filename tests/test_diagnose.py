@@ -64,6 +64,22 @@ def test_no_false_alarm_on_a_log_with_nothing_hidden(hysteresis_diagnosis):
     assert all(c.delta_bic > STRONG_DBIC for c in d.candidates)
 
 
+def test_verdict_reports_its_warnings_and_false_alarm_rate(hysteresis_diagnosis):
+    """A 1 kHz log of 4 runs: within a factor 2 of no measured design but the rich one
+    (1 kHz, 8 runs) once it is measured; either way the report says so, in words."""
+    from hdid._diagnose_rates import false_alarm
+
+    d = hysteresis_diagnosis
+    fa = false_alarm(1000.0, 4)
+    doc = d.to_dict()
+    assert doc["warnings"] == d.warnings and doc["false_alarm"] == d.false_alarm
+    if fa is None:
+        assert d.false_alarm is None
+        assert any("not measured" in w for w in d.warnings) and "[[warnings]]" in d.report()
+    else:
+        assert d.false_alarm == fa.to_dict() and "false alarms on clean logs" in d.report()
+
+
 @pytest.mark.slow
 def test_effect_outside_the_library_is_not_forced(hysteresis_diagnosis):
     d = hdid.diagnose(_log("quadratic_drag", 13), candidates=CANDIDATES)

@@ -11,9 +11,12 @@ from __future__ import annotations
 import math
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 from hdid import _diagnose as D
+
+from synthetic import ROOT
 
 
 def _cand(key, dbic, *, at_floor=True, white=True, rms=1.0):
@@ -82,6 +85,8 @@ def test_tie_within_one_family_is_not_ambiguous_but_noted():
     verdict, summary, notes = D._verdict(rounds, CANDS)
     assert verdict == "missing_effect" and "ripple" in summary
     assert any("kinematic_error" in n for n in notes)
+    # the summary itself names the look-alike: the physics is named, its form is not
+    assert "or kinematic_error" in summary and "same mark" in summary
 
 
 def test_floor_reached_with_a_powerless_whiteness_test_is_not_unexplained():
@@ -116,3 +121,118 @@ def test_order_scan_includes_orders_below_one_period_in_the_swing():
     ke = [lb for lb, _ in D._kinematic_variants(m, m.float_values(), {})]
     assert ke == [f"kinematic_error (order {n:g})" for n in D.KINEMATIC_ORDERS]
     assert CANDS["ripple"].scanned == 1 and CANDS["kinematic_error"].scanned == 1
+
+
+# -- ties that are not strong against the base -------------------------------------------
+def test_a_rival_within_ten_is_a_tie_even_if_not_strong_itself():
+    """Best at −14, an unrelated candidate at −6: the best is strong against the current
+    model, but only 8 better than the other — not "very strong" evidence (> 10) for one
+    over the other, so no single confident name."""
+    rounds = _round([_cand("hysteresis", -14), _cand("load_friction", -6)])
+    verdict, summary, _ = D._verdict(rounds, CANDS)
+    assert verdict == "ambiguous"
+    assert "ambiguous between hysteresis, load_friction" in summary
+    assert CANDS["load_friction"].experiment in summary
+
+
+# -- warnings and the calibrated false-alarm rate ----------------------------------------
+def test_false_alarm_rate_of_the_nearest_measured_design():
+    from hdid._diagnose_rates import DesignRate, clopper_pearson, false_alarm
+
+    lo, hi = clopper_pearson(0, 40)
+    # 0 of 40: the exact upper end is 1 − 0.025^(1/40)
+    assert lo == 0 and hi == pytest.approx(1 - 0.025 ** (1 / 40))
+    paper = DesignRate("paper", 250.0, 4, 0, 40, lo, hi, "test")
+    rich = DesignRate("rich", 1000.0, 8, 1, 40, *clopper_pearson(1, 40), "test")
+    assert false_alarm(250.0, 4, (paper, rich)) is paper
+    assert false_alarm(1000.0, 4, (paper, rich)) is rich  # rate 1×, runs 2×: near
+    assert false_alarm(5000.0, 8, (paper, rich)) is None  # 5× the rich rate: not near
+    assert "0 of 40" in paper.text()
+
+
+def _rounds_with(results, *, max_lag=10, at_floor=True):
+    r = _round(results, at_floor=at_floor, white=True)
+    r[0]["white"].max_lag = max_lag
+    return r
+
+
+def test_warnings_say_what_is_known_against_the_verdict():
+    from hdid._diagnose_rates import DesignRate
+
+    best = _cand("hysteresis", -40, at_floor=False, white=False, rms=1.6)
+    rounds = _rounds_with([best], max_lag=2)
+    w = D._warnings("unexplained", rounds, CANDS, [(50.0, 30.0, "backlash")], None)
+    text = " | ".join(w)
+    assert "not measured" in text  # no calibrated design near this log
+    assert "local one" in text and "backlash" in text  # the base basin found late
+    assert "little power" in text  # 2 lags
+    bad = DesignRate("paper", 250.0, 4, 3, 40, 0.016, 0.20, "test")
+    w = D._warnings("missing_effect", _rounds_with([_cand("hysteresis", -40)]), CANDS, [], bad)
+    assert len(w) == 1 and "above the 5 % target" in w[0]
+    good = DesignRate("paper", 250.0, 4, 0, 80, 0.0, 0.045, "test")
+    assert D._warnings("missing_effect", _rounds_with([_cand("hysteresis", -40)]), CANDS, [],
+                       good) == []
+
+
+# -- fair crediting: the current model from a candidate's optimum -------------------------
+def test_base_start_from_a_candidate_that_replaced_a_piece_keeps_the_current_values():
+    """soft_windup replaces the cubic spring: its optimum has no k1, k2. The current
+    model's start from it takes the candidate's friction (shared) and the *current fit's*
+    k1, k2 — not the set-up model's catalog values, which are no optimum of anything."""
+    import hdid
+    from hdid import _refit
+    from hdid._io import read_log
+    from hdid._transforms import to_unconstrained
+    from hdid.effects import library
+
+    log = read_log(ROOT / "data" / "synthetic" / "csf8_paper.csv")
+    m = hdid.Model.default()
+    s = _refit.setup(log, m, {})
+    ms = m.with_effect(library({"k1": 940.0, "k2": 6.5e7, "_k_wg": 0.094})["soft_windup"])
+    s2 = _refit.setup(log, ms, {})
+    tail = np.linspace(0.0, 1.0, s.problem.n_unknowns - s.problem.n_physical)
+    now = {**m.float_values(), "k1": 1234.0, "k2": 5.0e7, "tau_c": 2.0e-3}
+    cand_vals = {**ms.float_values(), "tau_c": 3.1e-3}
+    current = SimpleNamespace(values=lambda: now, setup=s,
+                              u=np.concatenate([np.zeros(s.problem.n_physical), tail]))
+    sf = SimpleNamespace(finite=True, values=lambda: cand_vals, setup=s2, label="soft_windup",
+                         u=np.concatenate([np.zeros(s2.problem.n_physical), tail]))
+    (origin, u), = D._base_starts(s, current, [sf], {})
+    assert origin == "reverse:soft_windup"
+    specs = m.parameter_specs()
+    got = dict(zip(s.problem.free, u[: s.problem.n_physical]))
+    assert got["k1"] == pytest.approx(float(to_unconstrained(specs["k1"], 1234.0)))
+    assert got["k2"] == pytest.approx(float(to_unconstrained(specs["k2"], 5.0e7)))
+    assert got["tau_c"] == pytest.approx(float(to_unconstrained(specs["tau_c"], 3.1e-3)))
+    np.testing.assert_array_equal(u[s.problem.n_physical:], tail)
+
+
+def test_candidate_warm_starts_are_at_the_current_optimum(monkeypatch):
+    """Item 1: every candidate starts from the current optimum — shared parameters at the
+    current fit's values (not at the values its model was set up with, the catalog's),
+    the added effect's at its data-derived values. The refits are captured, not run."""
+    import hdid
+    from hdid import _refit
+    from hdid._io import read_log
+    from hdid._transforms import to_unconstrained
+
+    log = read_log(ROOT / "data" / "synthetic" / "csf8_paper.csv")
+    m = hdid.Model.default()
+    s = _refit.setup(log, m, {})
+    fitted = {**m.float_values(), "k1": 1100.0, "tau_c": 2.2e-3, "tau_s": 3.5e-3,
+              "v_s": 3.5, "delta": 1.2}
+    tail = np.linspace(0.0, 1.0, s.problem.n_unknowns - s.problem.n_physical)
+    current = SimpleNamespace(values=lambda: fitted, model=m, setup=s,
+                              u=np.concatenate([np.zeros(s.problem.n_physical), tail]))
+    seen = []
+    monkeypatch.setattr(_refit, "run", lambda label, s2, starts: seen.append((s2, starts)))
+    D._candidate_fits(log, CANDS["hysteresis"], current, {"swing_rad": 0.3}, {}, [],
+                      lambda msg: None, {})
+    assert seen and all(o == "warm" for _, st in seen for o, _ in st)
+    specs = m.parameter_specs()
+    for s2, starts in seen:
+        for _, u in starts:
+            got = dict(zip(s2.problem.free, u[: s2.problem.n_physical]))
+            for k in ("k1", "tau_c", "tau_s", "v_s", "delta"):
+                assert got[k] == pytest.approx(float(to_unconstrained(specs[k], fitted[k]))), k
+            np.testing.assert_array_equal(u[s2.problem.n_physical:], tail)

@@ -46,7 +46,8 @@ from . import _config
 #: Modules that only orchestrate (no function of theirs is traced into a stored program:
 #: those come from ``_refit``, ``_residuals`` and the problem, model and effects they
 #: call): editing them does not invalidate the store.
-UNTRACED = frozenset({"_diagnose.py", "cli.py", "_verdicts.py"})
+UNTRACED = frozenset({"_diagnose.py", "_diagnose_candidates.py", "_diagnose_result.py",
+                      "_diagnose_verdict.py", "_diagnose_rates.py", "cli.py", "_verdicts.py"})
 _ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
 #: Compiled programs of this process, most recently used last. Bounded: every XLA:CPU
 #: executable holds memory mappings for its code (see tests/conftest.py).

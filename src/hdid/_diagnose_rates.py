@@ -1,0 +1,87 @@
+"""The measured false-alarm rate of :func:`hdid.diagnose`'s verdict rules.
+
+A false alarm is a verdict other than ``adequate`` on a clean log: one simulated from a
+fitted base model (hdid's simulator, the design's release angles, rate and length, a
+random sub-sample release instant per run, rounded to the design's encoder), so the base
+model is exactly right. ``benchmarks/diagnose_calibration.py`` measures it per design and
+writes ``benchmarks/results/diagnose_calibration.{json,md}``; the numbers below are
+copied from there (with the commit they were measured on) and :func:`false_alarm` reports
+the design nearest a log's, or says that none was measured near it.
+
+The interval is the exact (Clopper–Pearson) 95 % binomial interval of ``k`` alarms in
+``n`` logs: with ``k = 0`` and ``n = 40`` its upper end is 8.8 %, so 40 clean logs can
+show a rate ≤ 5 % only as "0 of 40, below 8.8 % at 95 %" — the target is met in
+expectation, not proved, at that count (≥ 72 logs with no alarm would prove it).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class DesignRate:
+    design: str
+    #: sample rate [Hz] and number of runs of the design's logs
+    rate_hz: float
+    runs: int
+    alarms: int
+    logs: int
+    lo: float
+    hi: float
+    measured: str
+
+    def to_dict(self) -> dict:
+        return {"design": self.design, "rate_hz": self.rate_hz, "runs": self.runs,
+                "false_alarms": self.alarms, "clean_logs": self.logs,
+                "rate": self.alarms / self.logs if self.logs else math.nan,
+                "interval_95": [self.lo, self.hi], "measured": self.measured}
+
+    def text(self) -> str:
+        return (f"false alarms on clean logs of the {self.design} design ({self.rate_hz:g} Hz, "
+                f"{self.runs} runs): {self.alarms} of {self.logs} "
+                f"({100 * self.alarms / self.logs:.0f} %, 95 % interval "
+                f"{100 * self.lo:.1f}–{100 * self.hi:.1f} %; {self.measured})")
+
+
+#: Filled from ``benchmarks/results/diagnose_calibration.json`` (see the module docstring).
+MEASURED: tuple[DesignRate, ...] = (
+    DesignRate("paper", 250.0, 4, 1, 80, 0.0003, 0.0677,
+               "measured 2026-11-24 on commit 368461b"),
+    DesignRate("rich", 1000.0, 8, 0, 46, 0.0, 0.0771,
+               "measured 2026-11-24 on commit 368461b"),
+)
+
+#: A log is "near" a measured design when its sample rate is within this factor of the
+#: design's and its number of runs within this factor too (the rule's behaviour depends
+#: on the effective observations per run and the runs: n and k of the BIC).
+NEAR_FACTOR = 2.0
+
+#: The issue's target: at most this rate of false alarms per clean log.
+TARGET = 0.05
+
+
+def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
+    """Exact binomial interval of ``k`` successes in ``n`` trials."""
+    from scipy.stats import beta
+
+    a = 1 - level
+    lo = 0.0 if k == 0 else float(beta.ppf(a / 2, k, n - k + 1))
+    hi = 1.0 if k == n else float(beta.ppf(1 - a / 2, k + 1, n - k))
+    return lo, hi
+
+
+def false_alarm(rate_hz: float, runs: int,
+                measured: tuple[DesignRate, ...] | None = None) -> DesignRate | None:
+    """The measured design nearest a log of ``runs`` runs at ``rate_hz`` (within
+    ``NEAR_FACTOR`` on both), or ``None``."""
+    measured = MEASURED if measured is None else measured
+
+    def dist(d: DesignRate) -> float:
+        return abs(math.log(rate_hz / d.rate_hz)) + abs(math.log(max(runs, 1) / d.runs))
+
+    near = [d for d in measured if d.logs > 0
+            and abs(math.log(rate_hz / d.rate_hz)) <= math.log(NEAR_FACTOR)
+            and abs(math.log(max(runs, 1) / d.runs)) <= math.log(NEAR_FACTOR)]
+    return min(near, key=dist) if near else None
