@@ -338,7 +338,7 @@ NOTES = """## Before → after (issue 6, third pass)
   on "any run has an event in this substep" — it used to run at every substep of every run
   under `vmap`. Results equal the old scheme's to 1e-15 (7 log × model cases, Jacobians
   included); residuals + Jacobian 443 → 243 µs.
-- **One-lane programs are not vmapped** (`hdid._fit.lanes_vmap`): a length-1 `vmap` would
+- **One-lane programs are not vmapped** (`hdid._lm.lanes_vmap`): a length-1 `vmap` would
   still turn the `cond` into a select. Batch CPU per log 167 → 99 ms (100 logs, back to
   back on one core).
 - **Processes, not threads**: two threads issuing JAX CPU calls measured CPU time = wall
@@ -370,7 +370,7 @@ NOTES = """## Before → after (issue 6, third pass)
 **What changed** (every log gets exactly the fit it got before — same starts, same
 Levenberg–Marquardt path, same stopping; `hdid.fit` and `fit_many` agree):
 
-- **Levenberg–Marquardt stepped by hand** (`hdid._fit._lm_lanes`). It reproduces
+- **Levenberg–Marquardt stepped by hand** (`hdid._lm._lm_lanes`). It reproduces
   optimistix's `LevenbergMarquardt` (normal-equations Cholesky, `ClassicalTrustRegion`
   damping update, re-initialised at every call as before), so every lane follows the same
   path (40 logs, old vs new code, same settings: max |Δχ²| 2e-8, k1 equal to 1e-11; the

@@ -127,7 +127,7 @@ def test_cli_diagnose_bad_candidate_is_a_one_line_error(tmp_path):
 
 
 def test_cli_add_sets_ripple_order_and_rejects_bad_order():
-    from hdid.cli import _Fail, _build_model
+    from hdid.cli._common import _Fail, _build_model
 
     m = _build_model(("ripple:12", "hysteresis"), (), ())
     assert m.effect_names[-2:] == ("ripple", "hysteresis")

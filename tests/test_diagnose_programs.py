@@ -133,7 +133,7 @@ def test_no_store_when_caching_is_off(store, monkeypatch, env):
 def test_starts_in_groups_of_one_program_give_fit_s_iterates():
     """:func:`hdid._refit._local_fits` runs the starts ``LANES`` at a time (one program
     per structure, any number of starts); lanes do not interact, so every start must end
-    where :func:`hdid._fit._local_fits` (all starts in one call) leaves it: same point,
+    where :func:`hdid._lm._local_fits` (all starts in one call) leaves it: same point,
     cost, convergence flag and iteration count (Rosenbrock from 7 starts: 3 groups in
     phase 1, the 3 best in phase 2)."""
     import types
@@ -141,7 +141,7 @@ def test_starts_in_groups_of_one_program_give_fit_s_iterates():
     import jax
 
     from hdid import _refit
-    from hdid._fit import _lm_lanes, _local_fits
+    from hdid._lm import _lm_lanes, _local_fits
 
     def res(U):
         return jnp.stack([10.0 * (U[:, 1] - U[:, 0] ** 2), 1.0 - U[:, 0]], axis=1)

@@ -30,7 +30,9 @@ class CandidateResult:
     moving_ratio_after: float = math.nan
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        from ._saved import finite
+
+        return finite({
             "effect": self.key,
             "variant": self.label,
             "rms_before_rad": self.rms_before_rad,
@@ -43,7 +45,7 @@ class CandidateResult:
             "fitted": self.values,
             "reason": self.reason,
             **({"error": self.error} if self.error else {}),
-        }
+        })
 
 
 @dataclass
@@ -75,7 +77,9 @@ class Diagnosis:
         return self.candidates[0] if self.candidates else None
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        from ._saved import finite
+
+        return finite({
             "source": self.source,
             "verdict": self.verdict,
             "summary": self.summary,
@@ -90,7 +94,7 @@ class Diagnosis:
             "warnings": self.warnings,
             "false_alarm": self.false_alarm,
             "timing": self.timing,
-        }
+        })
 
     def report(self) -> str:
         fl = self.floor_rad
@@ -144,15 +148,16 @@ class Diagnosis:
 
     def plot_ladder(self, path=None, *, ax=None):
         """RMS (in quantization floors) and BIC along the model ladder: the error falling."""
-        import matplotlib
-
-        if path is not None and ax is None:
-            matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        from ._plot import _new_figure
 
         fig = None
-        if ax is None:
-            fig, ax = plt.subplots(figsize=(6, 3.5), constrained_layout=True)
+        if ax is None:  # shown through pyplot, or (with a path) only saved: no backend chosen
+            if path is None:
+                import matplotlib.pyplot as plt
+            else:
+                plt = None
+            fig = _new_figure(plt, figsize=(6, 3.5), constrained_layout=True)
+            ax = fig.subplots()
         names = [s["model"] for s in self.ladder]
         rms = [s["rms_rad"] / self.floor_rad for s in self.ladder]
         x = np.arange(len(names))

@@ -28,13 +28,6 @@ from .effects import order_of_magnitude
 from ._lm import _local_fits
 from ._starts import _grid_starts, log_scales
 
-# Re-exported until the issue-17/19 branches (`_refit`, `_posterior.modes`, their tests)
-# import them from `_lm`/`_starts`, where they now live.
-from ._lm import (  # noqa: F401,E402
-    PHASE1_STEPS, PHASE2_CHUNK, LMState, _lm_lanes, _Schedule, lanes_vmap,
-)
-from ._starts import _choose_starts, _grid_candidates  # noqa: F401,E402
-
 
 #: Natural frequency [Hz] at which the default substep (``DEFAULT_MAX_SUBSTEP``) was
 #: validated against the event-driven reference (error 0.04 of the 250 Hz quantization

@@ -47,7 +47,9 @@ from . import _config
 #: those come from ``_refit``, ``_residuals`` and the problem, model and effects they
 #: call): editing them does not invalidate the store.
 UNTRACED = frozenset({"_diagnose.py", "_diagnose_candidates.py", "_diagnose_result.py",
-                      "_diagnose_verdict.py", "_diagnose_rates.py", "cli.py", "_verdicts.py"})
+                      "_diagnose_verdict.py", "_diagnose_rates.py", "_verdicts.py"})
+#: Packages of such modules: the command line, log reading (NumPy only).
+UNTRACED_PACKAGES = frozenset({"cli", "_io"})
 _ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
 #: Compiled programs of this process, most recently used last. Bounded: every XLA:CPU
 #: executable holds memory mappings for its code (see tests/conftest.py).
@@ -69,7 +71,8 @@ def _salt() -> str:
         h = hashlib.sha256()
         root = Path(__file__).resolve().parent
         for f in sorted(root.rglob("*.py")):
-            if f.relative_to(root).as_posix() in UNTRACED:
+            rel = f.relative_to(root).as_posix()
+            if rel in UNTRACED or rel.split("/")[0] in UNTRACED_PACKAGES:
                 continue
             h.update(str(f.relative_to(root)).encode())
             h.update(f.read_bytes())

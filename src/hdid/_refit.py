@@ -26,21 +26,12 @@ import numpy as np
 
 from . import _config  # noqa: F401
 from . import _programs, _residuals
-from ._fit import (
-    LMState,
-    _choose_starts,
-    _finish,
-    _grid_candidates,
-    _lm_lanes,
-    _Schedule,
-    _setup,
-    _Setup,
-    lanes_vmap,
-)
+from ._fit import _finish, _setup, _Setup
 from ._identifiability import MOVED_COUNTS, band_limit, derived_quantities
-from ._transforms import interval_to_u
+from ._lm import LMState, _lm_lanes, _Schedule, lanes_vmap
 from ._problem import Problem
-from ._transforms import to_unconstrained
+from ._starts import _choose_starts, _grid_candidates
+from ._transforms import interval_to_u, to_unconstrained
 
 #: Options of :func:`hdid.fit` that shape the problem (the rest belong to the schedule).
 SETUP_OPTIONS = ("inertia", "fix", "free_inertia", "inertia_prior", "release_time",
@@ -66,7 +57,7 @@ def _costs(problem: Problem, U):
 
 
 def _solve_lanes(problem: Problem, U0, active, max_steps, state: LMState):
-    """:func:`hdid._fit._solve_lanes` (the same program), run through the program store."""
+    """:func:`hdid._lm._solve_lanes` (the same program), run through the program store."""
     return _lm_lanes(
         lanes_vmap(problem.residuals), lanes_vmap(problem.residuals_and_jacobian), U0, active,
         max_steps, state,
@@ -102,7 +93,7 @@ LANES = 1
 
 
 def _local_fits(problem: Problem, U0, max_steps: int, lanes: int = LANES, solve=None):
-    """:func:`hdid._fit._local_fits` (the same schedule, :class:`hdid._fit._Schedule`,
+    """:func:`hdid._lm._local_fits` (the same schedule, :class:`hdid._lm._Schedule`,
     and, lanes not interacting, the same iterates for every start up to rounding: a
     vmapped simulator selects where a one-lane one branches) run as calls of one
     ``lanes``-wide program from :mod:`hdid._programs`: the starts a call advances are

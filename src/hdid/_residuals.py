@@ -626,14 +626,16 @@ def residual_features(frame: pd.DataFrame) -> dict[str, float]:
 # ---------------------------------------------------------------------------------------
 # figures
 # ---------------------------------------------------------------------------------------
-def _pyplot(path, axes):
-    import matplotlib
+def _figure(path, **kw):
+    """A new figure: through pyplot when it is to be shown (no ``path``), else a bare
+    :class:`~matplotlib.figure.Figure` that is only saved (no backend chosen)."""
+    from ._plot import _new_figure
 
-    if path is not None and axes is None:
-        matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
+    if path is None:
+        import matplotlib.pyplot as plt
 
-    return plt
+        return _new_figure(plt, **kw)
+    return _new_figure(None, **kw)
 
 
 def plot_residuals(result, path=None, *, axes=None):
@@ -659,12 +661,11 @@ def plot_residuals(result, path=None, *, axes=None):
     -------
     matplotlib.figure.Figure
     """
-    plt = _pyplot(path, axes)
     frame = residual_frame(result)
     wt = whiteness(result, frame=frame)
     sp = spectrum(frame)
     if axes is None:
-        fig, axes = plt.subplots(2, 3, figsize=(13, 7))
+        axes = _figure(path, figsize=(13, 7)).subplots(2, 3)
     axes = np.asarray(axes).ravel()
     if axes.size != 6:
         raise ValueError(f"axes: need 6 axes, got {axes.size}")
@@ -806,10 +807,10 @@ def plot_rest_approach(result, path=None, *, ax=None, window: tuple[float, float
     -------
     matplotlib.figure.Figure
     """
-    plt = _pyplot(path, ax)
     frame = residual_frame(result)
     if ax is None:
-        fig, ax = plt.subplots(figsize=(6.5, 3.6))
+        fig = _figure(path, figsize=(6.5, 3.6))
+        ax = fig.subplots()
     else:
         fig = ax.figure
     drawn = 0

@@ -1,11 +1,11 @@
 """Vectorised batch fit: the multi-start fits of many logs as lanes of shared programs.
 
 :func:`hdid.fit` runs its starts as lanes of one Levenberg–Marquardt program
-(:func:`hdid._fit._lm_lanes`). Here the lanes of *many* logs share compiled programs: logs
+(:func:`hdid._lm._lm_lanes`). Here the lanes of *many* logs share compiled programs: logs
 whose problems have the same structure and shape (runs × samples after padding, free
 parameters, set-ups) form a *bucket*; each call advances ``lanes`` (log, start) pairs, each
 lane with its own log's arrays. The schedule is :func:`hdid.fit`'s own
-(:class:`hdid._fit._Schedule`: grid, phase 1, phase 2 in chunks, lanes far behind their
+(:class:`hdid._lm._Schedule`: grid, phase 1, phase 2 in chunks, lanes far behind their
 log's best dropped), so every log gets the fit it would get alone: lanes never interact.
 
 Samples are padded (repeated last sample, weight 0: zero-length intervals and zero
@@ -23,7 +23,7 @@ one-lane program a rejected trial costs one forward pass and the forward-mode Ja
 (≈ 3× a forward pass) is computed only for accepted trials; a wider call computes it when
 *any* of its lanes needs it and runs as long as its slowest lane. Width 1 was the
 cheapest in CPU time per log; one-lane programs also keep the simulator's event branch a
-real ``cond`` (:func:`hdid._fit.lanes_vmap`). Threads do not add cores: JAX runs one CPU
+real ``cond`` (:func:`hdid._lm.lanes_vmap`). Threads do not add cores: JAX runs one CPU
 program at a time per process (2 threads issuing calls: CPU time = wall time, measured),
 so several cores need several processes (``fit_many(workers=…)``, dask). The Jacobian and
 residuals at the end of a lane's call are carried to its next call. The grid's forward
@@ -103,9 +103,9 @@ def _lane_lengths(problems: Problem, U):
 
 @eqx.filter_jit
 def _lane_solve(problems: Problem, U, active, max_steps, *state):
-    """:func:`hdid._fit._lm_lanes` over lanes, each with its own log and budget.
+    """:func:`hdid._lm._lm_lanes` over lanes, each with its own log and budget.
 
-    ``state`` (the fields of :class:`hdid._fit.LMState`) carries each lane's residuals,
+    ``state`` (the fields of :class:`hdid._lm.LMState`) carries each lane's residuals,
     Jacobian and damping from its previous call, so a call does not start by recomputing
     them. Returns ``(U, cost, done, iterations, *state)``.
     """

@@ -76,7 +76,9 @@ class PosteriorResult:
 
     def to_dict(self) -> dict[str, Any]:
         s = self.summary()
-        return {
+        from .._saved import finite
+
+        return finite({
             "posterior": s,
             "posterior_width": dict(self.widths),
             "posterior_diagnostics": {
@@ -114,7 +116,7 @@ class PosteriorResult:
                 "mode_search_s": self.mode_search_s,
                 "warnings": list(self.warnings),
             },
-        }
+        })
 
     def report(self) -> str:
         lines = ["posterior (median, 68 % and 95 % intervals; posterior/prior width):"]

@@ -9,7 +9,6 @@ that ``hdid --help`` answers at once.
 from __future__ import annotations
 
 from ._common import EXIT_PARTIAL, MAX_SAMPLES_PER_RUN
-from ._common import _build_model, _Fail  # noqa: F401  (tests/test_diagnose.py until issue 19 lands)
 from ._main import main
 
 __all__ = ["EXIT_PARTIAL", "MAX_SAMPLES_PER_RUN", "main"]
