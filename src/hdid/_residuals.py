@@ -627,8 +627,7 @@ def residual_features(frame: pd.DataFrame) -> dict[str, float]:
 # figures
 # ---------------------------------------------------------------------------------------
 def _figure(path, **kw):
-    """A new figure: through pyplot when it is to be shown (no ``path``), else a bare
-    :class:`~matplotlib.figure.Figure` that is only saved (no backend chosen)."""
+    """A new figure: pyplot's when shown (no ``path``), else a bare one (no backend)."""
     from ._plot import _new_figure
 
     if path is None:
