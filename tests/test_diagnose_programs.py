@@ -82,6 +82,8 @@ def test_stored_lapack_program_runs_in_a_fresh_process(store, tmp_path):
     code = textwrap.dedent(f"""
         import sys, numpy as np
         sys.path.insert(0, {str(Path(__file__).parent)!r})
+        import hdid
+        hdid.configure()  # as the CLI (and conftest.py) set a process up: float64
         from hdid import _programs
         import test_diagnose_programs as t
         def untraceable(*a):
