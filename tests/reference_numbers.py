@@ -3,8 +3,9 @@
 Issue 20 (architecture) moves every file; its rule is "same numbers before and after".
 ``python tests/reference_numbers.py --write`` records, at one commit, the fits of every
 shipped log (free-motion fits, the driven fit, the joint fit and the EMPS real log) into
-``tests/data/reference_numbers.json``; ``tests/test_reference_numbers.py`` refits them and
-compares every number.
+``tests/data/reference_numbers.json`` (``--write NAME …`` re-records some, after a change
+that is meant to move numbers; ``_recorded_at`` keeps each case's commit);
+``tests/test_reference_numbers.py`` refits them and compares every number.
 
 Two tolerances (``compare``):
 
@@ -169,7 +170,10 @@ def main(argv):
         t0 = time.perf_counter()
         store[name] = record(name)
         print(f"{name}: {len(store[name])} numbers, {time.perf_counter() - t0:.1f} s")
-        store["_recorded_at"] = commit
+        at = store.get("_recorded_at")
+        at = at if isinstance(at, dict) else {k: at for k in store if not k.startswith("_")}
+        at[name] = commit
+        store["_recorded_at"] = at
         STORE.write_text(json.dumps(store, indent=0, sort_keys=True) + "\n")
     return 0
 

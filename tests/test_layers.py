@@ -34,7 +34,7 @@ LAYERS = [
     {"_summaries", "_saved", "_plot", "_residuals", "_result", "_driven_result"},
     # fitting and the analysis at the optimum
     {"_identifiability", "_lm", "_starts", "_fit", "_nested", "_vfit", "_batch", "_driven_fit",
-     "_refit"},
+     "_driven_starts", "_refit"},
     # posterior and diagnosis
     {"_posterior", "_diagnose", "_diagnose_candidates", "_diagnose_result", "_diagnose_verdict",
      "_diagnose_rates"},
@@ -47,7 +47,7 @@ DEBT: set[tuple[str, str]] = set()
 MAX_LINES = 500
 #: Modules still over ``MAX_LINES``: their size today is their ceiling. Only shrinks.
 LONG = {
-    "_diagnose": 551, "_residuals": 833, "_driven_fit": 655,
+    "_diagnose": 551, "_residuals": 833,
     "_vfit": 600, "_driven_result": 539, "_identifiability": 523, "reference": 520,
 }
 
