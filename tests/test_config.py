@@ -32,7 +32,8 @@ def test_library_without_configure_is_float64_and_leaves_the_process_alone(tmp_p
 import json, os, sys
 import hdid
 r = hdid.fit({str(PAPER)!r})
-r.plot("fit.png")
+with hdid.bare_figures():  # a figure only saved: no pyplot
+    hdid.save_figure(r.plot(), "fit.png")
 import jax, jax.numpy as jnp
 print(json.dumps({{
     "x64": bool(jax.config.jax_enable_x64),

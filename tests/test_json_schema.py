@@ -170,11 +170,11 @@ def test_plot_into_one_axes_or_a_clear_error(fitted):
 
     _, result, _ = fitted
     fig, ax = plt.subplots()
-    assert result.plot(axes=ax) is fig
+    assert result.plot(ax=ax) is ax
     assert len(ax.lines) >= 2 * len(result.runs)
     fig, axes = plt.subplots(1, 3)
     with pytest.raises(hdid.HdidError, match=r"\(2, 4\)"):
-        result.plot(axes=axes)
+        result.plot(ax=axes)
     plt.close("all")
 
 
@@ -185,7 +185,7 @@ def test_fit_plot_band_centred_and_legend(fitted):
     import matplotlib.pyplot as plt
 
     _, result, _ = fitted
-    fig = result.plot()
+    fig = result.plot()[0, 0].figure
     top = fig.axes[0]
     # The stick band is drawn from the spring zero: centred on 0, as in the report.
     band = [p for p in top.patches if p.get_label() == "stick band (fit)"][0]
@@ -210,7 +210,7 @@ def test_ten_runs_wrap_into_rows():
 
     from hdid._plot import RUNS_PER_ROW, _fit_axes
 
-    fig, axes = _fit_axes(plt, 10)
+    fig, axes = _fit_axes(10)
     assert axes.shape == (2, 10)
     width, height = fig.get_size_inches()
     assert width <= 3.2 * RUNS_PER_ROW + 1 and height > 5.2 * 2  # 3 rows of 4, 4, 2

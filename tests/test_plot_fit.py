@@ -52,7 +52,7 @@ def test_fit_png_draws_the_band(result):
 
     from hdid._plot import BAND_LABEL, BAND_SIGMAS
 
-    fig = result.plot()
+    fig = result.plot()[0, 0].figure
     step = result.resolution_rad
     for i, run in enumerate(result.runs):
         top, bottom = fig.axes[2 * i], fig.axes[2 * i + 1]
@@ -92,7 +92,7 @@ def test_one_axes_overlay_has_the_band(result):
     from hdid._plot import BAND_LABEL
 
     fig, ax = plt.subplots()
-    result.plot(axes=ax)
+    assert result.plot(ax=ax) is ax
     assert BAND_LABEL in [t.get_text() for t in ax.get_legend().get_texts()]
     assert len(ax.collections) >= len(result.runs)
     # the motion fills the axes: the still tail (most of each 0.5 s run) is cropped, as in
@@ -104,14 +104,18 @@ def test_one_axes_overlay_has_the_band(result):
 
 
 def test_saving_leaves_the_backend_alone(result, tmp_path):
-    """plot(path) used to switch matplotlib to Agg (a notebook then showed nothing more)."""
+    """plot(path) used to switch matplotlib to Agg (a notebook then showed nothing more);
+    the CLI's way of saving (bare figures, ``save_figure``) touches no backend or pyplot."""
     import matplotlib
 
     before = matplotlib.get_backend()
     matplotlib.use("svg")
     try:
         out = tmp_path / "fit.png"
-        fig = result.plot(out)
+        with hdid.bare_figures():
+            ax = result.plot()
+        hdid.save_figure(ax, out)
+        fig = ax[0, 0].figure
         assert out.stat().st_size > 0
         assert matplotlib.get_backend() == "svg"
         import matplotlib.pyplot as plt
@@ -132,11 +136,11 @@ def test_readings_on_no_grid_get_no_counts(result):
     import matplotlib.pyplot as plt
 
     analog = dataclasses.replace(result, resolution_source="noise")
-    fig = analog.plot()
+    fig = analog.plot()[0, 0].figure
     texts = [fig._suptitle.get_text(), fig.axes[1].get_ylabel()]
     texts += [t.get_text() for t in fig.axes[1].get_legend().get_texts()]
     assert not any("count" in t for t in texts), texts
     assert "noise σ" in fig.axes[1].get_ylabel()
-    fig = result.plot()  # on a grid: counts, as before
+    fig = result.plot()[0, 0].figure  # on a grid: counts, as before
     assert "counts" in fig.axes[1].get_ylabel() and "counts" in fig._suptitle.get_text()
     plt.close("all")

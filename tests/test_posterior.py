@@ -402,7 +402,7 @@ def test_corner_has_units_no_offset_text_the_optimum_and_the_verdict(small_smc):
     import matplotlib
 
     matplotlib.use("Agg")
-    fig = small_smc.plot_corner()
+    fig = small_smc.plot_corner()[0, 0].figure
     fig.canvas.draw()
     offsets = [t for ax in fig.axes for t in (ax.xaxis.get_offset_text().get_text(),
                                               ax.yaxis.get_offset_text().get_text()) if t]
@@ -421,14 +421,14 @@ def test_predictive_has_a_residual_row_in_encoder_steps(small_smc):
 
     matplotlib.use("Agg")
     R = len(small_smc.fit.runs)
-    fig = small_smc.plot_predictive(n_draws=20)
+    fig = small_smc.plot_predictive(n_draws=20)[0, 0].figure
     assert len(fig.axes) == 2 * R
     assert fig.axes[R].get_ylabel() == "residual [encoder steps]"
     # the band on the residual scale is visible: wider than a tenth of a step somewhere
     coll = fig.axes[R].collections[0].get_paths()[0].vertices[:, 1]
     assert np.ptp(coll) > 0.1
     with pytest.raises(ValueError, match=r"\(2, 4\)"):
-        small_smc.plot_predictive(n_draws=5, axes=np.empty(3, dtype=object))
+        small_smc.plot_predictive(n_draws=5, ax=np.empty(3, dtype=object))
 
 
 def test_cli_sampler_option_reaches_the_library_and_refuses_emcee_options(tmp_path, monkeypatch):

@@ -20,9 +20,9 @@ PUBLIC = [
     "FreePlayStiffness", "Gravity", "HdidError", "KinematicErrorStiffness",
     "LinearStiffness", "LoadDependentFriction", "Log", "LogError", "Model", "Motion",
     "Parameter", "PositionRipple", "PositionalError", "Run", "Scales", "StribeckFriction",
-    "ThreeSegmentStiffness", "TorqueOffset", "ViscousFriction", "__version__", "configure", "diagnose",
-    "effects", "fit", "fit_driven", "fit_joint", "fit_many", "model_ladder", "read_log",
-    "sample_posterior", "simulate", "simulate_driven", "write_log",
+    "ThreeSegmentStiffness", "TorqueOffset", "ViscousFriction", "__version__", "bare_figures",
+    "configure", "diagnose", "effects", "fit", "fit_driven", "fit_joint", "fit_many", "model_ladder", "read_log",
+    "sample_posterior", "save_figure", "simulate", "simulate_driven", "write_log",
 ]
 
 #: The first arguments of each public function, by position, then the keywords a user may
@@ -63,6 +63,22 @@ def test_public_functions_keep_their_calls():
         assert names[: len(positional)] == positional, (name, names)
         missing = KEYWORDS.get(name, set()) - set(names)
         assert not missing, f"hdid.{name} lost keyword(s) {sorted(missing)}"
+
+
+def test_every_figure_is_drawn_into_ax_and_never_saved():
+    """One plotting convention (lmfit's ``plot(ax=None)``): every figure method takes the
+    axes to draw into as the keyword ``ax`` and no path (saving is ``hdid.save_figure``)."""
+    from hdid._posterior import PosteriorResult
+
+    methods = [getattr(cls, m) for cls in (hdid.FitResult, hdid.DrivenFitResult,
+                                           hdid.Diagnosis, PosteriorResult)
+               for m in dir(cls) if m.startswith("plot")]
+    assert len(methods) >= 8
+    for f in methods:
+        params = inspect.signature(f).parameters
+        assert "path" not in params and "axes" not in params, f.__qualname__
+        assert params["ax"].kind is inspect.Parameter.KEYWORD_ONLY, f.__qualname__
+        assert params["ax"].default is None, f.__qualname__
 
 
 def test_version_comes_from_the_installed_package():

@@ -309,18 +309,19 @@ def test_plots_build_and_save(paper, no_stribeck, tmp_path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig = paper.plot_residuals(tmp_path / "res.png")
-    assert (tmp_path / "res.png").stat().st_size > 0 and len(fig.axes) == 6
+    ax = paper.plot_residuals()
+    assert ax.shape == (2, 3)
+    hdid.save_figure(ax, tmp_path / "res.png")
+    assert (tmp_path / "res.png").stat().st_size > 0 and len(ax[0, 0].figure.axes) == 6
     fig2, axes = plt.subplots(2, 3)
-    assert R.plot_residuals(paper, axes=axes) is fig2
+    assert R.plot_residuals(paper, ax=axes) is axes
     fig3, ax = plt.subplots()
-    assert R.plot_rest_approach(paper, tmp_path / "rest.png", ax=ax) is fig3
-    assert (tmp_path / "rest.png").stat().st_size > 0
+    assert R.plot_rest_approach(paper, ax=ax) is ax
     # A model that never sticks still draws (an empty rest window, said in the title).
-    fig4 = R.plot_rest_approach(no_stribeck, tmp_path / "rest_ns.png")
-    assert "never sticks" in fig4.axes[0].get_title()
+    ax4 = R.plot_rest_approach(no_stribeck)
+    assert "never sticks" in ax4.get_title()
     with pytest.raises(ValueError, match="6 axes"):
-        R.plot_residuals(paper, axes=axes[0])
+        R.plot_residuals(paper, ax=axes[0])
     plt.close("all")
 
 
@@ -337,7 +338,7 @@ def test_residual_figure_shows_only_what_the_log_supports(paper, no_stribeck):
 
     wt = R.whiteness(paper)
     assert wt.max_lag < R.MIN_ACF_LAGS  # the premise: this log cannot support an ACF
-    fig = R.plot_residuals(paper)
+    fig = R.plot_residuals(paper)[0, 0].figure
     ax_acf, ax_sp = fig.axes[4], fig.axes[5]
     assert ax_acf.get_title().startswith("no ACF")
     assert ax_sp.get_title().startswith("no spectrum")
@@ -348,7 +349,7 @@ def test_residual_figure_shows_only_what_the_log_supports(paper, no_stribeck):
     assert len(pts) == runs.ngroups
     assert np.allclose(sorted(pts), sorted(np.sqrt((runs["residual_counts"]
                                                     .apply(lambda r: np.mean(r**2)))).to_numpy()))
-    fig2 = R.plot_residuals(no_stribeck)
+    fig2 = R.plot_residuals(no_stribeck)[0, 0].figure
     assert R.whiteness(no_stribeck).max_lag >= R.MIN_ACF_LAGS
     assert fig2.axes[4].get_title().startswith("Ljung–Box")
     assert fig2.axes[5].get_title() == "spectrum of moving residual"

@@ -68,6 +68,8 @@ _LAZY = {
     "simulate_driven": "._driven",
     "PositionalError": "._positional",
     "configure": "._config",
+    "save_figure": "._plot",
+    "bare_figures": "._plot",
 }
 
 #: Public functions that compute with JAX: they run in float64 (thread-local, see

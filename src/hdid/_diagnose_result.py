@@ -146,18 +146,13 @@ class Diagnosis:
     def __str__(self) -> str:
         return self.report()
 
-    def plot_ladder(self, path=None, *, ax=None):
-        """RMS (in quantization floors) and BIC along the model ladder: the error falling."""
-        from ._plot import _new_figure
+    def plot_ladder(self, *, ax=None):
+        """RMS (in quantization floors) and BIC along the model ladder: the error falling.
+        Draws into ``ax`` (a new figure without it) and returns the Axes."""
+        from ._plot import new_figure
 
-        fig = None
-        if ax is None:  # shown through pyplot, or (with a path) only saved: no backend chosen
-            if path is None:
-                import matplotlib.pyplot as plt
-            else:
-                plt = None
-            fig = _new_figure(plt, figsize=(6, 3.5), constrained_layout=True)
-            ax = fig.subplots()
+        if ax is None:
+            ax = new_figure(figsize=(6, 3.5), constrained_layout=True).subplots()
         names = [s["model"] for s in self.ladder]
         rms = [s["rms_rad"] / self.floor_rad for s in self.ladder]
         x = np.arange(len(names))
@@ -171,10 +166,7 @@ class Diagnosis:
         ax.set_ylim(0, 1.15 * max(max(rms), 1.0))
         ax.legend(loc="upper right", fontsize=8)
         ax.set_title("model ladder")
-        fig = fig or ax.figure
-        if path is not None:
-            fig.savefig(path, dpi=120)
-        return fig
+        return ax
 
 
 def _false_alarm_text(fa: dict[str, Any]) -> str:

@@ -12,7 +12,8 @@ import numpy as np
 
 from ._driven import DrivenJoint
 from ._driven_problem import DrivenData, DrivenProblem, JointProblem, build_driven_problem
-from ._driven_result import DrivenFitResult, analyse_driven
+from ._driven_analysis import analyse_driven
+from ._driven_result import DrivenFitResult
 from ._driven_starts import _coulomb_effects, _start_values, log_scales
 from ._errors import FitError
 from ._io import Log, read_log
@@ -121,7 +122,7 @@ def _with_scales(joint: DrivenJoint, data: DrivenData) -> DrivenJoint:
 
 def _data_cost(problem, u) -> float:
     """χ² of the data rows (the weak-prior rows left out), in units of the quantization σ."""
-    from ._driven_result import _residuals
+    from ._driven_evaluate import _residuals
 
     r = np.asarray(_residuals(problem, jnp.asarray(u)))[: -problem.n_physical or None]
     return float(r @ r) * float(problem.noise_scale) ** 2
@@ -439,7 +440,7 @@ MODEL_ERROR_RATIO = 3.0
 
 def _scatter_ratio(problem, u) -> float:
     """RMS of the weighted WG residuals in units of the current σ."""
-    from ._driven_result import _simulate
+    from ._driven_evaluate import _simulate
 
     _, sim = _simulate(problem, jnp.asarray(u))
     w = np.asarray(problem.weight)
@@ -448,7 +449,7 @@ def _scatter_ratio(problem, u) -> float:
 
 
 def _window_directions(problem: DrivenProblem, u, data: DrivenData) -> np.ndarray:
-    from ._driven_result import _simulate
+    from ._driven_evaluate import _simulate
 
     _, sim = _simulate(problem, u)
     s = np.asarray(sim["output_direction"])

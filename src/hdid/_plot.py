@@ -1,31 +1,69 @@
-"""Measured-vs-model figure for a fit."""
+"""Figures of a fit and of its posterior, and the one convention every hdid figure follows.
+
+Every figure is ``f(result, *, ax=None) -> Axes`` (lmfit's ``plot(ax=None)``): it draws
+into the axes it is given (one Axes, or an array of them for a multi-panel figure) and
+returns them; without ``ax`` it makes a new figure through pyplot, so a notebook or a
+window shows it. It never saves and never chooses a backend. To save,
+``save_figure(ax, path)``; inside ``with bare_figures():`` new figures are made without
+pyplot (the CLI: figures that are only written to a file touch no backend at all).
+"""
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+
 import numpy as np
+
+_BARE = contextvars.ContextVar("hdid_bare_figures", default=False)
+
+
+@contextlib.contextmanager
+def bare_figures():
+    """New figures inside this block are bare :class:`~matplotlib.figure.Figure` objects,
+    made without pyplot: nothing is shown, no backend is chosen or touched (for figures
+    that are only saved)."""
+    token = _BARE.set(True)
+    try:
+        yield
+    finally:
+        _BARE.reset(token)
+
+
+def new_figure(**kw):
+    """A new figure: through pyplot (shown in a notebook or a window), or a bare one
+    inside :func:`bare_figures`."""
+    if _BARE.get():
+        from matplotlib.figure import Figure
+
+        return Figure(**kw)
+    import matplotlib.pyplot as plt
+
+    return plt.figure(**kw)
+
+
+def figure_of(ax):
+    """The figure an Axes, or an array of Axes, belongs to."""
+    first = ax if hasattr(ax, "figure") else np.asarray(ax, dtype=object).flat[0]
+    return first.figure
+
+
+def save_figure(ax, path, dpi: int = 110) -> None:
+    """Save the figure ``ax`` (an Axes or an array of them, as a plot function returned
+    them) belongs to; the format follows the file's suffix."""
+    figure_of(ax).savefig(path, dpi=dpi)
 
 
 #: Runs per row of the fit figure; more runs wrap into further rows.
 RUNS_PER_ROW = 4
 
 
-def _new_figure(plt, **kw):
-    """A figure: through pyplot when given (shown in a notebook or a window), else a bare
-    :class:`~matplotlib.figure.Figure` (only saved: no backend is chosen or touched)."""
-    if plt is not None:
-        return plt.figure(**kw)
-    from matplotlib.figure import Figure
-
-    return Figure(**kw)
-
-
-def _fit_axes(plt, R: int):
+def _fit_axes(R: int):
     """A new figure with a (2, R) array of axes: per run the angle above its residual,
-    at most RUNS_PER_ROW runs side by side (more wrap into rows). ``plt``: pyplot, or
-    None for a figure that is only saved."""
+    at most RUNS_PER_ROW runs side by side (more wrap into rows)."""
     ncol = min(R, RUNS_PER_ROW)
     nrow = -(-R // ncol)
-    fig = _new_figure(plt, figsize=(3.2 * ncol + 1, 5.2 * nrow))
+    fig = new_figure(figsize=(3.2 * ncol + 1, 5.2 * nrow))
     gs = fig.add_gridspec(2 * nrow, ncol, height_ratios=[3, 1.3] * nrow)
     axes = np.empty((2, R), dtype=object)
     for i in range(R):
@@ -77,22 +115,19 @@ def _overlay(result, ax, times, meas, model_s, fine, model_fine, sd_fine):
     ax.set_ylabel("WG angle from spring zero [rad]")
     ax.set_title(f"{result.source}: measured (o) and model (–)", fontsize=9)
     ax.legend(fontsize=7)
-    return ax.figure
+    return ax
 
 
-def plot_fit(result, path=None, *, axes=None, fine_rate: float = 20000.0):
+def plot_fit(result, *, ax=None, fine_rate: float = 20000.0):
     """Measured vs model per run (angle from the fitted spring zero, so the stick band is
     centred on 0) with the model's ±2σ confidence band (:meth:`FitResult.predict_std`),
     and the residual in encoder counts below it (in the estimated noise σ for readings on
     no grid), where the same band is drawn about 0.
-    ``axes``: a ``(2, R)`` array of axes, or one Axes (all runs overlaid, no residuals).
-    With ``path`` and no ``axes`` the figure is only saved: it is made without pyplot, so
-    no backend is chosen and a notebook's stays as it is."""
+    ``ax``: a ``(2, R)`` array of axes, or one Axes (all runs overlaid, no residuals); a
+    new figure otherwise. Returns the axes drawn into (the ``(2, R)`` array, or the one Axes).
+    """
     result._need_log("plot()")
-    if path is None or axes is not None:
-        import matplotlib.pyplot as plt
-    else:
-        plt = None
+    axes = ax
     prob = result.problem
     times = np.asarray(prob.times)
     meas = np.asarray(prob.theta)
@@ -104,7 +139,7 @@ def plot_fit(result, path=None, *, axes=None, fine_rate: float = 20000.0):
             from ._errors import HdidError
 
             raise HdidError(
-                f"axes: this fit has {R} run(s), so give a (2, {R}) array of axes (angle above, "
+                f"ax: this fit has {R} run(s), so give a (2, {R}) array of axes (angle above, "
                 f"residual below, one column per run) or a single Axes (runs overlaid); got "
                 f"{grid.size} axes of shape {grid.shape}"
             )
@@ -114,12 +149,9 @@ def plot_fit(result, path=None, *, axes=None, fine_rate: float = 20000.0):
     model_s = result.predict()  # compiled by the fit already
     model_fine, sd_fine = result._predict_with_std(fine)
     if one:
-        fig = _overlay(result, axes, times, meas, model_s, fine, model_fine, sd_fine)
-        if path is not None:
-            fig.savefig(path, dpi=110)
-        return fig
+        return _overlay(result, axes, times, meas, model_s, fine, model_fine, sd_fine)
     if axes is None:
-        fig, axes = _fit_axes(plt, R)
+        fig, axes = _fit_axes(R)
     else:
         axes = grid
         fig = axes[0, 0].figure
@@ -173,12 +205,10 @@ def plot_fit(result, path=None, *, axes=None, fine_rate: float = 20000.0):
         fontsize=10,
     )
     fig.tight_layout()
-    if path is not None:
-        fig.savefig(path, dpi=110)
-    return fig
+    return axes
 
 
-def plot_predictive(post, path=None, *, n_draws: int = 100, axes=None, seed: int = 0):
+def plot_predictive(post, *, ax=None, n_draws: int = 100, seed: int = 0):
     """Posterior-predictive check of each measured run, on two scales.
 
     Top row: the readings and the model's 90 % / 50 % posterior band at full scale (there
@@ -188,14 +218,12 @@ def plot_predictive(post, path=None, *, n_draws: int = 100, axes=None, seed: int
     (dashed: a draw of the model plus its noise ``σ_n`` and the rounding ``q²/12``), so a
     reading outside the dashed lines is one the posterior does not expect.
 
-    ``axes``: ``(2, R)`` for both rows, or ``R`` axes for the residual row only.
+    ``ax``: ``(2, R)`` for both rows, or ``R`` axes for the residual row only; a new
+    figure otherwise. Returns the axes drawn into.
     """
     import jax.numpy as jnp
 
-    if path is None or axes is not None:
-        import matplotlib.pyplot as plt
-    else:  # only saved: no pyplot, no backend chosen
-        plt = None
+    axes = ax
 
     from ._evaluate import predict_rows as _predict_batch
 
@@ -217,7 +245,7 @@ def plot_predictive(post, path=None, *, n_draws: int = 100, axes=None, seed: int
     var = np.exp(2 * draws[:, -1])[:, None, None] + (q**2 / 12.0 if fit.resolution_known else 0.0)
     readings = pred_s + np.sqrt(var) * rng.standard_normal(pred_s.shape)
     if axes is None:
-        fig = _new_figure(plt, figsize=(3.2 * R + 1, 6.2))
+        fig = new_figure(figsize=(3.2 * R + 1, 6.2))
         axes = fig.subplots(2, R, squeeze=False, sharex="col")
         top, bottom = axes[0], axes[1]
     else:
@@ -227,7 +255,7 @@ def plot_predictive(post, path=None, *, n_draws: int = 100, axes=None, seed: int
         elif axes.ndim == 1 and axes.size == R:
             top, bottom = [None] * R, axes
         else:
-            raise ValueError(f"axes: {R} (residual row) or shape (2, {R}) (both rows), "
+            raise ValueError(f"ax: {R} (residual row) or shape (2, {R}) (both rows), "
                              f"not {axes.shape}")
         fig = bottom[0].figure
     for i, run in enumerate(fit.runs):
@@ -267,22 +295,16 @@ def plot_predictive(post, path=None, *, n_draws: int = 100, axes=None, seed: int
     fig.suptitle(f"{fit.source}: posterior predictive ({len(idx)} draws; bottom: minus the "
                  "posterior-median model)", fontsize=10)
     fig.tight_layout()
-    if path is not None:
-        fig.savefig(path, dpi=110)
-    return fig
+    return axes
 
 
-def plot_band(post, path=None, *, ax=None):
-    """Posterior of the stick-band edges beside the rest points actually logged."""
-    if path is None or ax is not None:
-        import matplotlib.pyplot as plt
-    else:  # only saved: no pyplot, no backend chosen
-        plt = None
-
+def plot_band(post, *, ax=None):
+    """Posterior of the stick-band edges beside the rest points actually logged. Returns
+    the Axes."""
     fit = post.fit
     hw = post.derived["stick_band_halfwidth_rad"]
     if ax is None:
-        fig = _new_figure(plt, figsize=(6.5, 3.4))
+        fig = new_figure(figsize=(6.5, 3.4))
         ax = fig.subplots()
     else:
         fig = ax.figure
@@ -299,6 +321,4 @@ def plot_band(post, path=None, *, ax=None):
     ax.set_yticks([])
     ax.legend(fontsize=7)
     fig.tight_layout()
-    if path is not None:
-        fig.savefig(path, dpi=110)
-    return fig
+    return ax

@@ -277,23 +277,21 @@ class FitResult:
                 "hdid.fit(log, model=result.model, start_from_model=True)"
             )
 
-    def plot(self, path=None, *, axes=None, fine_rate: float = 20000.0):
+    def plot(self, *, ax=None, fine_rate: float = 20000.0):
         """Measured vs model for every run (top) with residuals in counts (bottom); the
-        model carries its ±2σ confidence band (:meth:`predict_std`). Returns the figure.
+        model carries its ±2σ confidence band (:meth:`predict_std`). Returns the axes drawn
+        into; never saves (``hdid.save_figure(ax, "fit.png")``) or chooses a backend.
 
         Parameters
         ----------
-        path:
-            Save the figure here (PNG, PDF, …) if given. Without ``axes`` the figure is then
-            made without pyplot: no backend is chosen, nothing is shown.
-        axes:
+        ax:
             ``(2, R)`` array of matplotlib axes to draw into (angle above, residual below,
             one column per run), or one Axes (every run's release-to-rest stretch overlaid,
             no residuals); a new figure otherwise.
         """
         from ._plot import plot_fit
 
-        return plot_fit(self, path=path, axes=axes, fine_rate=fine_rate)
+        return plot_fit(self, ax=ax, fine_rate=fine_rate)
 
     # -- residual views (see hdid._residuals) -------------------------------------------
     def residuals(self):
@@ -308,8 +306,9 @@ class FitResult:
 
         return whiteness(self, max_lag)
 
-    def plot_residuals(self, path=None, *, axes=None):
-        """Residual vs time, WG angle, velocity, deflection; ACF; spectrum (2×3 figure)."""
+    def plot_residuals(self, *, ax=None):
+        """Residual vs time, WG angle, velocity, deflection; ACF; spectrum (2×3 axes,
+        returned)."""
         from ._residuals import plot_residuals
 
-        return plot_residuals(self, path=path, axes=axes)
+        return plot_residuals(self, ax=ax)

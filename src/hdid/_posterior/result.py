@@ -187,8 +187,10 @@ class PosteriorResult:
         """Write the chains as arviz NetCDF (reopen with ``arviz.from_netcdf``)."""
         self.to_inference_data().to_netcdf(str(path))
 
-    def plot_corner(self, path=None, names=None, fig=None):
-        """Corner plot of the free parameters (and the stick-band half-width).
+    def plot_corner(self, names=None, *, ax=None):
+        """Corner plot of the free parameters (and the stick-band half-width). Draws into
+        ``ax`` (a K×K array of axes, K = len(names); a new figure without it) and returns
+        the K×K axes.
 
         Each axis is in the parameter's unit with its power of ten in the label (no
         matplotlib offset text, which overlapped between panels); the least-squares optimum
@@ -218,6 +220,14 @@ class PosteriorResult:
                 ref = self.fit.derived[n][0]
             marks.append(None if ref is None else float(ref) * f)
         data = np.column_stack(cols)
+        from .._plot import figure_of, new_figure
+
+        K = len(cols)
+        if ax is None:
+            fig = new_figure(figsize=(2.0 * K + 1, 2.0 * K + 1))
+            fig.subplots(K, K)
+        else:
+            fig = figure_of(ax)
         fig = corner.corner(data, labels=labels, quantiles=[0.16, 0.5, 0.84], fig=fig,
                             show_titles=True, title_fmt=".3g", truths=marks,
                             truth_color="C1", max_n_ticks=3, label_kwargs={"fontsize": 9},
@@ -235,18 +245,19 @@ class PosteriorResult:
             name, what = self.convergence.worst if self.convergence is not None else ("?", "")
             fig.text(0.5, 0.99, f"NOT CONVERGED (worst: {name}, {what}) — intervals unreliable",
                      color="C3", ha="center", va="top", fontsize=11, weight="bold")
-        if path is not None:
-            fig.savefig(path, dpi=90)
-        return fig
+        return np.asarray(fig.axes, dtype=object).reshape(K, K)
 
-    def plot_predictive(self, path=None, n_draws: int = 100, axes=None, seed: int = 0):
+    def plot_predictive(self, *, ax=None, n_draws: int = 100, seed: int = 0):
+        """Posterior-predictive check of each run (:func:`hdid._plot.plot_predictive`);
+        returns the axes."""
         from .._plot import plot_predictive
 
-        return plot_predictive(self, path=path, n_draws=n_draws, axes=axes, seed=seed)
+        return plot_predictive(self, ax=ax, n_draws=n_draws, seed=seed)
 
-    def plot_band(self, path=None, ax=None):
+    def plot_band(self, *, ax=None):
+        """The stick band's posterior beside the logged rest points; returns the Axes."""
         from .._plot import plot_band
 
-        return plot_band(self, path=path, ax=ax)
+        return plot_band(self, ax=ax)
 
 

@@ -48,6 +48,7 @@ def diagnose_cmd(log, json_out, plot_out, residuals_out, candidates, steps, iner
     from .. import _io
     from .._diagnose import diagnose
     from .._errors import HdidError
+    from .._plot import bare_figures, save_figure
 
     try:
         data = _io.read_log(log_path, counts_per_rev=counts_per_rev, resolution=resolution)
@@ -68,10 +69,12 @@ def diagnose_cmd(log, json_out, plot_out, residuals_out, candidates, steps, iner
         raise _Fail.from_error(exc) from None
     _emit(result.report(), _with_provenance(result.to_dict(), result.base, log_path), json_out, quiet)
     if plot_out:
-        result.plot_ladder(plot_out)
+        with bare_figures():
+            save_figure(result.plot_ladder(), plot_out, dpi=120)
         if not quiet:
             click.echo(f"wrote {plot_out}")
     if residuals_out:
-        result.base.plot_residuals(residuals_out)
+        with bare_figures():
+            save_figure(result.base.plot_residuals(), residuals_out)
         if not quiet:
             click.echo(f"wrote {residuals_out}")

@@ -111,6 +111,7 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
 
     from .. import _fit, _io
     from .._errors import HdidError
+    from .._plot import bare_figures, save_figure
     from .._saved import sha256
 
     try:
@@ -158,14 +159,16 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
         if chains_out:
             post.save(chains_out)
         if corner_out:
-            post.plot_corner(corner_out)
+            with bare_figures():
+                save_figure(post.plot_corner(), corner_out, dpi=90)
     if json_out:
         _write_text(json_out, json.dumps(_finite(summary), indent=2) + "\n", "--json")
         if not quiet:
             click.echo(f"\nwrote {json_out}")
     if plot_out:
         phases.start(f"drawing {plot_out} (the model's band compiles once, ~10 s)")
-        result.plot(plot_out)
+        with bare_figures():
+            save_figure(result.plot(), plot_out)
         phases.stop()
         if not quiet:
             click.echo(f"wrote {plot_out}")
@@ -213,21 +216,17 @@ def _fit_driven(paths, model, json_out, plot_out, fix, counts_per_rev, driven_op
     result.input_sha256, result.options = digests, options
     _emit(result.report(), result.to_dict(), json_out, quiet)
     if plot_out:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        from matplotlib.figure import Figure
 
         has_kin = result.data.has_output
-        fig, axes = plt.subplots(3 if has_kin else 2, 1, figsize=(9, 9 if has_kin else 6),
-                                 squeeze=False,
-                                 gridspec_kw={"height_ratios": [2, 1, 2] if has_kin else [2, 1]})
-        result.plot(ax=axes[0, 0], residual_ax=axes[1, 0])
+        fig = Figure(figsize=(9, 9 if has_kin else 6))  # only saved: no pyplot, no backend
+        axes = fig.subplots(3 if has_kin else 2, 1, squeeze=False,
+                            gridspec_kw={"height_ratios": [2, 1, 2] if has_kin else [2, 1]})
+        result.plot(ax=axes[:2, 0])
         if has_kin:
             result.plot_kinematic_error(ax=axes[2, 0])
         fig.tight_layout()
         fig.savefig(plot_out, dpi=120)
-        plt.close(fig)
         if not quiet:
             click.echo(f"wrote {plot_out}")
 
