@@ -2,9 +2,10 @@
 file stem (the library's own, ``hdid/effects/<key>.py``) or an installed package's module
 under the ``hdid.effects`` entry-point group. Here a plugin package is "installed" on
 ``PYTHONPATH`` (a ``.dist-info`` with its entry point beside the module) and seen by
-``--add``'s help, by ``hdid.effects.library`` and by a fit, with no other edit.
-(Still to come, issue 20: diagnose's candidates, derived quantities and the posterior's
-coordinates read from the registry too.)
+``--add``'s help, by ``hdid.effects.library``, by a fit and in the fit's derived table (the
+quantities the effect declares, with their standard errors), with no other edit.
+(Still to come, issue 20: diagnose's candidates and the posterior's coordinates read from
+the registry too.)
 """
 
 from __future__ import annotations
@@ -43,6 +44,9 @@ class Cogging(hdid.AbstractEffect):
     @classmethod
     def start_from(cls, values):
         return cls(amplitude=values.get("amplitude", 0.0))
+
+    def derived(self, inertia, k_wg):
+        return {"cogging/inertia": self.amplitude / inertia}
 
     def torque(self, motion, state):
         return -self.amplitude * jnp.sin(24.0 * motion.theta)
@@ -89,6 +93,13 @@ def test_a_plugin_package_adds_an_effect_everywhere(plugin, tmp_path):
     d = json.loads((tmp_path / "fit.json").read_text())
     assert "amplitude" in d["parameters"]
     assert any(e["class"] == "Cogging" for e in d["model"]["effects"])
+    # the quantity it declares is in the derived table, with its delta-method std
+    # (amplitude / inertia: the same relative error as the amplitude, the inertia fixed)
+    amp = d["parameters"]["amplitude"]
+    per_i = d["derived"]["cogging/inertia"]
+    inertia = d["parameters"]["inertia"]["value"] if "inertia" in d["parameters"] else d["model"]["inertia"]
+    assert per_i["value"] == pytest.approx(amp["value"] / inertia, rel=1e-9)
+    assert per_i["std"] == pytest.approx(amp["std"] / inertia, rel=1e-6)
 
 
 def test_a_plugin_may_not_take_a_library_key(tmp_path):

@@ -50,7 +50,7 @@ from ._compile_clock import _clock
 from ._config import float64
 from ._errors import HdidError
 from ._fit import _finish, _Setup, _setup, nested_check
-from ._identifiability import band_limit, derived_quantities
+from ._derived import band_limit, derived_quantities
 from ._io import Log, read_log
 from ._lm import LMState, _lm_lanes, _Schedule, lanes_vmap
 from ._nested import CHECK_ABOVE_FLOOR, needs_check

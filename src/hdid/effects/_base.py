@@ -236,6 +236,17 @@ class AbstractEffect(eqx.Module):
         del theta_old, theta_new
         return state
 
+    def derived(self, inertia: Array, k_wg: Array) -> dict[str, Array]:
+        """Quantities this effect adds to a fit's derived table (``result.derived``, the
+        posterior's and the batch summary's), as JAX scalars computed from its parameters
+        and differentiable in them: their standard errors follow by the delta method.
+
+        ``inertia`` [kg m²] is the model's; ``k_wg`` [N m/rad] its small-swing restoring
+        stiffness at the logged axis (≤ 0 where there is none). Default: nothing.
+        """
+        del inertia, k_wg
+        return {}
+
     def values(self) -> dict[str, Any]:
         """Current parameter values by name."""
         return {p.name: getattr(self, p.name) for p in self.parameters}

@@ -39,6 +39,12 @@ class CubicStiffness(AbstractEffect):
         s = StartValues.of(values)
         return cls(k1=s.k1, k2=s.k2)
 
+    def derived(self, inertia, k_wg):
+        """Stiffness per unit inertia: what a free-motion log fixes when the inertia is
+        only assumed (the motion depends on ``k/I``)."""
+        del k_wg
+        return {"k1/inertia": self.k1 / inertia, "k2/inertia": self.k2 / inertia}
+
     def spring_torque(self, twist: Float[Array, ""]) -> Float[Array, ""]:
         """Output-side torque ``T_k`` [N m] at output twist ``twist`` [rad]."""
         return self.k1 * twist + self.k2 * twist**3

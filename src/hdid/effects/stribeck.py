@@ -52,6 +52,12 @@ class StribeckFriction(AbstractEffect):
         s = StartValues.of(values)
         return cls(**s.stribeck)
 
+    def derived(self, inertia, k_wg):
+        """Friction torques per unit inertia (decelerations, what the motion fixes when
+        the inertia is only assumed)."""
+        del k_wg
+        return {"tau_c/inertia": self.tau_c / inertia, "tau_s/inertia": self.tau_s / inertia}
+
     def sliding_magnitude(self, omega: Float[Array, ""]) -> Float[Array, ""]:
         """Friction magnitude [N m] while sliding at ``omega`` [rad/s]."""
         x = positive_power(jnp.abs(omega) / self.v_s, self.delta)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
+import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ._base import AbstractEffect, Motion, Parameter, StartValues
@@ -30,6 +31,14 @@ class ViscousFriction(AbstractEffect):
         """Starting values for ``--add viscous`` (see :func:`hdid.effects.library`)."""
         s = StartValues.of(values)
         return cls(c_v=values.get("c_v", 2e-5))
+
+    def derived(self, inertia, k_wg):
+        """``c_v`` per unit inertia, and the damping ratio ``ζ = c_v / (2·√(k_wg·I))`` of
+        the small-swing oscillator (NaN without a restoring stiffness)."""
+        ok = k_wg > 0
+        safe = jnp.where(ok, k_wg, 1.0)
+        return {"c_v/inertia": self.c_v / inertia,
+                "damping_ratio": jnp.where(ok, self.c_v / (2 * jnp.sqrt(safe * inertia)), jnp.nan)}
 
     def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
         del state
