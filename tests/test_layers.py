@@ -34,7 +34,7 @@ LAYERS = [
     {"_summaries", "_saved", "_plot", "_residual_frame", "_whiteness", "_residual_plots",
      "_residuals", "_result", "_driven_result"},
     # fitting and the analysis at the optimum
-    {"_identifiability", "_lm", "_starts", "_fit", "_nested", "_vfit", "_batch", "_driven_fit",
+    {"_identifiability", "_lm", "_starts", "_fit", "_nested", "_vfit", "_vfit_lanes", "_batch", "_driven_fit",
      "_driven_starts", "_driven_analysis", "_refit"},
     # posterior and diagnosis
     {"_posterior", "_diagnose", "_diagnose_candidates", "_diagnose_result", "_diagnose_verdict",
@@ -49,7 +49,6 @@ MAX_LINES = 500
 #: Modules still over ``MAX_LINES``: their size today is their ceiling. Only shrinks.
 LONG = {
     "_diagnose": 551,
-    "_vfit": 600, "reference": 520,
 }
 
 

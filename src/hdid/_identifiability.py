@@ -31,7 +31,6 @@ HIGH_CORRELATION = 0.95
 STRIBECK_VISIBLE = 5.0
 
 
-
 #: A run whose rest reading differs from its hold reading by more than this many encoder
 #: counts moved (one count of flicker is not motion).
 MOVED_COUNTS = 1.5
