@@ -147,3 +147,45 @@ def test_fit_with_a_user_effect_recovers_it(tmp_path):
     # quantization bias seen on friction terms) and the residual at the floor.
     assert abs(a.value - 4e-4) < 3 * a.std + 0.05 * 4e-4, (a.value, a.std)
     assert res.rms_residual_rad < 1.3 * res.quantization_floor_rad
+
+
+def test_the_spring_is_found_by_its_type_not_by_a_name():
+    """Springs are an abstract type (issue 20: no code dispatches on the slot string
+    "stiffness"): every library spring is an AbstractSpring, the model finds its spring
+    by type, a pendulum has none, and the driven joint takes a user's spring subclass
+    while refusing an effect that merely calls itself "stiffness"."""
+    from hdid.effects import registry
+
+    springs = {k for k, cls in registry().items() if issubclass(cls, hdid.AbstractSpring)}
+    assert springs == {"stiffness", "backlash", "kinematic_error", "linear_stiffness",
+                       "soft_windup"}
+    base = Model.default()
+    assert isinstance(base.spring, CubicStiffness)
+    values = base.float_values()
+    free_play = base.with_effect(registry()["backlash"].start_from(values))
+    assert type(free_play.spring).__name__ == "FreePlayStiffness"
+    assert base.without("stiffness").spring is None
+
+    class Soft(hdid.AbstractSpring):
+        k: float
+        parameters: ClassVar = (Parameter("k", "N m/rad", "a user's linear spring"),)
+
+        def torque(self, motion, state):
+            return -self.k * motion.theta / motion.ratio**2
+
+    class Impostor(AbstractEffect):
+        k: float
+        name: ClassVar[str] = "stiffness"
+        parameters: ClassVar = (Parameter("k", "N m/rad", "not a spring type"),)
+
+        def torque(self, motion, state):
+            return -self.k * motion.theta / motion.ratio**2
+
+    rest = base.without("stiffness").effects
+    joint = hdid.DrivenJoint(Model(effects=(Soft(k=900.0),) + rest, inertia=7e-7), 0.05,
+                             hdid.PositionalError.zeros(0))
+    # T_k(d) at the output of a linear spring: k·d
+    assert float(joint.spring_torque(1e-3)) == pytest.approx(900.0 * 1e-3, rel=1e-12)
+    with pytest.raises(ValueError, match="AbstractSpring"):
+        hdid.DrivenJoint(Model(effects=(Impostor(k=900.0),) + rest, inertia=7e-7), 0.05,
+                         hdid.PositionalError.zeros(0))

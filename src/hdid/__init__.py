@@ -39,6 +39,7 @@ _LAZY = {
     "FitError": "._errors",
     "HdidError": "._errors",
     "AbstractEffect": ".effects",
+    "AbstractSpring": ".effects",
     "Parameter": ".effects",
     "Scales": ".effects",
     "Motion": ".effects",
@@ -117,6 +118,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from ._simulate import simulate
     from .effects import (
         AbstractEffect,
+        AbstractSpring,
         AsymmetricStribeckFriction,
         AsymmetricViscousFriction,
         CoulombFriction,

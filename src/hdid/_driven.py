@@ -44,7 +44,7 @@ from . import _config  # noqa: F401
 from ._model import Model
 from ._positional import PositionalError
 from ._simulate import DEFAULT_MAX_SUBSTEP, _safe_div, crossing_fraction, rk4
-from .effects import AbstractEffect, Motion, Parameter
+from .effects import AbstractSpring, Motion, Parameter
 
 TAU_FOUT_PARAMETER = Parameter(
     "tau_fout", "N m", "Coulomb friction at the output (bearing + load side), output side"
@@ -60,8 +60,9 @@ class DrivenJoint(eqx.Module):
     Attributes
     ----------
     model:
-        The :class:`~hdid.Model` of the WG side; its effect named ``"stiffness"`` is the
-        spring law ``T_k`` (used for the output twist), its other effects act on the WG.
+        The :class:`~hdid.Model` of the WG side; its spring (:attr:`Model.spring`, an
+        :class:`~hdid.AbstractSpring`) is the law ``T_k`` used for the output twist, its
+        other effects act on the WG.
     tau_fout:
         Coulomb friction torque at the output [N m, output side].
     positional:
@@ -73,12 +74,12 @@ class DrivenJoint(eqx.Module):
     positional: PositionalError
 
     def __check_init__(self):
-        if "stiffness" not in self.model.effect_names:
+        stiff = self.model.spring
+        if stiff is None:
             raise ValueError(
-                "model: a driven joint needs a spring law (an effect named 'stiffness') "
+                "model: a driven joint needs a spring law (an hdid.AbstractSpring effect) "
                 f"for the output twist; the model has {list(self.model.effect_names)}"
             )
-        stiff = self.model.effect("stiffness")
         if stiff.init_state(jnp.zeros(())) is not None:
             raise ValueError(
                 f"model: the stiffness law {type(stiff).__name__} has memory; the driven "
@@ -131,13 +132,13 @@ class DrivenJoint(eqx.Module):
 
     # -- physics ----------------------------------------------------------------------
     @property
-    def spring(self) -> AbstractEffect:
-        return self.model.effect("stiffness")
+    def spring(self) -> AbstractSpring:
+        return self.model.spring
 
     @property
     def wg_model(self) -> Model:
         """The WG-side effects: every effect but the spring (eq. 9's ``τ_din``)."""
-        return self.model.without("stiffness")
+        return self.model.without(self.spring.name)
 
     def spring_torque(self, twist: Float[ArrayLike, "..."]) -> Float[Array, "..."]:
         """``T_k(d)`` [N m, output side] at output twist ``d`` [rad]."""

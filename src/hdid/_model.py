@@ -15,6 +15,7 @@ from jaxtyping import Array, ArrayLike, Float, PyTree
 from . import _config  # noqa: F401  (float64)
 from .effects import (
     AbstractEffect,
+    AbstractSpring,
     CubicStiffness,
     Motion,
     Parameter,
@@ -144,6 +145,12 @@ class Model(eqx.Module):
     @property
     def effect_names(self) -> tuple[str, ...]:
         return tuple(e.name for e in self.effects)
+
+    @property
+    def spring(self) -> AbstractSpring | None:
+        """The model's spring law (the effect that is an :class:`~hdid.AbstractSpring`),
+        or ``None`` (a pendulum, a direct drive with no spring)."""
+        return next((e for e in self.effects if isinstance(e, AbstractSpring)), None)
 
     def effect(self, name: str) -> AbstractEffect:
         for e in self.effects:

@@ -2,6 +2,7 @@
 
 from ._base import (
     AbstractEffect,
+    AbstractSpring,
     Motion,
     Parameter,
     Scales,
@@ -41,6 +42,7 @@ def library(values: dict[str, float]) -> dict[str, AbstractEffect]:
 
 __all__ = [
     "AbstractEffect",
+    "AbstractSpring",
     "AsymmetricStribeckFriction",
     "AsymmetricViscousFriction",
     "CoulombFriction",

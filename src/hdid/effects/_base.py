@@ -252,6 +252,20 @@ class AbstractEffect(eqx.Module):
         return {p.name: getattr(self, p.name) for p in self.parameters}
 
 
+class AbstractSpring(AbstractEffect):
+    """A torsional spring law: the restoring torque of the flexspline's twist.
+
+    A model holds one spring at most: every spring fills the slot ``name = "stiffness"``,
+    so adding one (``--add backlash``) replaces the model's. Code that needs *the* spring
+    finds it by this type (:attr:`hdid.Model.spring`), never by a name: the driven joint
+    reads the output twist through it, and it must then be memoryless
+    (``init_state`` returns ``None``). Subclasses implement :meth:`torque` (at the WG, as
+    every effect) and may offer ``spring_torque(twist)`` at the output.
+    """
+
+    name: ClassVar[str] = "stiffness"
+
+
 def positive_power(x: Array, exponent: Array) -> Array:
     """``x ** exponent`` for ``x >= 0`` with finite derivatives at ``x == 0`` (double-where)."""
     safe = jnp.where(x > 0, x, 1.0)

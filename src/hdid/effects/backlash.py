@@ -7,16 +7,16 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter, StartValues
+from ._base import AbstractSpring, Motion, Parameter, StartValues
 from .stiffness import CubicStiffness
 
 
-class FreePlayStiffness(AbstractEffect):
+class FreePlayStiffness(AbstractSpring):
     r"""Cubic spring with a dead zone: ``T = k1·e + k2·e³``, ``e = sign(d)·max(|d| − b/2N, 0)``.
 
     ``backlash`` is the total free play measured at the wave generator [rad] (at the
     output it is ``backlash / N``). Inside the zone the spring exerts no torque, so the
-    gear coasts on friction alone. It replaces the effect named ``"stiffness"``.
+    gear coasts on friction alone. It replaces the model's spring (:class:`AbstractSpring`).
 
     Residual mark when missing: the approach to rest is too abrupt (the real gear
     coasts without spring torque inside the zone); rest points spread wider than the
@@ -27,7 +27,6 @@ class FreePlayStiffness(AbstractEffect):
     k2: Float[ArrayLike, ""]
     backlash: Float[ArrayLike, ""]
 
-    name: ClassVar[str] = "stiffness"
     key: ClassVar[str] = "backlash"
     parameters: ClassVar[tuple[Parameter, ...]] = CubicStiffness.parameters + (
         Parameter("backlash", "rad", "total free play at the wave generator",

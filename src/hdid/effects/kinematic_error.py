@@ -7,17 +7,17 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter, StartValues
+from ._base import AbstractSpring, Motion, Parameter, StartValues
 from .stiffness import CubicStiffness
 
 
-class KinematicErrorStiffness(AbstractEffect):
+class KinematicErrorStiffness(AbstractSpring):
     r"""Cubic spring whose twist carries the gear's kinematic error (paper eq. 3).
 
     With the output locked the flexspline twist is ``d = θ/N + e(θ)``,
     ``e(θ) = ke_a·sin(n·θ) + ke_b·cos(n·θ)`` [rad, output side], ``n = order`` cycles per
     WG revolution (2 for the elliptical wave generator). The spring's energy gives the WG
-    torque ``−T_k(d)·(1/N + e'(θ))``. Replaces the effect named ``"stiffness"``.
+    torque ``−T_k(d)·(1/N + e'(θ))``. Replaces the model's spring (:class:`AbstractSpring`).
 
     Residual mark when missing: a torque periodic in the WG angle that scales with the
     spring torque. Over a ±0.157 rad swing ``n·θ`` spans only ±0.3 rad for ``n = 2``, so
@@ -32,7 +32,6 @@ class KinematicErrorStiffness(AbstractEffect):
     ke_b: Float[ArrayLike, ""]
     order: Float[ArrayLike, ""] = 2.0
 
-    name: ClassVar[str] = "stiffness"
     key: ClassVar[str] = "kinematic_error"
     parameters: ClassVar[tuple[Parameter, ...]] = CubicStiffness.parameters + (
         Parameter("ke_a", "rad", "sine amplitude of the kinematic error, output side",

@@ -6,15 +6,15 @@ from typing import ClassVar
 
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter, StartValues
+from ._base import AbstractSpring, Motion, Parameter, StartValues
 from .stiffness import CubicStiffness
 
 
-class LinearStiffness(AbstractEffect):
+class LinearStiffness(AbstractSpring):
     r"""Linear spring ``T_k(d) = k1·d`` at the output (``CubicStiffness`` with ``k2 = 0``).
 
     Use it to switch the cubic term off, e.g. to check whether the data need it. Replaces
-    the effect named ``"stiffness"``.
+    the model's spring (:class:`AbstractSpring`).
 
     Residual mark when the cubic term is missing: the large first swings of a release are
     slower in the model than in the gear (a hardening spring speeds them up), so the phase
@@ -23,7 +23,6 @@ class LinearStiffness(AbstractEffect):
 
     k1: Float[ArrayLike, ""]
 
-    name: ClassVar[str] = "stiffness"
     key: ClassVar[str] = "linear_stiffness"
     parameters: ClassVar[tuple[Parameter, ...]] = CubicStiffness.parameters[:1]
 

@@ -7,17 +7,17 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter, StartValues
+from ._base import AbstractSpring, Motion, Parameter, StartValues
 
 
-class ThreeSegmentStiffness(AbstractEffect):
+class ThreeSegmentStiffness(AbstractSpring):
     r"""Piecewise-linear spring of the Harmonic Drive catalogs, output side.
 
     ``T(d) = K1·d`` up to ``T1``, slope ``K2`` up to ``T2 = T1 + dT12``, slope ``K3``
     beyond, odd in the twist ``d = θ/N``; torque on the WG ``−T(d)/N``. The corners sit at
     ``d1 = T1/K1`` and ``d2 = d1 + dT12/K2``. CSF-8-100 catalog: ``T1`` = 0.29 N m,
     ``K1`` = 910, ``T2`` = 0.75 N m, ``K2`` = 1000, ``K3`` = 1200 N m/rad. Replaces the
-    effect named ``"stiffness"``.
+    model's spring (:class:`AbstractSpring`).
 
     Residual mark when missing: a cubic cannot follow a soft centre (``K1 < K2``), so the
     swing period near rest is too short in the cubic model: the phase error grows as the
@@ -31,7 +31,6 @@ class ThreeSegmentStiffness(AbstractEffect):
     T1: Float[ArrayLike, ""]
     dT12: Float[ArrayLike, ""]
 
-    name: ClassVar[str] = "stiffness"
     key: ClassVar[str] = "soft_windup"
     parameters: ClassVar[tuple[Parameter, ...]] = (
         # the CSF-8 catalog's segments relative to its cubic fit (physics notes)

@@ -7,10 +7,10 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter, StartValues
+from ._base import AbstractSpring, Motion, Parameter, StartValues
 
 
-class CubicStiffness(AbstractEffect):
+class CubicStiffness(AbstractSpring):
     r"""Nonlinear torsional spring, ``T_k(d) = k1·d + k2·d³`` at the output.
 
     The output is locked, so the twist is ``d = theta / N`` and the spring torque
@@ -23,7 +23,6 @@ class CubicStiffness(AbstractEffect):
     k1: Float[ArrayLike, ""]
     k2: Float[ArrayLike, ""]
 
-    name: ClassVar[str] = "stiffness"
     key: ClassVar[str] = "stiffness"
     parameters: ClassVar[tuple[Parameter, ...]] = (
         Parameter("k1", "N m/rad", "linear torsional stiffness, output side",
