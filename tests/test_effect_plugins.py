@@ -35,11 +35,10 @@ import hdid
 class Cogging(hdid.AbstractEffect):
     """Cogging: ``T = −a·sin(24 θ)`` [N m]. Residual mark: a 24-per-turn ripple."""
 
-    amplitude: float
+    amplitude: float = hdid.effects.parameter("N m", "cogging torque", transform="identity",
+                                              scale=1e-4)
     name: ClassVar[str] = "cogging"
     key: ClassVar[str] = "cogging"
-    parameters: ClassVar = (hdid.Parameter("amplitude", "N m", "cogging torque",
-                                           transform="identity", scale=1e-4),)
 
     @classmethod
     def start_from(cls, values):

@@ -189,3 +189,39 @@ def test_the_spring_is_found_by_its_type_not_by_a_name():
     with pytest.raises(ValueError, match="AbstractSpring"):
         hdid.DrivenJoint(Model(effects=(Impostor(k=900.0),) + rest, inertia=7e-7), 0.05,
                          hdid.PositionalError.zeros(0))
+
+
+def test_parameters_are_declared_once_on_their_fields():
+    """A parameter is declared once, as its field (issue 20): ``parameters`` is collected
+    from the fields in their order, a reused declaration keeps its metadata, and declaring
+    a parameter twice (field and class variable) is refused."""
+    import dataclasses
+
+    from hdid.effects import FreePlayStiffness, parameter, registry
+
+    for key, cls in registry().items():
+        fields = [f.name for f in dataclasses.fields(cls)]
+        assert "parameters" not in fields, key  # a class variable, not a field
+        assert [p.name for p in cls.parameters] == [n for n in fields if n in
+                                                    {p.name for p in cls.parameters}], key
+    assert FreePlayStiffness.parameters[:2] == CubicStiffness.parameters
+
+    class Drag(AbstractEffect):
+        c_d: float = parameter("N m s^2/rad^2", "quadratic drag", start=lambda s: 1e-9)
+        name: ClassVar[str] = "drag"
+
+        def torque(self, motion, state):
+            return -self.c_d * motion.omega * jnp.abs(motion.omega)
+
+    (p,) = Drag.parameters
+    assert (p.name, p.unit, p.transform) == ("c_d", "N m s^2/rad^2", "log")
+    model = Model.default().with_effect(Drag(c_d=2e-9))
+    assert model.parameter_specs()["c_d"] is p and float(model.values()["c_d"]) == 2e-9
+    with pytest.raises(TypeError, match="declare each parameter once"):
+        class Twice(AbstractEffect):
+            c_d: float = parameter("N m s^2/rad^2", "quadratic drag")
+            name: ClassVar[str] = "twice"
+            parameters: ClassVar = (Parameter("c_d", "N m s^2/rad^2", "quadratic drag"),)
+
+            def torque(self, motion, state):
+                return jnp.zeros(())

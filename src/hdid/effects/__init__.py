@@ -8,7 +8,9 @@ from ._base import (
     Scales,
     StartValues,
     order_of_magnitude,
+    parameter,
     positive_power,
+    same_parameter,
 )
 from ._registry import keys, registry
 from .asymmetric_friction import AsymmetricStribeckFriction
@@ -65,5 +67,7 @@ __all__ = [
     "ThreeSegmentStiffness",
     "TorqueOffset",
     "ViscousFriction",
+    "parameter",
     "positive_power",
+    "same_parameter",
 ]

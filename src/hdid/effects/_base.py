@@ -130,6 +130,36 @@ class Parameter:
         return dataclasses.replace(self, scale=value)
 
 
+#: Key of a field's metadata that makes it a declared parameter (:func:`parameter`).
+PARAMETER_METADATA = "hdid_parameter"
+
+
+def parameter(unit: str, doc: str, *, transform: str | tuple[str, float, float] = "log",
+              prior: tuple[float | None, float] | None = None,
+              scale: float | Callable[[Scales], float] = 1.0,
+              start: Callable[[Scales], float] | None = None):
+    """Declare an effect's physical parameter once, as the field that holds its value::
+
+        c_v: Float[ArrayLike, ""] = parameter("N m s/rad", "viscous coefficient",
+                                              start=lambda s: 0.05 * s.c_crit)
+
+    The arguments are those of :class:`Parameter` (its ``name`` is the field's); the
+    effect's ``parameters`` are collected from these fields, in their order.
+    """
+    meta = dict(unit=unit, doc=doc, transform=transform, prior=prior, scale=scale, start=start)
+    return eqx.field(metadata={PARAMETER_METADATA: meta})
+
+
+def same_parameter(effect: type, name: str):
+    """The declaration of another effect's parameter ``name``, reused (a backlash spring
+    shares the cubic spring's ``k1`` and ``k2``: the same unit, doc, transform and start)."""
+    p = next((p for p in effect.parameters if p.name == name), None)
+    if p is None:
+        raise TypeError(f"{effect.__name__} declares no parameter {name!r}")
+    return parameter(p.unit, p.doc, transform=p.transform, prior=p.prior, scale=p.scale,
+                     start=p.start)
+
+
 class Motion(eqx.Module):
     """What an effect sees of the wave generator at one instant.
 
@@ -180,19 +210,20 @@ class StartValues(NamedTuple):
 class AbstractEffect(eqx.Module):
     """A physical effect acting on the wave generator.
 
-    Subclasses declare their parameters as array fields *and* in the class variable
-    ``parameters`` (same names, with units and transforms), give themselves a ``name``,
-    and implement :meth:`torque`. Friction-like effects also implement
+    Subclasses declare each parameter once, as a field made by :func:`parameter` (its
+    unit, doc, transform, prior and start; the class variable ``parameters`` is collected
+    from these fields), give themselves a ``name`` (the slot it fills: an effect of the same
+    name replaces it) and implement :meth:`torque`. (An effect may instead list
+    ``parameters`` itself, as :class:`Parameter` objects named like its fields.) Friction-like effects also implement
     :meth:`holding_torque`; effects with memory (hysteresis elements, friction state)
     implement :meth:`init_state` / :meth:`update_state`.
 
     A user-defined effect is one file::
 
         class Cogging(hdid.AbstractEffect):
-            amplitude: float | jax.Array
+            amplitude: float | jax.Array = hdid.effects.parameter(
+                "N m", "cogging torque", transform="identity", scale=1e-3)
             name: ClassVar[str] = "cogging"
-            parameters: ClassVar = (hdid.Parameter("amplitude", "N m", "cogging torque",
-                                                   transform="identity", scale=1e-3),)
             def torque(self, motion, state):
                 return -self.amplitude * jnp.sin(24 * motion.theta)
     """
@@ -202,6 +233,20 @@ class AbstractEffect(eqx.Module):
     #: The ``--add`` name of a library or plugin effect: its module's file stem (or its
     #: ``hdid.effects`` entry point's name). ``None``: not offered by ``--add``.
     key: ClassVar[str | None] = None
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        own = tuple(
+            Parameter(name, **f.metadata[PARAMETER_METADATA]) for name, f in vars(cls).items()
+            if isinstance(f, dataclasses.Field) and PARAMETER_METADATA in f.metadata)
+        if own and "parameters" in vars(cls):
+            raise TypeError(f"{cls.__name__}: declare each parameter once, as a field made by "
+                            "hdid.effects.parameter(); drop the `parameters` class variable")
+        if own:
+            cls.parameters = own
+            # a class variable, not a field (an annotation object: dataclasses then need
+            # not resolve a string annotation in the effect's own module)
+            cls.__annotations__["parameters"] = ClassVar[tuple]
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> AbstractEffect:

@@ -6,7 +6,7 @@ from typing import ClassVar
 
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter, StartValues
+from ._base import AbstractEffect, Motion, StartValues, parameter, same_parameter
 from .stribeck import StribeckFriction
 
 
@@ -28,18 +28,16 @@ class AsymmetricStribeckFriction(AbstractEffect):
     the servo on) is the experiment that measures it.
     """
 
-    tau_c: Float[ArrayLike, ""]
-    tau_s: Float[ArrayLike, ""]
-    v_s: Float[ArrayLike, ""]
-    delta: Float[ArrayLike, ""]
-    asym: Float[ArrayLike, ""]
+    tau_c: Float[ArrayLike, ""] = same_parameter(StribeckFriction, "tau_c")
+    tau_s: Float[ArrayLike, ""] = same_parameter(StribeckFriction, "tau_s")
+    v_s: Float[ArrayLike, ""] = same_parameter(StribeckFriction, "v_s")
+    delta: Float[ArrayLike, ""] = same_parameter(StribeckFriction, "delta")
+    asym: Float[ArrayLike, ""] = parameter(
+        "1", "friction asymmetry: +θ is (1+asym), −θ is (1−asym) times",
+        transform=("interval", -0.9, 0.9))
 
     name: ClassVar[str] = "stribeck"
     key: ClassVar[str] = "asymmetric_friction"
-    parameters: ClassVar[tuple[Parameter, ...]] = StribeckFriction.parameters + (
-        Parameter("asym", "1", "friction asymmetry: +θ is (1+asym), −θ is (1−asym) times",
-                  transform=("interval", -0.9, 0.9)),
-    )
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> AsymmetricStribeckFriction:

@@ -6,7 +6,7 @@ from typing import ClassVar
 
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter, StartValues
+from ._base import AbstractEffect, Motion, StartValues, parameter
 
 
 class AsymmetricViscousFriction(AbstractEffect):
@@ -26,17 +26,15 @@ class AsymmetricViscousFriction(AbstractEffect):
     ``c_v`` leaves a residual odd in the velocity that is larger on one side.
     """
 
-    c_vp: Float[ArrayLike, ""]
-    c_vn: Float[ArrayLike, ""]
+    c_vp: Float[ArrayLike, ""] = parameter(
+        "N m s/rad", "viscous friction coefficient sliding in +θ (wave generator)",
+        start=lambda s: 0.05 * s.c_crit)
+    c_vn: Float[ArrayLike, ""] = parameter(
+        "N m s/rad", "viscous friction coefficient sliding in −θ (wave generator)",
+        start=lambda s: 0.05 * s.c_crit)
 
     name: ClassVar[str] = "viscous"
     key: ClassVar[str] = "asymmetric_viscous"
-    parameters: ClassVar[tuple[Parameter, ...]] = (
-        Parameter("c_vp", "N m s/rad", "viscous friction coefficient sliding in +θ (wave generator)",
-                  start=lambda s: 0.05 * s.c_crit),
-        Parameter("c_vn", "N m s/rad", "viscous friction coefficient sliding in −θ (wave generator)",
-                  start=lambda s: 0.05 * s.c_crit),
-    )
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> AsymmetricViscousFriction:

@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractSpring, Motion, Parameter, StartValues
+from ._base import AbstractSpring, Motion, StartValues, parameter, same_parameter
 from .stiffness import CubicStiffness
 
 
@@ -23,15 +23,13 @@ class FreePlayStiffness(AbstractSpring):
     stick band alone explains.
     """
 
-    k1: Float[ArrayLike, ""]
-    k2: Float[ArrayLike, ""]
-    backlash: Float[ArrayLike, ""]
+    k1: Float[ArrayLike, ""] = same_parameter(CubicStiffness, "k1")
+    k2: Float[ArrayLike, ""] = same_parameter(CubicStiffness, "k2")
+    backlash: Float[ArrayLike, ""] = parameter(
+        "rad", "total free play at the wave generator",
+        start=lambda s: 0.06 * s.amplitude)
 
     key: ClassVar[str] = "backlash"
-    parameters: ClassVar[tuple[Parameter, ...]] = CubicStiffness.parameters + (
-        Parameter("backlash", "rad", "total free play at the wave generator",
-                  start=lambda s: 0.06 * s.amplitude),
-    )
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> FreePlayStiffness:

@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter, StartValues
+from ._base import AbstractEffect, Motion, StartValues, parameter, same_parameter
 from .stribeck import StribeckFriction
 
 
@@ -28,11 +28,10 @@ class CoulombFriction(AbstractEffect):
     and a residual that peaks at the slow ends of each swing where the Stribeck rise acts.
     """
 
-    tau_c: Float[ArrayLike, ""]
+    tau_c: Float[ArrayLike, ""] = same_parameter(StribeckFriction, "tau_c")
 
     name: ClassVar[str] = "stribeck"
     key: ClassVar[str] = "coulomb"
-    parameters: ClassVar[tuple[Parameter, ...]] = StribeckFriction.parameters[:1]
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> CoulombFriction:

@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter, StartValues
+from ._base import AbstractEffect, Motion, StartValues, parameter
 
 
 class Gravity(AbstractEffect):
@@ -32,14 +32,12 @@ class Gravity(AbstractEffect):
     the first, large ones by a phase error that grows with the release angle.
     """
 
-    mgl: Float[ArrayLike, ""]
+    mgl: Float[ArrayLike, ""] = parameter(
+        "N m", "pendulum gravity torque m·g·l at the output (mass × g × arm)",
+        start=lambda s: s.k_out)
 
     name: ClassVar[str] = "gravity"
     key: ClassVar[str] = "gravity"
-    parameters: ClassVar[tuple[Parameter, ...]] = (
-        Parameter("mgl", "N m", "pendulum gravity torque m·g·l at the output (mass × g × arm)",
-                  start=lambda s: s.k_out),
-    )
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> Gravity:

@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float, PyTree
 
-from ._base import AbstractEffect, Motion, Parameter, StartValues
+from ._base import AbstractEffect, Motion, StartValues, parameter
 
 
 class DahlHysteresis(AbstractEffect):
@@ -32,17 +32,15 @@ class DahlHysteresis(AbstractEffect):
     separate it from stiffness and Coulomb friction.
     """
 
-    f_h: Float[ArrayLike, ""]
-    sigma_h: Float[ArrayLike, ""]
+    f_h: Float[ArrayLike, ""] = parameter(
+        "N m", "saturation torque of the Dahl element at the wave generator",
+        start=lambda s: 0.2 * s.torque)
+    sigma_h: Float[ArrayLike, ""] = parameter(
+        "N m/rad", "initial (rest) stiffness of the Dahl element, WG side",
+        start=lambda s: s.k_wg)
 
     name: ClassVar[str] = "hysteresis"
     key: ClassVar[str] = "hysteresis"
-    parameters: ClassVar[tuple[Parameter, ...]] = (
-        Parameter("f_h", "N m", "saturation torque of the Dahl element at the wave generator",
-                  start=lambda s: 0.2 * s.torque),
-        Parameter("sigma_h", "N m/rad", "initial (rest) stiffness of the Dahl element, WG side",
-                  start=lambda s: s.k_wg),
-    )
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> DahlHysteresis:

@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractSpring, Motion, Parameter, StartValues
+from ._base import AbstractSpring, Motion, StartValues, parameter, same_parameter
 from .stiffness import CubicStiffness
 
 
@@ -26,19 +26,17 @@ class KinematicErrorStiffness(AbstractSpring):
     driven input/output test, not in free motion.
     """
 
-    k1: Float[ArrayLike, ""]
-    k2: Float[ArrayLike, ""]
-    ke_a: Float[ArrayLike, ""]
-    ke_b: Float[ArrayLike, ""]
+    k1: Float[ArrayLike, ""] = same_parameter(CubicStiffness, "k1")
+    k2: Float[ArrayLike, ""] = same_parameter(CubicStiffness, "k2")
+    ke_a: Float[ArrayLike, ""] = parameter(
+        "rad", "sine amplitude of the kinematic error, output side",
+        transform="identity", scale=lambda s: 0.05 * s.twist)
+    ke_b: Float[ArrayLike, ""] = parameter(
+        "rad", "cosine amplitude of the kinematic error, output side",
+        transform="identity", scale=lambda s: 0.05 * s.twist)
     order: Float[ArrayLike, ""] = 2.0
 
     key: ClassVar[str] = "kinematic_error"
-    parameters: ClassVar[tuple[Parameter, ...]] = CubicStiffness.parameters + (
-        Parameter("ke_a", "rad", "sine amplitude of the kinematic error, output side",
-                  transform="identity", scale=lambda s: 0.05 * s.twist),
-        Parameter("ke_b", "rad", "cosine amplitude of the kinematic error, output side",
-                  transform="identity", scale=lambda s: 0.05 * s.twist),
-    )
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> KinematicErrorStiffness:

@@ -6,7 +6,7 @@ from typing import ClassVar
 
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractSpring, Motion, Parameter, StartValues
+from ._base import AbstractSpring, Motion, StartValues, parameter, same_parameter
 from .stiffness import CubicStiffness
 
 
@@ -21,10 +21,9 @@ class LinearStiffness(AbstractSpring):
     error is largest early and shrinks as the amplitude decays.
     """
 
-    k1: Float[ArrayLike, ""]
+    k1: Float[ArrayLike, ""] = same_parameter(CubicStiffness, "k1")
 
     key: ClassVar[str] = "linear_stiffness"
-    parameters: ClassVar[tuple[Parameter, ...]] = CubicStiffness.parameters[:1]
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> LinearStiffness:

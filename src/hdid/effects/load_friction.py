@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter, StartValues
+from ._base import AbstractEffect, Motion, StartValues, parameter
 
 
 class LoadDependentFriction(AbstractEffect):
@@ -26,14 +26,12 @@ class LoadDependentFriction(AbstractEffect):
     releases sit farther out.
     """
 
-    c_load: Float[ArrayLike, ""]
+    c_load: Float[ArrayLike, ""] = parameter(
+        "N m/rad", "friction increase per rad of WG twist (μ·k1/N²)",
+        start=lambda s: 0.05 * s.k_wg)
 
     name: ClassVar[str] = "load_friction"
     key: ClassVar[str] = "load_friction"
-    parameters: ClassVar[tuple[Parameter, ...]] = (
-        Parameter("c_load", "N m/rad", "friction increase per rad of WG twist (μ·k1/N²)",
-                  start=lambda s: 0.05 * s.k_wg),
-    )
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> LoadDependentFriction:

@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter, StartValues
+from ._base import AbstractEffect, Motion, StartValues, parameter
 
 
 class PositionRipple(AbstractEffect):
@@ -26,18 +26,16 @@ class PositionRipple(AbstractEffect):
     change of stiffness or of the spring's zero and cannot be told apart from them.
     """
 
-    ripple_a: Float[ArrayLike, ""]
-    ripple_b: Float[ArrayLike, ""]
+    ripple_a: Float[ArrayLike, ""] = parameter(
+        "N m", "sine amplitude of the position-periodic torque (WG)",
+        transform="identity", scale=lambda s: 0.03 * s.torque)
+    ripple_b: Float[ArrayLike, ""] = parameter(
+        "N m", "cosine amplitude of the position-periodic torque (WG)",
+        transform="identity", scale=lambda s: 0.03 * s.torque)
     order: Float[ArrayLike, ""] = 24.0
 
     name: ClassVar[str] = "ripple"
     key: ClassVar[str] = "ripple"
-    parameters: ClassVar[tuple[Parameter, ...]] = (
-        Parameter("ripple_a", "N m", "sine amplitude of the position-periodic torque (WG)",
-                  transform="identity", scale=lambda s: 0.03 * s.torque),
-        Parameter("ripple_b", "N m", "cosine amplitude of the position-periodic torque (WG)",
-                  transform="identity", scale=lambda s: 0.03 * s.torque),
-    )
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> PositionRipple:

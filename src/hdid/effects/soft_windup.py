@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractSpring, Motion, Parameter, StartValues
+from ._base import AbstractSpring, Motion, StartValues, parameter
 
 
 class ThreeSegmentStiffness(AbstractSpring):
@@ -25,26 +25,24 @@ class ThreeSegmentStiffness(AbstractSpring):
     amplitude that stays inside the first segment measures ``K1`` alone.
     """
 
-    K1: Float[ArrayLike, ""]
-    K2: Float[ArrayLike, ""]
-    K3: Float[ArrayLike, ""]
-    T1: Float[ArrayLike, ""]
-    dT12: Float[ArrayLike, ""]
+    # the CSF-8 catalog's segments relative to its cubic fit (physics notes)
+    K1: Float[ArrayLike, ""] = parameter(
+        "N m/rad", "stiffness of the first segment (|T| ≤ T1), output side",
+        start=lambda s: 0.97 * s.k_out)
+    K2: Float[ArrayLike, ""] = parameter(
+        "N m/rad", "stiffness of the second segment (T1 … T2), output side",
+        start=lambda s: 1.06 * s.k_out)
+    K3: Float[ArrayLike, ""] = parameter(
+        "N m/rad", "stiffness beyond T2, output side",
+        start=lambda s: 1.28 * s.k_out)
+    T1: Float[ArrayLike, ""] = parameter(
+        "N m", "output torque at the first corner",
+        start=lambda s: 0.2 * s.k_out * s.twist)
+    dT12: Float[ArrayLike, ""] = parameter(
+        "N m", "T2 − T1: output torque between the corners",
+        start=lambda s: 0.31 * s.k_out * s.twist)
 
     key: ClassVar[str] = "soft_windup"
-    parameters: ClassVar[tuple[Parameter, ...]] = (
-        # the CSF-8 catalog's segments relative to its cubic fit (physics notes)
-        Parameter("K1", "N m/rad", "stiffness of the first segment (|T| ≤ T1), output side",
-                  start=lambda s: 0.97 * s.k_out),
-        Parameter("K2", "N m/rad", "stiffness of the second segment (T1 … T2), output side",
-                  start=lambda s: 1.06 * s.k_out),
-        Parameter("K3", "N m/rad", "stiffness beyond T2, output side",
-                  start=lambda s: 1.28 * s.k_out),
-        Parameter("T1", "N m", "output torque at the first corner",
-                  start=lambda s: 0.2 * s.k_out * s.twist),
-        Parameter("dT12", "N m", "T2 − T1: output torque between the corners",
-                  start=lambda s: 0.31 * s.k_out * s.twist),
-    )
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> ThreeSegmentStiffness:

@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractSpring, Motion, Parameter, StartValues
+from ._base import AbstractSpring, Motion, StartValues, parameter
 
 
 class CubicStiffness(AbstractSpring):
@@ -20,17 +20,15 @@ class CubicStiffness(AbstractSpring):
     (hardening ``k2 > 0`` speeds up large swings).
     """
 
-    k1: Float[ArrayLike, ""]
-    k2: Float[ArrayLike, ""]
+    k1: Float[ArrayLike, ""] = parameter(
+        "N m/rad", "linear torsional stiffness, output side",
+        start=lambda s: s.k_out)
+    # k2·d³ about 17 % of the torque at the largest twist (the CSF-8 catalog's cubic)
+    k2: Float[ArrayLike, ""] = parameter(
+        "N m/rad^3", "cubic torsional stiffness, output side",
+        start=lambda s: 0.17 * s.k_out / s.twist**2)
 
     key: ClassVar[str] = "stiffness"
-    parameters: ClassVar[tuple[Parameter, ...]] = (
-        Parameter("k1", "N m/rad", "linear torsional stiffness, output side",
-                  start=lambda s: s.k_out),
-        # k2·d³ about 17 % of the torque at the largest twist (the CSF-8 catalog's cubic)
-        Parameter("k2", "N m/rad^3", "cubic torsional stiffness, output side",
-                  start=lambda s: 0.17 * s.k_out / s.twist**2),
-    )
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> CubicStiffness:

@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter, StartValues
+from ._base import AbstractEffect, Motion, StartValues, parameter
 
 
 class TorqueOffset(AbstractEffect):
@@ -28,14 +28,12 @@ class TorqueOffset(AbstractEffect):
     constant residual torque in an equation-error fit.
     """
 
-    tau_0: Float[ArrayLike, ""]
+    tau_0: Float[ArrayLike, ""] = parameter(
+        "N m", "constant torque the drive supplies at rest (offset, gravity bias), WG side",
+        transform="identity", scale=lambda s: s.torque, start=lambda s: 0.0)
 
     name: ClassVar[str] = "torque_offset"
     key: ClassVar[str] = "torque_offset"
-    parameters: ClassVar[tuple[Parameter, ...]] = (
-        Parameter("tau_0", "N m", "constant torque the drive supplies at rest (offset, gravity bias), WG side",
-                  transform="identity", scale=lambda s: s.torque, start=lambda s: 0.0),
-    )
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> TorqueOffset:

@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter, StartValues
+from ._base import AbstractEffect, Motion, StartValues, parameter
 
 
 class ViscousFriction(AbstractEffect):
@@ -17,14 +17,12 @@ class ViscousFriction(AbstractEffect):
     error growing with speed.
     """
 
-    c_v: Float[ArrayLike, ""]
+    c_v: Float[ArrayLike, ""] = parameter(
+        "N m s/rad", "viscous friction coefficient at the wave generator",
+        start=lambda s: 0.05 * s.c_crit)
 
     name: ClassVar[str] = "viscous"
     key: ClassVar[str] = "viscous"
-    parameters: ClassVar[tuple[Parameter, ...]] = (
-        Parameter("c_v", "N m s/rad", "viscous friction coefficient at the wave generator",
-                  start=lambda s: 0.05 * s.c_crit),
-    )
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> ViscousFriction:
