@@ -69,9 +69,8 @@ class _Clash(AbstractEffect):
 class Cogging(AbstractEffect):
     """The README's user-written effect, verbatim in spirit: one small class."""
 
-    amplitude: float
+    amplitude: float = hdid.effects.parameter("N m", "cogging torque", transform="identity", scale=1e-3)
     name: ClassVar[str] = "cogging"
-    parameters: ClassVar = (Parameter("amplitude", "N m", "cogging torque", transform="identity", scale=1e-3),)
 
     def torque(self, motion, state):
         return -self.amplitude * jnp.sin(24 * motion.theta)  # 24 cogging cycles per rev
