@@ -187,3 +187,32 @@ def test_the_batch_checks_the_nested_case_like_fit(monkeypatch, nested, symptom,
         log, kw = seen[0]
         assert isinstance(log, hdid.Log) and kw["nested"] == nested
         assert kw["fix"] == {"delta": 1.0} and kw["n_starts"] == 2
+
+
+def test_fit_many_takes_an_executor_like_emcees_pool(tmp_path):
+    """Parallelism passed in (emcee's ``pool=``): any concurrent.futures executor runs the
+    chunks. A spawned process (JAX must not be forked) fits like this one, bad rows stay
+    errors in their row, and the results come back usable."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time,theta\n0,abc\n")
+    logs = [EXAMPLE, bad]
+    local = hdid.fit_many(logs, n_starts=2)
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        table = hdid.fit_many(logs, executor=pool, chunk_size=1, n_starts=2)
+    timing = table.attrs["timing"]
+    assert timing["mode"] == "executor" and timing["n_tasks"] == 2
+    assert list(table["log"]) == [str(p) for p in logs]
+    assert "row 2" in table.loc[1, "error"] and table.loc[1, "result"] is None
+    ref = local.loc[0, "result"]
+    res = table.loc[0, "result"]
+    for name in ref.problem.free:
+        # same program and inputs in another process (tolerance as in the dask tests:
+        # 1e-3 std is far below any change of schedule)
+        assert abs(res.parameters[name].value - ref.parameters[name].value) <= (
+            1e-3 * ref.parameters[name].std)
+    assert res.residuals()["residual_rad"].notna().all()
+    with pytest.raises(ValueError, match="not both"):
+        hdid.fit_many(logs, executor=pool, client=object())

@@ -47,6 +47,8 @@ KEYWORDS = {
     "fit_driven": {"order", "max_order", "fix", "counts_per_rev", "torque_constant",
                    "output_counts_per_rev", "max_substep", "max_steps", "input_hold"},
     "sample_posterior": {"seed", "progress", "prior"},
+    "fit_many": {"progress", "vectorize", "band_bracket", "workers", "client", "executor",
+                 "chunk_size"},
 }
 
 

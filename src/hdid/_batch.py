@@ -26,6 +26,7 @@ def fit_many(
     threads: int | None = None,
     workers: int | None = None,
     client=None,
+    executor=None,
     chunk_size: int | None = None,
     **options,
 ):
@@ -61,7 +62,13 @@ def fit_many(
     client:
         A ``dask.distributed.Client``: the logs are split into chunks of ``chunk_size``
         (default 64) and each worker runs the vectorised fit on its chunks. Paths must be
-        readable on the workers (or pass DataFrames).
+        readable on the workers (or pass DataFrames). The same as
+        ``executor=client.get_executor()``.
+    executor:
+        Any :class:`concurrent.futures.Executor` (parallelism passed in, like emcee's
+        ``pool=``): a ``ProcessPoolExecutor``, a dask or MPI executor. The logs are cut
+        into chunks of ``chunk_size`` (default 64) and each chunk's vectorised fit is one
+        task. The caller owns the executor (this call neither starts nor shuts it down).
     **options:
         Passed to :func:`hdid.fit` (``inertia``, ``fix``, ``counts_per_rev``, ``n_starts``,
         …). Vectorised, ``nested`` defaults to ``None``: a fit with a symptom of a poorer
@@ -100,17 +107,25 @@ def fit_many(
     workers = 1 if workers is None else int(workers)
     if workers < 1:
         raise ValueError(f"workers = {workers}: must be >= 1 (local worker processes)")
-    dask_options = dict(band_bracket=band_bracket, lanes=lanes, threads=threads, **options)
+    task_options = dict(band_bracket=band_bracket, lanes=lanes, threads=threads, **options)
+    if client is not None and executor is not None:
+        raise ValueError("give client= or executor=, not both (a dask client is "
+                         "executor=client.get_executor())")
     if client is not None:
-        rows, timing = _fit_dask(client, items, names, chunk_size or DASK_CHUNK, bar,
-                                 dask_options)
+        rows, timing = _fit_executor(client.get_executor(pure=False), items, names,
+                                     chunk_size or DASK_CHUNK, bar, task_options)
+        timing["mode"] = "dask"
+    elif executor is not None:
+        rows, timing = _fit_executor(executor, items, names, chunk_size or DASK_CHUNK, bar,
+                                     task_options)
     elif workers > 1 and vectorize:
         with _local_client(workers) as local:
             # about 8 chunks per worker: the last chunks finish close together (the idle
             # tail is at most one chunk), and a chunk is still wide enough for the grid
             chunk = chunk_size or max(1, -(-len(items) // (CHUNKS_PER_WORKER * workers)))
-            rows, timing = _fit_dask(local, items, names, chunk, bar, dask_options)
-            timing["workers"] = workers
+            rows, timing = _fit_executor(local.get_executor(pure=False), items, names, chunk,
+                                         bar, task_options)
+            timing.update(mode="dask", workers=workers)
     elif vectorize:
         rows, timing = _fit_vectorized(items, names, bar, band_bracket, lanes, threads, options)
     else:
@@ -177,7 +192,7 @@ def _local_client(workers: int):
 
 @float64  # a worker process: hdid's arithmetic, whatever its JAX settings
 def _fit_chunk(items, names, options):
-    """One dask task: the vectorised fit of a chunk of logs (runs on a worker)."""
+    """One task: the vectorised fit of a chunk of logs (runs on a worker)."""
     opts = dict(options)
     band_bracket = opts.pop("band_bracket")
     lanes, threads = opts.pop("lanes"), opts.pop("threads")
@@ -202,17 +217,16 @@ def _fit_chunk(items, names, options):
     return rows, timing
 
 
-def _fit_dask(client, items, names, chunk, bar, options):
+def _fit_executor(executor, items, names, chunk, bar, options):
+    """Chunks of ``chunk`` logs as tasks of ``executor`` (``concurrent.futures`` API)."""
     import time
-
-    from distributed import as_completed
+    from concurrent.futures import as_completed
 
     t0 = time.perf_counter()
     chunk = max(int(chunk), 1)
     starts = list(range(0, len(items), chunk))
     futures = {
-        client.submit(_fit_chunk, items[s : s + chunk], names[s : s + chunk], options,
-                      pure=False): s
+        executor.submit(_fit_chunk, items[s : s + chunk], names[s : s + chunk], options): s
         for s in starts
     }
     rows: list = [None] * len(items)
@@ -227,7 +241,7 @@ def _fit_dask(client, items, names, chunk, bar, options):
     summed = {k: sum(t.get(k, 0) for t in timings)
               for k in ("compile_s", "run_s", "setup_s", "grid_s", "solve_s", "analyse_s",
                         "lane_steps", "n_failed")}
-    return rows, {"total_s": time.perf_counter() - t0, "n_logs": len(items), "mode": "dask",
+    return rows, {"total_s": time.perf_counter() - t0, "n_logs": len(items), "mode": "executor",
                   "n_tasks": len(starts), "workers_sum": summed}
 
 
