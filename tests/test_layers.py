@@ -27,7 +27,7 @@ LAYERS = [
     # simulation (free and driven) and data preparation
     {"_simulate", "_driven", "_prepare", "_synthetic"},
     # problems: parameters ↔ residuals
-    {"_problem", "_driven_problem"},
+    {"_problem_base", "_problem", "_driven_problem"},
     # what is evaluated on a problem, compiled (and kept on disk)
     {"_evaluate", "_driven_evaluate", "_derived", "_programs"},
     # results: data, their persistence and their figures

@@ -13,6 +13,7 @@ from jaxtyping import Array, Float
 
 from . import _config  # noqa: F401
 from ._driven import DrivenJoint, simulate_driven, substeps_for_times
+from ._problem_base import AbstractProblem
 from ._transforms import from_unconstrained
 from .effects import order_of_magnitude
 
@@ -188,7 +189,7 @@ def _smooth_speed(theta: np.ndarray, dt: float) -> np.ndarray:
     return savgol_filter(theta, w, 3, deriv=1, delta=dt)
 
 
-class DrivenProblem(eqx.Module):
+class DrivenProblem(AbstractProblem):
     """Residuals of one driven log for a :class:`DrivenJoint` whose ``free`` parameters
     are fitted.
 
@@ -407,7 +408,7 @@ def build_driven_problem(
     )
 
 
-class JointProblem(eqx.Module):
+class JointProblem(AbstractProblem):
     """Several problems sharing physical parameters: residuals stacked, unknowns mapped.
 
     ``index[i]`` lists, for each unknown of part ``i``, its position in the joint vector;
@@ -429,6 +430,3 @@ class JointProblem(eqx.Module):
             rs.append(r)
             Js.append(jnp.zeros((r.shape[0], self.n_unknowns)).at[:, i].add(J))
         return jnp.concatenate(rs), jnp.concatenate(Js, axis=0)
-
-    def cost(self, u):
-        return jnp.sum(self.residuals(u) ** 2)

@@ -269,8 +269,8 @@ def _solve_lanes(problem: Problem, U0, active, max_steps, state: LMState):
 def solve_fresh(problem, U0, active, max_steps):
     """Levenberg–Marquardt from every row of ``U0``, at most ``max_steps`` iterations,
     every lane started fresh: ``(U, cost, done, iterations)``. The one engine
-    (:func:`_lm_lanes`) for any problem with ``residuals`` and ``residuals_and_jacobian``
-    (free, driven, joint) — what the driven fit calls in chunks."""
+    (:func:`_lm_lanes`) for any :class:`~hdid._problem_base.AbstractProblem` (free,
+    driven, joint) — what the driven fit calls in chunks."""
     U0 = jnp.asarray(U0)
     L, n = U0.shape
     m = jax.eval_shape(problem.residuals, U0[0]).shape[0]

@@ -11,6 +11,7 @@ from jaxtyping import Array, Float
 from . import _config  # noqa: F401
 from ._model import Model
 from ._prepare import Prepared
+from ._problem_base import AbstractProblem
 from ._simulate import simulate_runs
 from ._transforms import from_unconstrained, interval_from_u
 
@@ -19,7 +20,7 @@ from ._transforms import from_unconstrained, interval_from_u
 OFFSET_SCALE_REL = 0.064
 
 
-class Problem(eqx.Module):
+class Problem(AbstractProblem):
     """Residuals of one log for a model whose ``free`` parameters are being fitted.
 
     The unknowns ``u`` are laid out as: free physical parameters (transformed), then the
@@ -177,10 +178,6 @@ class Problem(eqx.Module):
 
     def residuals(self, u):
         return jnp.concatenate([self.data_residuals(u), self.prior_residuals(u)])
-
-    def cost(self, u):
-        r = self.residuals(u)
-        return jnp.sum(r**2)
 
     # -- structured Jacobian ----------------------------------------------------------
     def _local(self, u):
