@@ -23,7 +23,7 @@ LAYERS = [
     # physics: effects, the reference (event-driven, SciPy) simulator
     {"effects", "reference"},
     # models
-    {"_model", "_positional", "_transforms"},
+    {"_parameter_set", "_model", "_positional", "_transforms"},
     # simulation (free and driven) and data preparation
     {"_simulate", "_driven", "_prepare", "_synthetic"},
     # problems: parameters ↔ residuals

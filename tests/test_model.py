@@ -224,3 +224,19 @@ def test_parameters_are_declared_once_on_their_fields():
 
             def torque(self, motion, state):
                 return jnp.zeros(())
+
+
+def test_model_joint_and_positional_error_share_one_parameter_set():
+    """A free-motion model, a driven joint and its positional error are parameter sets of
+    one kind (issue 20): values by name, a float copy, replace, and the same clear error
+    for a name they do not have."""
+    from hdid._parameter_set import AbstractParameterSet
+
+    joint = hdid.DrivenJoint.default(order=2)
+    for obj in (Model.default(), joint, joint.positional):
+        assert isinstance(obj, AbstractParameterSet)
+        name = obj.names()[-1]
+        again = obj.replace(**{name: 0.5})
+        assert again.float_values()[name] == 0.5 and list(again.names()) == list(obj.names())
+        with pytest.raises(KeyError, match=rf"unknown parameter\(s\) \['nope'\]; this {type(obj).__name__} has"):
+            obj.replace(nope=1.0)

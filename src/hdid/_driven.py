@@ -42,6 +42,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from . import _config  # noqa: F401
 from ._model import Model
+from ._parameter_set import AbstractParameterSet
 from ._positional import PositionalError
 from ._simulate import DEFAULT_MAX_SUBSTEP, _safe_div, crossing_fraction, rk4
 from .effects import AbstractSpring, Motion, Parameter
@@ -54,7 +55,7 @@ TAU_FOUT_PARAMETER = Parameter(
 MAX_TWIST = 0.2
 
 
-class DrivenJoint(eqx.Module):
+class DrivenJoint(AbstractParameterSet):
     """A harmonic drive in normal operation: WG model, output friction, positional error.
 
     Attributes
@@ -97,23 +98,14 @@ class DrivenJoint(eqx.Module):
     # -- parameters -----------------------------------------------------------------
     def parameter_specs(self) -> dict[str, Parameter]:
         return {**self.model.parameter_specs(), "tau_fout": TAU_FOUT_PARAMETER,
-                **self.positional.specs()}
+                **self.positional.parameter_specs()}
 
     def values(self) -> dict:
         return {**self.model.values(), "tau_fout": self.tau_fout, **self.positional.values()}
 
-    def float_values(self) -> dict[str, float]:
-        return {k: float(v) for k, v in self.values().items()}
-
-    def replace(self, **values) -> DrivenJoint:
+    def _replaced(self, values) -> DrivenJoint:
         model_names = set(self.model.parameter_specs())
         pos_names = set(self.positional.names())
-        unknown = set(values) - model_names - pos_names - {"tau_fout"}
-        if unknown:
-            raise KeyError(
-                f"unknown parameter(s) {sorted(unknown)}; this joint has "
-                f"{list(self.parameter_specs())}"
-            )
         mv = {k: v for k, v in values.items() if k in model_names}
         pv = {k: v for k, v in values.items() if k in pos_names}
         return DrivenJoint(

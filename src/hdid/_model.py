@@ -9,10 +9,10 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PyTree
 
 from . import _config  # noqa: F401  (float64)
+from ._parameter_set import AbstractParameterSet
 from .effects import (
     AbstractEffect,
     AbstractSpring,
@@ -50,7 +50,7 @@ INERTIA_PARAMETER = Parameter(
 )
 
 
-class Model(eqx.Module):
+class Model(AbstractParameterSet):
     """Inertia plus a tuple of effects, ``I·θ̈ = Σ effect torques`` at the wave generator.
 
     Attributes
@@ -179,17 +179,7 @@ class Model(eqx.Module):
         out["inertia"] = self.inertia
         return out
 
-    def float_values(self) -> dict[str, float]:
-        return {k: float(v) for k, v in self.values().items()}
-
-    def replace(self, **values: ArrayLike) -> Model:
-        """A model with some parameter values replaced (same effects)."""
-        specs = self.parameter_specs()
-        unknown = set(values) - set(specs)
-        if unknown:
-            raise KeyError(
-                f"unknown parameter(s) {sorted(unknown)}; this model has {list(specs)}"
-            )
+    def _replaced(self, values: dict[str, ArrayLike]) -> Model:
         effects = []
         for e in self.effects:
             names = [p.name for p in e.parameters if p.name in values]

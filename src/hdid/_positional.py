@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from ._parameter_set import AbstractParameterSet
 from .effects import Parameter
 
 #: Typical size of a positional-error coefficient [rad, output side]: the physics notes
@@ -13,7 +13,7 @@ from .effects import Parameter
 COEFFICIENT_SCALE = 1e-4
 
 
-class PositionalError(eqx.Module):
+class PositionalError(AbstractParameterSet):
     r"""Paper eq. 3: ``θ̃_p(θ) = a0/2 + Σ_{n=1..K} a_n cos(nθ) + b_n sin(nθ)``.
 
     ``θ`` is the wave-generator (motor) angle as logged, in the motor encoder's frame;
@@ -62,7 +62,7 @@ class PositionalError(eqx.Module):
             f"pos_b{n}" for n in range(1, K + 1)
         )
 
-    def specs(self) -> dict[str, Parameter]:
+    def parameter_specs(self) -> dict[str, Parameter]:
         out = {}
         for name in self.names():
             kind, n = name[4], name[5:]
@@ -83,7 +83,7 @@ class PositionalError(eqx.Module):
             out[f"pos_b{n}"] = self.b[n - 1]
         return out
 
-    def replace(self, **values) -> PositionalError:
+    def _replaced(self, values) -> PositionalError:
         a0 = values.get("pos_a0", self.a0)
         a = jnp.stack([jnp.asarray(values.get(f"pos_a{n}", self.a[n - 1]), dtype=float)
                        for n in range(1, self.order + 1)]) if self.order else self.a
