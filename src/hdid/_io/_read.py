@@ -1,8 +1,9 @@
-""":func:`read_log`: a CSV file or DataFrame to a validated :class:`~hdid.Log`."""
+""":func:`read_log`: a CSV file or DataFrame to a validated :class:`~hdid.Log` (the table
+is read by :mod:`._table`, its columns found by :mod:`._columns`, its rows checked by
+:mod:`._validate`)."""
 
 from __future__ import annotations
 
-import math
 import os
 
 import numpy as np
@@ -10,8 +11,8 @@ import pandas as pd
 
 from .._errors import LogError
 from ._names import (
-    _COUNTS_HINT, _INERTIA, _LOAD_TORQUE, _MIN_MOTION_UNQUANTIZED, _MOTOR,
-    _OUTPUT_COUNTS_HINT, _RUN, _SETUP, _THETA, _THETA_OUT, _TIME,
+    _COUNTS_HINT, _INERTIA, _LOAD_TORQUE, _MOTOR, _OUTPUT_COUNTS_HINT, _RUN, _SETUP, _THETA,
+    _THETA_OUT, _TIME,
 )
 from ._types import Log, Run
 from ._resolution import estimate_resolution
@@ -20,6 +21,7 @@ from ._columns import (
     _check_args, _column_scales, _find_columns, _first, _missing_cells, _positive_arg,
     _to_radians,
 )
+from ._validate import check_lengths, check_motion, check_within_runs, run_blocks, sample_period
 
 
 def read_log(
@@ -193,118 +195,16 @@ def read_log(
                 pos,
             )
 
-    # -- runs --------------------------------------------------------------
-    if run_labels is None:
-        starts = np.array([0], dtype=np.int64)
-        names = ["1"]
-    else:
-        change = np.flatnonzero(run_labels[1:] != run_labels[:-1]) + 1
-        starts = np.concatenate(([0], change)).astype(np.int64)
-        block_labels = run_labels[starts]
-        codes, uniques = pd.factorize(pd.Series(block_labels, dtype=object))
-        if len(uniques) != len(block_labels):
-            seen = np.zeros(len(uniques), dtype=bool)
-            for b, c in enumerate(codes):
-                if seen[c]:
-                    raise fail(
-                        f"run {_show(block_labels[b])} appears again after other runs — the rows "
-                        "of a run must be contiguous; sort the rows by run or relabel this block",
-                        _RUN,
-                        int(starts[b]),
-                    )
-                seen[c] = True
-        names = [str(v) for v in block_labels]
+    # -- runs, sampling, motion (hdid._io._validate) ------------------------
+    starts, names = run_blocks(run_labels, n, fail)
     ends = np.append(starts[1:], n)
     new_run = np.zeros(n, dtype=bool)
     new_run[starts] = True
     within = ~new_run[1:]  # step i -> i+1 stays inside one run
-
-    problems: list[tuple[int, int, LogError]] = []
-    if setups is not None:
-        pos = _first((setups[1:] != setups[:-1]) & within)
-        if pos is not None:
-            problems.append(
-                (
-                    pos + 1,
-                    0,
-                    fail(
-                        f"setup changes from {_show(setups[pos])} to {_show(setups[pos + 1])} "
-                        "within one run — a run must have one setup; check the labels or add a "
-                        "'run' column",
-                        _SETUP,
-                        pos + 1,
-                    ),
-                )
-            )
-    if inertia is not None:
-        pos = _first((inertia[1:] != inertia[:-1]) & within)
-        if pos is not None:
-            problems.append(
-                (
-                    pos + 1,
-                    1,
-                    fail(
-                        f"added inertia changes from {inertia[pos]:.6g} to {inertia[pos + 1]:.6g} "
-                        "within one run — it must be constant within a run",
-                        _INERTIA,
-                        pos + 1,
-                    ),
-                )
-            )
-    steps = np.diff(time)
-    pos = _first((steps <= 0) & within)
-    if pos is not None:
-        if steps[pos] == 0:
-            msg = (
-                f"time {time[pos + 1]:.9g} repeats the previous row — remove the duplicated row"
-            )
-        else:
-            msg = (
-                f"time {time[pos + 1]:.9g} is not after the previous {time[pos]:.9g} — time must "
-                "increase strictly within a run; sort the rows, or add a 'run' column if a new "
-                "release starts here"
-            )
-        problems.append((pos + 1, 2, fail(msg, _TIME, pos + 1)))
-    if problems:
-        raise min(problems, key=lambda p: p[:2])[2]
-
+    check_within_runs(setups, inertia, time, within, fail)
     lengths = ends - starts
-    short = _first(lengths < min_samples_per_run)
-    if short is not None:
-        raise fail(
-            f"run {_show(names[short])} has only {int(lengths[short])} sample(s), at least "
-            f"{min_samples_per_run} are needed — drop the run or log it longer",
-            _RUN if _RUN in cols else None,
-            int(starts[short]),
-        )
-
-    # -- sampling ----------------------------------------------------------
-    inner_steps = steps[within]
-    period = float(np.median(inner_steps))
-    if not math.isfinite(period):
-        raise fail("time values are too large to take differences — write time in seconds", _TIME)
-    tol = float(period_tolerance)
-    pos = _first((np.abs(steps - period) > tol * period) & within)
-    if pos is not None:
-        r = int(np.searchsorted(starts, pos, side="right") - 1)
-        run_period = float(np.median(np.diff(time[starts[r] : ends[r]])))
-        if abs(run_period - period) > tol * period:
-            raise fail(
-                f"run {_show(names[r])} is sampled every {run_period:.6g} s but the log's period "
-                f"is {period:.6g} s — all runs must share one sample rate (within "
-                f"{100 * tol:g}%); resample the run or read it separately",
-                _TIME,
-                int(starts[r]),
-            )
-        raise fail(
-            f"run {_show(names[r])}: time step {steps[pos]:.6g} s differs from the log's sample "
-            f"period {period:.6g} s by more than {100 * tol:g}% — resample the log to a "
-            "uniform rate or split it into runs at this row",
-            _TIME,
-            pos + 1,
-        )
-
-    # -- resolution and motion ---------------------------------------------
+    check_lengths(lengths, starts, names, min_samples_per_run, _RUN in cols, fail)
+    period = sample_period(time, within, starts, ends, names, period_tolerance, fail)
     if resolution is None:
         offsets = np.repeat(theta[starts], lengths)
         resolution = estimate_resolution(theta - offsets)
@@ -312,21 +212,8 @@ def read_log(
     if theta_out is not None and output_resolution is None:
         offsets = np.repeat(theta_out[starts], lengths)
         output_resolution = estimate_resolution(theta_out - offsets)
-    spans = np.maximum.reduceat(theta, starts) - np.minimum.reduceat(theta, starts)
-    if resolution is not None:
-        still = spans < (2.0 - 1e-6) * resolution
-        why = f"less than 2 encoder steps of {resolution:.6g} rad"
-    else:
-        still = spans < _MIN_MOTION_UNQUANTIZED
-        why = f"less than {_MIN_MOTION_UNQUANTIZED:g} rad"
-    r = None if driven else _first(still)
-    if r is not None:
-        raise fail(
-            f"run {_show(names[r])} shows no motion (theta spans {spans[r]:.6g} rad, {why}) — "
-            "check that the drive was twisted and released, or drop the run",
-            _THETA,
-            int(starts[r]),
-        )
+    if not driven:  # a driven run may stay stuck
+        check_motion(theta, starts, names, resolution, fail)
 
     def part(values: np.ndarray | None, k: int) -> np.ndarray | None:
         return None if values is None else values[starts[k] : ends[k]]
