@@ -116,6 +116,35 @@ def _restart_candidates(fit, rng, n_random: int) -> np.ndarray:
     return np.array(cands)
 
 
+#: Lanes per call of the mode search's Levenberg–Marquardt: the fit's own (``hdid.fit``'s
+#: default ``n_starts``), so that the search runs the program the fit compiled (same
+#: problem, same lane count: one in-memory or persistent-cache hit) instead of compiling
+#: one for its own number of candidates, which varies from log to log (27–32 s in a fresh
+#: process, benchmarks/README.md, issue 17 ``post3``).
+MODE_LANES = 6
+
+
+def _solve_in_lanes(solve_fresh, prob, U, active, steps, lanes: int = MODE_LANES):
+    """``solve_fresh`` over the rows of ``U`` in calls of ``lanes`` rows (the last padded
+    with inactive copies); calls whose rows are all inactive are skipped. Returns
+    ``(U, cost, done)`` as NumPy arrays (inactive rows: unchanged, cost inf, not done)."""
+    U = np.array(U, dtype=float)
+    active = np.asarray(active, dtype=bool)
+    n = len(U)
+    U_out, cost, done = U.copy(), np.full(n, np.inf), np.zeros(n, dtype=bool)
+    for i in range(0, n, lanes):
+        a = active[i : i + lanes]
+        if not a.any():
+            continue
+        blk, k = U[i : i + lanes], len(a)
+        if k < lanes:
+            blk = np.concatenate([blk, np.repeat(blk[:1], lanes - k, axis=0)])
+            a = np.concatenate([a, np.zeros(lanes - k, dtype=bool)])
+        u2, c2, d2, _ = map(np.asarray, solve_fresh(prob, jnp.asarray(blk), jnp.asarray(a), steps))
+        U_out[i : i + k], cost[i : i + k], done[i : i + k] = u2[:k], c2[:k], d2[:k]
+    return U_out, cost, done
+
+
 #: Restarts drawn from the widened Laplace approximation in :func:`find_modes`. 30 instead
 #: of 6 found more optima (paper log 1007 with seed 0: the one nearest the truth, which 6
 #: missed; with seed 7 not) but did not change the coverage on 14 paper logs (95 %
@@ -143,15 +172,13 @@ def find_modes(fit, *, n_random: int = N_RANDOM_RESTARTS, seed: int = 0, max_ste
     U0 = _restart_candidates(fit, rng, n_random)
     if extra_starts is not None:
         U0 = np.concatenate([U0, np.atleast_2d(np.asarray(extra_starts, dtype=float))])
-    U, costs, ok, _ = map(np.asarray, solve_fresh(
-        prob, jnp.asarray(U0), jnp.ones(len(U0), dtype=bool), PHASE1_STEPS))
-    U, costs = np.array(U), np.array(costs)
+    U, costs, ok = _solve_in_lanes(solve_fresh, prob, U0, np.ones(len(U0), dtype=bool),
+                                   PHASE1_STEPS)
     costs[~np.isfinite(costs)] = np.inf
     active = (costs - np.min(costs) < 10 * dchi2_max) & ~ok
     used = PHASE1_STEPS
     while active.any() and used < max_steps:
-        U2, c2, d2, _ = map(np.asarray, solve_fresh(
-            prob, jnp.asarray(U), jnp.asarray(active), PHASE2_CHUNK))
+        U2, c2, d2 = _solve_in_lanes(solve_fresh, prob, U, active, PHASE2_CHUNK)
         U[active], costs[active] = U2[active], np.where(np.isfinite(c2[active]), c2[active], np.inf)
         used += PHASE2_CHUNK
         active = active & ~d2 & (costs - np.min(costs) < dchi2_max)
@@ -235,8 +262,9 @@ def sampled_modes(fit, modes, seed: int, u_fit: np.ndarray, lin: np.ndarray,
                   gauss_prior=None) -> list[Mode]:
     """The optima a sampler starts from: ``modes`` ``"auto"`` (:func:`find_modes`),
     ``"fit"`` or a list of :class:`Mode` (copied: their weights are re-set), kept inside
-    the prior box around the fit (±``PRIOR_HALF_WIDTH``, else they cannot be sampled; the
-    fit's own if none is), with Laplace weights under the sampled prior (the fit's cost
+    the prior box around the fit (±``PRIOR_HALF_WIDTH``) and on the allowed side of the
+    orders the prior imposes (``tau_s ≥ tau_c``), else they cannot be sampled (the fit's
+    own, moved inside, if none is), with Laplace weights under the sampled prior (the fit's cost
     has the log-flat one; ``lin`` marks the parameters whose prior is flat in value)."""
     from dataclasses import replace
 
@@ -252,10 +280,24 @@ def sampled_modes(fit, modes, seed: int, u_fit: np.ndarray, lin: np.ndarray,
                  if modes == "auto" else [_fit_mode(view)])
     else:
         found = [replace(m) for m in modes]
+    from .density import ordered_pairs
+
     P = fit.problem.n_physical
-    found = [m for m in found if np.all(np.abs(m.u[:P] - u_fit[:P]) < PRIOR_HALF_WIDTH)]
+    pairs = ordered_pairs(fit.problem)
+
+    def in_order(u):
+        return pairs is None or bool(np.all(u[pairs[:, 1]] >= u[pairs[:, 0]]))
+
+    found = [m for m in found if np.all(np.abs(m.u[:P] - u_fit[:P]) < PRIOR_HALF_WIDTH)
+             and in_order(m.u)]
     if not found:
-        found = [_fit_mode(fit)]
+        # every optimum breaks an order the prior imposes (e.g. tau_s < tau_c): start from
+        # the fit's, each such pair put just inside the allowed side
+        m = _fit_mode(fit)
+        if pairs is not None:
+            for i, j in pairs:
+                m.u[j] = max(m.u[j], m.u[i] + 0.02)
+        found = [m]
     lz = np.array([m.log_evidence + float(lin @ (m.u[:P] - u_fit[:P])) for m in found])
     wz = np.exp(lz - lz.max())
     for m, wi in zip(found, wz / wz.sum()):
