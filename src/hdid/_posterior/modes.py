@@ -124,10 +124,11 @@ def _restart_candidates(fit, rng, n_random: int) -> np.ndarray:
 MODE_LANES = 6
 
 
-def _solve_in_lanes(solve_fresh, prob, U, active, steps, lanes: int = MODE_LANES):
+def _solve_in_lanes(solve_fresh, prob, U, active, steps, lanes: int | None = None):
     """``solve_fresh`` over the rows of ``U`` in calls of ``lanes`` rows (the last padded
     with inactive copies); calls whose rows are all inactive are skipped. Returns
     ``(U, cost, done)`` as NumPy arrays (inactive rows: unchanged, cost inf, not done)."""
+    lanes = MODE_LANES if lanes is None else int(lanes)
     U = np.array(U, dtype=float)
     active = np.asarray(active, dtype=bool)
     n = len(U)
