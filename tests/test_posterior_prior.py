@@ -136,9 +136,14 @@ def test_stribeck_priors_are_relative_to_the_log_and_physical(fit):
     specs = prob.base.parameter_specs()
     i, j = free.index("v_s"), free.index("delta")
     from hdid._fit import _setup
+    from hdid._prepare import offset_guess
+    from hdid._starts import log_scales
 
-    prep = _setup(EXAMPLE).prep
-    assert float(prob.prior_mean[i]) == pytest.approx(math.log(0.05 * prep.speed), rel=1e-6)
+    s0 = _setup(EXAMPLE)
+    scales = log_scales(s0.prep, hdid.Model.default(), offset_guess(s0.prep))
+    assert float(prob.prior_mean[i]) == pytest.approx(math.log(0.05 * scales.speed), rel=1e-9)
+    # the peak speed of the log (the swing's ω·amplitude), not its sampled chord speed
+    assert scales.speed >= s0.prep.speed
     assert float(prob.prior_sd[i]) == 1.0
     m, s = float(prob.prior_mean[j]), float(prob.prior_sd[j])
     lo, med, hi = (float(from_unconstrained(specs["delta"], m + z * s, np)) for z in (-1.96, 0, 1.96))

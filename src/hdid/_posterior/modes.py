@@ -6,8 +6,6 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -41,18 +39,33 @@ class Mode:
                 "values": dict(self.values)}
 
 
-@eqx.filter_jit
 def _rj(problem: Problem, u):
-    return problem.residuals_and_jacobian(u)
+    """Residuals and Jacobian (data rows, then weak-prior rows) at ``u``: the data part
+    from the program the fit's analysis compiled (``_evaluate.jacobian``: no compile of
+    its own), the prior rows in NumPy (``Problem.residuals_and_jacobian``'s)."""
+    from .._evaluate import jacobian
+
+    J, r = map(np.asarray, jacobian(problem, jnp.asarray(u)))
+    u = np.asarray(u, dtype=float)
+    P = problem.n_physical
+    on = np.asarray(problem.prior_on, dtype=bool)
+    sd = np.asarray(problem.prior_sd, dtype=float)
+    rp = np.where(on, (u[:P] - np.asarray(problem.prior_mean, dtype=float)) / sd, 0.0)
+    Jp = np.zeros((P, J.shape[1]))
+    Jp[:, :P] = np.diag(np.where(on, 1.0 / sd, 0.0))
+    return np.concatenate([r, rp]), np.concatenate([J, Jp], axis=0)
 
 
-@eqx.filter_jit
 def _path_costs(problem: Problem, U):
-    return jax.vmap(problem.cost)(U)
+    """Cost of every row of ``U``: the LM program with no iteration (its cost at the
+    start), in calls of the fit's lane count — the fit's compiled program again."""
+    from .._lm import solve_fresh
+
+    return _solve_in_lanes(solve_fresh, problem, U, np.ones(len(U), dtype=bool), 0)[1]
 
 
 def _laplace(problem: Problem, u) -> tuple[float, np.ndarray, float]:
-    r, J = map(np.asarray, _rj(problem, jnp.asarray(u)))
+    r, J = _rj(problem, u)
     cost = float(np.sum(r**2))
     # cost = Σ r² ⇒ −log p = cost/2, Gauss–Newton Hessian JᵀJ.
     H = J.T @ J + _BOX_PRECISION * np.eye(J.shape[1])
@@ -126,12 +139,14 @@ MODE_LANES = 6
 
 def _solve_in_lanes(solve_fresh, prob, U, active, steps, lanes: int | None = None):
     """``solve_fresh`` over the rows of ``U`` in calls of ``lanes`` rows (the last padded
-    with inactive copies); calls whose rows are all inactive are skipped. Returns
+    with inactive copies; ``lanes`` 0: one call of every row); calls whose rows are all
+    inactive are skipped. Returns
     ``(U, cost, done)`` as NumPy arrays (inactive rows: unchanged, cost inf, not done)."""
-    lanes = MODE_LANES if lanes is None else int(lanes)
     U = np.array(U, dtype=float)
     active = np.asarray(active, dtype=bool)
     n = len(U)
+    lanes = MODE_LANES if lanes is None else int(lanes)
+    lanes = n if lanes <= 0 else lanes  # 0: every row in one call
     U_out, cost, done = U.copy(), np.full(n, np.inf), np.zeros(n, dtype=bool)
     for i in range(0, n, lanes):
         a = active[i : i + lanes]
@@ -193,7 +208,7 @@ def find_modes(fit, *, n_random: int = N_RANDOM_RESTARTS, seed: int = 0, max_ste
         merged = False
         for m in modes:
             path = m.u + np.linspace(0.0, 1.0, 9)[:, None] * (u - m.u)
-            pc = np.asarray(_path_costs(prob, jnp.asarray(path)))
+            pc = np.asarray(_path_costs(prob, path))
             if np.all(np.isfinite(pc)) and np.max(pc) - max(cost, m.cost) < MODE_BARRIER:
                 merged = True
                 break
