@@ -18,8 +18,10 @@ effective-sample-size factor ``(1 − ρ₁)/(1 + ρ₁)``.
 
 Priors (documented defaults, all in the sampled space):
 - physical parameters: the problem's own priors (``Problem.prior_mean``, ``prior_sd``,
-  ``prior_on``: the weak priors on ``v_s`` and ``delta``, the inertia prior when the inertia
-  is free) times a flat prior in the transformed space (flat in log for positive ones)
+  ``prior_on``: the Stribeck law's physical priors on ``v_s`` and ``delta``, whose footing
+  is in ``effects/stribeck.py``, the inertia prior when the inertia is free), the orders
+  effects declare (``tau_s ≥ tau_c``: zero density otherwise, :func:`ordered_pairs`), times
+  a flat prior in the transformed space (flat in log for positive ones)
   within ``± PRIOR_HALF_WIDTH`` of the least-squares value; the coefficients of terms that
   may vanish (``LINEAR_PRIOR``: ``k2``, ``c_v``) are flat in their value instead (same box);
 - release instant: uniform on its bracket between samples; start angle flat within
