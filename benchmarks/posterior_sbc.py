@@ -5,6 +5,14 @@ Run (pinned to one core; ≈ 1–3 min per log)::
 
     taskset -c 1 python benchmarks/posterior_sbc.py [--paper-logs 20 --rich-logs 20]
         [--seed0 7000] [--max-steps 20000] [--budget-min 600]
+        [--prior physical|catalog|none] [--method emcee[,smc]]
+
+Default (``--prior physical``, exact SBC of the library's default priors): the truths'
+``v_s``, ``delta`` are drawn from the library's own priors of the Stribeck law (``v_s``
+relative to each log's peak speed, a fixed point: :func:`draw_physical`) and
+``tau_s ≥ tau_c``; ``k1, k2, tau_c, tau_s, c_v`` from catalog Gaussians that the sampler
+is given as ``prior=`` (the default flat boxes around the least-squares value cannot be
+drawn from). Items 1 and 4 below describe ``--prior none``.
 
 For each log ``i`` (paper and four-amplitude designs interleaved, so that an early stop
 leaves both represented):
@@ -125,6 +133,61 @@ def draw_from_prior(gen, rng, min_amplitude=None):
     raise RuntimeError("no truth with a band inside the design's smallest amplitude")
 
 
+#: ``--prior physical``: the parameters the default (physical) prior of the Stribeck law
+#: leaves to the user get the catalog Gaussians of ``CAL_PRIOR_SD``; ``v_s`` and
+#: ``delta`` keep the library's default priors (``effects/stribeck.py``: ``v_s``
+#: log-normal around 5 % of the log's own peak speed, ``delta`` logit-normal median 1) and
+#: ``tau_s ≥ tau_c`` is the library's default order.
+PHYSICAL_GIVEN = ("k1", "k2", "tau_c", "tau_s", "c_v")
+
+
+def _default_prior_of(df, truth, name):
+    """``(mean, sd)`` in the transformed space of the library's default prior of ``name``
+    on log ``df`` (as ``hdid.fit`` builds it: relative to the log's own scales)."""
+    from hdid._fit import _setup
+
+    prob = _setup(df, inertia=truth["inertia"]).problem
+    i = list(prob.free).index(name)
+    return float(prob.prior_mean[i]), float(prob.prior_sd[i])
+
+
+def draw_physical(gen, rng, design, seed, max_iter=8):
+    """A truth drawn from the prior the sampler is given with ``--prior physical``, and its
+    log: ``k1, k2, tau_c, tau_s, c_v`` from the catalog Gaussians (``tau_s ≥ tau_c``, band
+    margin as in :func:`draw_from_prior`), ``delta`` from the library's logit-normal,
+    ``v_s`` from the library's log-normal whose median is relative to the log's own peak
+    speed — which depends (weakly) on ``v_s``: a standard normal ``z`` is drawn once and
+    ``log v_s = mean(log) + sd·z`` iterated to a fixed point (the log regenerated each
+    time), so that ``z`` is exactly the standardised value under the prior of the log the
+    sampler sees. Returns ``(truth, log, info, notes)``."""
+    from hdid.effects.stribeck import DELTA_INTERVAL, DELTA_MEDIAN, DELTA_PRIOR_SD, _logit_in
+
+    t, band_rejects = draw_from_prior(gen, rng, min(abs(a) for a in design["amplitudes"]))
+    lo, hi = DELTA_INTERVAL
+    zd = _logit_in(DELTA_MEDIAN, lo, hi) + DELTA_PRIOR_SD * rng.standard_normal()
+    t["delta"] = lo + (hi - lo) / (1 + math.exp(-zd))
+    z = float(rng.standard_normal())
+    d = dict(design)
+    d["seed"] = seed
+    t["v_s"] = float(gen.TRUTH_CSF8["v_s"])
+    gap = float("inf")
+    for it in range(max_iter):
+        df, info = gen.make_log(t, **d, return_truth=True)
+        mean, sd = _default_prior_of(df, t, "v_s")
+        new = math.exp(mean + sd * z)
+        gap = abs(math.log(new / t["v_s"]))
+        if gap < 1e-4:
+            break
+        t["v_s"] = new
+    else:
+        df, info = gen.make_log(t, **d, return_truth=True)
+        mean, sd = _default_prior_of(df, t, "v_s")
+        gap = abs((math.log(t["v_s"]) - mean) / sd - z)
+    notes = {"band_rejects": band_rejects, "v_s_z": z, "v_s_fixed_point_iter": it + 1,
+             "v_s_fixed_point_gap_log": gap, "v_s_prior_log_mean": mean}
+    return t, df, info, notes
+
+
 def run_one(gen, design_name, design, seed, max_steps, method="smc", prior_mode="none"):
     import numpy as np
 
@@ -132,17 +195,24 @@ def run_one(gen, design_name, design, seed, max_steps, method="smc", prior_mode=
 
     rng = np.random.default_rng(seed)
     band_rejects = 0
-    if prior_mode == "catalog":
-        truth, band_rejects = draw_from_prior(gen, rng, min(abs(a) for a in design["amplitudes"]))
-        prior = catalog_prior(gen)
+    notes = {}
+    if prior_mode == "physical":
+        truth, df, info, notes = draw_physical(gen, rng, design, seed)
+        band_rejects = notes["band_rejects"]
+        cat = catalog_prior(gen)
+        prior = {n: cat[n] for n in PHYSICAL_GIVEN}
     else:
-        truth = draw_truth(gen, rng, min(abs(a) for a in design["amplitudes"]))
-        prior = None
-    d = dict(design)
-    d["seed"] = seed
-    df, info = gen.make_log(truth, **d, return_truth=True)
+        if prior_mode == "catalog":
+            truth, band_rejects = draw_from_prior(gen, rng, min(abs(a) for a in design["amplitudes"]))
+            prior = catalog_prior(gen)
+        else:
+            truth = draw_truth(gen, rng, min(abs(a) for a in design["amplitudes"]))
+            prior = None
+        d = dict(design)
+        d["seed"] = seed
+        df, info = gen.make_log(truth, **d, return_truth=True)
     out = {"design": design_name, "seed": seed, "truth_params": truth, "load_start": _load(),
-           "prior": prior_mode, "band_rejects": band_rejects}
+           "prior": prior_mode, "band_rejects": band_rejects, "truth_notes": notes}
     t0 = time.perf_counter()
     fit = hdid.fit(df, inertia=truth["inertia"])
     out["fit_s"] = time.perf_counter() - t0
@@ -234,10 +304,12 @@ def render(res):
 
 def _render(res, all_logs, method=None):
     logs = [r for r in all_logs if "quantities" in r]
-    L = [f"#{'#' if method else ''} Posterior calibration on independent-simulator logs (truths drawn around the catalog){': sampler ' + method if method else ''}\n",
+    exact = res["options"].get("prior") in ("catalog", "physical")
+    what = "truths drawn from the sampler's prior" if exact else "truths drawn around the catalog"
+    L = [f"#{'#' if method else ''} Posterior calibration on independent-simulator logs ({what}){': sampler ' + method if method else ''}\n",
          f"Generated by `python benchmarks/posterior_sbc.py` on {res['generated']} "
          f"(options {json.dumps(res['options'])}; sampler `{res['options'].get('method', 'emcee')}`; "
-         f"prior `{res['options'].get('prior', 'none')}`{' — truths drawn from the sampler’s prior: exact SBC' if res['options'].get('prior') == 'catalog' else ''}); machine: 2 cores shared with other "
+         f"prior `{res['options'].get('prior', 'none')}`{' — truths drawn from the sampler’s prior: exact SBC' if res['options'].get('prior') in ('catalog', 'physical') else ''}); machine: 2 cores shared with other "
          f"engineers' work, this run pinned to one core, load averages per log in the JSON.\n",
          f"Logs done: {len(logs)} ({sum(r['design'] == 'paper' for r in logs)} paper design, "
          f"{sum(r['design'] == 'rich' for r in logs)} four-amplitude 1 kHz); failed: "
@@ -318,11 +390,14 @@ def main(argv=None):
     ap.add_argument("--out-dir", type=Path, default=RESULTS)
     ap.add_argument("--name", default="posterior_sbc")
     ap.add_argument("--render", type=Path)
-    ap.add_argument("--method", default="emcee,smc",
+    ap.add_argument("--method", default="emcee",
                     help="samplers, comma-separated (each log's fit and optima shared)")
-    ap.add_argument("--prior", default="none", choices=("none", "catalog"),
-                    help="catalog: truths drawn from the sampler's own prior (CAL_PRIOR_SD), "
-                         "exact SBC; none: the default prior, truths drawn around the catalog")
+    ap.add_argument("--prior", default="physical", choices=("physical", "none", "catalog"),
+                    help="physical (default): the library's default priors on v_s, delta and "
+                         "tau_s >= tau_c, catalog Gaussians on k1, k2, tau_c, tau_s, c_v, "
+                         "truths drawn from exactly that prior (exact SBC); catalog: catalog "
+                         "Gaussians on every parameter (CAL_PRIOR_SD), exact SBC; none: the "
+                         "default prior, truths drawn around the catalog (not exact)")
     args = ap.parse_args(argv)
     out_json = args.out_dir / f"{args.name}.json"
     out_md = args.out_dir / f"{args.name}.md"

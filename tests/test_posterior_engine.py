@@ -1,6 +1,6 @@
 """The default engine of ``sample_posterior`` is emcee (issue 17: the engine the user asked
 for); tempered SMC alone is ``method="smc"``. Which one is calibrated over many logs is a
-benchmark (benchmarks/posterior_sbc.py, posterior_engine.py), not a unit test."""
+benchmark (benchmarks/posterior_sbc.py), not a unit test."""
 
 from __future__ import annotations
 

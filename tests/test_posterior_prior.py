@@ -33,8 +33,9 @@ def _x(fit, du=None):
 def test_gaussian_prior_replaces_the_default_and_orders_the_friction(fit):
     """With ``prior={"v_s": (c, s)}`` the log-density differs from the default one by
     exactly (normalised Gaussian in log v_s) − (default weak prior of v_s), at two points;
-    v_s may leave the ±7 box (the Gaussian is proper, the box is the default's); with
-    priors on tau_c and tau_s, tau_s < tau_c has zero density."""
+    v_s may leave the ±7 box (the Gaussian is proper, the box is the default's); with or
+    without priors on tau_c and tau_s, tau_s < tau_c has zero density (the Stribeck law's
+    declared order)."""
     prob = fit.problem
     free = list(prob.free)
     i = free.index("v_s")
@@ -59,6 +60,9 @@ def test_gaussian_prior_replaces_the_default_and_orders_the_friction(fit):
     assert np.isfinite(float(ordered.log_prob(jnp.asarray(x))))
     x[jc] = x[js] + 0.01  # tau_c just above tau_s
     assert float(ordered.log_prob(jnp.asarray(x))) == -np.inf
+    assert float(base.log_prob(jnp.asarray(x))) == -np.inf
+    x[jc] = x[js] - 0.01  # just below: allowed
+    assert np.isfinite(float(base.log_prob(jnp.asarray(x))))
     with pytest.raises(ValueError, match="not free"):
         posterior_density(fit, prior={"inertia": (1e-6, 0.1)})
 
@@ -118,3 +122,32 @@ def test_mode_search_under_a_user_prior_minimises_the_posterior(fit):
     assert np.all(starts[:, : i] == u[:i]) and np.all(starts[:, i + 1:] == u[i + 1:])
     assert np.array_equal(np.asarray(view.u), u) and fit.problem is prob
     assert with_user_prior(fit, None) == (fit, None)
+
+
+def test_stribeck_priors_are_relative_to_the_log_and_physical(fit):
+    """The Stribeck law's default priors (effects/stribeck.py): v_s log-normal with median
+    5 % of the log's own peak speed and sd 1 in log; delta logit-normal with median 1 and
+    95 % within [0.47, 2.3]; the order tau_c ≤ tau_s declared for the posterior."""
+    from hdid._posterior.density import ordered_pairs
+    from hdid._transforms import from_unconstrained
+
+    prob = fit.problem
+    free = list(prob.free)
+    specs = prob.base.parameter_specs()
+    i, j = free.index("v_s"), free.index("delta")
+    from hdid._fit import _setup
+    from hdid._prepare import offset_guess
+    from hdid._starts import log_scales
+
+    s0 = _setup(EXAMPLE)
+    scales = log_scales(s0.prep, hdid.Model.default(), offset_guess(s0.prep))
+    assert float(prob.prior_mean[i]) == pytest.approx(math.log(0.05 * scales.speed), rel=1e-9)
+    # the peak speed of the log (the swing's ω·amplitude), not its sampled chord speed
+    assert scales.speed >= s0.prep.speed
+    assert float(prob.prior_sd[i]) == 1.0
+    m, s = float(prob.prior_mean[j]), float(prob.prior_sd[j])
+    lo, med, hi = (float(from_unconstrained(specs["delta"], m + z * s, np)) for z in (-1.96, 0, 1.96))
+    assert med == pytest.approx(1.0, abs=1e-12)
+    assert 0.45 < lo < 0.5 and 2.2 < hi < 2.3
+    pairs = ordered_pairs(prob)
+    assert pairs.tolist() == [[free.index("tau_c"), free.index("tau_s")]]

@@ -18,8 +18,10 @@ effective-sample-size factor ``(1 − ρ₁)/(1 + ρ₁)``.
 
 Priors (documented defaults, all in the sampled space):
 - physical parameters: the problem's own priors (``Problem.prior_mean``, ``prior_sd``,
-  ``prior_on``: the weak priors on ``v_s`` and ``delta``, the inertia prior when the inertia
-  is free) times a flat prior in the transformed space (flat in log for positive ones)
+  ``prior_on``: the Stribeck law's physical priors on ``v_s`` and ``delta``, whose footing
+  is in ``effects/stribeck.py``, the inertia prior when the inertia is free), the orders
+  effects declare (``tau_s ≥ tau_c``: zero density otherwise, :func:`ordered_pairs`), times
+  a flat prior in the transformed space (flat in log for positive ones)
   within ``± PRIOR_HALF_WIDTH`` of the least-squares value; the coefficients of terms that
   may vanish (``LINEAR_PRIOR``: ``k2``, ``c_v``) are flat in their value instead (same box);
 - release instant: uniform on its bracket between samples; start angle flat within
@@ -86,7 +88,8 @@ class LogPosterior(eqx.Module):
     #: of each free physical parameter given one (``sample_posterior(prior=...)``); it
     #: replaces the default prior (box, weak prior, linear prior) of that parameter
     gauss_prior: jax.Array | None = None
-    #: ``(i, j)`` indices of (tau_c, tau_s) when the prior asks ``tau_s ≥ tau_c``
+    #: ``(K, 2)`` index pairs ``(i, j)`` of free physical parameters with ``value_i ≤
+    #: value_j`` imposed (:func:`ordered_pairs`: ``tau_c ≤ tau_s``); ``None``: none
     order: jax.Array | None = None
 
     @property
@@ -167,7 +170,7 @@ class LogPosterior(eqx.Module):
             lp += jnp.sum(jnp.where(default, self.linear_prior * (u[:P] - self.centre[:P]), 0.0))
         outside = jnp.any(default & (jnp.abs(u[:P] - self.centre[:P]) > PRIOR_HALF_WIDTH))
         if self.order is not None:
-            outside |= u[self.order[1]] < u[self.order[0]]
+            outside |= jnp.any(u[self.order[:, 1]] < u[self.order[:, 0]])
         q = p.step
         lo, hi = jnp.log(self.sigma_bounds[0] * q), jnp.log(self.sigma_bounds[1] * q)
         outside |= (log_sigma < lo) | (log_sigma > hi)
@@ -292,13 +295,13 @@ class PosteriorDensity(NamedTuple):
 
 def gaussian_prior(problem: Problem, prior: dict | None):
     """``(3, P)`` array (mean, sd, on) of the Gaussian prior in the transformed space that
-    ``prior`` asks for, and the ``(tau_c, tau_s)`` indices when both are given one (then
-    ``tau_s ≥ tau_c`` is imposed). ``prior`` maps a free physical parameter's name to
+    ``prior`` asks for, and the ordered pairs (:func:`ordered_pairs`, imposed with or
+    without a prior of the user's). ``prior`` maps a free physical parameter's name to
     ``(centre value, sd)``: the centre in the parameter's unit, the sd in its transformed
     space — log for positive parameters (a log-normal: 0.2 is ±20 %), logit of the
-    interval for ``delta``. ``None``: ``(None, None)``."""
+    interval for ``delta``. ``None``: ``(None, ordered pairs)``."""
     if not prior:
-        return None, None
+        return None, ordered_pairs(problem)
     from .._transforms import to_unconstrained
 
     specs = problem.base.parameter_specs()
@@ -314,11 +317,22 @@ def gaussian_prior(problem: Problem, prior: dict | None):
             raise ValueError(f"prior[{n!r}] = {(centre, sd)}: the centre must be finite and the sd > 0")
         i = free.index(n)
         G[:, i] = float(to_unconstrained(specs[n], centre)), float(sd), 1.0
-    order = None
-    if "tau_c" in prior and "tau_s" in prior and all(
-            specs[n].transform == "log" for n in ("tau_c", "tau_s")):
-        order = np.array([free.index("tau_c"), free.index("tau_s")])
-    return G, order
+    return G, ordered_pairs(problem)
+
+
+def ordered_pairs(problem: Problem) -> np.ndarray | None:
+    """``(K, 2)`` indices ``(i, j)`` into the free physical parameters of every pair an
+    effect declares ordered (``AbstractEffect.ordered``, e.g. Stribeck's ``tau_c ≤
+    tau_s``: breakaway at least Coulomb friction), both free and log-transformed (then
+    the order of the values is the order of the sampled logs); ``None`` if there is none.
+    The posterior gives the other side zero density."""
+    specs = problem.base.parameter_specs()
+    free = list(problem.free)
+    pairs = [(free.index(a), free.index(b))
+             for e in problem.base.effects for a, b in getattr(e, "ordered", ())
+             if a in free and b in free
+             and specs[a].transform == "log" and specs[b].transform == "log"]
+    return np.array(pairs, dtype=int).reshape(-1, 2) if pairs else None
 
 
 def posterior_density(fit, sigma_floor=None, linear_prior=LINEAR_PRIOR,

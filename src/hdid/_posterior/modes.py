@@ -6,8 +6,6 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -41,18 +39,33 @@ class Mode:
                 "values": dict(self.values)}
 
 
-@eqx.filter_jit
 def _rj(problem: Problem, u):
-    return problem.residuals_and_jacobian(u)
+    """Residuals and Jacobian (data rows, then weak-prior rows) at ``u``: the data part
+    from the program the fit's analysis compiled (``_evaluate.jacobian``: no compile of
+    its own), the prior rows in NumPy (``Problem.residuals_and_jacobian``'s)."""
+    from .._evaluate import jacobian
+
+    J, r = map(np.asarray, jacobian(problem, jnp.asarray(u)))
+    u = np.asarray(u, dtype=float)
+    P = problem.n_physical
+    on = np.asarray(problem.prior_on, dtype=bool)
+    sd = np.asarray(problem.prior_sd, dtype=float)
+    rp = np.where(on, (u[:P] - np.asarray(problem.prior_mean, dtype=float)) / sd, 0.0)
+    Jp = np.zeros((P, J.shape[1]))
+    Jp[:, :P] = np.diag(np.where(on, 1.0 / sd, 0.0))
+    return np.concatenate([r, rp]), np.concatenate([J, Jp], axis=0)
 
 
-@eqx.filter_jit
 def _path_costs(problem: Problem, U):
-    return jax.vmap(problem.cost)(U)
+    """Cost of every row of ``U``: the LM program with no iteration (its cost at the
+    start), in calls of the fit's lane count — the fit's compiled program again."""
+    from .._lm import solve_fresh
+
+    return _solve_in_lanes(solve_fresh, problem, U, np.ones(len(U), dtype=bool), 0)[1]
 
 
 def _laplace(problem: Problem, u) -> tuple[float, np.ndarray, float]:
-    r, J = map(np.asarray, _rj(problem, jnp.asarray(u)))
+    r, J = _rj(problem, u)
     cost = float(np.sum(r**2))
     # cost = Σ r² ⇒ −log p = cost/2, Gauss–Newton Hessian JᵀJ.
     H = J.T @ J + _BOX_PRECISION * np.eye(J.shape[1])
@@ -116,6 +129,38 @@ def _restart_candidates(fit, rng, n_random: int) -> np.ndarray:
     return np.array(cands)
 
 
+#: Lanes per call of the mode search's Levenberg–Marquardt: the fit's own (``hdid.fit``'s
+#: default ``n_starts``), so that the search runs the program the fit compiled (same
+#: problem, same lane count: one in-memory or persistent-cache hit) instead of compiling
+#: one for its own number of candidates, which varies from log to log (27–32 s in a fresh
+#: process, benchmarks/README.md, issue 17 ``post3``).
+MODE_LANES = 6
+
+
+def _solve_in_lanes(solve_fresh, prob, U, active, steps, lanes: int | None = None):
+    """``solve_fresh`` over the rows of ``U`` in calls of ``lanes`` rows (the last padded
+    with inactive copies; ``lanes`` 0: one call of every row); calls whose rows are all
+    inactive are skipped. Returns
+    ``(U, cost, done)`` as NumPy arrays (inactive rows: unchanged, cost inf, not done)."""
+    U = np.array(U, dtype=float)
+    active = np.asarray(active, dtype=bool)
+    n = len(U)
+    lanes = MODE_LANES if lanes is None else int(lanes)
+    lanes = n if lanes <= 0 else lanes  # 0: every row in one call
+    U_out, cost, done = U.copy(), np.full(n, np.inf), np.zeros(n, dtype=bool)
+    for i in range(0, n, lanes):
+        a = active[i : i + lanes]
+        if not a.any():
+            continue
+        blk, k = U[i : i + lanes], len(a)
+        if k < lanes:
+            blk = np.concatenate([blk, np.repeat(blk[:1], lanes - k, axis=0)])
+            a = np.concatenate([a, np.zeros(lanes - k, dtype=bool)])
+        u2, c2, d2, _ = map(np.asarray, solve_fresh(prob, jnp.asarray(blk), jnp.asarray(a), steps))
+        U_out[i : i + k], cost[i : i + k], done[i : i + k] = u2[:k], c2[:k], d2[:k]
+    return U_out, cost, done
+
+
 #: Restarts drawn from the widened Laplace approximation in :func:`find_modes`. 30 instead
 #: of 6 found more optima (paper log 1007 with seed 0: the one nearest the truth, which 6
 #: missed; with seed 7 not) but did not change the coverage on 14 paper logs (95 %
@@ -143,15 +188,13 @@ def find_modes(fit, *, n_random: int = N_RANDOM_RESTARTS, seed: int = 0, max_ste
     U0 = _restart_candidates(fit, rng, n_random)
     if extra_starts is not None:
         U0 = np.concatenate([U0, np.atleast_2d(np.asarray(extra_starts, dtype=float))])
-    U, costs, ok, _ = map(np.asarray, solve_fresh(
-        prob, jnp.asarray(U0), jnp.ones(len(U0), dtype=bool), PHASE1_STEPS))
-    U, costs = np.array(U), np.array(costs)
+    U, costs, ok = _solve_in_lanes(solve_fresh, prob, U0, np.ones(len(U0), dtype=bool),
+                                   PHASE1_STEPS)
     costs[~np.isfinite(costs)] = np.inf
     active = (costs - np.min(costs) < 10 * dchi2_max) & ~ok
     used = PHASE1_STEPS
     while active.any() and used < max_steps:
-        U2, c2, d2, _ = map(np.asarray, solve_fresh(
-            prob, jnp.asarray(U), jnp.asarray(active), PHASE2_CHUNK))
+        U2, c2, d2 = _solve_in_lanes(solve_fresh, prob, U, active, PHASE2_CHUNK)
         U[active], costs[active] = U2[active], np.where(np.isfinite(c2[active]), c2[active], np.inf)
         used += PHASE2_CHUNK
         active = active & ~d2 & (costs - np.min(costs) < dchi2_max)
@@ -165,7 +208,7 @@ def find_modes(fit, *, n_random: int = N_RANDOM_RESTARTS, seed: int = 0, max_ste
         merged = False
         for m in modes:
             path = m.u + np.linspace(0.0, 1.0, 9)[:, None] * (u - m.u)
-            pc = np.asarray(_path_costs(prob, jnp.asarray(path)))
+            pc = np.asarray(_path_costs(prob, path))
             if np.all(np.isfinite(pc)) and np.max(pc) - max(cost, m.cost) < MODE_BARRIER:
                 merged = True
                 break
@@ -235,8 +278,9 @@ def sampled_modes(fit, modes, seed: int, u_fit: np.ndarray, lin: np.ndarray,
                   gauss_prior=None) -> list[Mode]:
     """The optima a sampler starts from: ``modes`` ``"auto"`` (:func:`find_modes`),
     ``"fit"`` or a list of :class:`Mode` (copied: their weights are re-set), kept inside
-    the prior box around the fit (±``PRIOR_HALF_WIDTH``, else they cannot be sampled; the
-    fit's own if none is), with Laplace weights under the sampled prior (the fit's cost
+    the prior box around the fit (±``PRIOR_HALF_WIDTH``) and on the allowed side of the
+    orders the prior imposes (``tau_s ≥ tau_c``), else they cannot be sampled (the fit's
+    own, moved inside, if none is), with Laplace weights under the sampled prior (the fit's cost
     has the log-flat one; ``lin`` marks the parameters whose prior is flat in value)."""
     from dataclasses import replace
 
@@ -252,10 +296,24 @@ def sampled_modes(fit, modes, seed: int, u_fit: np.ndarray, lin: np.ndarray,
                  if modes == "auto" else [_fit_mode(view)])
     else:
         found = [replace(m) for m in modes]
+    from .density import ordered_pairs
+
     P = fit.problem.n_physical
-    found = [m for m in found if np.all(np.abs(m.u[:P] - u_fit[:P]) < PRIOR_HALF_WIDTH)]
+    pairs = ordered_pairs(fit.problem)
+
+    def in_order(u):
+        return pairs is None or bool(np.all(u[pairs[:, 1]] >= u[pairs[:, 0]]))
+
+    found = [m for m in found if np.all(np.abs(m.u[:P] - u_fit[:P]) < PRIOR_HALF_WIDTH)
+             and in_order(m.u)]
     if not found:
-        found = [_fit_mode(fit)]
+        # every optimum breaks an order the prior imposes (e.g. tau_s < tau_c): start from
+        # the fit's, each such pair put just inside the allowed side
+        m = _fit_mode(fit)
+        if pairs is not None:
+            for i, j in pairs:
+                m.u[j] = max(m.u[j], m.u[i] + 0.02)
+        found = [m]
     lz = np.array([m.log_evidence + float(lin @ (m.u[:P] - u_fit[:P])) for m in found])
     wz = np.exp(lz - lz.max())
     for m, wi in zip(found, wz / wz.sum()):

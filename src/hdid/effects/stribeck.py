@@ -2,12 +2,29 @@
 
 from __future__ import annotations
 
+import math
 from typing import ClassVar
 
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ._base import AbstractEffect, Motion, Parameter, StartValues, positive_power
+
+
+#: Median of the Stribeck velocity's prior (and its start) as a fraction of the log's
+#: peak speed, and the prior's sd in log (class docstring).
+V_S_FRACTION = 0.05
+V_S_PRIOR_SD = 1.0
+#: The shape exponent's interval (its transform), prior median and sd in the logit.
+DELTA_INTERVAL = (0.3, 4.0)
+DELTA_MEDIAN = 1.0
+DELTA_PRIOR_SD = 0.8
+
+
+def _logit_in(value: float, lo: float, hi: float) -> float:
+    """``value`` in the logit of the interval ``(lo, hi)`` (the ``"interval"`` transform)."""
+    p = (value - lo) / (hi - lo)
+    return math.log(p / (1.0 - p))
 
 
 class StribeckFriction(AbstractEffect):
@@ -21,6 +38,33 @@ class StribeckFriction(AbstractEffect):
     Residual mark when missing or wrong: rest points off, amplitude decrement per
     half-cycle wrong (Coulomb removes ``2·tau_c/k`` per swing), residual that flips with
     the sign of the velocity and peaks just before rest.
+
+    Priors (used by the least-squares fit as weak-prior rows and by the posterior; each
+    relative to the log in hand or dimensionless, none encodes one gear's size):
+
+    - ``v_s``: log-normal, median 5 % of the log's peak speed (``Scales.speed``), sd 1 in
+      log (95 % between 0.7 % and 37 % of that speed). Footing: ``v_s`` is the speed
+      where breakaway gives way to Coulomb friction; for the law to describe what the log
+      shows, that transition has to lie inside the speeds the log covers — well below its
+      peak (above it the law is Coulomb friction at ``tau_s`` plus an unresolved tail) and
+      above the speeds the encoder resolves (one step per sample is 0.7 % of the peak
+      speed on the paper's design, the prior's lower 2.5 % point). The previous sd of 2 (a factor e² = 7.4 either way, 2σ beyond the peak speed)
+      let the posterior run along the Coulomb limit of the law (low ``tau_c``, high
+      ``c_v``, ``v_s`` and low ``delta``), where emcee did not converge on the paper design
+      in 20 000 steps (benchmarks/README.md, issue 17, ``post3``).
+    - ``delta``: logit-normal on its interval (0.3, 4), median 1 (the exponential law),
+      sd 0.8 in the logit: 95 % between 0.47 and 2.3. Footing: the shape exponents
+      published for lubricated contacts lie between ½ and 2 (½–1 Bo & Pavelescu,
+      1 Tustin/exponential, 2 Armstrong-Hélouvry's Gaussian law). The previous logit sd of
+      2 around the interval's middle was U-shaped in the value and put the paper log's
+      posterior at the interval's top (median 2.9) wherever the data cannot see the shape.
+    - ``tau_s ≥ tau_c`` (:attr:`ordered`): breakaway (static) friction is by definition
+      at least the sliding friction it gives way to; the posterior gives ``tau_s < tau_c``
+      zero density. Chosen as a constraint rather than a reparameterisation
+      ``tau_s = tau_c + excess``: the fitted and reported parameters (names, JSON, saved
+      fits, diagnose's candidates) stay ``tau_c`` and ``tau_s``; the least-squares fit
+      keeps the unconstrained optimum and flags ``tau_s ≤ tau_c`` as a symptom (nested
+      Coulomb check) instead of pinning it to the boundary.
     """
 
     tau_c: Float[ArrayLike, ""]
@@ -36,15 +80,18 @@ class StribeckFriction(AbstractEffect):
         # breakaway above Coulomb, and enough to hold the largest logged rest point
         Parameter("tau_s", "N m", "static (breakaway) friction torque at the wave generator",
                   start=lambda s: max(1.3 * s.torque, 1.05 * s.k_wg * s.band)),
-        # Weak priors (transformed space) keep the poorly identified shape parameters
-        # finite when the data cannot see them; the report says when that happens. The
-        # Stribeck velocity's is centred on 5 % of the log's peak speed (3 rad/s on the
-        # CSF-8 paper log), a factor e² either way.
+        # Physical priors (transformed space; footing in the class docstring): the
+        # Stribeck velocity log-normal around 5 % of the log's peak speed, sd 1; the shape
+        # exponent logit-normal with median 1, 95 % in [0.47, 2.3].
         Parameter("v_s", "rad/s", "Stribeck velocity (wave generator)",
-                  prior=(None, 2.0), start=lambda s: 0.05 * s.speed),
+                  prior=(None, V_S_PRIOR_SD), start=lambda s: V_S_FRACTION * s.speed),
         Parameter("delta", "1", "Stribeck shape exponent",
-                  transform=("interval", 0.3, 4.0), prior=(0.0, 2.0)),
+                  transform=("interval", *DELTA_INTERVAL),
+                  prior=(_logit_in(DELTA_MEDIAN, *DELTA_INTERVAL), DELTA_PRIOR_SD)),
     )
+    #: Pairs ``(a, b)`` of this effect's parameters with ``a ≤ b`` imposed by the
+    #: posterior's prior (zero density otherwise): breakaway at least Coulomb friction.
+    ordered: ClassVar[tuple[tuple[str, str], ...]] = (("tau_c", "tau_s"),)
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> StribeckFriction:
