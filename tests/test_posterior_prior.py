@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import ClassVar
 
 import jax.numpy as jnp
 import numpy as np
@@ -151,3 +152,38 @@ def test_stribeck_priors_are_relative_to_the_log_and_physical(fit):
     assert 0.45 < lo < 0.5 and 2.2 < hi < 2.3
     pairs = ordered_pairs(prob)
     assert pairs.tolist() == [[free.index("tau_c"), free.index("tau_s")]]
+
+
+def test_sampling_coordinates_and_orders_are_declared_by_the_effects(fit):
+    """The posterior reads its coordinates from the parameters' declarations (issue 20:
+    no list of names in the posterior): the library's ``k1, k2, tau_c, c_v`` are sampled
+    in value and ``k2, c_v`` get a value-flat prior, and a user's effect that declares
+    ``sample_in_value`` / ``flat_in_value`` and an order is treated the same way."""
+    from hdid._posterior.density import declared, ordered_pairs
+    from hdid.effects import parameter
+
+    specs = hdid.Model.default().parameter_specs()
+    assert declared(specs, "sample_in_value") == ("k1", "k2", "tau_c", "c_v")
+    assert declared(specs, "flat_in_value") == ("k2", "c_v")
+
+    class Drag(hdid.AbstractEffect):
+        c_d: float = parameter("N m s^2/rad^2", "quadratic drag", start=lambda s: 1e-9,
+                               flat_in_value=True, sample_in_value=True)
+        c_e: float = parameter("N m s^2/rad^2", "a second drag", start=lambda s: 2e-9)
+        name: ClassVar[str] = "drag"
+        ordered: ClassVar = (("c_d", "c_e"),)
+
+        def torque(self, motion, state):
+            return -(self.c_d + self.c_e) * motion.omega * jnp.abs(motion.omega)
+
+    model = hdid.Model.default().with_effect(Drag(c_d=1e-9, c_e=2e-9))
+    specs = model.parameter_specs()
+    assert declared(specs, "sample_in_value")[-1] == "c_d"
+    assert declared(specs, "flat_in_value")[-1] == "c_d"
+    problem = fit.problem
+    problem = type(problem)(**{**{f: getattr(problem, f) for f in problem.__dataclass_fields__},
+                               "base": model, "free": problem.free + ("c_d", "c_e")})
+    pairs = ordered_pairs(problem)
+    free = list(problem.free)
+    assert [free.index("c_d"), free.index("c_e")] in pairs.tolist()
+    assert [free.index("tau_c"), free.index("tau_s")] in pairs.tolist()

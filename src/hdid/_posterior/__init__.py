@@ -11,9 +11,7 @@ One job per module:
 """
 
 from .density import (
-    LINEAR_PRIOR,
     PRIOR_HALF_WIDTH,
-    SAMPLE_LINEAR,
     SIGMA_BOUNDS,
     LogPosterior,
     _derived_batch,
@@ -28,9 +26,9 @@ from .moves import START_SCALE, MixtureProposal, _mode_start, _reset_outliers, d
 from .result import PosteriorResult
 
 __all__ = [
-    "BURN_IN_STAGES", "Convergence", "ESS_MIN", "LINEAR_PRIOR", "LogPosterior",
+    "BURN_IN_STAGES", "Convergence", "ESS_MIN", "LogPosterior",
     "MIN_TAU_MULTIPLE", "MixtureProposal", "Mode", "PRIOR_HALF_WIDTH", "PosteriorResult",
-    "RHAT_MAX", "SAMPLE_LINEAR", "SIGMA_BOUNDS", "START_SCALE", "convergence",
+    "RHAT_MAX", "SIGMA_BOUNDS", "START_SCALE", "convergence",
     "default_moves", "derived_np", "find_modes", "residual_autocorrelation",
     "sample_posterior", "tau_pooled", "width_ratios",
 ]

@@ -23,7 +23,7 @@ Priors (documented defaults, all in the sampled space):
   effects declare (``tau_s ≥ tau_c``: zero density otherwise, :func:`ordered_pairs`), times
   a flat prior in the transformed space (flat in log for positive ones)
   within ``± PRIOR_HALF_WIDTH`` of the least-squares value; the coefficients of terms that
-  may vanish (``LINEAR_PRIOR``: ``k2``, ``c_v``) are flat in their value instead (same box);
+  may vanish (declared ``flat_in_value``: ``k2``, ``c_v``) are flat in their value instead (same box);
 - release instant: uniform on its bracket between samples; start angle flat within
   ±5 encoder steps of its least-squares value; offset and other per-run unknowns flat;
 - ``σ_n``: log-uniform between ``0.05 q`` (the simulator's accuracy) and ``20 q``.
@@ -52,20 +52,14 @@ PRIOR_HALF_WIDTH = 7.0
 #: (benchmarks/results/simulator_schemes.md); a smaller σ_n would claim the model reproduces
 #: readings more exactly than it can compute them.
 SIGMA_BOUNDS = (0.05, 20.0)
-#: Log-transformed parameters whose default prior is flat in the *value*, not in its log:
-#: coefficients of terms that may be absent. A prior flat in log k2 (or log c_v) gives the
-#: "no cubic stiffness" ("no viscous friction") end an unbounded volume as the box widens —
-#: on the paper design that volume, not the data, pulled the posterior to k2 → 0 and a
-#: 92 mrad band (benchmarks/results/posterior_calibration.md).
-LINEAR_PRIOR = ("k2", "c_v")
-#: Log-transformed parameters that are *sampled* in their value (relative to the
-#: least-squares one) instead of their log. The data fix sums such as the stiffness torque
-#: ``k1·d + k2·d³`` over the twists seen and the friction ``τ_c + c_v·v`` over the speeds
-#: seen: straight lines in the values, bananas in their logs (k1–k2, τ_c–c_v on the paper
-#: design), and emcee's affine-invariant moves only straighten straight lines. The target
-#: density carries the Jacobian, so this changes the mixing, not the posterior
-#: (benchmarks/results/posterior_coordinates.md).
-SAMPLE_LINEAR = ("k1", "k2", "tau_c", "c_v")
+#: Which log-transformed parameters have a default prior flat in their *value* (not
+#: their log) and which the walkers move in their value is declared by each effect's
+#: parameters (``Parameter.flat_in_value``, ``Parameter.sample_in_value``: the library
+#: declares ``k2``, ``c_v`` flat in value — coefficients of terms that may vanish, whose
+#: "absent" end a log-flat prior gives an unbounded volume that pulled the paper design to
+#: k2 → 0 and a 92 mrad band — and samples ``k1``, ``k2``, ``tau_c``, ``c_v`` in value — the
+#: data fix ``k1·d + k2·d³`` and ``τ_c + c_v·v`` as straight lines, bananas in their logs;
+#: benchmarks/results/posterior_calibration.md, posterior_coordinates.md).
 #: Half-width of the start angle's flat prior around its least-squares value [encoder steps].
 START_ANGLE_HALF_WIDTH = 5.0
 
@@ -81,7 +75,7 @@ class LogPosterior(eqx.Module):
     #: 1.0 at log-transformed parameters whose prior is flat in the value, not its log
     linear_prior: jax.Array | None = None
     #: 1.0 at log-transformed parameters *sampled* in their value relative to the
-    #: least-squares one (``y = exp(u − centre)``, see ``SAMPLE_LINEAR``); ``None``: the
+    #: least-squares one (``y = exp(u − centre)``, declared ``sample_in_value``); ``None``: the
     #: sampled vector is ``u`` itself
     sample_linear: jax.Array | None = None
     #: ``(3, P)``: mean, sd and on/off (1/0) of a Gaussian prior in the transformed space
@@ -329,18 +323,23 @@ def ordered_pairs(problem: Problem) -> np.ndarray | None:
     specs = problem.base.parameter_specs()
     free = list(problem.free)
     pairs = [(free.index(a), free.index(b))
-             for e in problem.base.effects for a, b in getattr(e, "ordered", ())
+             for e in problem.base.effects for a, b in e.ordered
              if a in free and b in free
              and specs[a].transform == "log" and specs[b].transform == "log"]
     return np.array(pairs, dtype=int).reshape(-1, 2) if pairs else None
 
 
-def posterior_density(fit, sigma_floor=None, linear_prior=LINEAR_PRIOR,
-                      sample_linear=SAMPLE_LINEAR, prior=None) -> PosteriorDensity:
+def declared(specs, flag: str) -> tuple[str, ...]:
+    """Names whose declaration sets ``flag`` (``"flat_in_value"``, ``"sample_in_value"``)."""
+    return tuple(n for n, s in specs.items() if getattr(s, flag, False))
+
+
+def posterior_density(fit, sigma_floor=None, linear_prior=None,
+                      sample_linear=None, prior=None) -> PosteriorDensity:
     """:class:`LogPosterior` of ``fit``: tempered by the residuals' lag-1 autocorrelation
     (effective sample size), σ bounded in steps, a flat prior in the value of the
     log-transformed parameters named in ``linear_prior`` and sampling in the value of
-    those in ``sample_linear``; ``prior`` (:func:`gaussian_prior`) replaces the default
+    those in ``sample_linear`` (``None``: as the effects declare them, see above); ``prior`` (:func:`gaussian_prior`) replaces the default
     prior of the parameters it names."""
     import math
 
@@ -359,6 +358,10 @@ def posterior_density(fit, sigma_floor=None, linear_prior=LINEAR_PRIOR,
     bounds = (SIGMA_BOUNDS[0] if sigma_floor is None else float(sigma_floor), SIGMA_BOUNDS[1])
     u_fit = np.asarray(fit.u, dtype=float)
     specs = prob.base.parameter_specs()
+    if linear_prior is None:
+        linear_prior = declared(specs, "flat_in_value")
+    if sample_linear is None:
+        sample_linear = declared(specs, "sample_in_value")
     lin = np.array([1.0 if (n in linear_prior and specs[n].transform == "log") else 0.0
                     for n in prob.free])
     samp = np.array([1.0 if (n in sample_linear and specs[n].transform == "log") else 0.0

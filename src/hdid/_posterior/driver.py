@@ -13,9 +13,7 @@ import numpy as np
 from .._identifiability import unknown_labels
 from .._problem import Problem
 from .density import (
-    LINEAR_PRIOR,
     PRIOR_HALF_WIDTH,
-    SAMPLE_LINEAR,
     derived_np,
     posterior_density,
     to_physical,
@@ -76,8 +74,8 @@ def sample_posterior(
     moves=None,
     sigma_floor: float | None = None,
     modes="auto",
-    linear_prior: tuple[str, ...] = LINEAR_PRIOR,
-    sample_linear: tuple[str, ...] = SAMPLE_LINEAR,
+    linear_prior: tuple[str, ...] | None = None,
+    sample_linear: tuple[str, ...] | None = None,
     method: str = "emcee",
     n_particles: int | None = None,
     prior: dict | None = None,
@@ -143,8 +141,9 @@ def sample_posterior(
         and ``tau_s`` given, ``tau_s ≥ tau_c`` is imposed. What the data then narrowed is
         in ``widths`` (posterior / prior sd).
     sample_linear:
-        Log-transformed parameters the walkers move in the *value* of (default
-        ``SAMPLE_LINEAR``); the density carries the Jacobian, so only the mixing changes.
+        Log-transformed parameters the walkers move in the *value* of (default: those
+        whose declaration says ``sample_in_value``); the density carries the Jacobian, so
+        only the mixing changes.
     """
     if method == "smc":
         from .smc import N_PARTICLES, sample_smc

@@ -111,6 +111,15 @@ class Parameter:
         linear stiffness at the output, ``lambda s: 0.1 * s.k_out / s.twist**2`` for a
         cubic one); ``None``: the model's current value. This is how every library effect
         starts on a log of any gear size and in any consistent units.
+    flat_in_value:
+        The posterior's default flat prior on a ``"log"`` parameter is flat in its *value*,
+        not its log: for coefficients of terms that may vanish (``k2``, ``c_v``), whose
+        "absent" end a log-flat prior would give an unbounded volume.
+    sample_in_value:
+        The posterior samples a ``"log"`` parameter in its value (relative to the
+        least-squares one): for the terms of sums the data fix as straight lines
+        (``k1·d + k2·d³``, ``τ_c + c_v·v``), bananas in their logs. Changes the mixing,
+        not the posterior (the density carries the Jacobian).
     """
 
     name: str
@@ -120,6 +129,8 @@ class Parameter:
     prior: tuple[float | None, float] | None = None
     scale: float | Callable[[Scales], float] = 1.0
     start: Callable[[Scales], float] | None = None
+    flat_in_value: bool = False
+    sample_in_value: bool = False
 
     def resolved(self, scales: Scales | None) -> Parameter:
         """This declaration with a callable :attr:`scale` evaluated on ``scales``
@@ -137,7 +148,8 @@ PARAMETER_METADATA = "hdid_parameter"
 def parameter(unit: str, doc: str, *, transform: str | tuple[str, float, float] = "log",
               prior: tuple[float | None, float] | None = None,
               scale: float | Callable[[Scales], float] = 1.0,
-              start: Callable[[Scales], float] | None = None):
+              start: Callable[[Scales], float] | None = None,
+              flat_in_value: bool = False, sample_in_value: bool = False):
     """Declare an effect's physical parameter once, as the field that holds its value::
 
         c_v: Float[ArrayLike, ""] = parameter("N m s/rad", "viscous coefficient",
@@ -146,7 +158,8 @@ def parameter(unit: str, doc: str, *, transform: str | tuple[str, float, float] 
     The arguments are those of :class:`Parameter` (its ``name`` is the field's); the
     effect's ``parameters`` are collected from these fields, in their order.
     """
-    meta = dict(unit=unit, doc=doc, transform=transform, prior=prior, scale=scale, start=start)
+    meta = dict(unit=unit, doc=doc, transform=transform, prior=prior, scale=scale, start=start,
+                flat_in_value=flat_in_value, sample_in_value=sample_in_value)
     return eqx.field(metadata={PARAMETER_METADATA: meta})
 
 
@@ -157,7 +170,8 @@ def same_parameter(effect: type, name: str):
     if p is None:
         raise TypeError(f"{effect.__name__} declares no parameter {name!r}")
     return parameter(p.unit, p.doc, transform=p.transform, prior=p.prior, scale=p.scale,
-                     start=p.start)
+                     start=p.start, flat_in_value=p.flat_in_value,
+                     sample_in_value=p.sample_in_value)
 
 
 class Motion(eqx.Module):
@@ -233,6 +247,9 @@ class AbstractEffect(eqx.Module):
     #: The ``--add`` name of a library or plugin effect: its module's file stem (or its
     #: ``hdid.effects`` entry point's name). ``None``: not offered by ``--add``.
     key: ClassVar[str | None] = None
+    #: Pairs ``(a, b)`` of this effect's parameters with ``a ≤ b`` imposed by the
+    #: posterior's prior (zero density otherwise), e.g. breakaway at least Coulomb friction.
+    ordered: ClassVar[tuple[tuple[str, str], ...]] = ()
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)

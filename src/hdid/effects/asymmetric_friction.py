@@ -38,6 +38,7 @@ class AsymmetricStribeckFriction(AbstractEffect):
 
     name: ClassVar[str] = "stribeck"
     key: ClassVar[str] = "asymmetric_friction"
+    ordered: ClassVar[tuple[tuple[str, str], ...]] = StribeckFriction.ordered
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> AsymmetricStribeckFriction:

@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, StartValues, parameter, same_parameter
+from ._base import AbstractEffect, Motion, StartValues, same_parameter
 from .stribeck import StribeckFriction
 
 

@@ -6,7 +6,7 @@ from typing import ClassVar
 
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractSpring, Motion, StartValues, parameter, same_parameter
+from ._base import AbstractSpring, Motion, StartValues, same_parameter
 from .stiffness import CubicStiffness
 
 

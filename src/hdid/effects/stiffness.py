@@ -22,11 +22,11 @@ class CubicStiffness(AbstractSpring):
 
     k1: Float[ArrayLike, ""] = parameter(
         "N m/rad", "linear torsional stiffness, output side",
-        start=lambda s: s.k_out)
+        start=lambda s: s.k_out, sample_in_value=True)
     # k2·d³ about 17 % of the torque at the largest twist (the CSF-8 catalog's cubic)
     k2: Float[ArrayLike, ""] = parameter(
         "N m/rad^3", "cubic torsional stiffness, output side",
-        start=lambda s: 0.17 * s.k_out / s.twist**2)
+        start=lambda s: 0.17 * s.k_out / s.twist**2, flat_in_value=True, sample_in_value=True)
 
     key: ClassVar[str] = "stiffness"
 

@@ -8,7 +8,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, Parameter, StartValues, positive_power
+from ._base import AbstractEffect, Motion, StartValues, parameter, positive_power
 
 
 #: Median of the Stribeck velocity's prior (and its start) as a fraction of the log's
@@ -67,30 +67,27 @@ class StribeckFriction(AbstractEffect):
       Coulomb check) instead of pinning it to the boundary.
     """
 
-    tau_c: Float[ArrayLike, ""]
-    tau_s: Float[ArrayLike, ""]
-    v_s: Float[ArrayLike, ""]
-    delta: Float[ArrayLike, ""]
+    tau_c: Float[ArrayLike, ""] = parameter(
+        "N m", "Coulomb friction torque at the wave generator",
+        start=lambda s: s.torque, sample_in_value=True)
+    # breakaway above Coulomb, and enough to hold the largest logged rest point
+    tau_s: Float[ArrayLike, ""] = parameter(
+        "N m", "static (breakaway) friction torque at the wave generator",
+        start=lambda s: max(1.3 * s.torque, 1.05 * s.k_wg * s.band))
+    # Physical priors (transformed space; footing in the class docstring): the
+    # Stribeck velocity log-normal around 5 % of the log's peak speed, sd 1; the shape
+    # exponent logit-normal with median 1, 95 % in [0.47, 2.3].
+    v_s: Float[ArrayLike, ""] = parameter(
+        "rad/s", "Stribeck velocity (wave generator)",
+        prior=(None, V_S_PRIOR_SD), start=lambda s: V_S_FRACTION * s.speed)
+    delta: Float[ArrayLike, ""] = parameter(
+        "1", "Stribeck shape exponent",
+        transform=("interval", *DELTA_INTERVAL),
+        prior=(_logit_in(DELTA_MEDIAN, *DELTA_INTERVAL), DELTA_PRIOR_SD))
 
     name: ClassVar[str] = "stribeck"
     key: ClassVar[str] = "stribeck"
-    parameters: ClassVar[tuple[Parameter, ...]] = (
-        Parameter("tau_c", "N m", "Coulomb friction torque at the wave generator",
-                  start=lambda s: s.torque),
-        # breakaway above Coulomb, and enough to hold the largest logged rest point
-        Parameter("tau_s", "N m", "static (breakaway) friction torque at the wave generator",
-                  start=lambda s: max(1.3 * s.torque, 1.05 * s.k_wg * s.band)),
-        # Physical priors (transformed space; footing in the class docstring): the
-        # Stribeck velocity log-normal around 5 % of the log's peak speed, sd 1; the shape
-        # exponent logit-normal with median 1, 95 % in [0.47, 2.3].
-        Parameter("v_s", "rad/s", "Stribeck velocity (wave generator)",
-                  prior=(None, V_S_PRIOR_SD), start=lambda s: V_S_FRACTION * s.speed),
-        Parameter("delta", "1", "Stribeck shape exponent",
-                  transform=("interval", *DELTA_INTERVAL),
-                  prior=(_logit_in(DELTA_MEDIAN, *DELTA_INTERVAL), DELTA_PRIOR_SD)),
-    )
-    #: Pairs ``(a, b)`` of this effect's parameters with ``a ≤ b`` imposed by the
-    #: posterior's prior (zero density otherwise): breakaway at least Coulomb friction.
+    #: breakaway at least Coulomb friction (imposed by the posterior)
     ordered: ClassVar[tuple[tuple[str, str], ...]] = (("tau_c", "tau_s"),)
 
     @classmethod

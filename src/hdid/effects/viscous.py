@@ -19,7 +19,7 @@ class ViscousFriction(AbstractEffect):
 
     c_v: Float[ArrayLike, ""] = parameter(
         "N m s/rad", "viscous friction coefficient at the wave generator",
-        start=lambda s: 0.05 * s.c_crit)
+        start=lambda s: 0.05 * s.c_crit, flat_in_value=True, sample_in_value=True)
 
     name: ClassVar[str] = "viscous"
     key: ClassVar[str] = "viscous"
