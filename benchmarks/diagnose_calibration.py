@@ -55,6 +55,7 @@ def _second_setup(path: Path) -> None:
 def run_design(name: str, n: int, gen, records: list, meta: dict | None = None,
                first: int = 0) -> None:
     import hdid
+    from hdid import _programs
     from hdid._synthetic import synthesize
 
     design = dict(RICH if name == "rich" else gen.PAPER_DESIGN)
@@ -64,16 +65,6 @@ def run_design(name: str, n: int, gen, records: list, meta: dict | None = None,
     amps = list(design["amplitudes"])
     with tempfile.TemporaryDirectory() as tmp:
         for i in range(first, n):
-            if i > first and i % 10 == 0:
-                # A long process that keeps every compiled program ran out of memory
-                # mappings at the 39th rich log ("LLVM compilation error: Cannot allocate
-                # memory", then a segfault): drop them; the store reloads them.
-                import jax
-
-                from hdid import _programs
-
-                jax.clear_caches()
-                _programs._LOADED.clear()
             path = Path(tmp) / f"{name}_{i}.csv"
             synthesize(path, amplitudes=amps, rate=design["fs"], duration=design["duration"],
                        hold=design["hold"], offset=0.005, model=fitted.model, seed=1000 + i)
@@ -99,12 +90,16 @@ def run_design(name: str, n: int, gen, records: list, meta: dict | None = None,
                 "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
                 "compile_s": d.timing.get("compile_s"), "load1": load,
                 "load1_after": os.getloadavg()[0],
+                # the process's memory mappings and how often hdid dropped its compiled
+                # programs to bound them (one process diagnoses every log: issue 19)
+                "maps": _programs._maps(), "releases": _programs.RELEASES,
             }
             records.append(rec)
             if meta is not None:  # results so far, in case the run is stopped
                 write(records, meta)
             print(f"{name} {i:3d} {d.verdict:15s} best {rec['best']} {rec['best_dbic']:.1f} "
-                  f"RMS {rec['rms_before_floor']:.2f} {rec['wall_s']:.0f}s (load {load:.1f})",
+                  f"RMS {rec['rms_before_floor']:.2f} {rec['wall_s']:.0f}s (load {load:.1f}) "
+                  f"maps {rec['maps']} releases {rec['releases']}",
                   flush=True)
 
 

@@ -110,17 +110,49 @@ def test_no_strong_candidate():
 # -- order scans ------------------------------------------------------------------------
 def test_order_scan_includes_orders_below_one_period_in_the_swing():
     """The issue's miss: ripple of order 12 over a ±0.24 rad swing (0.46 periods) was
-    never tried because the scan skipped orders with less than a period in the swing."""
+    never tried because the scan skipped orders with less than a period in the swing;
+    then order 36 (not in the old list of 11 orders, not a periodogram peak) was never
+    tried either. Every integer order 1–48 is screened now, both candidates."""
     import hdid
 
     m = hdid.Model.default()
     labels = [lb for lb, _ in D._ripple_variants(m, m.float_values(), {"swing_rad": 0.48,
-                                                                      "ripple_orders": [37.0]})]
-    for n in (1, 2, 3, 12, 37):
+                                                                      "ripple_orders": [37.0, 98.0]})]
+    for n in (*range(1, 49), 98):
         assert f"ripple (order {n})" in labels
+    assert len(labels) == 49  # 37 is in the list already
     ke = [lb for lb, _ in D._kinematic_variants(m, m.float_values(), {})]
-    assert ke == [f"kinematic_error (order {n:g})" for n in D.KINEMATIC_ORDERS]
+    assert ke == [f"kinematic_error (order {n})" for n in range(1, 49)]
     assert CANDS["ripple"].scanned == 1 and CANDS["kinematic_error"].scanned == 1
+
+
+def test_every_order_tied_in_the_screen_is_refitted():
+    """Less than a period in the swing: low orders screen alike (seed 8805: ripple 1–16
+    at one-step Δχ² 460–466), so each within ``SCAN_TIE_DCHI2`` of the best is refitted
+    and the fit decides; a clear screen refits the best ``SCAN_REFITS``."""
+    assert D._scan_refits([1706.0, 1705.0, 1697.0, 1691.0, 1200.0]) == D.SCAN_REFITS
+    tied = [466.0, 465.0, 465.0, 465.0, 465.0, 464.0, 463.0, 462.5, 400.0, 10.0]
+    assert D._scan_refits(tied) == 8
+    assert D._scan_refits([500.0] * 40) == D.SCAN_MAX_REFITS
+    assert D._scan_refits([3.0]) == 1 and D._scan_refits([]) == 0
+
+
+def test_the_scan_note_states_the_scanned_set_and_the_refitted_orders():
+    table = {f"ripple (order {n})": 100.0 - n for n in (*range(1, 49), 98, 101)}
+    note = D._scan_note("ripple", table, ["ripple (order 1)", "ripple (order 2)"])
+    assert "orders scanned 1–48, 98, 101 (50;" in note and note.endswith("refitted "
+        f"(the best {D.SCAN_REFITS} and every one within {D.SCAN_TIE_DCHI2:g} of the best, "
+        f"at most {D.SCAN_MAX_REFITS}): 1, 2")
+
+
+def test_a_base_gain_below_the_floor_is_no_better_optimum():
+    """The current model's restart counts as a better basin only when its BIC falls by
+    more than ``BASE_IMPROVED_DBIC``: below the floor (a clean 250 Hz log's χ² 21.7 →
+    20.2 with n = 40, k = 14) the BIC does not move at all."""
+    n, k = 40.0, 14
+    assert D.bic_value(21.7, n, k) - D.bic_value(20.2, n, k) == 0.0
+    # above the floor, one χ² is ~n/χ² of BIC: not the 2 that "positive" evidence needs
+    assert D.bic_value(400.0, n, k) - D.bic_value(399.0, n, k) < D.BASE_IMPROVED_DBIC
 
 
 # -- ties that are not strong against the base -------------------------------------------

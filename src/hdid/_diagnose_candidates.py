@@ -100,19 +100,23 @@ def _tau(values) -> float:
     return 0.02 * values["_k_wg"] * (swing if math.isfinite(swing) else 1.0)
 
 
-#: Orders (cycles per WG revolution) scanned for a position-periodic torque: low orders
-#: (1–6: less than one period over a typical swing, still identifiable against a smooth
-#: stiffness bend when the data say so), the WG mesh (2, 4) and common motor pole/slot
-#: cogging orders; the two largest peaks of the residual's periodogram against the WG
-#: angle are added. No order is skipped by a rule of thumb: every one is screened by
-#: the fit itself (one Gauss–Newton step, the score statistic) and the best
-#: ``SCAN_REFITS`` are refitted to convergence.
-RIPPLE_ORDERS = (1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0, 48.0)
+#: Orders (cycles per WG revolution) scanned for a position-periodic torque: every
+#: integer order 1 … ``MAX_ORDER`` — low orders (less than one period over the swing,
+#: still identifiable against a smooth stiffness bend when the data say so), the WG mesh
+#: (2, 4), motor pole/slot cogging orders and anything between — plus the two largest
+#: peaks of the residual's periodogram against the WG angle (up to
+#: ``PERIODOGRAM_ORDERS``). No order is skipped by a rule of thumb: every one is screened
+#: by the fit itself (one Gauss–Newton step: the score statistic), and every order whose
+#: screening gain is within ``SCAN_TIE_DCHI2`` of the best is refitted to convergence
+#: (see :func:`hdid._diagnose._candidate_fits`), so the order is decided by the fit.
+MAX_ORDER = 48
+RIPPLE_ORDERS = tuple(float(n) for n in range(1, MAX_ORDER + 1))
 #: The residual periodogram searches integer orders 1 … this for peaks; with the fixed
 #: list inside that range, the ripple's order is chosen from this many settings.
 PERIODOGRAM_ORDERS = 120
-#: Orders of the kinematic error scanned (2 is the elliptical wave generator's).
-KINEMATIC_ORDERS = (1.0, 2.0, 3.0, 4.0)
+#: Orders of the kinematic error scanned (2 is the elliptical wave generator's): every
+#: integer order 1 … ``MAX_ORDER``, as the ripple's.
+KINEMATIC_ORDERS = tuple(float(n) for n in range(1, MAX_ORDER + 1))
 
 
 def _ripple_variants(model, values, hints):
@@ -195,7 +199,7 @@ def default_candidates() -> list[Candidate]:
         ),
         Candidate(
             "ripple", lambda m: not _has(m, "ripple"), _ripple_variants, scanned=1,
-            reset_shape=False, family="position-periodic", settings=PERIODOGRAM_ORDERS,
+            family="position-periodic", settings=PERIODOGRAM_ORDERS,
             mark="the residual is periodic in the wave-generator angle, not in time, with the "
                  "same phase in every run",
             experiment="releases starting from different WG angles (shift the spring zero by "
@@ -212,7 +216,7 @@ def default_candidates() -> list[Candidate]:
                        "the centre stiffness K1 directly",
         ),
         Candidate(
-            "kinematic_error", cubic, _kinematic_variants, scanned=1, reset_shape=False,
+            "kinematic_error", cubic, _kinematic_variants, scanned=1,
             family="position-periodic", settings=len(KINEMATIC_ORDERS),
             mark="a spring torque modulated periodically in the WG angle",
             experiment="a driven input/output test with the output encoder: free motion "
