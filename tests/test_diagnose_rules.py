@@ -182,6 +182,21 @@ def test_false_alarm_rate_of_the_nearest_measured_design():
     assert "0 of 40" in paper.text()
 
 
+def test_measured_rates_are_the_committed_calibration_results():
+    """``MEASURED`` is generated from ``benchmarks/results/diagnose_calibration.json``,
+    never typed by hand: its counts are the file's, design by design."""
+    import json
+
+    from hdid._diagnose_rates import MEASURED, clopper_pearson
+
+    doc = json.loads((ROOT / "benchmarks" / "results" / "diagnose_calibration.json").read_text())
+    for d in MEASURED:
+        rows = [r for r in doc["records"] if r["design"] == d.design and "error" not in r]
+        k = sum(r["verdict"] != "adequate" for r in rows)
+        assert (d.alarms, d.logs) == (k, len(rows))
+        assert (d.lo, d.hi) == pytest.approx(clopper_pearson(k, len(rows)), abs=1e-4)
+
+
 def _rounds_with(results, *, max_lag=10, at_floor=True):
     r = _round(results, at_floor=at_floor, white=True)
     r[0]["white"].max_lag = max_lag
@@ -268,3 +283,29 @@ def test_candidate_warm_starts_are_at_the_current_optimum(monkeypatch):
             for k in ("k1", "tau_c", "tau_s", "v_s", "delta"):
                 assert got[k] == pytest.approx(float(to_unconstrained(specs[k], fitted[k]))), k
             np.testing.assert_array_equal(u[s2.problem.n_physical:], tail)
+
+
+def test_an_order_replaced_in_one_set_up_is_the_set_up_of_that_order():
+    """The scan builds one set-up and replaces the order (a traced value): leaf for
+    leaf the problem a fresh set-up of that order builds."""
+    import jax
+
+    import hdid
+    from hdid import _refit
+    from hdid.effects import library
+
+    from synthetic import GEN
+
+    truth = {k: v for k, v in GEN.TRUTH_CSF8.items() if k != "ratio"}
+    log = GEN.make_log(truth, amplitudes=[0.157, -0.157], fs=250.0, duration=0.3, hold=0.04,
+                       offsets_by_setup={"A": 0.0}, seed=3)
+    m = hdid.Model.default()
+    v = m.float_values()
+    for key in ("ripple", "kinematic_error"):
+        s1 = _refit.setup(log, m.with_effect(library({**v, "order": 1.0})[key]), {})
+        s7 = _refit.setup(log, m.with_effect(library({**v, "order": 7.0})[key]), {})
+        got = D._reorder(s1, key, 7.0)
+        a, ta = jax.tree_util.tree_flatten(got.problem)
+        b, tb = jax.tree_util.tree_flatten(s7.problem)
+        assert ta == tb and all(np.array_equal(np.asarray(x), np.asarray(y)) for x, y in zip(a, b))
+        assert D._effect_of(got.model, key).order == 7.0 and got.model.float_values() == s7.model.float_values()

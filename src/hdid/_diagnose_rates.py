@@ -5,7 +5,7 @@ fitted base model (hdid's simulator, the design's release angles, rate and lengt
 random sub-sample release instant per run, rounded to the design's encoder), so the base
 model is exactly right. ``benchmarks/diagnose_calibration.py`` measures it per design and
 writes ``benchmarks/results/diagnose_calibration.{json,md}``; the numbers below are
-copied from there (with the commit they were measured on) and :func:`false_alarm` reports
+generated from there (with the source they were measured on) and :func:`false_alarm` reports
 the design nearest a log's, or says that none was measured near it.
 
 The interval is the exact (Clopper–Pearson) 95 % binomial interval of ``k`` alarms in
@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+
+from ._diagnose_measured import ROWS
 
 
 @dataclass(frozen=True)
@@ -45,13 +47,10 @@ class DesignRate:
                 f"{100 * self.lo:.1f}–{100 * self.hi:.1f} %; {self.measured})")
 
 
-#: Filled from ``benchmarks/results/diagnose_calibration.json`` (see the module docstring).
-MEASURED: tuple[DesignRate, ...] = (
-    DesignRate("paper", 250.0, 4, 1, 80, 0.0003, 0.0677,
-               "measured 2026-11-24 on commit 368461b"),
-    DesignRate("rich", 1000.0, 8, 0, 46, 0.0, 0.0771,
-               "measured 2026-11-24 on commit 368461b"),
-)
+#: Generated from ``benchmarks/results/diagnose_calibration.json`` into
+#: :mod:`hdid._diagnose_measured` (``python benchmarks/diagnose_calibration.py
+#: --measured``): never typed by hand; a test checks the two agree.
+MEASURED: tuple[DesignRate, ...] = tuple(DesignRate(**row) for row in ROWS)
 
 #: A log is "near" a measured design when its sample rate is within this factor of the
 #: design's and its number of runs within this factor too (the rule's behaviour depends
