@@ -179,7 +179,20 @@ def test_false_alarm_rate_of_the_nearest_measured_design():
     assert false_alarm(250.0, 4, (paper, rich)) is paper
     assert false_alarm(1000.0, 4, (paper, rich)) is rich  # rate 1×, runs 2×: near
     assert false_alarm(5000.0, 8, (paper, rich)) is None  # 5× the rich rate: not near
+    # 8 runs at 500 Hz, the rate read from time stamps: a factor 2 from the rich design,
+    # not pushed past it by rounding (it was matched to the paper design, 2× on both)
+    assert false_alarm(499.99999999999955, 8, (paper, rich)) is rich
     assert "0 of 40" in paper.text()
+
+
+def test_the_target_is_met_when_the_one_sided_bound_is_below_it():
+    """"≤ 5 %" at 95 % confidence: 1 alarm in 93 logs shows it, 1 in 80 does not; 0 alarms
+    need 59 logs."""
+    from hdid._diagnose_rates import TARGET, DesignRate, upper_bound
+
+    assert upper_bound(1, 93) <= TARGET < upper_bound(1, 80)
+    assert upper_bound(0, 59) <= TARGET < upper_bound(0, 58)
+    assert DesignRate("paper", 250.0, 4, 1, 93, 0.0, 0.06, "t").to_dict()["upper_95"] <= TARGET
 
 
 def test_measured_rates_are_the_committed_calibration_results():

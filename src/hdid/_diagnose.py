@@ -73,7 +73,7 @@ Verdicts (the only four; :func:`_verdict`)
         the best leaves it above the floor (and ``steps`` > 1 did not reach it).
 Warnings (:func:`_warnings`, ``Diagnosis.warnings``)
     what is known against trusting the verdict: no false-alarm rate measured near this
-    design, or one whose 95 % upper end is above the 5 % target; the current model's
+    design, or one whose one-sided 95 % upper bound is above the 5 % target; the current model's
     first optimum was a local one (its fits have several basins); a whiteness test with
     fewer than ``LOW_POWER_LAGS`` lags; the named effect leaves a residual that is not
     white or not at the floor; candidate refits that failed.
