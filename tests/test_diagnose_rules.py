@@ -147,11 +147,14 @@ def test_the_scan_note_states_the_scanned_set_and_the_refitted_orders():
 
 def test_a_base_gain_below_the_floor_is_no_better_optimum():
     """The current model's restart counts as a better basin only when its BIC falls by
-    more than ``BASE_IMPROVED_DBIC``: below the floor (a clean 250 Hz log's χ² 21.7 →
-    20.2 with n = 40, k = 14) the BIC does not move at all."""
-    n, k = 40.0, 14
-    assert D.bic_value(21.7, n, k) - D.bic_value(20.2, n, k) == 0.0
-    # above the floor, one χ² is ~n/χ² of BIC: not the 2 that "positive" evidence needs
+    more than ``BASE_IMPROVED_DBIC``. On a clean 250 Hz paper log (n = 35, k = 17: the
+    floor is χ² 18) χ² 15.0 → 13.4 is below the floor — no change of BIC, no better
+    optimum (the old 1-χ² rule fired) — while 21.7 → 20.2 is above it: ΔBIC 2.5, a
+    better basin that still counts."""
+    n, k = 35.0, 17
+    assert D.bic_value(15.0, n, k) - D.bic_value(13.4, n, k) == 0.0
+    assert D.bic_value(21.7, n, k) - D.bic_value(20.2, n, k) > D.BASE_IMPROVED_DBIC
+    # far above the floor one χ² is ~n/χ² of BIC: not the 2 that "positive" evidence needs
     assert D.bic_value(400.0, n, k) - D.bic_value(399.0, n, k) < D.BASE_IMPROVED_DBIC
 
 
