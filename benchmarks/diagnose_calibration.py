@@ -149,7 +149,7 @@ def write(records: list, meta: dict) -> None:
                   + "; ".join(f"{r['design']} {r['i']}: {r['error']}" for r in fails)]
     lines += ["", "`hdid._diagnose_rates.MEASURED` is generated from this file's JSON "
               "(`python benchmarks/diagnose_calibration.py --measured` writes "
-              "`src/hdid/_diagnose_measured.py`):", "", "```python"]
+              "its block in `src/hdid/_diagnose_rates.py`):", "", "```python"]
     lines += [_design_rate_line(t) for t in measured_table(records)]
     lines += ["```", "", "Per log:", "",
               "| design | # | verdict | best (ΔBIC) | RMS before / floor | s | load before → after |",
@@ -165,7 +165,7 @@ def write(records: list, meta: dict) -> None:
 
 #: The designs' sample rate [Hz] and number of runs (what ``false_alarm`` matches a log to).
 DESIGN_SHAPE = {"paper": (250.0, 4), "rich": (1000.0, 8)}
-MEASURED_MODULE = ROOT / "src" / "hdid" / "_diagnose_measured.py"
+MEASURED_MODULE = ROOT / "src" / "hdid" / "_diagnose_rates.py"
 
 
 def measured_table(records: list) -> list[dict]:
@@ -191,16 +191,15 @@ def _design_rate_line(t: dict) -> str:
 
 
 def write_measured(records: list) -> str:
-    """``src/hdid/_diagnose_measured.py`` from the records (never typed by hand)."""
+    """The generated block of ``src/hdid/_diagnose_rates.py`` (between its ``BEGIN`` and
+    ``END GENERATED`` markers) from the records: never typed by hand."""
     body = "\n".join("    " + _design_rate_line(t) for t in measured_table(records))
-    text = (
-        '"""False-alarm rates of :func:`hdid.diagnose` on clean logs, per design — GENERATED\n'
-        "by ``python benchmarks/diagnose_calibration.py --measured`` from\n"
-        "``benchmarks/results/diagnose_calibration.json``; do not edit (read by\n"
-        ':mod:`hdid._diagnose_rates`)."""\n\n'
-        "ROWS = (\n" + body + "\n)\n")
-    MEASURED_MODULE.write_text(text)
-    return text
+    block = "ROWS = (\n" + body + "\n)\n"
+    text = MEASURED_MODULE.read_text()
+    a, b = "# BEGIN GENERATED\n", "# END GENERATED\n"
+    i, j = text.index(a) + len(a), text.index(b)
+    MEASURED_MODULE.write_text(text[:i] + block + text[j:])
+    return block
 
 
 def _stamp(records: list, meta: dict) -> None:

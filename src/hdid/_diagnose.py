@@ -19,24 +19,15 @@ Refits (:mod:`hdid._refit`)
     optimum and the current model again from their new optima (``BASIN_PASSES``). A
     candidate is credited only with what the current model cannot reach from there.
 Orders
-    Position-periodic candidates (``ripple``, ``kinematic_error``) scan their order: every
-    integer order 1–48 (``RIPPLE_ORDERS``, ``KINEMATIC_ORDERS``), low orders included,
-    and for the ripple the residual periodogram's two peaks. Each order is screened by
-    one Gauss–Newton step from the current optimum (the score statistic, which sees the
-    collinearity with stiffness and offset; the order is a traced value, so all orders
-    share one program); every order whose screening gain is within ``SCAN_TIE_DCHI2`` of
-    the best is refitted to convergence, at least the best ``SCAN_REFITS`` and at most
-    ``SCAN_MAX_REFITS`` (when less than a period fits the swing, low orders screen alike
-    and only the refit tells them apart: the order is decided by the fit). Refits start
-    from the current optimum, its Gauss–Newton step and the catalog friction shape; the
-    best-screened and best-refitted orders (``SCAN_GRID`` of each) also from the base
-    grid's points, as other candidates do (the current optimum can be a basin the
-    candidate's optimum is not in: seed 8905's ripple stayed at 2.3× the floor from it).
-    The scan costs one parameter in the BIC plus ``2·ln M`` for choosing among ``M``
-    orders (a uniform prior over them: the periodogram searches 120, so a ripple pays
-    9.6 for the freedom of its order). The scanned set, each order's one-step gain and
-    the refitted orders are in the report's notes and in ``Diagnosis.scanned`` /
-    ``.refitted``.
+    Position-periodic candidates (``ripple``, ``kinematic_error``) scan every integer
+    order 1–48 (the ripple also the residual periodogram's two peaks): each screened by
+    one Gauss–Newton step (the score statistic; the order is traced, one program for
+    all), the best ``SCAN_REFITS`` and every order within ``SCAN_TIE_DCHI2`` of the best
+    screen refitted (at most ``SCAN_MAX_REFITS``: the order is decided by the fit), from
+    the starts other candidates get (:func:`~hdid._diagnose_candidates._scan_fits`).
+    The scan costs one parameter plus ``2·ln M`` for choosing among ``M`` orders (the
+    periodogram searches 120: 9.6). The scanned set, the one-step gains and the refitted
+    orders are in the notes and in ``Diagnosis.scanned`` / ``.refitted``.
 Evidence
     ``BIC = n·ln(max(χ², n − k)/n) + k·ln n`` (:func:`bic_value`), ``χ²`` in units of the
     quantization variance ``step²/12``, ``n`` the effective observations, ``k`` the fitted
@@ -89,6 +80,16 @@ import numpy as np
 
 from ._diagnose_candidates import (  # noqa: F401  (re-exported: tests, CLI)
     KINEMATIC_ORDERS,
+    SCAN_GRID,
+    SCAN_MAX_REFITS,
+    SCAN_REFITS,
+    SCAN_TIE_DCHI2,
+    _effect_of,
+    _merge,
+    _reorder,
+    _scan_fits,
+    _scan_note,
+    _scan_refits,
     PERIODOGRAM_ORDERS,
     RIPPLE_ORDERS,
     SHAPE_RESET,
@@ -116,31 +117,18 @@ from ._diagnose_verdict import (  # noqa: F401
 FAR_FROM_FLOOR = 3.0
 #: ... so its candidates get as many grid starts as the base fit always gets.
 FULL_GRID_STARTS = 6
-#: Discrete settings (orders) refitted after the one-step screen of all of them: the
-#: best ``SCAN_REFITS`` and every one whose one-step gain is within ``SCAN_TIE_DCHI2`` of
-#: the best (ties: when less than a period fits the swing, low orders screen alike and
-#: only the refit tells them apart), at most ``SCAN_MAX_REFITS``.
-SCAN_REFITS = 3
-SCAN_TIE_DCHI2 = 4.0
-SCAN_MAX_REFITS = 16
-#: The best-screened and the best-refitted orders (this many of each) that also get
-#: the candidate's own data-driven grid starts.
-SCAN_GRID = 2
 #: Strong candidates whose residual is analysed (covariance, whiteness) per round: the
 #: verdict needs only the best one's (each analysis compiles programs of its own).
 MAX_ANALYSED = 1
 #: Passes of "current model from the candidates' optima, then the candidates from the
 #: current model's new optimum" when the first finds the current model a better basin.
 BASIN_PASSES = 2
-#: A restart of the current model counts as a better optimum (a note, a warning, and the
-#: candidates started again from it) when it lowers the current model's BIC by more than
-#: this: 2 is where Kass & Raftery's (1995) scale starts "positive" evidence, so a
-#: smaller change is "not worth more than a bare mention". It replaced a rule of 1 χ²,
-#: which also fired for gains *below* the quantization floor (a clean 250 Hz log, n = 35,
-#: k = 17: χ² 15.0 → 13.4, fitting the rounding), where the BIC does not move at all
-#: (:func:`bic_value`). Above the floor it still fires (χ² 21.7 → 20.2 there: ΔBIC 2.5;
-#: 3 of 96 clean paper logs, all judged ``adequate``): a better basin found late is real,
-#: not noise, and the warning says so. The better optimum is kept either way.
+#: A restart of the current model counts as a better optimum (a note, a warning, the
+#: candidates started again) when it lowers the current model's BIC by more than this:
+#: where "positive" evidence starts on Kass & Raftery's (1995) scale. (The old 1-χ² rule
+#: also fired below the quantization floor, e.g. χ² 15.0 → 13.4 on a clean 250 Hz log
+#: with n = 35, k = 17, where the BIC does not move; above it, 21.7 → 20.2 is ΔBIC 2.5:
+#: a better basin found late, real, not noise.) The better optimum is kept either way.
 BASE_IMPROVED_DBIC = 2.0
 
 
@@ -223,27 +211,6 @@ def _base_starts(base_setup, current, cand_fits, values_reset):
     return starts
 
 
-def _merge(a, b):
-    """One :class:`~hdid._refit.StructureFit` holding the starts of two runs of the same
-    structure (the best of both is its optimum)."""
-    from ._refit import StructureFit
-
-    return StructureFit(a.label, a.setup, np.concatenate([a.U, b.U]),
-                        np.concatenate([a.costs, b.costs]), np.concatenate([a.ok, b.ok]),
-                        np.concatenate([a.steps, b.steps]), a.origins + b.origins,
-                        a.wall_s + b.wall_s)
-
-
-def _scan_refits(gains: Sequence[float]) -> int:
-    """How many of the screened settings (one-step gains, best first) are refitted: the
-    best ``SCAN_REFITS`` and every one within ``SCAN_TIE_DCHI2`` of the best, at most
-    ``SCAN_MAX_REFITS``."""
-    if not gains:
-        return 0
-    tied = sum(g >= gains[0] - SCAN_TIE_DCHI2 for g in gains)
-    return min(max(SCAN_REFITS, tied), SCAN_MAX_REFITS, len(gains))
-
-
 def _candidate_fits(log, cand, current, hints, opts, grid_points, say, scans,
                     scan_refitted=None):
     """Refit ``cand`` on ``log`` from ``current``: a list of StructureFits (one per
@@ -282,49 +249,8 @@ def _candidate_fits(log, cand, current, hints, opts, grid_points, say, scans,
             setups[label] = _refit.setup(log, models[0], opts)
     fits = []
     if cand.scanned:
-        gains = {}
-        for label, models in groups.items():
-            s = setups[label]
-            u0 = _refit.warm(s, models[0].float_values(), tail)
-            added = [n for n in s.problem.free if n not in current.setup.problem.free]
-            gains[label] = (*_refit.gauss_newton_step(s, u0, added), u0)
-        order = sorted(gains, key=lambda lb: -gains[lb][0])
-        chosen = _scan_refits([gains[lb][0] for lb in order])
-        scans[cand.key] = {lb: gains[lb][0] for lb in order}
-        scan_refitted.setdefault(cand.key, [])
-        say(f"  + {cand.key}: {len(order)} orders screened, {chosen} refitted")
-        for label in order[:chosen]:
-            gain, step, u0 = gains[label]
-            s = setups[label]
-            starts = [("warm", u0), ("gauss-newton", u0 + step)]
-            # the other bases (the catalog friction shape where the current fit's is
-            # unusual: a current optimum in a poor basin is a poor start for the
-            # candidate too), the effect at the step's values
-            stepped, *_ = s.problem.unpack_np(u0 + step)
-            new = {k: float(v) for k, v in stepped.items()
-                   if k not in current.setup.problem.free}
-            starts += [("shape_reset", _refit.warm(s, {**m.float_values(), **new}, tail))
-                       for m in groups[label][1:]]
-            fits.append(_refit.run(label, s, starts))
-            if label not in scan_refitted[cand.key]:
-                scan_refitted[cand.key].append(label)
-        if grid_points:
-            # The current optimum may be a poor basin, and every start near it stays
-            # there (seed 8905: 2.3× the floor, the base grid's points: 0.86×): the
-            # best-screened and the best-refitted orders also start from the base grid's
-            # points with the effect at zero, as many as the other candidates get (no
-            # program of its own: the candidate's own grid would compile one).
-            by_cost = [f.label for f in sorted((f for f in fits if f.finite),
-                                               key=lambda f: f.cost)]
-            pick = list(dict.fromkeys(order[:SCAN_GRID] + by_cost[:SCAN_GRID]))
-            for label in pick:
-                i = next(j for j, f in enumerate(fits) if f.label == label)
-                s = fits[i].setup
-                first = groups[label][0].float_values()
-                starts = [("grid", _refit.warm(s, {**first, **v}, t)) for v, t in grid_points]
-                say(f"  + {label}  ({len(starts)} grid starts)")
-                fits[i] = _merge(fits[i], _refit.run(label, s, starts))
-        return fits
+        return _scan_fits(cand, groups, setups, current, tail, grid_points, say, scans,
+                          scan_refitted)
     for label, models in groups.items():
         s = setups[label]
         starts = [("warm", _refit.warm(s, m.float_values(), tail)) for m in models]
@@ -333,25 +259,6 @@ def _candidate_fits(log, cand, current, hints, opts, grid_points, say, scans,
         say(f"  + {label}  ({len(starts)} starts)")
         fits.append(_refit.run(label, s, starts))
     return fits
-
-
-def _effect_of(model, key: str):
-    """``model``'s effect whose library key is ``key``."""
-    return next(e for e in model.effects if e.key == key)
-
-
-def _reorder(s, key: str, order):
-    """Set-up ``s`` with effect ``key``'s ``order`` replaced (model and problem)."""
-    import equinox as eqx
-    import jax.numpy as jnp
-
-    def where(m):
-        return _effect_of(m, key).order
-
-    old = where(s.problem.base)
-    problem = eqx.tree_at(lambda p: where(p.base), s.problem,
-                          jnp.asarray(float(order), dtype=jnp.asarray(old).dtype))
-    return s._replace(model=eqx.tree_at(where, s.model, float(order)), problem=problem)
 
 
 def _at_optimum(model, values):
@@ -609,29 +516,6 @@ def diagnose(
         false_alarm=fa.to_dict() if fa is not None else None,
     )
 
-
-
-def _order(label: str) -> str:
-    return label.split("order ")[-1].rstrip(")")
-
-
-def _scan_note(key: str, table: dict[str, float], refitted: list[str]) -> str:
-    """The scanned set, each order's one-step gain and which orders were refitted."""
-    nums = sorted(float(_order(lb)) for lb in table)
-    ints = [n for n in nums if n == int(n)]
-    runs, start = [], None
-    for i, n in enumerate(ints):  # consecutive integers as ranges: "1–48, 98, 101"
-        if start is None:
-            start = n
-        if i + 1 == len(ints) or ints[i + 1] != n + 1:
-            runs.append(f"{start:g}" if start == n else f"{start:g}–{n:g}")
-            start = None
-    runs += [f"{n:g}" for n in nums if n != int(n)]
-    gains = ", ".join(f"{_order(lb)}: {g:.0f}" for lb, g in table.items())
-    return (f"{key}: orders scanned {', '.join(runs)} ({len(table)}; one-step Δχ², best "
-            f"first: {gains}); refitted (the best {SCAN_REFITS} and every one within "
-            f"{SCAN_TIE_DCHI2:g} of the best, at most {SCAN_MAX_REFITS}): "
-            f"{', '.join(_order(lb) for lb in refitted)}")
 
 
 def _ladder_step(name: str, fit, cand: Candidate | None) -> dict[str, Any]:

@@ -19,8 +19,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ._diagnose_measured import ROWS
-
 
 @dataclass(frozen=True)
 class DesignRate:
@@ -55,9 +53,16 @@ class DesignRate:
                 f"{100 * self.upper:.1f} %; {self.measured})")
 
 
-#: Generated from ``benchmarks/results/diagnose_calibration.json`` into
-#: :mod:`hdid._diagnose_measured` (``python benchmarks/diagnose_calibration.py
-#: --measured``): never typed by hand; a test checks the two agree.
+#: The measured rates, per design: GENERATED between the markers by ``python
+#: benchmarks/diagnose_calibration.py --measured`` from
+#: ``benchmarks/results/diagnose_calibration.json`` — never typed by hand (a test checks
+#: the two agree).
+# BEGIN GENERATED
+ROWS = (
+    {'design': 'paper', 'rate_hz': 250.0, 'runs': 4, 'alarms': 1, 'logs': 96, 'lo': 0.0003, 'hi': 0.0567, 'measured': 'measured 2026-11-24, src 4dda7eb49ff9b674'},
+    {'design': 'rich', 'rate_hz': 1000.0, 'runs': 8, 'alarms': 0, 'logs': 46, 'lo': 0.0, 'hi': 0.0771, 'measured': 'measured 2026-11-24, src ad757e93410f3c84'},
+)
+# END GENERATED
 MEASURED: tuple[DesignRate, ...] = tuple(DesignRate(**row) for row in ROWS)
 
 #: A log is "near" a measured design when its sample rate is within this factor of the

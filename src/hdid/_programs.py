@@ -49,7 +49,7 @@ from . import _config
 #: traced again): editing them does not invalidate the store.
 UNTRACED = frozenset({"_diagnose.py", "_diagnose_candidates.py", "_diagnose_result.py",
                       "_diagnose_verdict.py", "_diagnose_rates.py", "_verdicts.py",
-                      "_programs.py", "_diagnose_measured.py"})
+                      "_programs.py"})
 #: Packages of such modules: the command line, log reading (NumPy only).
 UNTRACED_PACKAGES = frozenset({"cli", "_io"})
 _ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
