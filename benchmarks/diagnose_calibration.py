@@ -31,9 +31,14 @@ RICH = dict(amplitudes=[0.157, -0.157, 0.12, -0.12, 0.08, -0.08, 0.05, -0.05], f
 
 
 def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
-    from hdid._diagnose_rates import clopper_pearson as cp
+    """Exact binomial interval (the same as :func:`hdid._diagnose_rates.clopper_pearson`,
+    which reads the module this script generates)."""
+    from scipy.stats import beta
 
-    return cp(k, n, level)
+    a = 1 - level
+    lo = 0.0 if k == 0 else float(beta.ppf(a / 2, k, n - k + 1))
+    hi = 1.0 if k == n else float(beta.ppf(1 - a / 2, k + 1, n - k))
+    return lo, hi
 
 
 def _second_setup(path: Path) -> None:
@@ -55,6 +60,7 @@ def _second_setup(path: Path) -> None:
 def run_design(name: str, n: int, gen, records: list, meta: dict | None = None,
                first: int = 0) -> None:
     import hdid
+    from hdid import _programs
     from hdid._synthetic import synthesize
 
     design = dict(RICH if name == "rich" else gen.PAPER_DESIGN)
@@ -64,16 +70,6 @@ def run_design(name: str, n: int, gen, records: list, meta: dict | None = None,
     amps = list(design["amplitudes"])
     with tempfile.TemporaryDirectory() as tmp:
         for i in range(first, n):
-            if i > first and i % 10 == 0:
-                # A long process that keeps every compiled program ran out of memory
-                # mappings at the 39th rich log ("LLVM compilation error: Cannot allocate
-                # memory", then a segfault): drop them; the store reloads them.
-                import jax
-
-                from hdid import _programs
-
-                jax.clear_caches()
-                _programs._LOADED.clear()
             path = Path(tmp) / f"{name}_{i}.csv"
             synthesize(path, amplitudes=amps, rate=design["fs"], duration=design["duration"],
                        hold=design["hold"], offset=0.005, model=fitted.model, seed=1000 + i)
@@ -99,12 +95,17 @@ def run_design(name: str, n: int, gen, records: list, meta: dict | None = None,
                 "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
                 "compile_s": d.timing.get("compile_s"), "load1": load,
                 "load1_after": os.getloadavg()[0],
+                # the process's memory mappings and how often hdid dropped its compiled
+                # programs to bound them (one process diagnoses every log: issue 19)
+                "maps": _programs._maps(), "releases": _programs.RELEASES,
+                "date": (meta or {}).get("date"), "src": (meta or {}).get("src"),
             }
             records.append(rec)
             if meta is not None:  # results so far, in case the run is stopped
                 write(records, meta)
             print(f"{name} {i:3d} {d.verdict:15s} best {rec['best']} {rec['best_dbic']:.1f} "
-                  f"RMS {rec['rms_before_floor']:.2f} {rec['wall_s']:.0f}s (load {load:.1f})",
+                  f"RMS {rec['rms_before_floor']:.2f} {rec['wall_s']:.0f}s (load {load:.1f}) "
+                  f"maps {rec['maps']} releases {rec['releases']}",
                   flush=True)
 
 
@@ -125,8 +126,8 @@ def write(records: list, meta: dict) -> None:
         "A false alarm is any verdict other than `adequate`; `strong` counts logs where some "
         "candidate had ΔBIC < −10. 95 % intervals are exact binomial (Clopper–Pearson).",
         "",
-        "| design | logs | false alarms (verdict) | rate, 95 % interval | logs with a strong candidate | median s (wall) | median s (CPU) |",
-        "|---|---|---|---|---|---|---|",
+        "| design | logs | false alarms (verdict) | rate, 95 % interval | one-sided 95 % upper bound | logs with a strong candidate | median s (wall) | median s (CPU) |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for design in ("paper", "rich"):
         rows = [r for r in records if r["design"] == design and "error" not in r]
@@ -137,22 +138,19 @@ def write(records: list, meta: dict) -> None:
         lo, hi = clopper_pearson(k, len(rows))
         wall = sorted(r["wall_s"] for r in rows)[len(rows) // 2]
         cpu = sorted(r["cpu_s"] for r in rows)[len(rows) // 2]
-        lines.append(f"| {design} | {len(rows)} | {k} | {k / len(rows):.0%} [{lo:.0%}, {hi:.0%}] "
-                     f"| {s} | {wall:.0f} | {cpu:.0f} |")
+        from scipy.stats import beta
+
+        up = 1.0 if k >= len(rows) else float(beta.ppf(0.95, k + 1, len(rows) - k))
+        lines.append(f"| {design} | {len(rows)} | {k} | {k / len(rows):.1%} [{lo:.1%}, {hi:.1%}] "
+                     f"| {up:.2%} | {s} | {wall:.0f} | {cpu:.0f} |")
     fails = [r for r in records if "error" in r]
     if fails:
         lines += ["", f"{len(fails)} diagnose call(s) failed: "
                   + "; ".join(f"{r['design']} {r['i']}: {r['error']}" for r in fails)]
-    lines += ["", "For `hdid._diagnose_rates.MEASURED`:", "", "```python"]
-    for design in ("paper", "rich"):
-        rows = [r for r in records if r["design"] == design and "error" not in r]
-        if rows:
-            k = sum(r["verdict"] != "adequate" for r in rows)
-            lo, hi = clopper_pearson(k, len(rows))
-            rate = 250.0 if design == "paper" else 1000.0
-            runs = 4 if design == "paper" else 8
-            lines.append(f'DesignRate("{design}", {rate}, {runs}, {k}, {len(rows)}, {lo:.4f}, '
-                         f'{hi:.4f}, "{meta["date"][:10]}, src {meta["src"]}"),')
+    lines += ["", "`hdid._diagnose_rates.MEASURED` is generated from this file's JSON "
+              "(`python benchmarks/diagnose_calibration.py --measured` writes "
+              "its block in `src/hdid/_diagnose_rates.py`):", "", "```python"]
+    lines += [_design_rate_line(t) for t in measured_table(records)]
     lines += ["```", "", "Per log:", "",
               "| design | # | verdict | best (ΔBIC) | RMS before / floor | s | load before → after |",
               "|---|---|---|---|---|---|---|"]
@@ -165,7 +163,63 @@ def write(records: list, meta: dict) -> None:
     (OUT / "diagnose_calibration.md").write_text("\n".join(lines) + "\n")
 
 
+#: The designs' sample rate [Hz] and number of runs (what ``false_alarm`` matches a log to).
+DESIGN_SHAPE = {"paper": (250.0, 4), "rich": (1000.0, 8)}
+MEASURED_MODULE = ROOT / "src" / "hdid" / "_diagnose_rates.py"
+
+
+def measured_table(records: list) -> list[dict]:
+    """Per design: false alarms, clean logs, the 95 % interval and where it was measured
+    (the dates and source fingerprints of its records)."""
+    out = []
+    for design, (rate, runs) in DESIGN_SHAPE.items():
+        rows = [r for r in records if r["design"] == design and "error" not in r]
+        if not rows:
+            continue
+        k = sum(r["verdict"] != "adequate" for r in rows)
+        lo, hi = clopper_pearson(k, len(rows))
+        where = sorted({f"{(r.get('date') or '?')[:10]}, src {r.get('src') or '?'}"
+                        for r in rows})
+        out.append({"design": design, "rate_hz": rate, "runs": runs, "alarms": k,
+                    "logs": len(rows), "lo": round(lo, 4), "hi": round(hi, 4),
+                    "measured": "measured " + "; ".join(where)})
+    return out
+
+
+def _design_rate_line(t: dict) -> str:
+    return "{" + ", ".join(f"{k!r}: {v!r}" for k, v in t.items()) + "},"
+
+
+def write_measured(records: list) -> str:
+    """The generated block of ``src/hdid/_diagnose_rates.py`` (between its ``BEGIN`` and
+    ``END GENERATED`` markers) from the records: never typed by hand."""
+    body = "\n".join("    " + _design_rate_line(t) for t in measured_table(records))
+    block = "ROWS = (\n" + body + "\n)\n"
+    text = MEASURED_MODULE.read_text()
+    a, b = "# BEGIN GENERATED\n", "# END GENERATED\n"
+    i, j = text.index(a) + len(a), text.index(b)
+    MEASURED_MODULE.write_text(text[:i] + block + text[j:])
+    return block
+
+
+def _stamp(records: list, meta: dict) -> None:
+    """Where records without provenance were measured: the designs this file's last run
+    names, at its date and source; the others at the run before it."""
+    ran = [d for d in DESIGN_SHAPE if d in (meta.get("cmd") or "")]
+    earlier = meta.get("earlier") or {}
+    for r in records:
+        src = meta if r["design"] in ran else earlier
+        r.setdefault("date", src.get("date"))
+        r.setdefault("src", src.get("src"))
+
+
 def main(argv: list[str]) -> None:
+    if "--measured" in argv:  # the module from the committed results, nothing run
+        prev = json.loads((OUT / "diagnose_calibration.json").read_text())
+        _stamp(prev["records"], prev["meta"])
+        write(prev["records"], prev["meta"])
+        print(write_measured(prev["records"]))
+        return
     n = int(argv[0]) if argv and argv[0].isdigit() else 10
     designs = [a for a in argv if a in ("paper", "rich")] or ["paper", "rich"]
     gen = import_generate()
@@ -179,6 +233,9 @@ def main(argv: list[str]) -> None:
         prev = json.loads(old.read_text())
         records = [r for r in prev["records"] if r["design"] not in designs
                    or (first and r["i"] < first)]
+        for r in records:  # records of earlier runs keep where they were measured
+            r.setdefault("date", prev["meta"].get("date"))
+            r.setdefault("src", prev["meta"].get("src"))
         meta["earlier"] = {k: prev["meta"].get(k) for k in ("date", "load", "load_end", "src")}
     run_designs(designs, lambda k, design: run_design(design, n, gen, records, meta, first),
                 write, records, meta)

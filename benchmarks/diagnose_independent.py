@@ -117,7 +117,8 @@ def hidden_params(name: str, truth: dict, design: dict, rng) -> dict:
     raise KeyError(name)
 
 
-def run_design(design: str, records: list, meta: dict, per: int, seed0: int) -> None:
+def run_design(design: str, records: list, meta: dict, per: int, seed0: int,
+               only: set | None = None) -> None:
     import hdid
 
     gen, hid = import_generate(), _hidden_module()
@@ -126,6 +127,8 @@ def run_design(design: str, records: list, meta: dict, per: int, seed0: int) -> 
         for name in HIDDEN:
             seed = seed0 + i
             i += 1
+            if only and name not in only:
+                continue
             truth, des = draw(design, seed)
             rng = np.random.default_rng(seed + 10_000)
             hp = hidden_params(name, truth, des, rng) if name != "none" else {}
@@ -135,7 +138,9 @@ def run_design(design: str, records: list, meta: dict, per: int, seed0: int) -> 
                    "expected": None if name == "quadratic_drag" else name,
                    "truth": truth, "hidden_params": hp,
                    "design_params": {k: v for k, v in des.items()},
-                   "load1_before": os.getloadavg()[0]}
+                   "load1_before": os.getloadavg()[0],
+                   # which code ran it (rows of several runs share the results file)
+                   "code": os.environ.get("HDID_BENCH_CODE", meta.get("src", ""))}
             try:
                 df = gen.make_log(truth, **mk, seed=seed, hidden=kw)
                 moved = [np.ptp(g["theta"].to_numpy()) for _, g in df.groupby("run")]
@@ -229,6 +234,8 @@ def write(records: list, meta: dict) -> None:
              f"core 0; load at start {meta['load']}" + (f", at end {meta['load_end']}"
                                                        if meta.get("load_end") else "")
              + f"; src {meta['src']}. `{meta.get('cmd', '')}`", "",
+             *([f"Note: {meta['note']}. Column `code`: the branch each row was run on.", ""]
+               if meta.get("note") else []),
              "Each log draws its plant, design and hidden-effect magnitude (see the script's "
              "docstring; seeds 8800+). `named` = what the verdict names (`A|B` = ambiguous "
              "between them). RMS in quantization floors (step/√12); `after` = the first "
@@ -245,13 +252,13 @@ def write(records: list, meta: dict) -> None:
         ok = [r for r in rows if "error" not in r]
         lines += [f"## {design} design", "",
                   "| hidden | seed | g | rate Hz | v_s | δ | verdict | named | first (ΔBIC) | "
-                  "RMS before → after | ✓ | s | load |",
-                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+                  "RMS before → after | ✓ | s | load | code |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in rows:
             dp, tr = r["design_params"], r["truth"]
             if "error" in r:
                 lines.append(f"| {r['hidden']} | {r['seed']} | | | | | FAILED: {r['error'][:80]} "
-                             "| | | | | | |")
+                             f"| | | | | | | {r.get('code', '')} |")
                 continue
             c0 = r["candidates"][0] if r["candidates"] else {}
             lines.append(
@@ -260,7 +267,7 @@ def write(records: list, meta: dict) -> None:
                 f"{c0.get('variant', '')} ({c0.get('delta_bic', math.nan):.0f}) | "
                 f"{r['rms_before_floor']:.2f} → {c0.get('rms_after_floor', math.nan):.2f} | "
                 f"{ {'right': '✓', 'honest': '~', 'wrong': '✗'}[_grade(r)]} | {r['wall_s']:.0f} | "
-                f"{r['load1_after']:.1f} |")
+                f"{r['load1_after']:.1f} | {r.get('code', '')} |")
         lib = [r for r in ok if r["expected"] not in (None, "none")]
         first = [r for r in lib if r["top"] == r["expected"]]
         floor = [r for r in first if r["candidates"][0]["rms_after_floor"] <= 1.3]
@@ -307,15 +314,24 @@ def main(argv: list[str]) -> None:
                         + " ".join(argv))
     # --seed0 S: a further batch (seeds S, S+1, …) added to the earlier records
     seed0 = int(argv[argv.index("--seed0") + 1]) if "--seed0" in argv else None
+    only = set(argv[argv.index("--only") + 1].split(",")) if "--only" in argv else None
     records: list = []
     if (RESULTS / f"{NAME}.json").exists() and "--fresh" not in argv:
         prev = json.loads((RESULTS / f"{NAME}.json").read_text())
-        records = [r for r in prev["records"] if r["design"] not in designs
-                   or (seed0 is not None and not seed0 <= r["seed"] < seed0 + 100)]
+        if only:  # --only EFFECT,…: those logs rerun, every other record kept
+            rerun = {(d, (seed0 or {"rich": 8800, "paper": 9800}[d]) + p * len(HIDDEN) + j)
+                     for d in designs for p in range(per)
+                     for j, name in enumerate(HIDDEN) if name in only}
+            records = [r for r in prev["records"] if (r["design"], r["seed"]) not in rerun]
+        else:
+            records = [r for r in prev["records"] if r["design"] not in designs
+                       or (seed0 is not None and not seed0 <= r["seed"] < seed0 + 100)]
         meta["earlier"] = {k: prev["meta"].get(k) for k in ("date", "load", "load_end", "src")}
+        if prev["meta"].get("note"):
+            meta["note"] = prev["meta"]["note"]
     for design in designs:
         s0 = seed0 if seed0 is not None else {"rich": 8800, "paper": 9800}[design]
-        run_design(design, records, meta, per, seed0=s0)
+        run_design(design, records, meta, per, seed0=s0, only=only)
     meta["load_end"] = load_text()
     write(records, meta)
 

@@ -6,7 +6,7 @@ they are refitted and judged.)"""
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -100,19 +100,23 @@ def _tau(values) -> float:
     return 0.02 * values["_k_wg"] * (swing if math.isfinite(swing) else 1.0)
 
 
-#: Orders (cycles per WG revolution) scanned for a position-periodic torque: low orders
-#: (1–6: less than one period over a typical swing, still identifiable against a smooth
-#: stiffness bend when the data say so), the WG mesh (2, 4) and common motor pole/slot
-#: cogging orders; the two largest peaks of the residual's periodogram against the WG
-#: angle are added. No order is skipped by a rule of thumb: every one is screened by
-#: the fit itself (one Gauss–Newton step, the score statistic) and the best
-#: ``SCAN_REFITS`` are refitted to convergence.
-RIPPLE_ORDERS = (1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0, 48.0)
+#: Orders (cycles per WG revolution) scanned for a position-periodic torque: every
+#: integer order 1 … ``MAX_ORDER`` — low orders (less than one period over the swing,
+#: still identifiable against a smooth stiffness bend when the data say so), the WG mesh
+#: (2, 4), motor pole/slot cogging orders and anything between — plus the two largest
+#: peaks of the residual's periodogram against the WG angle (up to
+#: ``PERIODOGRAM_ORDERS``). No order is skipped by a rule of thumb: every one is screened
+#: by the fit itself (one Gauss–Newton step: the score statistic), and every order whose
+#: screening gain is within ``SCAN_TIE_DCHI2`` of the best is refitted to convergence
+#: (see :func:`hdid._diagnose._candidate_fits`), so the order is decided by the fit.
+MAX_ORDER = 48
+RIPPLE_ORDERS = tuple(float(n) for n in range(1, MAX_ORDER + 1))
 #: The residual periodogram searches integer orders 1 … this for peaks; with the fixed
 #: list inside that range, the ripple's order is chosen from this many settings.
 PERIODOGRAM_ORDERS = 120
-#: Orders of the kinematic error scanned (2 is the elliptical wave generator's).
-KINEMATIC_ORDERS = (1.0, 2.0, 3.0, 4.0)
+#: Orders of the kinematic error scanned (2 is the elliptical wave generator's): every
+#: integer order 1 … ``MAX_ORDER``, as the ripple's.
+KINEMATIC_ORDERS = tuple(float(n) for n in range(1, MAX_ORDER + 1))
 
 
 def _ripple_variants(model, values, hints):
@@ -195,7 +199,7 @@ def default_candidates() -> list[Candidate]:
         ),
         Candidate(
             "ripple", lambda m: not _has(m, "ripple"), _ripple_variants, scanned=1,
-            reset_shape=False, family="position-periodic", settings=PERIODOGRAM_ORDERS,
+            family="position-periodic", settings=PERIODOGRAM_ORDERS,
             mark="the residual is periodic in the wave-generator angle, not in time, with the "
                  "same phase in every run",
             experiment="releases starting from different WG angles (shift the spring zero by "
@@ -212,7 +216,7 @@ def default_candidates() -> list[Candidate]:
                        "the centre stiffness K1 directly",
         ),
         Candidate(
-            "kinematic_error", cubic, _kinematic_variants, scanned=1, reset_shape=False,
+            "kinematic_error", cubic, _kinematic_variants, scanned=1,
             family="position-periodic", settings=len(KINEMATIC_ORDERS),
             mark="a spring torque modulated periodically in the WG angle",
             experiment="a driven input/output test with the output encoder: free motion "
@@ -283,3 +287,134 @@ def _ripple_orders(frame, top: int = 2) -> list[float]:
             break
     return picks
 
+
+# -- scanned settings (orders) -----------------------------------------------------
+
+#: Discrete settings (orders) refitted after the one-step screen of all of them: the
+#: best ``SCAN_REFITS`` and every one whose one-step gain is within ``SCAN_TIE_DCHI2`` of
+#: the best (ties: when less than a period fits the swing, low orders screen alike and
+#: only the refit tells them apart), at most ``SCAN_MAX_REFITS``.
+SCAN_REFITS = 3
+SCAN_TIE_DCHI2 = 4.0
+SCAN_MAX_REFITS = 16
+#: The best-screened and the best-refitted orders (this many of each) that also get
+#: the candidate's own data-driven grid starts.
+SCAN_GRID = 2
+
+
+def _merge(a, b):
+    """One :class:`~hdid._refit.StructureFit` holding the starts of two runs of the same
+    structure (the best of both is its optimum)."""
+    from ._refit import StructureFit
+
+    return StructureFit(a.label, a.setup, np.concatenate([a.U, b.U]),
+                        np.concatenate([a.costs, b.costs]), np.concatenate([a.ok, b.ok]),
+                        np.concatenate([a.steps, b.steps]), a.origins + b.origins,
+                        a.wall_s + b.wall_s)
+
+
+def _scan_refits(gains: Sequence[float]) -> int:
+    """How many of the screened settings (one-step gains, best first) are refitted: the
+    best ``SCAN_REFITS`` and every one within ``SCAN_TIE_DCHI2`` of the best, at most
+    ``SCAN_MAX_REFITS``."""
+    if not gains:
+        return 0
+    tied = sum(g >= gains[0] - SCAN_TIE_DCHI2 for g in gains)
+    return min(max(SCAN_REFITS, tied), SCAN_MAX_REFITS, len(gains))
+
+
+def _effect_of(model, key: str):
+    """``model``'s effect whose library key is ``key``."""
+    return next(e for e in model.effects if e.key == key)
+
+
+def _reorder(s, key: str, order):
+    """Set-up ``s`` with effect ``key``'s ``order`` replaced (model and problem)."""
+    import equinox as eqx
+    import jax.numpy as jnp
+
+    def where(m):
+        return _effect_of(m, key).order
+
+    old = where(s.problem.base)
+    problem = eqx.tree_at(lambda p: where(p.base), s.problem,
+                          jnp.asarray(float(order), dtype=jnp.asarray(old).dtype))
+    return s._replace(model=eqx.tree_at(where, s.model, float(order)), problem=problem)
+
+
+def _scan_fits(cand, groups, setups, current, tail, grid_points, say, scans, scan_refitted):
+    """The refits of a scanned candidate (for :func:`hdid._diagnose._candidate_fits`):
+    every setting (order) screened by one Gauss–Newton step from the current optimum;
+    the best and every tie refitted (:func:`_scan_refits`) from the current optimum, its
+    step and the other bases (the catalog friction shape); the best ``SCAN_GRID`` by
+    screen and by refit also from the base grid's points (``grid_points``). The screen
+    goes to ``scans``, the refitted settings to ``scan_refitted``."""
+    from . import _refit
+
+    fits = []
+    gains = {}
+    for label, models in groups.items():
+        s = setups[label]
+        u0 = _refit.warm(s, models[0].float_values(), tail)
+        added = [n for n in s.problem.free if n not in current.setup.problem.free]
+        gains[label] = (*_refit.gauss_newton_step(s, u0, added), u0)
+    order = sorted(gains, key=lambda lb: -gains[lb][0])
+    chosen = _scan_refits([gains[lb][0] for lb in order])
+    scans[cand.key] = {lb: gains[lb][0] for lb in order}
+    scan_refitted.setdefault(cand.key, [])
+    say(f"  + {cand.key}: {len(order)} orders screened, {chosen} refitted")
+    for label in order[:chosen]:
+        gain, step, u0 = gains[label]
+        s = setups[label]
+        starts = [("warm", u0), ("gauss-newton", u0 + step)]
+        # the other bases (the catalog friction shape where the current fit's is
+        # unusual: a current optimum in a poor basin is a poor start for the
+        # candidate too), the effect at the step's values
+        stepped, *_ = s.problem.unpack_np(u0 + step)
+        new = {k: float(v) for k, v in stepped.items()
+               if k not in current.setup.problem.free}
+        starts += [("shape_reset", _refit.warm(s, {**m.float_values(), **new}, tail))
+                   for m in groups[label][1:]]
+        fits.append(_refit.run(label, s, starts))
+        if label not in scan_refitted[cand.key]:
+            scan_refitted[cand.key].append(label)
+    if grid_points:
+        # The current optimum may be a poor basin, and every start near it stays
+        # there (seed 8905: 2.3× the floor, the base grid's points: 0.86×): the
+        # best-screened and the best-refitted orders also start from the base grid's
+        # points with the effect at zero, as many as the other candidates get (no
+        # program of its own: the candidate's own grid would compile one).
+        by_cost = [f.label for f in sorted((f for f in fits if f.finite),
+                                           key=lambda f: f.cost)]
+        pick = list(dict.fromkeys(order[:SCAN_GRID] + by_cost[:SCAN_GRID]))
+        for label in pick:
+            i = next(j for j, f in enumerate(fits) if f.label == label)
+            s = fits[i].setup
+            first = groups[label][0].float_values()
+            starts = [("grid", _refit.warm(s, {**first, **v}, t)) for v, t in grid_points]
+            say(f"  + {label}  ({len(starts)} grid starts)")
+            fits[i] = _merge(fits[i], _refit.run(label, s, starts))
+    return fits
+
+
+def _order(label: str) -> str:
+    return label.split("order ")[-1].rstrip(")")
+
+
+def _scan_note(key: str, table: dict[str, float], refitted: list[str]) -> str:
+    """The scanned set, each order's one-step gain and which orders were refitted."""
+    nums = sorted(float(_order(lb)) for lb in table)
+    ints = [n for n in nums if n == int(n)]
+    runs, start = [], None
+    for i, n in enumerate(ints):  # consecutive integers as ranges: "1–48, 98, 101"
+        if start is None:
+            start = n
+        if i + 1 == len(ints) or ints[i + 1] != n + 1:
+            runs.append(f"{start:g}" if start == n else f"{start:g}–{n:g}")
+            start = None
+    runs += [f"{n:g}" for n in nums if n != int(n)]
+    gains = ", ".join(f"{_order(lb)}: {g:.0f}" for lb, g in table.items())
+    return (f"{key}: orders scanned {', '.join(runs)} ({len(table)}; one-step Δχ², best "
+            f"first: {gains}); refitted (the best {SCAN_REFITS} and every one within "
+            f"{SCAN_TIE_DCHI2:g} of the best, at most {SCAN_MAX_REFITS}): "
+            f"{', '.join(_order(lb) for lb in refitted)}")

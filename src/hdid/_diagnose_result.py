@@ -66,6 +66,8 @@ class Diagnosis:
     timing: dict[str, float] = field(default_factory=dict)
     #: discrete settings scanned per candidate (labels, best one-step gain first)
     scanned: dict[str, list[str]] = field(default_factory=dict)
+    #: of those, the ones refitted to convergence (screen ties included), per candidate
+    refitted: dict[str, list[str]] = field(default_factory=dict)
     #: why the verdict may not be trustworthy (empty when nothing is known against it)
     warnings: list[str] = field(default_factory=list)
     #: the verdict rules' measured false-alarm rate on clean logs of the nearest design
@@ -91,6 +93,7 @@ class Diagnosis:
             "ladder": self.ladder,
             "notes": self.notes,
             "scanned": self.scanned,
+            "refitted": self.refitted,
             "warnings": self.warnings,
             "false_alarm": self.false_alarm,
             "timing": self.timing,

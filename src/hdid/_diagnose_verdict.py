@@ -152,8 +152,9 @@ def _warnings(verdict, rounds, all_cands, local_base, fa) -> list[str]:
         out.append("the false-alarm rate of these rules was not measured for a design near "
                    "this log's (sample rate, number of runs): a claimed effect has no "
                    "calibrated error rate here")
-    elif fa.hi > TARGET and verdict != "adequate":
-        out.append(f"{fa.text()}: the upper end is above the {100 * TARGET:.0f} % target")
+    elif fa.upper > TARGET and verdict != "adequate":
+        out.append(f"{fa.text()}: the one-sided upper bound is above the "
+                   f"{100 * TARGET:.0f} % target (not yet shown to meet it)")
     if local_base:
         a, b, who = local_base[0]
         out.append(f"the base model's first optimum was a local one (χ² {a:.1f} → {b:.1f} from "

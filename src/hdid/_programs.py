@@ -45,9 +45,11 @@ from . import _config
 
 #: Modules that only orchestrate (no function of theirs is traced into a stored program:
 #: those come from ``_refit``, ``_residuals`` and the problem, model and effects they
-#: call): editing them does not invalidate the store.
+#: call; this module only wraps them, and a stored program that no longer loads is
+#: traced again): editing them does not invalidate the store.
 UNTRACED = frozenset({"_diagnose.py", "_diagnose_candidates.py", "_diagnose_result.py",
-                      "_diagnose_verdict.py", "_diagnose_rates.py", "_verdicts.py"})
+                      "_diagnose_verdict.py", "_diagnose_rates.py", "_verdicts.py",
+                      "_programs.py"})
 #: Packages of such modules: the command line, log reading (NumPy only).
 UNTRACED_PACKAGES = frozenset({"cli", "_io"})
 _ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
@@ -55,6 +57,16 @@ _ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
 #: executable holds memory mappings for its code (see tests/conftest.py).
 _LOADED: OrderedDict[str, Any] = OrderedDict()
 MAX_LOADED = 64
+#: ... and bounded by what they cost: a model's programs hold ~1 400–2 700 memory
+#: mappings (``/proc/self/maps``), so 64 of them can exceed the kernel's limit
+#: (``vm.max_map_count``, 65 530 by default), and JAX's own caches keep executables of
+#: their own besides. When the process holds more than this fraction of the limit after a
+#: new program, every compiled program is dropped — this store's and JAX's caches
+#: (:func:`release`) — and later calls read them again from the store. (A process that
+#: diagnosed ~40 logs died of "LLVM compilation error: Cannot allocate memory".)
+MAX_MAPS_FRACTION = 0.5
+#: Times :func:`release` ran in this process (for tests and benchmarks).
+RELEASES = 0
 _SALT: str | None = None
 #: One dict per program prepared in this process: name, how (``stored``: read from the
 #: store; ``traced``: traced and lowered here; ``jit``: store off), and seconds spent
@@ -152,7 +164,43 @@ def call(name: str, fn: Callable, *args):
     _LOADED[key] = prog
     while len(_LOADED) > MAX_LOADED:
         _LOADED.popitem(last=False)
+    if _maps_over_limit():
+        release()
     return out
+
+
+def _maps() -> int | None:
+    """Memory mappings of this process (Linux), or ``None`` where it cannot tell."""
+    try:
+        with open("/proc/self/maps", "rb") as f:
+            return sum(1 for _ in f)
+    except OSError:
+        return None
+
+
+def _max_maps() -> int:
+    try:
+        return int(Path("/proc/sys/vm/max_map_count").read_text())
+    except (OSError, ValueError):
+        return 65530
+
+
+def _maps_over_limit() -> bool:
+    n = _maps()
+    return n is not None and n > MAX_MAPS_FRACTION * _max_maps()
+
+
+def release() -> None:
+    """Drop every compiled program of this process: this store's and JAX's own caches
+    (:func:`jax.clear_caches`), so their executables' memory is returned; later calls
+    read the programs again from the store (or trace them)."""
+    import gc
+
+    global RELEASES
+    _LOADED.clear()
+    jax.clear_caches()
+    gc.collect()
+    RELEASES += 1
 
 
 def _prepare(name, key, fn, treedef, static, leaves):
