@@ -343,6 +343,10 @@ def test_diagnose_json_has_the_fit_provenance(fitted, tmp_path, monkeypatch):
     assert diag["hdid_version"] == version("hdid")
     for key in ("model", "correlation", "covariance"):
         assert diag[key] == data[key], key
+    # every key the diagnosis writes is declared in the schema (it allows others, so a
+    # validation alone would not notice an undeclared one)
+    schema = json.loads((Path(hdid.__file__).parent / "schema" / "diagnose.schema.json").read_text())
+    assert set(diag) <= set(schema["properties"]), set(diag) - set(schema["properties"])
     assert diag["verdict"] == "adequate"  # the diagnosis's own fields are kept
 
 

@@ -48,7 +48,7 @@ DEBT: set[tuple[str, str]] = set()
 MAX_LINES = 500
 #: Modules still over ``MAX_LINES``: their size today is their ceiling. Only shrinks.
 LONG = {
-    "_diagnose": 551,
+    "_diagnose": 550,
 }
 
 
