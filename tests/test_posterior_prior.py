@@ -33,8 +33,8 @@ def _x(fit, du=None):
 
 def test_gaussian_prior_replaces_the_default_and_orders_the_friction(fit):
     """With ``prior={"v_s": (c, s)}`` the log-density differs from the default one by
-    exactly (normalised Gaussian in log v_s) − (default weak prior of v_s), at two points;
-    v_s may leave the ±7 box (the Gaussian is proper, the box is the default's); with or
+    exactly (normalised Gaussian in log v_s) − (the law's declared Gaussian of v_s), at two
+    points; v_s may leave the ±7 box (both are proper; tau_s keeps the box); with or
     without priors on tau_c and tau_s, tau_s < tau_c has zero density (the Stribeck law's
     declared order)."""
     prob = fit.problem
@@ -43,16 +43,24 @@ def test_gaussian_prior_replaces_the_default_and_orders_the_friction(fit):
     c, s = 5.0, 0.3
     base = posterior_density(fit, sample_linear=()).lp
     user = posterior_density(fit, sample_linear=(), prior={"v_s": (c, s)}).lp
+    G0, _ = density.gaussian_prior(prob, None)
     for d in (0.0, 0.4):
         x = _x(fit, {i: d})
         u = x[i]
         gauss = -0.5 * ((u - math.log(c)) / s) ** 2 - math.log(s) - 0.5 * math.log(2 * math.pi)
-        weak = -0.5 * float(((u - prob.prior_mean[i]) / prob.prior_sd[i]) ** 2)
+        # the default: the Stribeck law's declared posterior prior on v_s (log-normal,
+        # normalised like the user's), not the least-squares weak row
+        m0, s0 = float(G0[0, i]), float(G0[1, i])
+        weak = -0.5 * ((u - m0) / s0) ** 2 - math.log(s0) - 0.5 * math.log(2 * math.pi)
         diff = float(user.log_prob(jnp.asarray(x)) - base.log_prob(jnp.asarray(x)))
         assert diff == pytest.approx(gauss - weak, abs=1e-9)
     far = _x(fit, {i: PRIOR_HALF_WIDTH + 1.0})
-    assert float(base.log_prob(jnp.asarray(far))) == -np.inf
+    # v_s's Gaussians (the declared one and the user's) are proper: no box for v_s
+    assert np.isfinite(float(base.log_prob(jnp.asarray(far))))
     assert np.isfinite(float(user.log_prob(jnp.asarray(far))))
+    # a parameter without one keeps the default's box (tau_s: flat in its log, ±7)
+    far = _x(fit, {free.index("tau_s"): PRIOR_HALF_WIDTH + 1.0})
+    assert float(base.log_prob(jnp.asarray(far))) == -np.inf
     vals = fit.values
     ordered = posterior_density(fit, sample_linear=(), prior={
         "tau_c": (vals["tau_c"], 1.0), "tau_s": (vals["tau_s"], 1.0)}).lp
@@ -115,21 +123,29 @@ def test_mode_search_under_a_user_prior_minimises_the_posterior(fit):
     u = np.asarray(fit.u, dtype=float)
     base_rows = float(np.sum(np.asarray(prob.prior_residuals(u)) ** 2))
     own_vs = float(((u[i] - prob.prior_mean[i]) / prob.prior_sd[i]) ** 2)
+    # the other rows G replaces: the declared posterior priors (delta's), each in place of
+    # its least-squares weak row
+    on = [k for k in np.flatnonzero(G[2] > 0) if k != i]
+    others = sum(float(((u[k] - G[0, k]) / G[1, k]) ** 2
+                       - ((u[k] - prob.prior_mean[k]) / prob.prior_sd[k]) ** 2) for k in on)
     got = float(view.problem.cost(jnp.asarray(u)) - prob.cost(jnp.asarray(u)))
-    assert got == pytest.approx(9.0 - own_vs, abs=1e-9)
+    assert got == pytest.approx(9.0 - own_vs + others, abs=1e-9)
     assert base_rows >= own_vs
     assert starts.shape == (1 + N_PRIOR_STARTS, u.size)
     assert starts[0, i] == pytest.approx(u[i] + 0.9)
-    assert np.all(starts[:, : i] == u[:i]) and np.all(starts[:, i + 1:] == u[i + 1:])
+    kept = [k for k in range(u.size) if k >= G.shape[1] or G[2, k] == 0]
+    assert np.all(starts[:, kept] == u[kept])  # only the Gaussians' parameters are drawn
     assert np.array_equal(np.asarray(view.u), u) and fit.problem is prob
     assert with_user_prior(fit, None) == (fit, None)
 
 
 def test_stribeck_priors_are_relative_to_the_log_and_physical(fit):
-    """The Stribeck law's default priors (effects/stribeck.py): v_s log-normal with median
-    5 % of the log's own peak speed and sd 1 in log; delta logit-normal with median 1 and
-    95 % within [0.47, 2.3]; the order tau_c ≤ tau_s declared for the posterior."""
-    from hdid._posterior.density import ordered_pairs
+    """The Stribeck law's priors (effects/stribeck.py). In the posterior (declared as
+    ``posterior_prior``): v_s log-normal with median 5 % of the log's own peak speed and
+    sd 1 in log; delta logit-normal with median 1 and 95 % within [0.47, 2.3]; the order
+    tau_c ≤ tau_s. In the least-squares fit: the weak rows, sd 2, centred on the same v_s
+    start and on delta's interval middle."""
+    from hdid._posterior.density import gaussian_prior, ordered_pairs
     from hdid._transforms import from_unconstrained
 
     prob = fit.problem
@@ -145,13 +161,16 @@ def test_stribeck_priors_are_relative_to_the_log_and_physical(fit):
     assert float(prob.prior_mean[i]) == pytest.approx(math.log(0.05 * scales.speed), rel=1e-9)
     # the peak speed of the log (the swing's ω·amplitude), not its sampled chord speed
     assert scales.speed >= s0.prep.speed
-    assert float(prob.prior_sd[i]) == 1.0
-    m, s = float(prob.prior_mean[j]), float(prob.prior_sd[j])
+    assert float(prob.prior_sd[i]) == 2.0 and float(prob.prior_sd[j]) == 2.0
+    G, pairs = gaussian_prior(prob, None)
+    assert G[2, i] == 1.0 and G[2, j] == 1.0 and G[2].sum() == 2.0
+    assert G[0, i] == pytest.approx(float(prob.prior_mean[i]), rel=1e-12) and G[1, i] == 1.0
+    m, s = G[0, j], G[1, j]
     lo, med, hi = (float(from_unconstrained(specs["delta"], m + z * s, np)) for z in (-1.96, 0, 1.96))
     assert med == pytest.approx(1.0, abs=1e-12)
     assert 0.45 < lo < 0.5 and 2.2 < hi < 2.3
-    pairs = ordered_pairs(prob)
     assert pairs.tolist() == [[free.index("tau_c"), free.index("tau_s")]]
+    assert ordered_pairs(prob).tolist() == pairs.tolist()
 
 
 def test_sampling_coordinates_and_orders_are_declared_by_the_effects(fit):

@@ -294,6 +294,7 @@ def gaussian_prior(problem: Problem, prior: dict | None):
     ``(centre value, sd)``: the centre in the parameter's unit, the sd in its transformed
     space — log for positive parameters (a log-normal: 0.2 is ±20 %), logit of the
     interval for ``delta``. ``None``: ``(None, ordered pairs)``."""
+    prior = {**declared_prior(problem), **(prior or {})}
     if not prior:
         return None, ordered_pairs(problem)
     from .._transforms import to_unconstrained
@@ -312,6 +313,25 @@ def gaussian_prior(problem: Problem, prior: dict | None):
         i = free.index(n)
         G[:, i] = float(to_unconstrained(specs[n], centre)), float(sd), 1.0
     return G, ordered_pairs(problem)
+
+
+def declared_prior(problem: Problem) -> dict:
+    """The posterior priors the effects declare (``AbstractEffect.posterior_prior``) for
+    free parameters, as ``{name: (centre value, sd)}``; a centre of ``None`` is the
+    least-squares prior row's centre (the log's own start)."""
+    from .._transforms import from_unconstrained
+
+    specs = problem.base.parameter_specs()
+    free = list(problem.free)
+    out = {}
+    for e in problem.base.effects:
+        for n, (centre, sd) in e.posterior_prior.items():
+            if n in free:
+                if centre is None:
+                    u = float(np.asarray(problem.prior_mean)[free.index(n)])
+                    centre = float(from_unconstrained(specs[n], u, np))
+                out[n] = (centre, sd)
+    return out
 
 
 def ordered_pairs(problem: Problem) -> np.ndarray | None:

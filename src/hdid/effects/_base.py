@@ -250,6 +250,11 @@ class AbstractEffect(eqx.Module):
     #: Pairs ``(a, b)`` of this effect's parameters with ``a ≤ b`` imposed by the
     #: posterior's prior (zero density otherwise), e.g. breakaway at least Coulomb friction.
     ordered: ClassVar[tuple[tuple[str, str], ...]] = ()
+    #: The posterior's default Gaussian priors for some of this effect's parameters,
+    #: ``{name: (centre value, sd in the transformed space)}``; a centre of ``None`` is
+    #: the log's own start (as :attr:`Parameter.prior`). They replace the least-squares
+    #: weak prior rows of those parameters in the posterior only.
+    posterior_prior: ClassVar[dict[str, tuple[float | None, float]]] = {}
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)

@@ -39,6 +39,7 @@ class AsymmetricStribeckFriction(AbstractEffect):
     name: ClassVar[str] = "stribeck"
     key: ClassVar[str] = "asymmetric_friction"
     ordered: ClassVar[tuple[tuple[str, str], ...]] = StribeckFriction.ordered
+    posterior_prior: ClassVar[dict] = StribeckFriction.posterior_prior
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> AsymmetricStribeckFriction:
