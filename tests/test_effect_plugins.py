@@ -3,9 +3,9 @@ file stem (the library's own, ``hdid/effects/<key>.py``) or an installed package
 under the ``hdid.effects`` entry-point group. Here a plugin package is "installed" on
 ``PYTHONPATH`` (a ``.dist-info`` with its entry point beside the module) and seen by
 ``--add``'s help, by ``hdid.effects.library``, by a fit and in the fit's derived table (the
-quantities the effect declares, with their standard errors), with no other edit.
-(Still to come, issue 20: diagnose's candidates and the posterior's coordinates read from
-the registry too.)
+quantities the effect declares, with their standard errors), by ``hdid diagnose`` (the
+candidate it declares: starts, trial place, residual mark) and by the posterior (the
+prior it declares), with no other edit.
 """
 
 from __future__ import annotations
@@ -39,6 +39,10 @@ class Cogging(hdid.AbstractEffect):
                                               scale=1e-4)
     name: ClassVar[str] = "cogging"
     key: ClassVar[str] = "cogging"
+    candidate: ClassVar = hdid.effects.Candidate(
+        trial=5, starts=lambda v: [{"amplitude": 0.01 * v["_k_wg"] * v["_swing"]}],
+        mark="a 24-per-turn ripple in the residual", experiment="turn the motor slowly")
+    posterior_prior: ClassVar[dict] = {"amplitude": (0.0, 1e-3)}
 
     @classmethod
     def start_from(cls, values):
@@ -99,6 +103,34 @@ def test_a_plugin_package_adds_an_effect_everywhere(plugin, tmp_path):
     inertia = d["parameters"]["inertia"]["value"] if "inertia" in d["parameters"] else d["model"]["inertia"]
     assert per_i["value"] == pytest.approx(amp["value"] / inertia, rel=1e-9)
     assert per_i["std"] == pytest.approx(amp["std"] / inertia, rel=1e-6)
+
+
+DIAGNOSE_AND_POSTERIOR = """
+import json, sys
+import hdid
+from hdid._diagnose import default_candidates
+from hdid._posterior.density import gaussian_prior
+
+cands = [c.key for c in default_candidates()]
+fit = hdid.fit(sys.argv[1], hdid.Model.default().with_effect(
+    hdid.effects.library({})["cogging"]), n_starts=2)
+G, _ = gaussian_prior(fit.problem, None)
+i = list(fit.problem.free).index("amplitude")
+d = hdid.diagnose(sys.argv[1], candidates=["cogging"], n_starts=1)
+print(json.dumps({"first": cands[0], "prior": [float(x) for x in G[:, i]],
+                  "tried": [c.key for c in d.candidates],
+                  "reasons": [c.reason for c in d.candidates]}))
+"""
+
+
+def test_a_plugins_candidate_and_prior_reach_diagnose_and_the_posterior(plugin, tmp_path):
+    site, env = plugin
+    out = json.loads(_run([sys.executable, "-c", DIAGNOSE_AND_POSTERIOR, str(PAPER)], env,
+                          tmp_path).strip().splitlines()[-1])
+    assert out["first"] == "cogging"  # trial=5 puts it before the library's (10 …)
+    assert out["prior"] == [0.0, 1e-3, 1.0]  # the declared (centre, sd) in use
+    assert out["tried"] == ["cogging"]
+    assert "24-per-turn ripple" in out["reasons"][0]  # the declared mark is reported
 
 
 def test_a_plugin_may_not_take_a_library_key(tmp_path):

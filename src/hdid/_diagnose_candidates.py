@@ -1,247 +1,47 @@
-"""The candidates of :func:`hdid.diagnose`: which library effects it tries, how each is
-added to the current model (variants, data-derived starting values, scanned orders) and
-the residual periodogram that proposes ripple orders. (See :mod:`hdid._diagnose` for how
-they are refitted and judged.)"""
+"""The candidates of :func:`hdid.diagnose`: the effects of the registry that declare a
+:class:`~hdid.effects.Candidate` (``effects/<key>.py``: trial order, data-derived starts,
+scanned orders, residual mark, separating experiment), the catalog-shape restart, the
+residual periodogram that proposes ripple orders and the order scan's machinery. (See
+:mod:`hdid._diagnose` for how they are refitted and judged.)"""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Sequence
 
 import numpy as np
 
+from .effects._candidate import MAX_ORDER, ORDERS, PERIODOGRAM_ORDERS, Candidate  # noqa: F401
 
-@dataclass(frozen=True)
-class Candidate:
-    """One thing ``diagnose`` can try: a library effect and how to add it.
-
-    Attributes
-    ----------
-    key:
-        The name used by ``--add`` and in the report.
-    applies:
-        ``applies(model) -> bool``: whether the candidate is meaningful for ``model``
-        (e.g. free play only replaces a plain cubic spring).
-    variants:
-        ``variants(model, values, hints) -> [(label, model), ...]``: the models to fit
-        (several when a discrete setting such as a ripple order is scanned).
-    scanned:
-        Discrete settings scanned, counted as extra parameters in the BIC.
-    mark:
-        The mark the effect leaves in residuals (plain language).
-    experiment:
-        The experiment that separates it from its look-alikes.
-    """
-
-    key: str
-    applies: Callable
-    variants: Callable
-    scanned: int = 0
-    mark: str = ""
-    experiment: str = ""
-    reset_shape: bool = True
-    #: candidates of one family leave the same mark (a tie between them is no ambiguity
-    #: about the physics, only about its form); "" = a family of its own
-    family: str = ""
-    #: how many discrete settings the scan chooses from (M): choosing the best of M
-    #: costs ``2·ln M`` on the BIC's −2·ln L scale (a uniform prior over the settings),
-    #: besides the ``scanned`` parameter's ``ln n``
-    settings: int = 1
-
-    def penalty(self, n: float) -> float:
-        """BIC cost of the scanned settings: ``scanned·ln n + 2·ln M``."""
-        return self.scanned * math.log(n) + 2.0 * math.log(max(self.settings, 1))
-
-
-
-def _has(model, name, cls=None) -> bool:
-    if name not in model.effect_names:
-        return False
-    return cls is None or type(model.effect(name)) is cls
-
-
-def _library_variant(key: str, starts: Callable | None = None):
-    """Variants adding library effect ``key``; ``starts(values) -> [overrides, ...]`` gives
-    several starting values for the new parameters (a multi-start, not a model choice:
-    the best is kept and no parameter is charged for it)."""
-
-    def variants(model, values, hints):
-        from .effects import library
-
-        values = {**values, "_k_wg": _model_k_wg(model, values, hints),
-                  "_swing": hints.get("swing_rad", math.nan)}
-        overrides = starts(values) if starts is not None else [{}]
-        return [(key, model.with_effect(library({**values, **o})[key])) for o in overrides]
-
-    return variants
-
-
-def _model_k_wg(model, values, hints) -> float:
-    """The fitted model's small-swing restoring stiffness at the logged axis [N m/rad]:
-    ``k1/N²`` for a cubic spring, else the secant of its rest torque over a tenth of the
-    logged swing (a gravity pendulum, segments) — never a catalog number."""
-    if "k1" in values:
-        return float(values["k1"]) / model.ratio**2
-    swing = hints.get("swing_rad", math.nan)
-    probe = 0.1 * swing if math.isfinite(swing) and swing > 0 else 1e-3
-    return max(float(model.rest_torque(probe)) / -probe, 0.0)
-
-
-def _k_wg(values) -> float:
-    return values["_k_wg"]
-
-
-def _tau(values) -> float:
-    """The fitted Coulomb level, or a small fraction of the spring torque over the swing."""
-    if "tau_c" in values:
-        return values["tau_c"]
-    swing = values.get("_swing", math.nan)
-    return 0.02 * values["_k_wg"] * (swing if math.isfinite(swing) else 1.0)
-
-
-#: Orders (cycles per WG revolution) scanned for a position-periodic torque: every
-#: integer order 1 … ``MAX_ORDER`` — low orders (less than one period over the swing,
-#: still identifiable against a smooth stiffness bend when the data say so), the WG mesh
-#: (2, 4), motor pole/slot cogging orders and anything between — plus the two largest
-#: peaks of the residual's periodogram against the WG angle (up to
-#: ``PERIODOGRAM_ORDERS``). No order is skipped by a rule of thumb: every one is screened
-#: by the fit itself (one Gauss–Newton step: the score statistic), and every order whose
-#: screening gain is within ``SCAN_TIE_DCHI2`` of the best is refitted to convergence
-#: (see :func:`hdid._diagnose._candidate_fits`), so the order is decided by the fit.
-MAX_ORDER = 48
-RIPPLE_ORDERS = tuple(float(n) for n in range(1, MAX_ORDER + 1))
-#: The residual periodogram searches integer orders 1 … this for peaks; with the fixed
-#: list inside that range, the ripple's order is chosen from this many settings.
-PERIODOGRAM_ORDERS = 120
-#: Orders of the kinematic error scanned (2 is the elliptical wave generator's): every
-#: integer order 1 … ``MAX_ORDER``, as the ripple's.
-KINEMATIC_ORDERS = tuple(float(n) for n in range(1, MAX_ORDER + 1))
-
-
-def _ripple_variants(model, values, hints):
-    from .effects import library
-
-    orders = list(RIPPLE_ORDERS)
-    for n in hints.get("ripple_orders") or []:
-        if all(abs(n - o) > 0.5 for o in orders):
-            orders.append(float(n))
-    out = []
-    for n in orders:
-        eff = library({**values, "order": float(n)})["ripple"]
-        out.append((f"ripple (order {n:g})", model.with_effect(eff)))
-    return out
-
-
-def _kinematic_variants(model, values, hints):
-    from .effects import library
-
-    out = []
-    for n in KINEMATIC_ORDERS:
-        eff = library({**values, "order": float(n)})["kinematic_error"]
-        out.append((f"kinematic_error (order {n:g})", model.with_effect(eff)))
-    return out
+#: Orders scanned for a position-periodic torque (``ripple``: also the residual
+#: periodogram's two largest peaks) and for the kinematic error: every integer order
+#: 1 … ``MAX_ORDER``, declared by the effects (:data:`hdid.effects._candidate.ORDERS`).
+RIPPLE_ORDERS = ORDERS
+KINEMATIC_ORDERS = ORDERS
 
 
 def default_candidates() -> list[Candidate]:
-    """The library's candidates, in the order they are tried."""
-    from .effects import (
-        CubicStiffness,
-        LinearStiffness,
-        StribeckFriction,
-    )
+    """The candidates the registry's effects declare (the library's files and installed
+    plugins'), in their declared trial order."""
+    from .effects._candidate import candidates
+    from .effects._registry import registry
 
-    def cubic(m):
-        return _has(m, "stiffness", CubicStiffness)
+    return candidates(registry())
 
-    return [
-        Candidate(
-            "backlash", cubic,
-            # free play a few % of the logged swing (0.005 and 0.02 rad on a CSF-8's ±0.157)
-            _library_variant("backlash", lambda v: [
-                {"backlash": f * v["_swing"]} for f in (0.016, 0.064)
-            ] if math.isfinite(v["_swing"]) else [{}]),
-            mark="the approach to rest is too abrupt in the model — the gear coasts through a "
-                 "dead zone without spring torque — and rest points spread wider than stiction "
-                 "explains",
-            experiment="releases from several amplitudes and a 1 kHz log resolve the coasting "
-                       "through the dead zone; an added-inertia run changes the coasting time "
-                       "but not the band",
-        ),
-        Candidate(
-            "hysteresis", lambda m: not _has(m, "hysteresis"),
-            _library_variant("hysteresis", lambda v: [
-                {"f_h": a * _tau(v), "sigma_h": b * _k_wg(v)} for a in (0.2, 0.5) for b in (0.5, 2.0)
-            ]),
-            mark="after each reversal the gear decelerates more gently than Coulomb friction "
-                 "allows and the rest point is pulled towards where it came from",
-            experiment="releases of several amplitudes (the loop's rounded corners do not "
-                       "scale with amplitude, Coulomb friction and stiffness do) and 1 kHz "
-                       "sampling around the reversals",
-        ),
-        Candidate(
-            "asymmetric_friction", lambda m: _has(m, "stribeck", StribeckFriction),
-            _library_variant("asymmetric_friction", lambda v: [{"asym": -0.25}, {"asym": 0.25}]),
-            mark="rest points of + and − releases sit asymmetrically and part of the residual "
-                 "does not flip with the velocity",
-            experiment="a known spring zero (zero-torque reading with the servo on): without "
-                       "it the Coulomb part of an asymmetry is the same as an encoder offset",
-        ),
-        Candidate(
-            "load_friction", lambda m: not _has(m, "load_friction"),
-            _library_variant("load_friction", lambda v: [
-                {"c_load": 0.02 * _k_wg(v)}, {"c_load": 0.1 * _k_wg(v)}
-            ]),
-            mark="large swings lose more amplitude per half-cycle than small ones, so a "
-                 "constant friction is too weak early and too strong late",
-            experiment="releases from at least three amplitudes: the decrement per half-cycle "
-                       "then shows its growth with load",
-        ),
-        Candidate(
-            "ripple", lambda m: not _has(m, "ripple"), _ripple_variants, scanned=1,
-            family="position-periodic", settings=PERIODOGRAM_ORDERS,
-            mark="the residual is periodic in the wave-generator angle, not in time, with the "
-                 "same phase in every run",
-            experiment="releases starting from different WG angles (shift the spring zero by "
-                       "a fraction of the ripple period) separate a position-periodic torque "
-                       "from stiffness",
-        ),
-        Candidate(
-            "soft_windup", cubic,
-            _library_variant("soft_windup", lambda v: [{}, {"K1": 0.6 * v["k1"]}] if "k1" in v
-                             else [{}]),
-            mark="the swing period near rest differs from the cubic model's: the phase error "
-                 "grows as the amplitude decays",
-            experiment="a small-amplitude release (inside the first catalog segment) measures "
-                       "the centre stiffness K1 directly",
-        ),
-        Candidate(
-            "kinematic_error", cubic, _kinematic_variants, scanned=1,
-            family="position-periodic", settings=len(KINEMATIC_ORDERS),
-            mark="a spring torque modulated periodically in the WG angle",
-            experiment="a driven input/output test with the output encoder: free motion "
-                       "barely sees the positional error",
-        ),
-        Candidate(
-            "stiffness", lambda m: _has(m, "stiffness", LinearStiffness),
-            _library_variant("stiffness"),
-            mark="large first swings are faster than a linear spring allows (hardening)",
-            experiment="releases at two amplitudes: the frequency then depends on amplitude",
-        ),
-        Candidate(
-            "stribeck", lambda m: not _has(m, "stribeck"), _library_variant("stribeck"),
-            mark="the residual flips with the sign of the velocity and peaks just before rest: "
-                 "static friction above Coulomb is missing",
-            experiment="1 kHz sampling around the reversals resolves the Stribeck rise",
-        ),
-        Candidate(
-            "viscous", lambda m: not _has(m, "viscous"), _library_variant("viscous"),
-            mark="the decay envelope is exponential rather than linear and the error grows "
-                 "with speed",
-            experiment="releases at several amplitudes separate viscous (∝ speed) from "
-                       "Coulomb (constant) losses",
-        ),
-    ]
+
+def _variants_of(key: str):
+    cand = next(c for c in default_candidates() if c.key == key)
+    return cand.variants
+
+
+def _ripple_variants(model, values, hints):
+    """The ripple candidate's variants (one per scanned order)."""
+    return _variants_of("ripple")(model, values, hints)
+
+
+def _kinematic_variants(model, values, hints):
+    """The kinematic-error candidate's variants (one per scanned order)."""
+    return _variants_of("kinematic_error")(model, values, hints)
 
 
 #: The catalog Stribeck shape, a second starting point for candidates when the base fit's

@@ -12,6 +12,7 @@ from ._base import (
     positive_power,
     same_parameter,
 )
+from ._candidate import Candidate
 from ._registry import keys, registry
 from .asymmetric_friction import AsymmetricStribeckFriction
 from .asymmetric_viscous import AsymmetricViscousFriction
@@ -47,6 +48,7 @@ __all__ = [
     "AbstractSpring",
     "AsymmetricStribeckFriction",
     "AsymmetricViscousFriction",
+    "Candidate",
     "CoulombFriction",
     "CubicStiffness",
     "DahlHysteresis",

@@ -255,6 +255,10 @@ class AbstractEffect(eqx.Module):
     #: the log's own start (as :attr:`Parameter.prior`). They replace the least-squares
     #: weak prior rows of those parameters in the posterior only.
     posterior_prior: ClassVar[dict[str, tuple[float | None, float]]] = {}
+    #: How ``hdid diagnose`` tries this effect (:class:`hdid.effects.Candidate`: trial
+    #: order, starting values, scanned orders, residual mark, separating experiment);
+    #: ``None``: not tried.
+    candidate: ClassVar[Any] = None
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)

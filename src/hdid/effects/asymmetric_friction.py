@@ -7,6 +7,7 @@ from typing import ClassVar
 from jaxtyping import Array, ArrayLike, Float
 
 from ._base import AbstractEffect, Motion, StartValues, parameter, same_parameter
+from ._candidate import Candidate
 from .stribeck import StribeckFriction
 
 
@@ -38,6 +39,15 @@ class AsymmetricStribeckFriction(AbstractEffect):
 
     name: ClassVar[str] = "stribeck"
     key: ClassVar[str] = "asymmetric_friction"
+    #: how ``hdid diagnose`` tries it
+    candidate: ClassVar[Candidate] = Candidate(
+        trial=30, replaces="stribeck",
+        starts=lambda v: [{"asym": -0.25}, {"asym": 0.25}],
+        mark="rest points of + and − releases sit asymmetrically and part of the residual "
+             "does not flip with the velocity",
+        experiment="a known spring zero (zero-torque reading with the servo on): without "
+                   "it the Coulomb part of an asymmetry is the same as an encoder offset",
+    )
     ordered: ClassVar[tuple[tuple[str, str], ...]] = StribeckFriction.ordered
     posterior_prior: ClassVar[dict] = StribeckFriction.posterior_prior
 

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import math
 from typing import ClassVar
 
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ._base import AbstractSpring, Motion, StartValues, parameter, same_parameter
+from ._candidate import Candidate
 from .stiffness import CubicStiffness
 
 
@@ -30,6 +32,19 @@ class FreePlayStiffness(AbstractSpring):
         start=lambda s: 0.06 * s.amplitude)
 
     key: ClassVar[str] = "backlash"
+    #: how ``hdid diagnose`` tries it
+    candidate: ClassVar[Candidate] = Candidate(
+        trial=10, replaces="stiffness",
+        # free play a few % of the logged swing (0.005 and 0.02 rad on a CSF-8's ±0.157)
+        starts=lambda v: ([{"backlash": f * v["_swing"]} for f in (0.016, 0.064)]
+                          if math.isfinite(v["_swing"]) else [{}]),
+        mark="the approach to rest is too abrupt in the model — the gear coasts through a "
+             "dead zone without spring torque — and rest points spread wider than stiction "
+             "explains",
+        experiment="releases from several amplitudes and a 1 kHz log resolve the coasting "
+                   "through the dead zone; an added-inertia run changes the coasting time "
+                   "but not the band",
+    )
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> FreePlayStiffness:

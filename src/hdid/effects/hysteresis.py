@@ -8,6 +8,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float, PyTree
 
 from ._base import AbstractEffect, Motion, StartValues, parameter
+from ._candidate import Candidate, friction_level
 
 
 class DahlHysteresis(AbstractEffect):
@@ -41,6 +42,17 @@ class DahlHysteresis(AbstractEffect):
 
     name: ClassVar[str] = "hysteresis"
     key: ClassVar[str] = "hysteresis"
+    #: how ``hdid diagnose`` tries it
+    candidate: ClassVar[Candidate] = Candidate(
+        trial=20,
+        starts=lambda v: [{"f_h": a * friction_level(v), "sigma_h": b * v["_k_wg"]}
+                          for a in (0.2, 0.5) for b in (0.5, 2.0)],
+        mark="after each reversal the gear decelerates more gently than Coulomb friction "
+             "allows and the rest point is pulled towards where it came from",
+        experiment="releases of several amplitudes (the loop's rounded corners do not "
+                   "scale with amplitude, Coulomb friction and stiffness do) and 1 kHz "
+                   "sampling around the reversals",
+    )
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> DahlHysteresis:

@@ -8,6 +8,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ._base import AbstractSpring, Motion, StartValues, parameter, same_parameter
+from ._candidate import ORDERS, Candidate
 from .stiffness import CubicStiffness
 
 
@@ -37,6 +38,14 @@ class KinematicErrorStiffness(AbstractSpring):
     order: Float[ArrayLike, ""] = 2.0
 
     key: ClassVar[str] = "kinematic_error"
+    #: how ``hdid diagnose`` tries it
+    candidate: ClassVar[Candidate] = Candidate(
+        trial=70, replaces="stiffness", orders=ORDERS, settings=len(ORDERS),
+        family="position-periodic",
+        mark="a spring torque modulated periodically in the WG angle",
+        experiment="a driven input/output test with the output encoder: free motion "
+                   "barely sees the positional error",
+    )
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> KinematicErrorStiffness:

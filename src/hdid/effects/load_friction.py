@@ -8,6 +8,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ._base import AbstractEffect, Motion, StartValues, parameter
+from ._candidate import Candidate
 
 
 class LoadDependentFriction(AbstractEffect):
@@ -32,6 +33,15 @@ class LoadDependentFriction(AbstractEffect):
 
     name: ClassVar[str] = "load_friction"
     key: ClassVar[str] = "load_friction"
+    #: how ``hdid diagnose`` tries it
+    candidate: ClassVar[Candidate] = Candidate(
+        trial=40,
+        starts=lambda v: [{"c_load": 0.02 * v["_k_wg"]}, {"c_load": 0.1 * v["_k_wg"]}],
+        mark="large swings lose more amplitude per half-cycle than small ones, so a "
+             "constant friction is too weak early and too strong late",
+        experiment="releases from at least three amplitudes: the decrement per half-cycle "
+                   "then shows its growth with load",
+    )
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> LoadDependentFriction:

@@ -8,6 +8,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ._base import AbstractEffect, Motion, StartValues, parameter
+from ._candidate import ORDERS, PERIODOGRAM_ORDERS, Candidate
 
 
 class PositionRipple(AbstractEffect):
@@ -36,6 +37,16 @@ class PositionRipple(AbstractEffect):
 
     name: ClassVar[str] = "ripple"
     key: ClassVar[str] = "ripple"
+    #: how ``hdid diagnose`` tries it
+    candidate: ClassVar[Candidate] = Candidate(
+        trial=50, orders=ORDERS, periodogram=True, settings=PERIODOGRAM_ORDERS,
+        family="position-periodic",
+        mark="the residual is periodic in the wave-generator angle, not in time, with the "
+             "same phase in every run",
+        experiment="releases starting from different WG angles (shift the spring zero by "
+                   "a fraction of the ripple period) separate a position-periodic torque "
+                   "from stiffness",
+    )
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> PositionRipple:

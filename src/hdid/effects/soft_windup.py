@@ -8,6 +8,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ._base import AbstractSpring, Motion, StartValues, parameter
+from ._candidate import Candidate
 
 
 class ThreeSegmentStiffness(AbstractSpring):
@@ -43,6 +44,15 @@ class ThreeSegmentStiffness(AbstractSpring):
         start=lambda s: 0.31 * s.k_out * s.twist)
 
     key: ClassVar[str] = "soft_windup"
+    #: how ``hdid diagnose`` tries it
+    candidate: ClassVar[Candidate] = Candidate(
+        trial=60, replaces="stiffness",
+        starts=lambda v: [{}, {"K1": 0.6 * v["k1"]}] if "k1" in v else [{}],
+        mark="the swing period near rest differs from the cubic model's: the phase error "
+             "grows as the amplitude decays",
+        experiment="a small-amplitude release (inside the first catalog segment) measures "
+                   "the centre stiffness K1 directly",
+    )
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> ThreeSegmentStiffness:

@@ -8,6 +8,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ._base import AbstractSpring, Motion, StartValues, parameter
+from ._candidate import Candidate
 
 
 class CubicStiffness(AbstractSpring):
@@ -29,6 +30,12 @@ class CubicStiffness(AbstractSpring):
         start=lambda s: 0.17 * s.k_out / s.twist**2, flat_in_value=True, sample_in_value=True)
 
     key: ClassVar[str] = "stiffness"
+    #: how ``hdid diagnose`` tries it
+    candidate: ClassVar[Candidate] = Candidate(
+        trial=80, replaces="linear_stiffness",
+        mark="large first swings are faster than a linear spring allows (hardening)",
+        experiment="releases at two amplitudes: the frequency then depends on amplitude",
+    )
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> CubicStiffness:

@@ -8,6 +8,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ._base import AbstractEffect, Motion, StartValues, parameter, positive_power
+from ._candidate import Candidate
 
 
 #: Median of the Stribeck velocity's prior (and its start) as a fraction of the log's
@@ -88,6 +89,13 @@ class StribeckFriction(AbstractEffect):
 
     name: ClassVar[str] = "stribeck"
     key: ClassVar[str] = "stribeck"
+    #: how ``hdid diagnose`` tries it
+    candidate: ClassVar[Candidate] = Candidate(
+        trial=90,
+        mark="the residual flips with the sign of the velocity and peaks just before rest: "
+             "static friction above Coulomb is missing",
+        experiment="1 kHz sampling around the reversals resolves the Stribeck rise",
+    )
     #: breakaway at least Coulomb friction (imposed by the posterior)
     ordered: ClassVar[tuple[tuple[str, str], ...]] = (("tau_c", "tau_s"),)
     #: the physical priors, in the posterior (class docstring)

@@ -8,6 +8,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ._base import AbstractEffect, Motion, StartValues, parameter
+from ._candidate import Candidate
 
 
 class ViscousFriction(AbstractEffect):
@@ -23,6 +24,14 @@ class ViscousFriction(AbstractEffect):
 
     name: ClassVar[str] = "viscous"
     key: ClassVar[str] = "viscous"
+    #: how ``hdid diagnose`` tries it
+    candidate: ClassVar[Candidate] = Candidate(
+        trial=100,
+        mark="the decay envelope is exponential rather than linear and the error grows "
+             "with speed",
+        experiment="releases at several amplitudes separate viscous (∝ speed) from "
+                   "Coulomb (constant) losses",
+    )
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> ViscousFriction:
