@@ -190,6 +190,32 @@ def test_the_spring_is_found_by_its_type_not_by_a_name():
                          hdid.PositionalError.zeros(0))
 
 
+def test_the_friction_law_is_found_by_its_type_not_by_a_name():
+    """Dry friction laws are an abstract type as springs are (issue 20): the library's
+    (Stribeck, Coulomb, asymmetric) are AbstractFriction, the model finds its law by type
+    and a user effect that merely calls itself "stribeck" is not taken for one."""
+    from hdid.effects import registry
+
+    laws = {k for k, cls in registry().items() if issubclass(cls, hdid.AbstractFriction)}
+    assert laws == {"stribeck", "coulomb", "asymmetric_friction"}
+    base = Model.default()
+    assert type(base.friction) is hdid.StribeckFriction
+    values = base.float_values()
+    coulomb = base.with_effect(registry()["coulomb"].start_from(values))
+    assert type(coulomb.friction) is hdid.CoulombFriction and len(coulomb.effects) == 3
+    assert base.without("stribeck").friction is None
+
+    class Impostor(AbstractEffect):
+        f: float
+        name: ClassVar[str] = "stribeck"
+        parameters: ClassVar = (Parameter("f", "N m", "not a friction type"),)
+
+        def torque(self, motion, state):
+            return -self.f * motion.direction
+
+    assert base.with_effect(Impostor(f=1e-3)).friction is None
+
+
 def test_parameters_are_declared_once_on_their_fields():
     """A parameter is declared once, as its field (issue 20): ``parameters`` is collected
     from the fields in their order, a reused declaration keeps its metadata, and declaring

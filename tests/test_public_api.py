@@ -14,7 +14,7 @@ import sys
 import hdid
 
 PUBLIC = [
-    "AbstractEffect", "AbstractSpring", "AsymmetricStribeckFriction", "AsymmetricViscousFriction",
+    "AbstractEffect", "AbstractFriction", "AbstractSpring", "AsymmetricStribeckFriction", "AsymmetricViscousFriction",
     "CoulombFriction", "CubicStiffness", "DEFAULT_INERTIA", "DEFAULT_RATIO", "DahlHysteresis",
     "Diagnosis", "DrivenFitResult", "DrivenJoint", "FitError", "FitResult",
     "FreePlayStiffness", "Gravity", "HdidError", "KinematicErrorStiffness",

@@ -39,6 +39,7 @@ _LAZY = {
     "FitError": "._errors",
     "HdidError": "._errors",
     "AbstractEffect": ".effects",
+    "AbstractFriction": ".effects",
     "AbstractSpring": ".effects",
     "Parameter": ".effects",
     "Scales": ".effects",
@@ -118,6 +119,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from ._simulate import simulate
     from .effects import (
         AbstractEffect,
+        AbstractFriction,
         AbstractSpring,
         AsymmetricStribeckFriction,
         AsymmetricViscousFriction,

@@ -79,9 +79,6 @@ def _derived_and_jacobian(problem: Problem, u):
     return quantities(u[:P]), jax.jacfwd(quantities)(u[:P])
 
 
-BASE_EFFECTS = ("stiffness", "stribeck", "viscous")
-
-
 def _is_base(model) -> bool:
     """The base model's effects, by class (a user effect may reuse a slot name)."""
     from .effects import CubicStiffness, StribeckFriction, ViscousFriction

@@ -43,12 +43,11 @@ def _offset_parameters(joint: DrivenJoint, free) -> list[str]:
 
 
 def _coulomb_effects(joint: DrivenJoint):
-    """The model's Stribeck-type friction effects (``tau_c``, ``tau_s`` fields; their
-    nested special case is Coulomb friction, ``tau_s = tau_c``)."""
-    from .effects import AsymmetricStribeckFriction, StribeckFriction
-
-    return [e for e in joint.wg_model.effects
-            if isinstance(e, (StribeckFriction, AsymmetricStribeckFriction))]
+    """The model's Stribeck-type friction law (an :class:`~hdid.AbstractFriction` with
+    ``tau_c`` and ``tau_s``; its nested special case is Coulomb friction, ``tau_s = tau_c``)."""
+    law = joint.wg_model.friction
+    names = {p.name for p in law.parameters} if law is not None else set()
+    return [law] if {"tau_c", "tau_s"} <= names else []
 
 
 def log_scales(data: DrivenData, joint: DrivenJoint, inertia: float | None = None,

@@ -15,6 +15,7 @@ from . import _config  # noqa: F401  (float64)
 from ._parameter_set import AbstractParameterSet
 from .effects import (
     AbstractEffect,
+    AbstractFriction,
     AbstractSpring,
     CubicStiffness,
     Motion,
@@ -151,6 +152,12 @@ class Model(AbstractParameterSet):
         """The model's spring law (the effect that is an :class:`~hdid.AbstractSpring`),
         or ``None`` (a pendulum, a direct drive with no spring)."""
         return next((e for e in self.effects if isinstance(e, AbstractSpring)), None)
+
+    @property
+    def friction(self) -> AbstractFriction | None:
+        """The model's dry friction law (the effect that is an
+        :class:`~hdid.AbstractFriction`: Stribeck, Coulomb, asymmetric), or ``None``."""
+        return next((e for e in self.effects if isinstance(e, AbstractFriction)), None)
 
     def effect(self, name: str) -> AbstractEffect:
         for e in self.effects:

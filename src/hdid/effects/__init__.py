@@ -2,6 +2,7 @@
 
 from ._base import (
     AbstractEffect,
+    AbstractFriction,
     AbstractSpring,
     Motion,
     Parameter,
@@ -45,6 +46,7 @@ def library(values: dict[str, float]) -> dict[str, AbstractEffect]:
 
 __all__ = [
     "AbstractEffect",
+    "AbstractFriction",
     "AbstractSpring",
     "AsymmetricStribeckFriction",
     "AsymmetricViscousFriction",

@@ -337,6 +337,20 @@ class AbstractSpring(AbstractEffect):
     name: ClassVar[str] = "stiffness"
 
 
+class AbstractFriction(AbstractEffect):
+    """A dry friction law at the wave generator: a sliding torque (:meth:`torque`) and the
+    torque it can hold at rest (:meth:`holding_torque`, which makes the simulator stick).
+
+    A model holds one at most: every friction law fills the slot ``name = "stribeck"``
+    (the historic name, kept so that saved fits and JSON read back), so adding one
+    (``--add coulomb``) replaces the model's. Code that needs *the* friction law finds it
+    by this type (:attr:`hdid.Model.friction`), never by a name. Velocity-proportional
+    (viscous) and load-dependent terms are separate effects that add to it.
+    """
+
+    name: ClassVar[str] = "stribeck"
+
+
 def positive_power(x: Array, exponent: Array) -> Array:
     """``x ** exponent`` for ``x >= 0`` with finite derivatives at ``x == 0`` (double-where)."""
     safe = jnp.where(x > 0, x, 1.0)

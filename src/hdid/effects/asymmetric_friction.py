@@ -6,12 +6,12 @@ from typing import ClassVar
 
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, StartValues, parameter, same_parameter
+from ._base import AbstractFriction, Motion, StartValues, parameter, same_parameter
 from ._candidate import Candidate
 from .stribeck import StribeckFriction
 
 
-class AsymmetricStribeckFriction(AbstractEffect):
+class AsymmetricStribeckFriction(AbstractFriction):
     r"""Stribeck friction that is ``(1 + asym)`` times stronger sliding in +θ than the
     symmetric law and ``(1 − asym)`` times in −θ, static and kinetic alike.
 
@@ -37,7 +37,6 @@ class AsymmetricStribeckFriction(AbstractEffect):
         "1", "friction asymmetry: +θ is (1+asym), −θ is (1−asym) times",
         transform=("interval", -0.9, 0.9))
 
-    name: ClassVar[str] = "stribeck"
     key: ClassVar[str] = "asymmetric_friction"
     #: how ``hdid diagnose`` tries it
     candidate: ClassVar[Candidate] = Candidate(

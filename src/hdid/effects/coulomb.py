@@ -7,11 +7,11 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, StartValues, same_parameter
+from ._base import AbstractFriction, Motion, StartValues, same_parameter
 from .stribeck import StribeckFriction
 
 
-class CoulombFriction(AbstractEffect):
+class CoulombFriction(AbstractFriction):
     r"""Coulomb friction: a constant level ``tau_c`` [N m] opposing the sliding direction.
 
     Sliding: ``tau_f = s·tau_c`` (``s`` the sliding direction); at rest it holds any torque
@@ -30,7 +30,6 @@ class CoulombFriction(AbstractEffect):
 
     tau_c: Float[ArrayLike, ""] = same_parameter(StribeckFriction, "tau_c")
 
-    name: ClassVar[str] = "stribeck"
     key: ClassVar[str] = "coulomb"
 
     @classmethod

@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, StartValues, parameter, positive_power
+from ._base import AbstractFriction, Motion, StartValues, parameter, positive_power
 from ._candidate import Candidate
 
 
@@ -27,7 +27,7 @@ DELTA_PRIOR_SD = 0.8
 LSQ_PRIOR_SD = 2.0
 
 
-class StribeckFriction(AbstractEffect):
+class StribeckFriction(AbstractFriction):
     r"""Coulomb friction with a Stribeck rise to a static (breakaway) level.
 
     Sliding: ``tau_f = s·(tau_c + (tau_s − tau_c)·exp(−|ω/v_s|^delta))`` opposing the
@@ -87,7 +87,6 @@ class StribeckFriction(AbstractEffect):
         "1", "Stribeck shape exponent",
         transform=("interval", *DELTA_INTERVAL), prior=(0.0, LSQ_PRIOR_SD))
 
-    name: ClassVar[str] = "stribeck"
     key: ClassVar[str] = "stribeck"
     #: how ``hdid diagnose`` tries it
     candidate: ClassVar[Candidate] = Candidate(
