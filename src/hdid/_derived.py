@@ -1,13 +1,12 @@
-"""Derived physical quantities of a model: the stick band (and the data's own bracket of
-it), the natural frequency, and what each effect declares (:meth:`AbstractEffect.derived`:
-torques per unit inertia, a damping ratio), with their standard errors by the delta method."""
+"""Standard errors of the derived physical quantities (:meth:`hdid.Model.derived`: the
+stick band, the natural frequency, what each effect declares) by the delta method, from
+:meth:`Problem.derived_and_jacobian` compiled once per problem structure."""
 
 from __future__ import annotations
 
 import math
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -33,50 +32,10 @@ def _derived(problem: Problem, u, cov, null, precomputed=None) -> dict:
     return out
 
 
-def band_limit(problem: Problem):
-    """How far [log units] to search for the stick band's edges: twice the largest
-    excursion from the spring zero in the log (the band cannot extend past where the log
-    shows the gear sliding; a fixed 1 rad would not fit a log in mrad or in degrees)."""
-    off = problem.offset0[problem.setup_index][:, None]
-    return 2.0 * jnp.max(jnp.abs(problem.theta - off))
-
-
-def derived_quantities(model, theta_max=1.0) -> dict:
-    """Derived physical quantities of a model (JAX scalars): the stick band, searched
-    within ``±theta_max`` (:func:`band_limit` of the log), the small-swing natural
-    frequency, and what each effect declares (:meth:`AbstractEffect.derived`: the library's
-    torques per unit inertia and damping ratio; a plugin effect's own)."""
-    N = model.ratio
-    v = model.values()
-    I = v["inertia"]
-    lo, hi = model.stick_band(theta_max)
-    out = {"stick_band_halfwidth_rad": 0.5 * (hi - lo), "stick_band_lower_rad": lo,
-           "stick_band_upper_rad": hi}
-    if "k1" in v:
-        k_wg = v["k1"] / N**2
-    else:  # any other restoring law (a gravity pendulum, segments): its slope at the zero
-        k_wg = -jax.grad(lambda th: model.rest_torque(th))(jnp.zeros(()))
-    for effect in model.effects:
-        for name, value in effect.derived(I, k_wg).items():
-            if name in out:
-                raise ValueError(f"{type(effect).__name__}.derived(): {name!r} is already "
-                                 "derived by another effect; give it a name of its own")
-            out[name] = value
-    ok = k_wg > 0
-    safe = jnp.where(ok, k_wg, 1.0)
-    out["natural_frequency_hz"] = jnp.where(ok, jnp.sqrt(safe / I) / (2 * jnp.pi), jnp.nan)
-    return out
-
-
 @eqx.filter_jit
 def _derived_and_jacobian(problem: Problem, u):
-    P = problem.n_physical
-
-    def quantities(up):
-        return derived_quantities(problem.model(jnp.concatenate([up, u[P:]])),
-                                  band_limit(problem))
-
-    return quantities(u[:P]), jax.jacfwd(quantities)(u[:P])
+    """:meth:`Problem.derived_and_jacobian`, compiled once per problem structure."""
+    return problem.derived_and_jacobian(u)
 
 
 def _is_base(model) -> bool:

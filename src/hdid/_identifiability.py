@@ -17,7 +17,6 @@ from ._summaries import ParameterEstimate, RunSummary, StartSummary
 from ._transforms import derivative
 from ._derived import _derived, band_bracket
 # re-exported while the posterior and diagnose branches still import them from here
-from ._derived import band_limit, derived_quantities  # noqa: F401
 
 
 #: A direction in the optimiser's space whose data-only standard deviation exceeds this

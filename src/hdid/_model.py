@@ -246,6 +246,33 @@ class Model(AbstractParameterSet):
         lo, hi = self.stick_band(theta_max)
         return 0.5 * (hi - lo)
 
+    def derived(self, theta_max: float = 1.0) -> dict[str, Array]:
+        """Derived physical quantities (JAX scalars): the stick band, searched within
+        ``±theta_max`` (a log's :meth:`~hdid._problem.Problem.band_limit`), the
+        small-swing natural frequency, and what each effect declares
+        (:meth:`AbstractEffect.derived`: the library's torques per unit inertia and damping
+        ratio; a plugin effect's own)."""
+        v = self.values()
+        inertia = v["inertia"]
+        lo, hi = self.stick_band(theta_max)
+        out = {"stick_band_halfwidth_rad": 0.5 * (hi - lo), "stick_band_lower_rad": lo,
+               "stick_band_upper_rad": hi}
+        if "k1" in v:
+            k_wg = v["k1"] / self.ratio**2
+        else:  # any other restoring law (a gravity pendulum, segments): its slope at zero
+            k_wg = -jax.grad(lambda th: self.rest_torque(th))(jnp.zeros(()))
+        for effect in self.effects:
+            for name, value in effect.derived(inertia, k_wg).items():
+                if name in out:
+                    raise ValueError(f"{type(effect).__name__}.derived(): {name!r} is already "
+                                     "derived by another effect; give it a name of its own")
+                out[name] = value
+        ok = k_wg > 0
+        safe = jnp.where(ok, k_wg, 1.0)
+        out["natural_frequency_hz"] = jnp.where(ok, jnp.sqrt(safe / inertia) / (2 * jnp.pi),
+                                                jnp.nan)
+        return out
+
 
 def _band_edge(model: Model, side: float, theta_max: float) -> Array:
     """Distance from zero to where the rest torque on ``side`` first exceeds holding."""

@@ -153,6 +153,28 @@ class Problem(AbstractProblem):
         values, *_ = self.unpack(u)
         return self.base.replace(**values) if values else self.base
 
+    def band_limit(self):
+        """How far [log units] to search for the stick band's edges: twice the largest
+        excursion from the spring zero in the log (the band cannot extend past where the
+        log shows the gear sliding; a fixed 1 rad would not fit a log in mrad or degrees)."""
+        off = self.offset0[self.setup_index][:, None]
+        return 2.0 * jnp.max(jnp.abs(self.theta - off))
+
+    def derived(self, u) -> dict:
+        """The model's derived quantities at ``u`` (:meth:`hdid.Model.derived`), the stick
+        band searched within :meth:`band_limit`."""
+        return self.model(u).derived(self.band_limit())
+
+    def derived_and_jacobian(self, u):
+        """``(values, ∂values/∂u_physical)``: :meth:`derived` and its Jacobian in the
+        physical unknowns (forward mode; the nuisance unknowns held at ``u``'s)."""
+        P = self.n_physical
+
+        def quantities(up):
+            return self.derived(jnp.concatenate([up, u[P:]]))
+
+        return quantities(u[:P]), jax.jacfwd(quantities)(u[:P])
+
     # -- forward model ----------------------------------------------------------------
     def simulate(self, u, times=None, full_output: bool = False):
         """Simulated WG angle of every run ``(R, T)``, spring-zero frame (no offset)."""

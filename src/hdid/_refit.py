@@ -27,7 +27,7 @@ import numpy as np
 from . import _config  # noqa: F401
 from . import _programs, _residuals
 from ._fit import _finish, _setup, _Setup
-from ._identifiability import MOVED_COUNTS, band_limit, derived_quantities
+from ._identifiability import MOVED_COUNTS
 from ._lm import LMState, _lm_lanes, _Schedule, lanes_vmap
 from ._problem import Problem
 from ._starts import _choose_starts, _grid_candidates
@@ -70,13 +70,7 @@ def _analysis_parts(p: Problem, u, fine):
     :func:`hdid._residuals.stick_times`'s grid ``fine`` (one program for both)."""
     r, J = p.data_residuals_and_jacobian(u)
     dense = p.simulate(u, full_output=True)
-    P = p.n_physical
-
-    def quantities(up):
-        return derived_quantities(p.model(jnp.concatenate([up, u[P:]])), band_limit(p))
-
-    return ((J, r), dense, (quantities(u[:P]), jax.jacfwd(quantities)(u[:P])),
-            p.simulate(u, fine, full_output=True))
+    return ((J, r), dense, p.derived_and_jacobian(u), p.simulate(u, fine, full_output=True))
 
 
 def _stored_solve(problem: Problem, U, active, k, state):

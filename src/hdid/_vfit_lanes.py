@@ -12,7 +12,6 @@ import equinox as eqx
 import jax
 import numpy as np
 
-from ._derived import band_limit, derived_quantities
 from ._fit import _Setup
 from ._lm import LMState, _lm_lanes, _Schedule, lanes_vmap
 from ._problem import Problem
@@ -61,14 +60,7 @@ def _lane_analysis(problems: Problem, U):
     def one(p: Problem, u):
         r, J = p.data_residuals_and_jacobian(u)
         dense = p.simulate(u, full_output=True)
-        P = p.n_physical
-
-        def quantities(up):
-            return derived_quantities(p.model(jax.numpy.concatenate([up, u[P:]])),
-                                      band_limit(p))
-
-        derived = (quantities(u[:P]), jax.jacfwd(quantities)(u[:P]))
-        return (J, r), dense, derived
+        return (J, r), dense, p.derived_and_jacobian(u)
 
     return jax.vmap(one)(problems, U)
 

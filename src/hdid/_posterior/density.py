@@ -40,7 +40,6 @@ import numpy as np
 
 from .. import _config  # noqa: F401
 from .._evaluate import predict_rows
-from .._identifiability import band_limit, derived_quantities
 from .._problem import Problem
 from .._transforms import from_unconstrained
 
@@ -223,7 +222,7 @@ _batch_jit = jax.jit(_batch)
 @eqx.filter_jit
 def _derived_batch(problem: Problem, X):
     def one(x):
-        return derived_quantities(problem.model(x[:-1]), band_limit(problem))
+        return problem.derived(x[:-1])
 
     return jax.vmap(one)(X)
 
