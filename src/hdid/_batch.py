@@ -9,6 +9,8 @@ from collections.abc import Iterable
 from typing import Any
 
 from ._config import float64
+from ._fit import fit
+from ._vfit import DEFAULT_LANES, LOG_ERRORS, error_text, fit_batch
 
 #: Logs per dask task (each worker runs the vectorised batch fit on its chunk).
 DASK_CHUNK = 64
@@ -140,9 +142,6 @@ def fit_many(
 def _fit_loop(items, names, bar, band_bracket, options):
     import time
 
-    from ._fit import fit
-    from ._vfit import LOG_ERRORS
-
     t0 = time.perf_counter()
     rows = []
     for name, item in zip(names, items):
@@ -161,8 +160,6 @@ def _fit_loop(items, names, bar, band_bracket, options):
 
 
 def _fit_vectorized(items, names, bar, band_bracket, lanes, threads, options):
-    from ._vfit import DEFAULT_LANES, fit_batch
-
     def done(i, outcome):
         if bar is not None:
             bar.update(1)
@@ -246,8 +243,6 @@ def _fit_executor(executor, items, names, chunk, bar, options):
 
 
 def _row(name: str, res, band_bracket: bool) -> dict[str, Any]:
-    from ._vfit import error_text
-
     row: dict[str, Any] = {"log": name, "error": None}
     if isinstance(res, BaseException):
         row["error"] = error_text(res)

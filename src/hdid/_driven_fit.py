@@ -21,6 +21,9 @@ from ._model import Model
 from ._positional import PositionalError
 from ._transforms import to_unconstrained
 from .effects import CoulombFriction, StribeckFriction
+from ._driven_evaluate import _residuals, _simulate
+from ._fit import _setup, fit
+from ._lm import solve_fresh
 
 
 #: Highest positional-error order tried when the order is chosen by BIC.
@@ -122,8 +125,6 @@ def _with_scales(joint: DrivenJoint, data: DrivenData) -> DrivenJoint:
 
 def _data_cost(problem, u) -> float:
     """χ² of the data rows (the weak-prior rows left out), in units of the quantization σ."""
-    from ._driven_evaluate import _residuals
-
     r = np.asarray(_residuals(problem, jnp.asarray(u)))[: -problem.n_physical or None]
     return float(r @ r) * float(problem.noise_scale) ** 2
 
@@ -213,8 +214,6 @@ def fit_joint(
     log fixes the absolute scale (known motor torque), the output friction and the
     positional error. Starting values come from a fit of each log alone.
     """
-    from ._fit import _setup, fit
-
     t_start = time.perf_counter()
     read = [_read(lg, counts_per_rev, torque_constant, output_counts_per_rev) for lg in logs]
     driven = [lg for lg in read if getattr(lg, "is_driven", False)]
@@ -393,8 +392,6 @@ LM_CHUNK = 25
 def _solve(problem, u0, source: str, max_steps: int, data: DrivenData | None = None):
     """Levenberg–Marquardt from ``u0``; for a driven part, rounds that make each
     window's starting output-friction sign agree with the previous window's end."""
-    from ._lm import solve_fresh
-
     u = jnp.asarray(u0)
     rounds = DIRECTION_ROUNDS if data is not None else 1
     if (data is not None and not data.has_output and "tau_fout" not in problem.free
@@ -440,8 +437,6 @@ MODEL_ERROR_RATIO = 3.0
 
 def _scatter_ratio(problem, u) -> float:
     """RMS of the weighted WG residuals in units of the current σ."""
-    from ._driven_evaluate import _simulate
-
     _, sim = _simulate(problem, jnp.asarray(u))
     w = np.asarray(problem.weight)
     r = w * (np.asarray(sim["theta"]) - np.asarray(problem.theta)) / float(problem.sigma)
@@ -449,8 +444,6 @@ def _scatter_ratio(problem, u) -> float:
 
 
 def _window_directions(problem: DrivenProblem, u, data: DrivenData) -> np.ndarray:
-    from ._driven_evaluate import _simulate
-
     _, sim = _simulate(problem, u)
     s = np.asarray(sim["output_direction"])
     last = (np.asarray(problem.weight) > 0).sum(axis=1) - 1

@@ -12,6 +12,8 @@ import numpy as np
 from ._config import float64_methods
 from ._summaries import ParameterEstimate
 from ._driven_evaluate import _simulate
+from ._plot import new_figure
+from ._saved import SCHEMA_VERSION, finite, hdid_version, model_structure, sha256
 
 
 @float64_methods
@@ -168,8 +170,6 @@ class DrivenFitResult:
     def to_dict(self) -> dict[str, Any]:
         """Strict-JSON summary (the ``--json`` schema of a driven or joint fit): a NaN or
         infinite value as ``None``."""
-        from ._saved import finite
-
         return finite({
             "source": self.source,
             "kind": self.kind,
@@ -189,8 +189,6 @@ class DrivenFitResult:
         """The fields the fit JSON has for reuse (``hdid._saved.provenance``): version, the
         input files and their SHA-256, the options, the model's structure, and the full
         correlation and covariance of the parameters and positional coefficients."""
-        from ._saved import SCHEMA_VERSION, hdid_version, model_structure, sha256
-
         digests = self.input_sha256 or {}
         inputs = [{"path": p, "sha256": digests.get(p) or sha256(p)}
                   for p in (self.sources or [self.source])]
@@ -232,8 +230,6 @@ class DrivenFitResult:
         figure) with the quantization floor ±σ shaded. ``ax``: one Axes (the top panel
         only) or two (top, residual); without it a two-panel figure is made. Returns the
         axes drawn into."""
-        from ._plot import new_figure
-
         given = ax
         if ax is None:
             given = new_figure(figsize=(8, 6)).subplots(
@@ -270,8 +266,6 @@ class DrivenFitResult:
         """Paper Fig. 3: the output kinematic error ``θ_out + θ/N`` of one run, split into
         the positional error ``θ̃_p(θ)`` and the flexibility-induced error
         ``T_k⁻¹(τ_l + τ_fout)``. Returns the Axes."""
-        from ._plot import new_figure
-
         if not self.data.has_output:
             raise ValueError(f"{self.source}: the log has no output angle, so no kinematic error")
         c = self.curves_by_run()[run]

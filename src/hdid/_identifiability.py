@@ -16,6 +16,7 @@ from ._result import FitResult
 from ._summaries import ParameterEstimate, RunSummary, StartSummary
 from ._transforms import derivative
 from ._derived import _derived, band_bracket
+from .effects import StribeckFriction
 # re-exported while the posterior and diagnose branches still import them from here
 
 
@@ -346,8 +347,6 @@ def _shape_warnings(problem: Problem, flags: dict[str, str]) -> list[str]:
     likelihood is far from Gaussian along it and the levels' errors are too small (an
     independent csf20 paper-design log: v_s 0.63 ± 0.83 against a true 3.6, tau_c 3.8
     standard errors from the truth at a fit below the truth's own residual)."""
-    from .effects import StribeckFriction
-
     out = []
     for law in problem.base.effects:
         if type(law) is not StribeckFriction:

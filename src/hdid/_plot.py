@@ -14,6 +14,7 @@ import contextlib
 import contextvars
 
 import numpy as np
+from ._evaluate import predict_rows as _predict_batch
 
 _BARE = contextvars.ContextVar("hdid_bare_figures", default=False)
 
@@ -225,7 +226,6 @@ def plot_predictive(post, *, ax=None, n_draws: int = 100, seed: int = 0):
 
     axes = ax
 
-    from ._evaluate import predict_rows as _predict_batch
 
     fit = post.fit
     prob = fit.problem

@@ -10,6 +10,10 @@ import numpy as np
 
 from ._config import float64_methods
 from ._summaries import ParameterEstimate, RunSummary, StartSummary
+from ._evaluate import dense as _dense, prediction_and_jacobian
+from ._plot import plot_fit
+from ._residuals import plot_residuals, residual_frame, whiteness
+from ._saved import covariance_matrix, extras, finite, load, save
 
 
 @float64_methods
@@ -71,8 +75,6 @@ class FitResult:
         """Model encoder readings per run at the logged times, or at ``times`` ``(R, T')``."""
         import jax.numpy as jnp
 
-        from ._evaluate import dense as _dense
-
         self._need_log("predict()")
         t = self.problem.times if times is None else jnp.asarray(times)
         theta, _, _ = _dense(self.problem, jnp.asarray(self.u), t)
@@ -97,8 +99,6 @@ class FitResult:
 
         self._need_log("predict_std()")
         t = self.problem.times if times is None else jnp.asarray(times)
-        from ._evaluate import prediction_and_jacobian
-
         pred, J = map(np.asarray, prediction_and_jacobian(self.problem, jnp.asarray(self.u), t))
         C = np.asarray(self.covariance)
         var = np.einsum("rtk,kl,rtl->rt", J, C, J)
@@ -108,8 +108,6 @@ class FitResult:
     def to_dict(self) -> dict[str, Any]:
         """Strict-JSON summary (the ``hdid fit --json`` schema): plain Python numbers, a
         NaN or infinite value (an undetermined std) as ``None``."""
-        from ._saved import finite
-
         return finite({
             "source": self.source,
             "parameters": {n: p.to_dict() for n, p in self.parameters.items()},
@@ -237,21 +235,15 @@ class FitResult:
 
     def _reuse_dict(self) -> dict[str, Any]:
         """Model structure, correlation/covariance, version, input checksum, options."""
-        from ._saved import extras
-
         return extras(self)
 
     def parameter_covariance(self):
         """``(names, matrix)``: the free parameters' covariance in physical units."""
-        from ._saved import covariance_matrix
-
         return covariance_matrix(self)
 
     def save(self, path) -> None:
         """Write the result as JSON (what ``hdid fit --json`` writes; schema in
         ``hdid/schema/fit.schema.json``). :meth:`load` reads it back."""
-        from ._saved import save
-
         save(self, path)
 
     @classmethod
@@ -264,8 +256,6 @@ class FitResult:
         so :meth:`predict` and :meth:`plot` need a refit. ``effects`` maps class names to
         your own effect classes (those not in hdid).
         """
-        from ._saved import load
-
         return load(path, effects, cls)
 
     def _need_log(self, what: str) -> None:
@@ -289,26 +279,18 @@ class FitResult:
             one column per run), or one Axes (every run's release-to-rest stretch overlaid,
             no residuals); a new figure otherwise.
         """
-        from ._plot import plot_fit
-
         return plot_fit(self, ax=ax, fine_rate=fine_rate)
 
     # -- residual views (see hdid._residuals) -------------------------------------------
     def residuals(self):
         """Per-sample frame: measured, model, residual, model state and phase."""
-        from ._residuals import residual_frame
-
         return residual_frame(self)
 
     def whiteness(self, max_lag: int | None = None):
         """Ljung–Box and quantization-floor test of the moving residual."""
-        from ._residuals import whiteness
-
         return whiteness(self, max_lag)
 
     def plot_residuals(self, *, ax=None):
         """Residual vs time, WG angle, velocity, deflection; ACF; spectrum (2×3 axes,
         returned)."""
-        from ._residuals import plot_residuals
-
         return plot_residuals(self, ax=ax)

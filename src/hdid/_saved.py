@@ -22,6 +22,7 @@ import numpy as np
 
 from ._errors import HdidError
 from ._summaries import ParameterEstimate, RunSummary, StartSummary
+from ._model import Model
 
 #: Version of the JSON layout; raised when a field changes meaning or goes away.
 SCHEMA_VERSION = 1
@@ -106,8 +107,6 @@ def model_from_structure(d: dict, classes: dict | None = None):
     """Rebuild the :class:`~hdid.Model` that :func:`model_structure` described.
 
     ``classes`` maps class names to your own effect classes (those not in hdid)."""
-    from ._model import Model
-
     effects = []
     for e in d["effects"]:
         cls = (classes or {}).get(e["class"])
