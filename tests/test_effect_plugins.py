@@ -88,9 +88,9 @@ def test_a_plugin_package_adds_an_effect_everywhere(plugin, tmp_path):
     site, env = plugin
     cli = [sys.executable, "-m", "hdid.cli"]
     assert "cogging" in _run([*cli, "fit", "--help"], env, tmp_path).replace("\n", " ")
-    keys = _run([sys.executable, "-c", "import hdid; print(sorted(hdid.effects.library({})))"],
-                env, tmp_path)
-    assert "'cogging'" in keys
+    keys = _run([sys.executable, "-c", "import hdid; print(sorted(hdid.effects.library({})), "
+                 "hdid.effects.Cogging is hdid.effects.registry()['cogging'])"], env, tmp_path)
+    assert "'cogging'" in keys and keys.strip().endswith("True")  # hdid.effects.Cogging too
     _run([*cli, "fit", str(PAPER), "--add", "cogging", "--starts", "2", "-q", "--json",
           "fit.json"], env, tmp_path)
     d = json.loads((tmp_path / "fit.json").read_text())

@@ -32,6 +32,17 @@ from .torque_offset import TorqueOffset
 from .viscous import ViscousFriction
 
 
+def __getattr__(name: str):
+    """Any registry effect's class by its class name (``hdid.effects.Cogging``): a new
+    library file or an installed plugin needs no edit here to be reachable."""
+    if name.startswith("__"):
+        raise AttributeError(name)
+    for cls in registry().values():
+        if cls.__name__ == name:
+            return cls
+    raise AttributeError(f"module 'hdid.effects' has no attribute {name!r}")
+
+
 def library(values: dict[str, float]) -> dict[str, AbstractEffect]:
     """Effects that ``--add NAME`` can add — every effect of the registry (this package's
     files and the installed plugins', :func:`~hdid.effects._registry.registry`) — with
