@@ -336,3 +336,92 @@ def gauss_newton_step(s: _Setup, u: np.ndarray, added: list[str]) -> tuple[float
             if i >= s.problem.n_physical or s.problem.free[i] not in added]
     reduced, _ = gain(J[:, keep])
     return max(full - reduced, 0.0), step
+
+
+def _order_of(model, key: str):
+    """The ``order`` leaf of ``model``'s effect whose library key is ``key`` (traced code:
+    it lives here, in a module the program store's key covers)."""
+    return next(e for e in model.effects if e.key == key).order
+
+
+def _order_columns(problem: Problem, u, orders, key: str, added: tuple[int, ...]):
+    """The data-residual Jacobian columns of the physical unknowns ``added`` (their
+    indices in ``problem.free``) at ``u`` for every order in ``orders``: ``(M, A, R·T)``.
+    The order is replaced inside the program (a traced value), each order one forward
+    pass with only the ``A`` new tangents (:meth:`Problem.data_residuals_and_jacobian`'s
+    per-run trick: a physical unknown's tangent set in every run at once), the orders
+    looped (``lax.map``, not ``vmap``: the simulator's event branch stays a branch)."""
+    import equinox as eqx
+
+    local = problem._local(u)
+    R, L = local.shape
+    basis = jnp.broadcast_to(jnp.asarray(np.eye(L)[list(added)])[:, None, :],
+                             (len(added), R, L))
+
+    def one(order):
+        p = eqx.tree_at(lambda q: _order_of(q.base, key), problem,
+                        order.astype(jnp.asarray(_order_of(problem.base, key)).dtype))
+        _, t = jax.vmap(lambda d: jax.jvp(p._runs_residuals, (local,), (d,)),
+                        out_axes=(None, 0))(basis)
+        return t.reshape(len(added), -1)
+
+    return jax.lax.map(one, orders)
+
+
+#: Orders per call of the order-columns program (the orders padded to a multiple of it:
+#: one program whatever the number of residual-periodogram peaks added to the 48).
+ORDER_BLOCK = 50
+
+
+def _lstsq_gain(M: np.ndarray, r: np.ndarray) -> tuple[float, np.ndarray]:
+    step, *_ = np.linalg.lstsq(M, -r, rcond=1e-10)
+    return float(-(M.T @ r) @ step), step
+
+
+def gauss_newton_orders(s: _Setup, u: np.ndarray, key: str, added: list[str],
+                        orders) -> list[tuple[float, np.ndarray]] | None:
+    """:func:`gauss_newton_step` of ``added`` at ``u`` for every order of effect ``key``
+    in ``orders`` at once, for a ``u`` where the added parameters are all zero (the
+    effect adds no torque: residuals and every other column do not depend on the
+    order — the same numbers, not merely close: each order's extra terms are exact
+    zeros). ``r`` and the full Jacobian come from the structure's LM program once (at
+    ``s``'s own order), then, per order, only the added parameters' columns — from one
+    program for all orders (:func:`_order_columns`) — are replaced; the reduced gain
+    (``added`` held) is the same for every order and computed once. The same screen as
+    one :func:`gauss_newton_step` per order, which costs a full Jacobian each (the
+    shipped 1 kHz log: 96 LM-program calls for two scanned candidates). ``None`` where an
+    added parameter is not zero at ``u`` (the columns would then depend on the order)."""
+    p = s.problem
+    P = p.n_physical
+    idx = [p.free.index(n) for n in added]
+    U = np.asarray(u, dtype=float)
+    vals, *_ = p.unpack_np(U)
+    if any(float(vals[n]) != 0.0 for n in added):
+        return None
+    r, J = residuals_and_jacobian(p, U)
+    zero = [(0.0, np.zeros_like(U)) for _ in orders]
+    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
+        return zero
+    keep = [i for i in range(J.shape[1]) if i >= P or p.free[i] not in added]
+    reduced, _ = _lstsq_gain(J[:, keep], r)
+    orders = np.asarray(orders, dtype=float)
+    M = len(orders)
+    n_pad = -M % ORDER_BLOCK
+    padded = np.concatenate([orders, np.repeat(orders[-1:], n_pad)])
+    cols = []
+    for b in range(0, len(padded), ORDER_BLOCK):
+        cols.append(np.asarray(_programs.call(
+            "order_columns", _order_columns, p, jnp.asarray(U),
+            jnp.asarray(padded[b:b + ORDER_BLOCK]), key, tuple(idx))))
+    C = np.concatenate(cols)[:M]
+    n_data = C.shape[-1]
+    out = []
+    for m in range(M):
+        Jm = J.copy()
+        Jm[:n_data, idx] = C[m].T
+        if not np.all(np.isfinite(Jm)):
+            out.append((0.0, np.zeros_like(U)))
+            continue
+        full, step = _lstsq_gain(Jm, r)
+        out.append((max(full - reduced, 0.0), step))
+    return out
