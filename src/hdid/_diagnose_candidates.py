@@ -353,26 +353,9 @@ def _scan_fits(cand, groups, setups, current, tail, grid_points, say, scans, sca
 
     fits = []
     gains = {}
-    starts0 = {lb: _refit.warm(setups[lb], ms[0].float_values(), tail)
-               for lb, ms in groups.items()}
-    first = next(iter(groups))
-    s0 = setups[first]
-    added = [n for n in s0.problem.free if n not in current.setup.problem.free]
-    # every order from one Jacobian (the effect at zero: only its columns depend on the
-    # order, one program computes them for all orders) where every order starts at the
-    # same point; else one Gauss–Newton step per order
-    same = all(np.array_equal(u, starts0[first]) for u in starts0.values())
-    screened = (_refit.gauss_newton_orders(
-        s0, starts0[first], cand.key, added,
-        [float(_effect_of(groups[lb][0], cand.key).order) for lb in groups])
-        if same else None)
-    if screened is not None:
-        gains = {lb: (*g, starts0[lb]) for lb, g in zip(groups, screened)}
     for label, models in groups.items():
-        if screened is not None:
-            break
         s = setups[label]
-        u0 = starts0[label]
+        u0 = _refit.warm(s, models[0].float_values(), tail)
         added = [n for n in s.problem.free if n not in current.setup.problem.free]
         gains[label] = (*_refit.gauss_newton_step(s, u0, added), u0)
     order = sorted(gains, key=lambda lb: -gains[lb][0])
