@@ -189,6 +189,65 @@ def run_flow(fit, found, dens, seed, pilot, max_steps, adapt, adapt_steps, chunk
             "stage_s": stage, "U": U}
 
 
+class FlowIndependence:
+    """Exact independence MH proposal in the sampled coordinates from a flow (latent t,
+    ``nu`` = 8): ``x = T(z)``, ``log q(x) = log t(z) − log|det ∂x/∂z|``."""
+
+    def __init__(self, fmap, D):
+        from hdid._posterior import flow as F
+
+        self.fmap, self.t = fmap, F.LatentT(D)
+
+    def logq(self, X):
+        Z = self.fmap.inverse(X)
+        _, ld = self.fmap.forward(Z)
+        return self.t.logpdf(Z) - ld
+
+    def __call__(self, coords, random):
+        Z, _ = self.t(coords, random)
+        X, ld = self.fmap.forward(Z)
+        lq_new = self.t.logpdf(Z) - ld
+        return X, self.logq(coords) - lq_new
+
+
+def flow_mh_factory(fit, found, dens, seed, n_particles, info):
+    """Moves for ``sample_posterior(moves=...)``: the default DE moves plus an independence
+    move from a flow fitted to an SMC pilot (instead of the t-mixture)."""
+    import emcee
+
+    from hdid._posterior import flow as F
+    from hdid._posterior import smc
+    from hdid._posterior.moves import MixtureProposal
+
+    def make(lp, proposal):
+        D = lp.ndim
+        q = float(fit.problem.step)
+        log_lo = math.log(dens.bounds[0] * q)
+        log_rms = math.log(max(fit.rms_residual_rad, dens.bounds[0] * q))
+        s_mid = 0.5 * (log_lo + max(log_rms, log_lo + 0.5))
+        means = lp.to_sampled_np(np.array([np.concatenate([m.u, [s_mid]]) for m in found]))
+        covs = np.zeros((len(found), D, D))
+        for k, m in enumerate(found):
+            covs[k, :-1, :-1] = lp.sampled_cov_np(m.u, smc.REF_SCALE**2 * m.cov)
+            covs[k, -1, -1] = 1.0
+        ref = MixtureProposal(means, covs, [max(m.weight, 0.02) for m in found], nu=smc.REF_NU)
+        t = time.perf_counter()
+        X, *_ = smc.run_smc_np(lp, ref, n_particles, 4, seed, smc.N_MCMC, imh=True,
+                               k_min=smc.K_MIN, final_rounds=2)
+        info["pilot_s"] = time.perf_counter() - t
+        t = time.perf_counter()
+        fmap = F.fit_flow(X.reshape(-1, D), seed, kind="coupling", layers=4, width=32)
+        info["flow_fit_s"] = time.perf_counter() - t
+        return [
+            (emcee.moves.DEMove(), 0.4),
+            (emcee.moves.DEMove(gamma0=1.0), 0.05),
+            (emcee.moves.DESnookerMove(), 0.2),
+            (emcee.moves.MHMove(FlowIndependence(fmap, D)), 0.35),
+        ]
+
+    return make
+
+
 def intervals(fit, U, prob):
     from hdid._posterior.density import derived_np, to_physical
 
@@ -212,6 +271,9 @@ def main(argv=None):
     ap.add_argument("--adapt-steps", type=int, default=1000)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--skip-baseline", action="store_true")
+    ap.add_argument("--skip-flow", action="store_true")
+    ap.add_argument("--flow-mh", action="store_true",
+                    help="also: the default sampler with the flow as its independence move")
     ap.add_argument("--name", default="posterior_flow_latent")
     a = ap.parse_args(argv)
     import hdid
@@ -237,16 +299,36 @@ def main(argv=None):
             tr, info = truth
             row["truth"] = {**{k: float(v) for k, v in tr.items() if isinstance(v, (int, float))},
                             "band": float(info["stick_band_halfwidth"])}
+        if a.flow_mh:
+            info = {}
+            la = _load()
+            t = time.perf_counter()
+            post = hdid.sample_posterior(fit, modes=found, seed=a.seed, prior=prior,
+                                         max_steps=a.baseline_steps,
+                                         moves=flow_mh_factory(fit, found, dens, a.seed, 1000, info))
+            d = post.to_dict()["posterior_diagnostics"]
+            row["flow_mh"] = {"wall_s": time.perf_counter() - t, "load_start": la, "load_end": _load(),
+                              "steps": int(post.chain.shape[0]), "converged": bool(post.converged),
+                              "rhat_max": d["convergence"]["rhat_max"],
+                              "ess_bulk_min": d["convergence"]["ess_bulk_min"],
+                              "ess_tail_min": d["convergence"]["ess_tail_min"],
+                              "tau_max": d["tau_max"], "move_acceptance": d["move_acceptance"],
+                              "stage_s": post.stage_s, **info,
+                              "intervals": intervals(fit, post.draws, fit.problem)}
+            print(name, "flow_mh", {k: row["flow_mh"][k] for k in ("steps", "converged", "rhat_max",
+                                                                    "ess_bulk_min", "tau_max", "wall_s")},
+                  row["flow_mh"]["move_acceptance"], info, flush=True)
         la = _load()
         t = time.perf_counter()
-        r = run_flow(fit, found, dens, a.seed, a.pilot, a.max_steps, a.adapt, a.adapt_steps)
-        U = r.pop("U")
-        r.update(wall_s=time.perf_counter() - t, load_start=la, load_end=_load(),
-                 intervals=intervals(fit, U, fit.problem))
-        row["flow"] = r
-        print(name, "flow", {k: r[k] for k in ("steps", "converged", "rhat_max", "ess_bulk_min",
-                                               "tau_max", "tau_latent_max", "wall_s")},
-              r["stage_s"], r["move_acceptance"], flush=True)
+        r = None if a.skip_flow else run_flow(fit, found, dens, a.seed, a.pilot, a.max_steps, a.adapt, a.adapt_steps)
+        if r is not None:
+            U = r.pop("U")
+            r.update(wall_s=time.perf_counter() - t, load_start=la, load_end=_load(),
+                     intervals=intervals(fit, U, fit.problem))
+            row["flow"] = r
+            print(name, "flow", {k: r[k] for k in ("steps", "converged", "rhat_max", "ess_bulk_min",
+                                                   "tau_max", "tau_latent_max", "wall_s")},
+                  r["stage_s"], r["move_acceptance"], flush=True)
         if not a.skip_baseline:
             la = _load()
             t = time.perf_counter()
