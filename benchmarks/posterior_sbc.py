@@ -160,7 +160,10 @@ def draw_physical(gen, rng, design, seed, max_iter=8):
     ``log v_s = mean(log) + sd·z`` iterated to a fixed point (the log regenerated each
     time), so that ``z`` is exactly the standardised value under the prior of the log the
     sampler sees. Returns ``(truth, log, info, notes)``."""
-    from hdid.effects.stribeck import DELTA_INTERVAL, DELTA_MEDIAN, DELTA_PRIOR_SD, _logit_in
+    from hdid.effects.stribeck import DELTA_INTERVAL, DELTA_MEDIAN, DELTA_PRIOR_SD
+
+    def _logit_in(x, lo, hi):  # the law's logit-normal is in logit((x − lo)/(hi − lo))
+        return math.log((x - lo) / (hi - x))
 
     t, band_rejects = draw_from_prior(gen, rng, min(abs(a) for a in design["amplitudes"]))
     lo, hi = DELTA_INTERVAL

@@ -107,7 +107,9 @@ def sample_posterior(
     Metropolis–Hastings from a t-mixture over the optima (:class:`MixtureProposal`),
     refitted after each of ``BURN_IN_STAGES`` stages; the kept chain uses the last mixture,
     fixed. (A normalizing flow fitted to the burn-in draws in its place was measured and
-    lost: benchmarks/results/posterior_flow.md.)
+    lost: benchmarks/results/posterior_flow.md; so did emcee in the latent space of a flow
+    fitted to an SMC pilot, and that flow as the independence move, under the physical
+    priors: benchmarks/README.md, branch ``post5``.)
 
     The kept chain grows (checked after ``chunk`` steps, then at every growth by
     ``CHECK_GROWTH``) until it converges — every sampled quantity and the stick-band
