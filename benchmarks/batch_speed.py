@@ -127,7 +127,7 @@ def worker(cfg: dict) -> dict:
     if cfg["mode"] == "scipy":
         import pandas as pd
 
-        from hdid._model import CATALOG_CSF8
+        from hdid._models._model import CATALOG_CSF8
 
         spec = importlib.util.spec_from_file_location("_sw", ROOT / "benchmarks" / "scipy_way.py")
         sw = importlib.util.module_from_spec(spec)
@@ -224,7 +224,7 @@ def _workers_run(cfg: dict, warm: list, timed: list, t_imp: float) -> dict:
         before = client.run(_worker_usage)
         c0 = _cpu()
         t = time.perf_counter()
-        from hdid._batch import CHUNKS_PER_WORKER
+        from hdid._fitting._batch import CHUNKS_PER_WORKER
 
         chunk = max(1, -(-len(timed) // (CHUNKS_PER_WORKER * W)))  # as fit_many(workers=W)
         table = hdid.fit_many(timed, client=client, chunk_size=chunk)
@@ -333,12 +333,12 @@ NOTES = """## Before → after (issue 6, third pass)
 
 **What changed:**
 
-- **Simulator** (`hdid._simulate.simulate_runs`): every run of a log in one loop, the
+- **Simulator** (`hdid._simulation._simulate.simulate_runs`): every run of a log in one loop, the
   zero-velocity crossing and stick/slip split (three more RK4 steps) behind a `lax.cond`
   on "any run has an event in this substep" — it used to run at every substep of every run
   under `vmap`. Results equal the old scheme's to 1e-15 (7 log × model cases, Jacobians
   included); residuals + Jacobian 443 → 243 µs.
-- **One-lane programs are not vmapped** (`hdid._lm.lanes_vmap`): a length-1 `vmap` would
+- **One-lane programs are not vmapped** (`hdid._fitting._lm.lanes_vmap`): a length-1 `vmap` would
   still turn the `cond` into a select. Batch CPU per log 167 → 99 ms (100 logs, back to
   back on one core).
 - **Processes, not threads**: two threads issuing JAX CPU calls measured CPU time = wall
@@ -370,7 +370,7 @@ NOTES = """## Before → after (issue 6, third pass)
 **What changed** (every log gets exactly the fit it got before — same starts, same
 Levenberg–Marquardt path, same stopping; `hdid.fit` and `fit_many` agree):
 
-- **Levenberg–Marquardt stepped by hand** (`hdid._lm._lm_lanes`). It reproduces
+- **Levenberg–Marquardt stepped by hand** (`hdid._fitting._lm._lm_lanes`). It reproduces
   optimistix's `LevenbergMarquardt` (normal-equations Cholesky, `ClassicalTrustRegion`
   damping update, re-initialised at every call as before), so every lane follows the same
   path (40 logs, old vs new code, same settings: max |Δχ²| 2e-8, k1 equal to 1e-11; the

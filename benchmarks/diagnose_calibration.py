@@ -31,7 +31,7 @@ RICH = dict(amplitudes=[0.157, -0.157, 0.12, -0.12, 0.08, -0.08, 0.05, -0.05], f
 
 
 def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
-    """Exact binomial interval (the same as :func:`hdid._diagnose_rates.clopper_pearson`,
+    """Exact binomial interval (the same as :func:`hdid._diagnosis._rates.clopper_pearson`,
     which reads the module this script generates)."""
     from scipy.stats import beta
 
@@ -60,8 +60,8 @@ def _second_setup(path: Path) -> None:
 def run_design(name: str, n: int, gen, records: list, meta: dict | None = None,
                first: int = 0) -> None:
     import hdid
-    from hdid import _programs
-    from hdid._synthetic import synthesize
+    from hdid._problems import _programs
+    from hdid._simulation._synthetic import synthesize
 
     design = dict(RICH if name == "rich" else gen.PAPER_DESIGN)
     truth = {k: v for k, v in gen.TRUTH_CSF8.items() if k != "ratio"}
@@ -147,9 +147,9 @@ def write(records: list, meta: dict) -> None:
     if fails:
         lines += ["", f"{len(fails)} diagnose call(s) failed: "
                   + "; ".join(f"{r['design']} {r['i']}: {r['error']}" for r in fails)]
-    lines += ["", "`hdid._diagnose_rates.MEASURED` is generated from this file's JSON "
+    lines += ["", "`hdid._diagnosis._rates.MEASURED` is generated from this file's JSON "
               "(`python benchmarks/diagnose_calibration.py --measured` writes "
-              "its block in `src/hdid/_diagnose_rates.py`):", "", "```python"]
+              "its block in `src/hdid/_diagnosis/_rates.py`):", "", "```python"]
     lines += [_design_rate_line(t) for t in measured_table(records)]
     lines += ["```", "", "Per log:", "",
               "| design | # | verdict | best (ΔBIC) | RMS before / floor | s | load before → after |",
@@ -165,7 +165,7 @@ def write(records: list, meta: dict) -> None:
 
 #: The designs' sample rate [Hz] and number of runs (what ``false_alarm`` matches a log to).
 DESIGN_SHAPE = {"paper": (250.0, 4), "rich": (1000.0, 8)}
-MEASURED_MODULE = ROOT / "src" / "hdid" / "_diagnose_rates.py"
+MEASURED_MODULE = ROOT / "src" / "hdid" / "_diagnosis" / "_rates.py"
 
 
 def measured_table(records: list) -> list[dict]:
@@ -191,7 +191,7 @@ def _design_rate_line(t: dict) -> str:
 
 
 def write_measured(records: list) -> str:
-    """The generated block of ``src/hdid/_diagnose_rates.py`` (between its ``BEGIN`` and
+    """The generated block of ``src/hdid/_diagnosis/_rates.py`` (between its ``BEGIN`` and
     ``END GENERATED`` markers) from the records: never typed by hand."""
     body = "\n".join("    " + _design_rate_line(t) for t in measured_table(records))
     block = "ROWS = (\n" + body + "\n)\n"

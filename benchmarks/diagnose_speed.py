@@ -11,7 +11,7 @@ load, CPU seconds less so).
 
 Where the time goes: diagnose's own ``timing`` (JAX tracing, lowering and compiling, or
 reading JAX's cache, against fitting) and, where the code has one, the program store's
-record (:data:`hdid._programs.STATS`: per program, read from the store or traced, and
+record (:data:`hdid._problems._programs.STATS`: per program, read from the store or traced, and
 the compile or cache read).
 
     python benchmarks/diagnose_speed.py --code before=/tmp/wt_before/src \
@@ -47,7 +47,7 @@ except SystemExit:
 wall = time.perf_counter() - t0
 ru = resource.getrusage(resource.RUSAGE_SELF)
 try:
-    from hdid import _programs
+    from hdid._problems import _programs
     stats = list(getattr(_programs, "STATS", []))
 except Exception:
     stats = []

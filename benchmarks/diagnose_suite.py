@@ -55,7 +55,7 @@ def _model_without(piece: str):
 
 
 def run_design(design_name: str, gen, hid, records: list, seed0: int, removed: bool = False) -> None:
-    from hdid._diagnose import diagnose
+    from hdid._diagnosis._diagnose import diagnose
 
     design = dict(RICH if design_name == "rich" else gen.PAPER_DESIGN)
     truth = {k: v for k, v in gen.TRUTH_CSF8.items() if k != "ratio"}

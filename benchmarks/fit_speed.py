@@ -10,14 +10,14 @@ Measures, in one run:
    (a) with an empty, fresh persistent compilation cache (``HDID_CACHE_DIR=<tmp>``): true cold;
    (b) again with that now-populated cache: the "cold CLI with persistent cache" of the goal;
    (c) ``hdid --help``.  (b) is broken down by subprocess timings of ``python -c pass``,
-   ``import hdid, jax`` and ``import hdid._fit`` (all heavy imports), and by one instrumented
+   ``import hdid, jax`` and ``import hdid._fitting._fit`` (all heavy imports), and by one instrumented
    in-process CLI call (JAX monitoring events: tracing, lowering, XLA compile / cache reads, and
    the phases of :func:`hdid.fit`).
 2. **Warm fit** — in-process ``hdid.fit(path)`` after one warm-up (same process, same shapes) on
    ``csf8_paper.csv`` and on 3 more 4-run 250 Hz logs made with
    ``data/synthetic/generate.py::make_log`` (paper design, other seeds); also ``n_starts=1``.
 3. **The scipy way** — ``benchmarks/scipy_way.py::fit_scipy`` (LSODA + least_squares) on the
-   same logs, started from the CSF-8 catalog values (``hdid._model.CATALOG_CSF8``, the
+   same logs, started from the CSF-8 catalog values (``hdid._models._model.CATALOG_CSF8``, the
    defaults of ``hdid.Model``: k1 equals the truth, the others are 10–40 % off), release-time
    and held-angle guesses of ``runs_from_dataframe`` (within half a sample) and the offsets of
    ``guess_offsets``; inertia and gear ratio fixed at the truth, as in hdid.  That start is
@@ -141,20 +141,20 @@ def _union(spans):
     try:
         from hdid._compile_clock import union_length
     except ImportError:  # code from before issue 20 (--code NAME=SRC)
-        from hdid._vfit import union_length
+        from hdid._fitting._vfit import union_length
 
     return union_length(spans)
 
 
 class _FitPhases:
-    """Wrap the phases of ``hdid._fit.fit`` with timers (device work is waited for)."""
+    """Wrap the phases of ``hdid._fitting._fit.fit`` with timers (device work is waited for)."""
 
     NAMES = ("read_log", "prepare", "build_problem", "_grid_starts", "_solve_many", "analyse")
 
     def __init__(self):
         import jax
 
-        from hdid import _fit
+        from hdid._fitting import _fit
 
         self.times = defaultdict(list)
         self._orig = {}
@@ -271,7 +271,8 @@ def _probe_cli(log: str, json_out: str) -> None:
     """Run in a subprocess: one instrumented ``hdid fit LOG -q --json OUT``, JSON on stdout."""
     t0 = time.perf_counter()
     import hdid.cli
-    from hdid import _fit, _io  # noqa: F401  (the CLI imports these inside the command)
+    from hdid._fitting import _fit  # noqa: F401  (the CLI imports these inside the command)
+    from hdid import _log as _io  # noqa: F401  (the CLI imports these inside the command)
     t_import = time.perf_counter() - t0
     ev = _JaxEvents()
     ph = _FitPhases()
@@ -332,7 +333,7 @@ def bench_cli(cache_dir: Path, reps: dict) -> dict:
     res["import_hdid_jax_s"] = _stats([_timed([py, "-c", "import hdid, jax"], env, "import")[0]
                                        for _ in range(reps["small"])])
     res["import_hdid_fit_s"] = _stats([
-        _timed([py, "-c", "import hdid.cli, hdid._fit, hdid._io"], env, "import _fit")[0]
+        _timed([py, "-c", "import hdid.cli, hdid._fitting._fit, hdid._log"], env, "import _fit")[0]
         for _ in range(reps["small"])])
 
     print("instrumented CLI call (populated cache) ...", flush=True)
@@ -430,11 +431,11 @@ def bench_warm(logs, reps: dict) -> dict:
 def bench_scipy(logs, reps: int, n_logs: int) -> dict:
     import pandas as pd
 
-    from hdid._model import CATALOG_CSF8
+    from hdid._models._model import CATALOG_CSF8
 
     sw = _import_scipy_way()
     res = {"load_before": _load("scipy start"), "x0": dict(CATALOG_CSF8),
-           "start": "CSF-8 catalog values (hdid._model.CATALOG_CSF8), release times and held "
+           "start": "CSF-8 catalog values (hdid._models._model.CATALOG_CSF8), release times and held "
                     "readings from runs_from_dataframe, offsets from guess_offsets; inertia "
                     "and ratio fixed at the truth; fit_scipy defaults otherwise"}
     per_log = []
@@ -564,7 +565,7 @@ def write_report(res: dict, out_dir: Path) -> str:
         ("`hdid --help`", cli["help_s"], None),
         ("`python -c pass`", cli["python_startup_s"], None),
         ("`python -c 'import hdid, jax'`", cli["import_hdid_jax_s"], None),
-        ("`python -c 'import hdid.cli, hdid._fit, hdid._io'` (all fit imports)",
+        ("`python -c 'import hdid.cli, hdid._fitting._fit, hdid._log'` (all fit imports)",
          cli["import_hdid_fit_s"], None),
         ("**cold CLI, empty cache** (true cold)", cli["cold_empty_cache_s"],
          cli.get("cold_empty_cache_cpu_s")),
@@ -605,7 +606,7 @@ def write_report(res: dict, out_dir: Path) -> str:
     L.append(f"Instrumented in-process CLI call (median of {len(pr)}; JAX monitoring events; "
              "spans of nested jits merged):\n")
     L.append("| part | time |\n|---|---|")
-    L.append(f"| imports (`hdid.cli`, `hdid._fit`, `hdid._io`) | {_ms(imp)} |")
+    L.append(f"| imports (`hdid.cli`, `hdid._fitting._fit`, `hdid._log`) | {_ms(imp)} |")
     L.append(f"| first `hdid fit` call in the process | {_ms(fit_first)} |")
     keys = list(pr[0]["compile"])
     for k in keys:

@@ -44,7 +44,7 @@ print(json.dumps({"read_s": t1 - t0, "fit_s": t2 - t1,
 
 
 def one(n: int, timeout: float, tmp: Path) -> dict:
-    from hdid._synthetic import synthesize
+    from hdid._simulation._synthetic import synthesize
 
     path = tmp / f"long_{n}.csv"
     t = time.perf_counter()

@@ -144,7 +144,7 @@ PHYSICAL_GIVEN = ("k1", "k2", "tau_c", "tau_s", "c_v")
 def _default_prior_of(df, truth, name):
     """``(mean, sd)`` in the transformed space of the library's default prior of ``name``
     on log ``df`` (as ``hdid.fit`` builds it: relative to the log's own scales)."""
-    from hdid._fit import _setup
+    from hdid._fitting._fit import _setup
 
     prob = _setup(df, inertia=truth["inertia"]).problem
     i = list(prob.free).index(name)

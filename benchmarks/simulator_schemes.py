@@ -4,7 +4,7 @@ Run by hand (takes ~2–4 min on 2 shared cores)::
 
     python benchmarks/simulator_schemes.py
 
-The scheme is the one in :mod:`hdid._simulate` (RK4 substeps, friction direction frozen
+The scheme is the one in :mod:`hdid._simulation._simulate` (RK4 substeps, friction direction frozen
 inside a substep; at a velocity zero RK4 re-integrates from the substep start to α·h and
 closes the gap to ω = 0 with θ_stop = θ_a − ω_a²/(2a)).  For *exactly* ``ss`` substeps per
 sample, ss ∈ {2, 4, 8, 16, 32}, (``substeps=ss, max_substep=inf``) and for the *default*
@@ -51,8 +51,8 @@ import _common  # noqa: E402  (on sys.path as a script; configures the process: 
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
-from hdid._model import Model  # noqa: E402
-from hdid._simulate import DEFAULT_MAX_SUBSTEP, simulate, substeps_for  # noqa: E402
+from hdid._models._model import Model  # noqa: E402
+from hdid._simulation._simulate import DEFAULT_MAX_SUBSTEP, simulate, substeps_for  # noqa: E402
 from hdid.reference import reference_trajectory, simulate_reference  # noqa: E402
 
 INERTIA = 7.0e-7
@@ -74,7 +74,7 @@ OUT = Path(__file__).resolve().parent / "results" / "simulator_schemes.md"
 
 
 def _substep_restart_fix(model, inertia, carry, h):
-    """Candidate (not in hdid): ``hdid._simulate._substep`` with two changes at a crossing.
+    """Candidate (not in hdid): ``hdid._simulation._simulate._substep`` with two changes at a crossing.
 
     1. The gap step dt = −ω_a/a to ω = 0 is taken whatever the sign of ω_a (the Newton
        estimate of α may overshoot the zero slightly; hdid then skips the gap).
@@ -84,7 +84,7 @@ def _substep_restart_fix(model, inertia, carry, h):
     """
     import jax.numpy as jnp
 
-    from hdid import _simulate as S
+    from hdid._simulation import _simulate as S
     from hdid.effects import Motion
 
     theta, omega, direction, states = carry
@@ -270,7 +270,7 @@ def main():
         print(f"lead {lead:.3f} s  err {lead_rows[-1][1]:.2e}", flush=True)
 
     # Candidate restart-time correction (accuracy and forward cost; gradients at default).
-    from hdid import _simulate as S
+    from hdid._simulation import _simulate as S
 
     cand_rows = []
     original = S._substep
@@ -338,7 +338,7 @@ def write_report(rows, lead_rows, cand_rows, elapsed, load_before, load_after):
         f"- jax {jax.__version__}, backend {jax.default_backend()}, "
         f"devices {[str(d) for d in jax.devices()]}, python {platform.python_version()}, "
         f"numpy {np.__version__}, float64",
-        "- scheme: `hdid._simulate` — RK4 substeps, friction direction frozen inside a "
+        "- scheme: `hdid._simulation._simulate` — RK4 substeps, friction direction frozen inside a "
         "substep; at a velocity zero RK4 re-integrates from the substep start to α·h "
         "(smooth side of the Stribeck kink) and closes the gap with "
         "θ_stop = θ_a − ω_a²/(2a)",

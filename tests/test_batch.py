@@ -113,7 +113,7 @@ def test_vectorized_band_bracket_and_diverged_rows(batch_logs, monkeypatch):
     assert 0 < lo < hi
 
     # Every lane diverges: each log gets an error in its row, no NaN numbers.
-    from hdid import _vfit
+    from hdid._fitting import _vfit
 
     solve = _vfit._lane_solve
 
@@ -135,7 +135,7 @@ def test_a_log_one_octave_coarser_than_the_batch_shares_its_finer_substep(monkey
     # one (never coarser: that would lose accuracy), and only when as many logs use it.
     from types import SimpleNamespace
 
-    import hdid._vfit as V
+    import hdid._fitting._vfit as V
 
     calls = []
 
@@ -163,10 +163,10 @@ def test_a_log_one_octave_coarser_than_the_batch_shares_its_finer_substep(monkey
     (None, True, False),
 ])
 def test_the_batch_checks_the_nested_case_like_fit(monkeypatch, nested, symptom, checked):
-    # fit()'s nested Coulomb check (hdid._nested) in the vectorised batch: "auto" only on a
+    # fit()'s nested Coulomb check (hdid._fitting._nested) in the vectorised batch: "auto" only on a
     # symptom, True always, False never — with the log and the caller's options; the
     # batch's default (None) warns on a symptom instead.
-    import hdid._vfit as V
+    import hdid._fitting._vfit as V
 
     seen = []
 

@@ -249,12 +249,12 @@ def test_semicolon_csv_with_decimal_points_is_read(tmp_path):
     ],
 )
 def test_bad_output_path_refused_before_fitting(tmp_path, monkeypatch, option, make, fragment):
-    import hdid._fit
+    import hdid._fitting._fit
 
     def no_fit(*a, **k):  # the refusal must come before any fitting
         raise AssertionError("fit started before the output path was checked")
 
-    monkeypatch.setattr(hdid._fit, "fit", no_fit)
+    monkeypatch.setattr(hdid._fitting._fit, "fit", no_fit)
     target = tmp_path / "out_dir" if make == "dir" else tmp_path / make
     if make == "dir":
         target.mkdir()
@@ -263,23 +263,23 @@ def test_bad_output_path_refused_before_fitting(tmp_path, monkeypatch, option, m
 
 
 def test_diagnose_bad_plot_refused_before_fitting(tmp_path, monkeypatch):
-    import hdid._diagnose
+    import hdid._diagnosis._diagnose
 
     def no_diagnose(*a, **k):
         raise AssertionError("diagnosed before the output path was checked")
 
-    monkeypatch.setattr(hdid._diagnose, "diagnose", no_diagnose)
+    monkeypatch.setattr(hdid._diagnosis._diagnose, "diagnose", no_diagnose)
     res = CliRunner().invoke(main, ["diagnose", str(EXAMPLE), "--residuals", str(tmp_path / "r.xyz")])
     _one_line_exit_2(res, "xyz")
 
 
 def test_simulate_refuses_existing_file_before_simulating(tmp_path, monkeypatch):
-    import hdid._synthetic
+    import hdid._simulation._synthetic
 
     def no_sim(*a, **k):
         raise AssertionError("simulated before refusing")
 
-    monkeypatch.setattr(hdid._synthetic, "synthesize", no_sim)
+    monkeypatch.setattr(hdid._simulation._synthetic, "synthesize", no_sim)
     out = tmp_path / "existing.csv"
     out.write_text("keep me\n")
     res = CliRunner().invoke(main, ["simulate", str(out)])
@@ -315,10 +315,10 @@ def _stub_fit_error(*args, **kwargs):
 
 @pytest.mark.parametrize("tty", [True, False])
 def test_phases_on_a_terminal_only(monkeypatch, tty):
-    import hdid._fit
+    import hdid._fitting._fit
     import hdid.cli
 
-    monkeypatch.setattr(hdid._fit, "fit", _stub_fit_error)
+    monkeypatch.setattr(hdid._fitting._fit, "fit", _stub_fit_error)
     monkeypatch.setattr(hdid.cli._common, "_stderr_is_tty", lambda: tty)
     res = CliRunner().invoke(main, ["fit", str(EXAMPLE)])
     assert res.exit_code == 2
@@ -336,13 +336,13 @@ def test_phases_on_a_terminal_only(monkeypatch, tty):
 
 
 def test_too_long_log_refused_at_once(monkeypatch):
-    import hdid._fit
+    import hdid._fitting._fit
     import hdid.cli
 
     def no_fit(*a, **k):
         raise AssertionError("a log over the limit must be refused before fitting")
 
-    monkeypatch.setattr(hdid._fit, "fit", no_fit)
+    monkeypatch.setattr(hdid._fitting._fit, "fit", no_fit)
     # The example has 125 samples per run: a limit of 100 refuses it, with the hint.
     monkeypatch.setattr(hdid.cli._common, "MAX_SAMPLES_PER_RUN", 100)
     res = CliRunner().invoke(main, ["fit", str(EXAMPLE)])

@@ -19,14 +19,14 @@ EXAMPLE = ROOT / "data" / "synthetic" / "csf8_paper.csv"
 def test_drawing_the_figure_is_a_phase_on_a_terminal(monkeypatch, tmp_path, tty):
     """fit.png's confidence band compiles a Jacobian the first time (~10 s): on a terminal
     that wait is named like the others; redirected, stderr stays empty."""
-    import hdid._fit
-    import hdid._plot
+    import hdid._fitting._fit
+    import hdid._results._plot
     import hdid.cli
 
     drawn = []
     fake = SimpleNamespace(report=lambda: "report", to_dict=lambda: {}, plot=lambda: "axes")
-    monkeypatch.setattr(hdid._fit, "fit", lambda *a, **k: fake)
-    monkeypatch.setattr(hdid._plot, "save_figure", lambda ax, path: drawn.append((ax, path)))
+    monkeypatch.setattr(hdid._fitting._fit, "fit", lambda *a, **k: fake)
+    monkeypatch.setattr(hdid._results._plot, "save_figure", lambda ax, path: drawn.append((ax, path)))
     monkeypatch.setattr(hdid.cli._common, "_stderr_is_tty", lambda: tty)
     out = tmp_path / "fit.png"
     res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "--plot", str(out)])

@@ -15,8 +15,8 @@ from click.testing import CliRunner
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import hdid._diagnose
-import hdid._fit
+import hdid._diagnosis._diagnose
+import hdid._fitting._fit
 from hdid.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -60,8 +60,8 @@ _BODY = st.one_of(
 @FUZZ
 @given(head=_HEADERS, body=_BODY, command=st.sampled_from(["fit", "diagnose"]))
 def test_fuzz_log_bytes(tmp_path, monkeypatch, head, body, command):
-    monkeypatch.setattr(hdid._fit, "fit", _stub)
-    monkeypatch.setattr(hdid._diagnose, "diagnose", _stub)
+    monkeypatch.setattr(hdid._fitting._fit, "fit", _stub)
+    monkeypatch.setattr(hdid._diagnosis._diagnose, "diagnose", _stub)
     path = tmp_path / "log.csv"
     path.write_bytes(head + body)
     _check(CliRunner().invoke(main, [command, str(path)]))
@@ -80,8 +80,8 @@ _NAMES = st.one_of(
 @FUZZ
 @given(name=_NAMES, option=st.sampled_from(["--json", "--plot", "--summary"]))
 def test_fuzz_output_paths(tmp_path, monkeypatch, name, option):
-    monkeypatch.setattr(hdid._fit, "fit", _stub)
-    monkeypatch.setattr("hdid._batch.fit_many", _stub, raising=False)
+    monkeypatch.setattr(hdid._fitting._fit, "fit", _stub)
+    monkeypatch.setattr("hdid._fitting._batch.fit_many", _stub, raising=False)
     monkeypatch.chdir(tmp_path)
     log = tmp_path / "log.csv"
     if not log.exists():
@@ -94,9 +94,9 @@ def test_fuzz_output_paths(tmp_path, monkeypatch, name, option):
 @FUZZ
 @given(name=_NAMES)
 def test_fuzz_simulate_output(tmp_path, monkeypatch, name):
-    import hdid._synthetic
+    import hdid._simulation._synthetic
 
-    monkeypatch.setattr(hdid._synthetic, "synthesize", _stub)
+    monkeypatch.setattr(hdid._simulation._synthetic, "synthesize", _stub)
     monkeypatch.chdir(tmp_path)
     (tmp_path / "log.csv").write_text("existing\n")
     _check(CliRunner().invoke(main, ["simulate", name]))

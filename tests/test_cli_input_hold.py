@@ -22,7 +22,7 @@ class _Stop(Exception):
 
 @pytest.fixture
 def spy(monkeypatch):
-    import hdid._driven_fit
+    import hdid._fitting._driven_fit
 
     seen = {}
 
@@ -33,8 +33,8 @@ def spy(monkeypatch):
 
         return f
 
-    monkeypatch.setattr(hdid._driven_fit, "fit_driven", record("fit_driven"))
-    monkeypatch.setattr(hdid._driven_fit, "fit_joint", record("fit_joint"))
+    monkeypatch.setattr(hdid._fitting._driven_fit, "fit_driven", record("fit_driven"))
+    monkeypatch.setattr(hdid._fitting._driven_fit, "fit_joint", record("fit_joint"))
     return seen
 
 

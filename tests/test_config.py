@@ -83,7 +83,7 @@ def test_to_dict_is_strict_json_whatever_the_values():
     import math
 
     import hdid
-    from hdid._summaries import ParameterEstimate
+    from hdid._results._summaries import ParameterEstimate
 
     r = hdid.fit(PAPER, n_starts=1, max_steps=3, nested=False)  # any fit will do
     p = r.parameters["k1"]

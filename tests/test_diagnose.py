@@ -14,7 +14,7 @@ import pytest
 from click.testing import CliRunner
 
 import hdid
-from hdid._diagnose import STRONG_DBIC, bic
+from hdid._diagnosis._diagnose import STRONG_DBIC, bic
 from hdid.cli import main
 
 from synthetic import GEN, HID, ROOT
@@ -67,7 +67,7 @@ def test_no_false_alarm_on_a_log_with_nothing_hidden(hysteresis_diagnosis):
 def test_verdict_reports_its_warnings_and_false_alarm_rate(hysteresis_diagnosis):
     """A 1 kHz log of 4 runs: within a factor 2 of no measured design but the rich one
     (1 kHz, 8 runs) once it is measured; either way the report says so, in words."""
-    from hdid._diagnose_rates import false_alarm
+    from hdid._diagnosis._rates import false_alarm
 
     d = hysteresis_diagnosis
     fa = false_alarm(1000.0, 4)

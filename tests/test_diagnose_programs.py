@@ -1,4 +1,4 @@
-"""The program store (:mod:`hdid._programs`) that lets ``hdid diagnose`` skip tracing in a
+"""The program store (:mod:`hdid._problems._programs`) that lets ``hdid diagnose`` skip tracing in a
 later process: same numbers as the jit path, keyed by everything that shapes the program,
 a stored program that uses LAPACK runs in a fresh process without tracing, and the store
 is on by default."""
@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from hdid import _programs
+from hdid._problems import _programs
 
 SRC = Path(__file__).resolve().parents[1] / "src"
 
@@ -84,7 +84,7 @@ def test_stored_lapack_program_runs_in_a_fresh_process(store, tmp_path):
         sys.path.insert(0, {str(Path(__file__).parent)!r})
         import hdid
         hdid.configure()  # as the CLI (and conftest.py) set a process up: float64
-        from hdid import _programs
+        from hdid._problems import _programs
         import test_diagnose_programs as t
         def untraceable(*a):
             raise AssertionError("traced although stored")
@@ -133,17 +133,17 @@ def test_no_store_when_caching_is_off(store, monkeypatch, env):
 
 
 def test_starts_in_groups_of_one_program_give_fit_s_iterates():
-    """:func:`hdid._refit._local_fits` runs the starts ``LANES`` at a time (one program
+    """:func:`hdid._fitting._refit._local_fits` runs the starts ``LANES`` at a time (one program
     per structure, any number of starts); lanes do not interact, so every start must end
-    where :func:`hdid._lm._local_fits` (all starts in one call) leaves it: same point,
+    where :func:`hdid._fitting._lm._local_fits` (all starts in one call) leaves it: same point,
     cost, convergence flag and iteration count (Rosenbrock from 7 starts: 3 groups in
     phase 1, the 3 best in phase 2)."""
     import types
 
     import jax
 
-    from hdid import _refit
-    from hdid._lm import _lm_lanes, _local_fits
+    from hdid._fitting import _refit
+    from hdid._fitting._lm import _lm_lanes, _local_fits
 
     def res(U):
         return jnp.stack([10.0 * (U[:, 1] - U[:, 0] ** 2), 1.0 - U[:, 0]], axis=1)
@@ -167,15 +167,15 @@ def test_starts_in_groups_of_one_program_give_fit_s_iterates():
 
 
 def test_trapped_runs_from_the_residuals_match_the_simulation():
-    """:func:`hdid._refit.trapped_runs` reads the runs the model never releases off the
+    """:func:`hdid._fitting._refit.trapped_runs` reads the runs the model never releases off the
     residuals the LM already has (no simulation program per structure); it must name the
-    runs :func:`hdid._fit.trapped_runs` finds by simulating: none at a fitted-like start,
+    runs :func:`hdid._fitting._fit.trapped_runs` finds by simulating: none at a fitted-like start,
     all of them where static friction exceeds every release's spring torque."""
     import hdid
-    from hdid import _refit
-    from hdid._fit import trapped_runs
-    from hdid._io import read_log
-    from hdid._transforms import to_unconstrained
+    from hdid._fitting import _refit
+    from hdid._fitting._fit import trapped_runs
+    from hdid._log import read_log
+    from hdid._models._transforms import to_unconstrained
 
     log = read_log(SRC.parent / "data" / "synthetic" / "hidden_hysteresis_1khz.csv")
     s = _refit.setup(log, hdid.Model.default(), {})
@@ -198,8 +198,8 @@ def test_residuals_and_jacobian_from_the_lm_program_are_the_problem_s():
     program (a lane stopped at its start) instead of a program of its own: they must be
     the problem's own, to rounding (forward mode in both: 1e-9 relative)."""
     import hdid
-    from hdid import _refit
-    from hdid._io import read_log
+    from hdid._fitting import _refit
+    from hdid._log import read_log
 
     log = read_log(SRC.parent / "data" / "synthetic" / "hidden_hysteresis_1khz.csv")
     s = _refit.setup(log, hdid.Model.default(), {})
@@ -214,13 +214,14 @@ def test_residuals_and_jacobian_from_the_lm_program_are_the_problem_s():
 
 def test_residual_frame_and_whiteness_reuse_the_analysis_parts_unchanged():
     """A refit's analysed result carries the Jacobian and simulations its analysis
-    program computed (``hdid._residuals.PARTS``); the residual frame and the whiteness
+    program computed (``hdid._results._residuals.PARTS``); the residual frame and the whiteness
     test must give the same numbers from them as from their own programs."""
     import pandas as pd
 
     import hdid
-    from hdid import _refit, _residuals
-    from hdid._io import read_log
+    from hdid._fitting import _refit
+    from hdid._results import _residuals
+    from hdid._log import read_log
 
     log = read_log(SRC.parent / "data" / "synthetic" / "hidden_hysteresis_1khz.csv")
     s = _refit.setup(log, hdid.Model.default(), {})

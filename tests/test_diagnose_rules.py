@@ -1,4 +1,4 @@
-"""The decision rules of :func:`hdid.diagnose` (module docstring of ``hdid._diagnose``),
+"""The decision rules of :func:`hdid.diagnose` (module docstring of ``hdid._diagnosis._diagnose``),
 checked on constructed candidate tables: no fit, so they run in milliseconds.
 
 Statistical footing used below: χ² is in units of the quantization variance
@@ -14,7 +14,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from hdid import _diagnose as D
+from hdid._diagnosis import _diagnose as D
 
 from synthetic import ROOT
 
@@ -172,7 +172,7 @@ def test_a_rival_within_ten_is_a_tie_even_if_not_strong_itself():
 
 # -- warnings and the calibrated false-alarm rate ----------------------------------------
 def test_false_alarm_rate_of_the_nearest_measured_design():
-    from hdid._diagnose_rates import DesignRate, clopper_pearson, false_alarm
+    from hdid._diagnosis._rates import DesignRate, clopper_pearson, false_alarm
 
     lo, hi = clopper_pearson(0, 40)
     # 0 of 40: the exact upper end is 1 − 0.025^(1/40)
@@ -191,7 +191,7 @@ def test_false_alarm_rate_of_the_nearest_measured_design():
 def test_the_target_is_met_when_the_one_sided_bound_is_below_it():
     """"≤ 5 %" at 95 % confidence: 1 alarm in 93 logs shows it, 1 in 80 does not; 0 alarms
     need 59 logs."""
-    from hdid._diagnose_rates import TARGET, DesignRate, upper_bound
+    from hdid._diagnosis._rates import TARGET, DesignRate, upper_bound
 
     assert upper_bound(1, 93) <= TARGET < upper_bound(1, 80)
     assert upper_bound(0, 59) <= TARGET < upper_bound(0, 58)
@@ -203,7 +203,7 @@ def test_measured_rates_are_the_committed_calibration_results():
     never typed by hand: its counts are the file's, design by design."""
     import json
 
-    from hdid._diagnose_rates import MEASURED, clopper_pearson
+    from hdid._diagnosis._rates import MEASURED, clopper_pearson
 
     doc = json.loads((ROOT / "benchmarks" / "results" / "diagnose_calibration.json").read_text())
     for d in MEASURED:
@@ -220,7 +220,7 @@ def _rounds_with(results, *, max_lag=10, at_floor=True):
 
 
 def test_warnings_say_what_is_known_against_the_verdict():
-    from hdid._diagnose_rates import DesignRate
+    from hdid._diagnosis._rates import DesignRate
 
     best = _cand("hysteresis", -40, at_floor=False, white=False, rms=1.6)
     rounds = _rounds_with([best], max_lag=2)
@@ -243,9 +243,9 @@ def test_base_start_from_a_candidate_that_replaced_a_piece_keeps_the_current_val
     model's start from it takes the candidate's friction (shared) and the *current fit's*
     k1, k2 — not the set-up model's catalog values, which are no optimum of anything."""
     import hdid
-    from hdid import _refit
-    from hdid._io import read_log
-    from hdid._transforms import to_unconstrained
+    from hdid._fitting import _refit
+    from hdid._log import read_log
+    from hdid._models._transforms import to_unconstrained
     from hdid.effects import library
 
     log = read_log(ROOT / "data" / "synthetic" / "csf8_paper.csv")
@@ -275,9 +275,9 @@ def test_candidate_warm_starts_are_at_the_current_optimum(monkeypatch):
     current fit's values (not at the values its model was set up with, the catalog's),
     the added effect's at its data-derived values. The refits are captured, not run."""
     import hdid
-    from hdid import _refit
-    from hdid._io import read_log
-    from hdid._transforms import to_unconstrained
+    from hdid._fitting import _refit
+    from hdid._log import read_log
+    from hdid._models._transforms import to_unconstrained
 
     log = read_log(ROOT / "data" / "synthetic" / "csf8_paper.csv")
     m = hdid.Model.default()
@@ -307,7 +307,7 @@ def test_an_order_replaced_in_one_set_up_is_the_set_up_of_that_order():
     import jax
 
     import hdid
-    from hdid import _refit
+    from hdid._fitting import _refit
     from hdid.effects import library
 
     from synthetic import GEN

@@ -19,8 +19,8 @@ import pandas as pd
 import pytest
 
 import hdid
-from hdid._driven import DrivenJoint, simulate_driven
-from hdid._positional import PositionalError
+from hdid._simulation._driven import DrivenJoint, simulate_driven
+from hdid._models._positional import PositionalError
 
 from synthetic import ROOT, SYNTH
 
@@ -286,7 +286,7 @@ def test_first_order_hold_against_the_cubic_of_a_torque_ramp():
 
 
 def test_input_hold_rule():
-    from hdid._driven_fit import input_hold_for
+    from hdid._fitting._driven_fit import input_hold_for
 
     class L:
         torque_constant = None

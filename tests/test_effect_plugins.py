@@ -108,7 +108,7 @@ def test_a_plugin_package_adds_an_effect_everywhere(plugin, tmp_path):
 DIAGNOSE_AND_POSTERIOR = """
 import json, sys
 import hdid
-from hdid._diagnose import default_candidates
+from hdid._diagnosis._diagnose import default_candidates
 from hdid._posterior.density import gaussian_prior
 
 cands = [c.key for c in default_candidates()]

@@ -1,4 +1,4 @@
-"""Tests for hdid._io: reading, validating and writing free-motion logs."""
+"""Tests for hdid._log: reading, validating and writing free-motion logs."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hdid._errors import HdidError, LogError
-from hdid._io import Log, Run, estimate_resolution, read_log, write_log
+from hdid._log import Log, Run, estimate_resolution, read_log, write_log
 
 CPR = 4000
 Q = 2 * math.pi / CPR  # encoder step [rad]
@@ -248,7 +248,7 @@ def test_numbers_are_read_correctly_rounded_whatever_pandas_parses(good, monkeyp
     under a pandas whose text parser is one unit in the last place off — pandas 3.0.6 read
     ``repr(0.036)`` as 0.036000000000000004 (seen on the GPU machine's image). Here the
     parser is made off by one ulp on purpose; ``to_numeric`` still decides what is a number."""
-    import hdid._io._table as io_mod
+    import hdid._log._table as io_mod
 
     real = pd.to_numeric
 

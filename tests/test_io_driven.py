@@ -1,4 +1,4 @@
-"""Tests for the driven-log columns of hdid._io (motor torque/current, output angle, load)."""
+"""Tests for the driven-log columns of hdid._log (motor torque/current, output angle, load)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 from hdid._errors import LogError
-from hdid._io import Log, Run, read_log, write_log
+from hdid._log import Log, Run, read_log, write_log
 
 ROOT = Path(__file__).resolve().parents[1]
 DRIVEN = ROOT / "data" / "synthetic" / "driven_csf8.csv"

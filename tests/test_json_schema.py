@@ -26,18 +26,18 @@ EXAMPLE = ROOT / "data" / "synthetic" / "csf8_paper.csv"
 def fitted(tmp_path_factory):
     """One CLI fit of the example (2 starts: cheap) and its JSON, and the same fit from the
     library as a live FitResult."""
-    import hdid._fit
+    import hdid._fitting._fit
 
     tmp = tmp_path_factory.mktemp("schema")
     out = tmp / "fit.json"
-    real, kept = hdid._fit.fit, []
+    real, kept = hdid._fitting._fit.fit, []
 
     def keep(*args, **kwargs):  # the CLI's own fit, kept for the library-level tests
         kept.append(real(*args, **kwargs))
         return kept[-1]
 
     mp = pytest.MonkeyPatch()
-    mp.setattr(hdid._fit, "fit", keep)
+    mp.setattr(hdid._fitting._fit, "fit", keep)
     try:
         res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "--starts", "2", "--fix", "delta=1",
                                         "-q", "--json", str(out)])
@@ -49,7 +49,7 @@ def fitted(tmp_path_factory):
 
 
 def _validator():
-    from hdid._saved import schema
+    from hdid._results._saved import schema
 
     s = schema()  # read through importlib.resources: the file ships with the package
     jsonschema.Draft202012Validator.check_schema(s)
@@ -108,7 +108,7 @@ def test_save_load_round_trip(fitted, tmp_path):
     result.save(path)
     again = hdid.FitResult.load(path)
     assert again.report() == result.report()
-    from hdid._saved import finite
+    from hdid._results._saved import finite
 
     assert finite(again.to_dict()) == finite(result.to_dict())
     assert again.model.values()["k1"] == pytest.approx(result.values["k1"], rel=1e-15)
@@ -144,7 +144,7 @@ def test_simulate_from_fit_json(fitted, tmp_path):
 
 
 def test_start_values_reach_the_fit(fitted, monkeypatch):
-    import hdid._fit
+    import hdid._fitting._fit
 
     _, result, _ = fitted
     seen = {}
@@ -153,7 +153,7 @@ def test_start_values_reach_the_fit(fitted, monkeypatch):
         seen["model"], seen["kw"] = model, kw
         return result
 
-    monkeypatch.setattr(hdid._fit, "fit", spy)
+    monkeypatch.setattr(hdid._fitting._fit, "fit", spy)
     res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "--start", "k1=1200", "--start", "tau_c=3e-3", "-q"])
     assert res.exit_code == 0, res.output
     assert seen["kw"]["start_from_model"] is True
@@ -208,7 +208,7 @@ def test_ten_runs_wrap_into_rows():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hdid._plot import RUNS_PER_ROW, _fit_axes
+    from hdid._results._plot import RUNS_PER_ROW, _fit_axes
 
     fig, axes = _fit_axes(10)
     assert axes.shape == (2, 10)
@@ -224,7 +224,7 @@ SHARED = ("schema_version", "hdid_version", "input", "options", "model", "correl
 
 
 def _schema_validator(kind):
-    from hdid._saved import schema
+    from hdid._results._saved import schema
 
     s = schema(kind)
     jsonschema.Draft202012Validator.check_schema(s)
@@ -298,7 +298,7 @@ def test_driven_schema_rejects_broken_json(driven_json, breakage):
 def test_schemas_share_the_provenance_fields():
     """The provenance fields mean the same in the three files: the driven and diagnose
     schemas define them as the fit schema does (the driven model only adds its keys)."""
-    from hdid._saved import schema
+    from hdid._results._saved import schema
 
     fit = schema("fit")["properties"]
     for kind in ("driven", "diagnose"):
@@ -318,9 +318,9 @@ def test_diagnose_json_has_the_fit_provenance(fitted, tmp_path, monkeypatch):
     """hdid diagnose --json: the base fit's model, correlation and covariance, the input's
     checksum and the options, validated against diagnose.schema.json. The diagnosis
     itself is stubbed (its content is the diagnose tests' business): this is the JSON."""
-    import hdid._diagnose
-    from hdid._diagnose import Diagnosis
-    from hdid._residuals import whiteness
+    import hdid._diagnosis._diagnose
+    from hdid._diagnosis._diagnose import Diagnosis
+    from hdid._results._residuals import whiteness
 
     data, result, _ = fitted
 
@@ -329,7 +329,7 @@ def test_diagnose_json_has_the_fit_provenance(fitted, tmp_path, monkeypatch):
                          candidates=[], whiteness_before=whiteness(result), notes=[],
                          ladder=[], floor_rad=result.quantization_floor_rad)
 
-    monkeypatch.setattr(hdid._diagnose, "diagnose", stub)
+    monkeypatch.setattr(hdid._diagnosis._diagnose, "diagnose", stub)
     out = tmp_path / "diag.json"
     res = CliRunner().invoke(main, ["diagnose", str(EXAMPLE), "--fix", "delta=1", "-q",
                                     "--json", str(out)])

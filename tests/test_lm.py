@@ -1,4 +1,4 @@
-"""The one Levenberg–Marquardt engine (``hdid._lm``) against an independent oracle:
+"""The one Levenberg–Marquardt engine (``hdid._fitting._lm``) against an independent oracle:
 optimistix's ``LevenbergMarquardt`` (normal-equations Cholesky), which ``_lm_lanes``
 reproduces step for step, on a small nonlinear least-squares problem with a known answer."""
 
@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from hdid._lm import LMState, _lm_lanes
+from hdid._fitting._lm import LMState, _lm_lanes
 
 T = np.linspace(0.0, 3.0, 40)
 TRUE = np.array([2.0, 1.3, 0.4])
@@ -48,15 +48,15 @@ def test_lanes_lm_reaches_optimistix_optimum_from_every_start():
 
 def test_solve_fresh_runs_on_any_problem_of_the_abstraction():
     """Free, driven and joint problems are instances of one abstraction
-    (``hdid._problem_base.AbstractProblem``): the engine needs nothing else, so a problem
+    (``hdid._problems._base.AbstractProblem``): the engine needs nothing else, so a problem
     written from scratch — the exponential above — is solved like the library's own,
     and ``cost`` is inherited (χ² = Σ r²)."""
     import equinox as eqx
 
-    from hdid._driven_problem import DrivenProblem, JointProblem
-    from hdid._lm import solve_fresh
-    from hdid._problem import Problem
-    from hdid._problem_base import AbstractProblem
+    from hdid._problems._driven_problem import DrivenProblem, JointProblem
+    from hdid._fitting._lm import solve_fresh
+    from hdid._problems._problem import Problem
+    from hdid._problems._base import AbstractProblem
 
     assert all(issubclass(c, AbstractProblem) for c in (Problem, DrivenProblem, JointProblem))
 

@@ -133,7 +133,7 @@ def test_fit_with_a_user_effect_recovers_it(tmp_path):
     # A log simulated with cogging (hdid's own simulator: this checks the plumbing of a
     # user effect through the fit, not the physics, which test_simulate checks), rich
     # design: 1 kHz, four amplitudes each way.
-    from hdid._synthetic import synthesize
+    from hdid._simulation._synthetic import synthesize
 
     truth = Model.default().with_effect(Cogging(amplitude=4e-4))
     path = tmp_path / "cog.csv"
@@ -256,7 +256,7 @@ def test_model_joint_and_positional_error_share_one_parameter_set():
     """A free-motion model, a driven joint and its positional error are parameter sets of
     one kind (issue 20): values by name, a float copy, replace, and the same clear error
     for a name they do not have."""
-    from hdid._parameter_set import AbstractParameterSet
+    from hdid._models._parameter_set import AbstractParameterSet
 
     joint = hdid.DrivenJoint.default(order=2)
     for obj in (Model.default(), joint, joint.positional):

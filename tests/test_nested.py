@@ -1,4 +1,4 @@
-"""The free-motion fit against its nested special case (Stribeck ⊃ Coulomb, ``hdid._nested``).
+"""The free-motion fit against its nested special case (Stribeck ⊃ Coulomb, ``hdid._fitting._nested``).
 
 The logic is checked with stand-in fits (so each branch is reached on purpose), and the
 guarantee it gives on a real fit: a free Stribeck law never ends worse than Coulomb.
@@ -12,7 +12,7 @@ from types import SimpleNamespace
 
 import hdid
 
-from hdid._nested import (
+from hdid._fitting._nested import (
     CHECK_ABOVE_FLOOR,
     NESTED_MARGIN,
     RESTART_RATIO,
@@ -161,8 +161,8 @@ def test_a_residual_above_three_times_the_floor_is_a_warning():
     # plausibility_warnings on the shipped paper log's own prepared data: an exact model
     # leaves ≤ 1× step/√12 (0.6–0.9× measured at paper-design truths); the generator's
     # poorer basins measured 4.2–11.9×. Just below the factor: no warning; above: one.
-    from hdid._fit import _setup
-    from hdid._identifiability import RESIDUAL_FLOOR_FACTOR, plausibility_warnings
+    from hdid._fitting._fit import _setup
+    from hdid._fitting._identifiability import RESIDUAL_FLOOR_FACTOR, plausibility_warnings
 
     s = _setup(hdid.read_log(EXAMPLE))
     floor = s.prep.resolution / 12**0.5

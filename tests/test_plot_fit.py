@@ -50,7 +50,7 @@ def test_fit_png_draws_the_band(result):
     import matplotlib.pyplot as plt
     from matplotlib.collections import PolyCollection
 
-    from hdid._plot import BAND_LABEL, BAND_SIGMAS
+    from hdid._results._plot import BAND_LABEL, BAND_SIGMAS
 
     fig = result.plot()[0, 0].figure
     step = result.resolution_rad
@@ -89,7 +89,7 @@ def test_one_axes_overlay_has_the_band(result):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hdid._plot import BAND_LABEL
+    from hdid._results._plot import BAND_LABEL
 
     fig, ax = plt.subplots()
     assert result.plot(ax=ax) is ax

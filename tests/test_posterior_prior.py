@@ -146,15 +146,15 @@ def test_stribeck_priors_are_relative_to_the_log_and_physical(fit):
     tau_c ≤ tau_s. In the least-squares fit: the weak rows, sd 2, centred on the same v_s
     start and on delta's interval middle."""
     from hdid._posterior.density import gaussian_prior, ordered_pairs
-    from hdid._transforms import from_unconstrained
+    from hdid._models._transforms import from_unconstrained
 
     prob = fit.problem
     free = list(prob.free)
     specs = prob.base.parameter_specs()
     i, j = free.index("v_s"), free.index("delta")
-    from hdid._fit import _setup
-    from hdid._prepare import offset_guess
-    from hdid._starts import log_scales
+    from hdid._fitting._fit import _setup
+    from hdid._simulation._prepare import offset_guess
+    from hdid._fitting._starts import log_scales
 
     s0 = _setup(EXAMPLE)
     scales = log_scales(s0.prep, hdid.Model.default(), offset_guess(s0.prep))

@@ -16,8 +16,8 @@ import pandas as pd
 import pytest
 
 import hdid
-from hdid._identifiability import plausibility_warnings
-from hdid._prepare import prepare, turning_points
+from hdid._fitting._identifiability import plausibility_warnings
+from hdid._simulation._prepare import prepare, turning_points
 
 PAPER = "data/synthetic/csf8_paper.csv"
 

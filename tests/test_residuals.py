@@ -1,4 +1,4 @@
-"""Residual views (:mod:`hdid._residuals`): the frame, the whiteness test, features, plots.
+"""Residual views (:mod:`hdid._results._residuals`): the frame, the whiteness test, features, plots.
 
 Two fits of the committed ``csf8_paper.csv`` (reference simulator, CSF-8 truth, 250 Hz,
 4 releases, rounded to a 4000-count encoder, no other noise), shared module-wide:
@@ -28,7 +28,7 @@ import pandas as pd
 import pytest
 
 import hdid
-from hdid import _residuals as R
+from hdid._results import _residuals as R
 
 ROOT = Path(__file__).resolve().parent.parent
 PAPER_CSV = ROOT / "data" / "synthetic" / "csf8_paper.csv"

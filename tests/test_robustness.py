@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import hdid
-from hdid._io import read_log
-from hdid._prepare import prepare
+from hdid._log import read_log
+from hdid._simulation._prepare import prepare
 from hdid.reference import stick_band_halfwidth
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,4 +1,4 @@
-"""Physics tests of the JAX simulator :func:`hdid._simulate.simulate`.
+"""Physics tests of the JAX simulator :func:`hdid._simulation._simulate.simulate`.
 
 Every tolerance below is derived from the numerics of the scheme (RK4 substeps of size
 ``h`` with the friction direction frozen; at a velocity zero RK4 re-integrates from the
@@ -43,8 +43,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from hdid._model import Model
-from hdid._simulate import DEFAULT_MAX_SUBSTEP, _substep, simulate, substeps_for
+from hdid._models._model import Model
+from hdid._simulation._simulate import DEFAULT_MAX_SUBSTEP, _substep, simulate, substeps_for
 from hdid.reference import reference_trajectory, simulate_reference
 
 # ----------------------------------------------------------------------------- set-up

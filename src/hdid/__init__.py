@@ -23,18 +23,18 @@ def _version() -> str:
 __version__ = _version()
 
 _LAZY = {
-    "fit": "._fit",
-    "fit_many": "._batch",
+    "fit": "._fitting._fit",
+    "fit_many": "._fitting._batch",
     "sample_posterior": "._posterior",
-    "FitResult": "._result",
-    "Model": "._model",
-    "DEFAULT_INERTIA": "._model",
-    "DEFAULT_RATIO": "._model",
-    "simulate": "._simulate",
-    "read_log": "._io",
-    "write_log": "._io",
-    "Log": "._io",
-    "Run": "._io",
+    "FitResult": "._results._result",
+    "Model": "._models._model",
+    "DEFAULT_INERTIA": "._models._model",
+    "DEFAULT_RATIO": "._models._model",
+    "simulate": "._simulation._simulate",
+    "read_log": "._log",
+    "write_log": "._log",
+    "Log": "._log",
+    "Run": "._log",
     "LogError": "._errors",
     "FitError": "._errors",
     "HdidError": "._errors",
@@ -60,18 +60,18 @@ _LAZY = {
     "TorqueOffset": ".effects",
     "CoulombFriction": ".effects",
     "effects": ".effects",
-    "diagnose": "._diagnose",
-    "Diagnosis": "._diagnose",
-    "model_ladder": "._diagnose",
-    "fit_driven": "._driven_fit",
-    "fit_joint": "._driven_fit",
-    "DrivenFitResult": "._driven_result",
-    "DrivenJoint": "._driven",
-    "simulate_driven": "._driven",
-    "PositionalError": "._positional",
+    "diagnose": "._diagnosis._diagnose",
+    "Diagnosis": "._diagnosis._diagnose",
+    "model_ladder": "._diagnosis._ladder",
+    "fit_driven": "._fitting._driven_fit",
+    "fit_joint": "._fitting._driven_fit",
+    "DrivenFitResult": "._results._driven_result",
+    "DrivenJoint": "._simulation._driven",
+    "simulate_driven": "._simulation._driven",
+    "PositionalError": "._models._positional",
     "configure": "._config",
-    "save_figure": "._plot",
-    "bare_figures": "._plot",
+    "save_figure": "._results._plot",
+    "bare_figures": "._results._plot",
 }
 
 #: Public functions that compute with JAX: they run in float64 (thread-local, see
@@ -104,19 +104,20 @@ def __dir__():
 if TYPE_CHECKING:  # pragma: no cover
     from . import effects
     from ._errors import FitError, HdidError, LogError
-    from ._batch import fit_many
+    from ._fitting._batch import fit_many
     from ._config import configure
     from ._posterior import sample_posterior
-    from ._diagnose import Diagnosis, diagnose, model_ladder
-    from ._driven import DrivenJoint, simulate_driven
-    from ._driven_fit import fit_driven, fit_joint
-    from ._driven_result import DrivenFitResult
-    from ._positional import PositionalError
-    from ._fit import fit
-    from ._io import Log, Run, read_log, write_log
-    from ._model import DEFAULT_INERTIA, DEFAULT_RATIO, Model
-    from ._result import FitResult
-    from ._simulate import simulate
+    from ._diagnosis._diagnose import Diagnosis, diagnose
+    from ._diagnosis._ladder import model_ladder
+    from ._simulation._driven import DrivenJoint, simulate_driven
+    from ._fitting._driven_fit import fit_driven, fit_joint
+    from ._results._driven_result import DrivenFitResult
+    from ._models._positional import PositionalError
+    from ._fitting._fit import fit
+    from ._log import Log, Run, read_log, write_log
+    from ._models._model import DEFAULT_INERTIA, DEFAULT_RATIO, Model
+    from ._results._result import FitResult
+    from ._simulation._simulate import simulate
     from .effects import (
         AbstractEffect,
         AbstractFriction,

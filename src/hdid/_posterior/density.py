@@ -39,9 +39,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _config  # noqa: F401
-from .._evaluate import predict_rows
-from .._problem import Problem
-from .._transforms import from_unconstrained
+from .._problems._evaluate import predict_rows
+from .._problems._problem import Problem
+from .._models._transforms import from_unconstrained
 
 #: Flat prior half-width around the least-squares value in the transformed space
 #: (±7 in log ≈ a factor 1000 either way: uninformative but proper).
@@ -296,7 +296,7 @@ def gaussian_prior(problem: Problem, prior: dict | None):
     prior = {**declared_prior(problem), **(prior or {})}
     if not prior:
         return None, ordered_pairs(problem)
-    from .._transforms import to_unconstrained
+    from .._models._transforms import to_unconstrained
 
     specs = problem.base.parameter_specs()
     free = list(problem.free)
@@ -318,7 +318,7 @@ def declared_prior(problem: Problem) -> dict:
     """The posterior priors the effects declare (``AbstractEffect.posterior_prior``) for
     free parameters, as ``{name: (centre value, sd)}``; a centre of ``None`` is the
     least-squares prior row's centre (the log's own start)."""
-    from .._transforms import from_unconstrained
+    from .._models._transforms import from_unconstrained
 
     specs = problem.base.parameter_specs()
     free = list(problem.free)

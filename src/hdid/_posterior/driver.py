@@ -10,8 +10,8 @@ from dataclasses import replace
 import jax.numpy as jnp
 import numpy as np
 
-from .._identifiability import unknown_labels
-from .._problem import Problem
+from .._fitting._identifiability import unknown_labels
+from .._problems._problem import Problem
 from .density import (
     PRIOR_HALF_WIDTH,
     derived_np,

@@ -9,7 +9,7 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
-from .._problem import Problem
+from .._problems._problem import Problem
 from .density import PRIOR_HALF_WIDTH
 
 #: Local optima more than this far above the best (χ² in the fit's q/√12 units) carry
@@ -43,7 +43,7 @@ def _rj(problem: Problem, u):
     """Residuals and Jacobian (data rows, then weak-prior rows) at ``u``: the data part
     from the program the fit's analysis compiled (``_evaluate.jacobian``: no compile of
     its own), the prior rows in NumPy (``Problem.residuals_and_jacobian``'s)."""
-    from .._evaluate import jacobian
+    from .._problems._evaluate import jacobian
 
     J, r = map(np.asarray, jacobian(problem, jnp.asarray(u)))
     u = np.asarray(u, dtype=float)
@@ -59,7 +59,7 @@ def _rj(problem: Problem, u):
 def _path_costs(problem: Problem, U):
     """Cost of every row of ``U``: the LM program with no iteration (its cost at the
     start), in calls of the fit's lane count — the fit's compiled program again."""
-    from .._lm import solve_fresh
+    from .._fitting._lm import solve_fresh
 
     return _solve_in_lanes(solve_fresh, problem, U, np.ones(len(U), dtype=bool), 0)[1]
 
@@ -83,7 +83,7 @@ def _restart_candidates(fit, rng, n_random: int) -> np.ndarray:
     u0 = np.asarray(fit.u, dtype=float)
     free = list(prob.free)
     specs = prob.base.parameter_specs()
-    from .._transforms import to_unconstrained
+    from .._models._transforms import to_unconstrained
 
     def with_values(vals):
         u = u0.copy()
@@ -181,7 +181,7 @@ def find_modes(fit, *, n_random: int = N_RANDOM_RESTARTS, seed: int = 0, max_ste
     than ``MODE_BARRIER``, and each remaining one is weighted by its Laplace evidence.
     Sorted by weight, largest first.
     """
-    from .._lm import PHASE1_STEPS, PHASE2_CHUNK, solve_fresh
+    from .._fitting._lm import PHASE1_STEPS, PHASE2_CHUNK, solve_fresh
 
     prob: Problem = fit.problem
     rng = np.random.default_rng(seed)

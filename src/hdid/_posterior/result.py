@@ -76,7 +76,7 @@ class PosteriorResult:
 
     def to_dict(self) -> dict[str, Any]:
         s = self.summary()
-        from .._saved import finite
+        from .._results._saved import finite
 
         return finite({
             "posterior": s,
@@ -220,7 +220,7 @@ class PosteriorResult:
                 ref = self.fit.derived[n][0]
             marks.append(None if ref is None else float(ref) * f)
         data = np.column_stack(cols)
-        from .._plot import figure_of, new_figure
+        from .._results._plot import figure_of, new_figure
 
         K = len(cols)
         if ax is None:
@@ -248,15 +248,15 @@ class PosteriorResult:
         return np.asarray(fig.axes, dtype=object).reshape(K, K)
 
     def plot_predictive(self, *, ax=None, n_draws: int = 100, seed: int = 0):
-        """Posterior-predictive check of each run (:func:`hdid._plot.plot_predictive`);
+        """Posterior-predictive check of each run (:func:`hdid._results._plot.plot_predictive`);
         returns the axes."""
-        from .._plot import plot_predictive
+        from .._results._plot import plot_predictive
 
         return plot_predictive(self, ax=ax, n_draws=n_draws, seed=seed)
 
     def plot_band(self, *, ax=None):
         """The stick band's posterior beside the logged rest points; returns the Axes."""
-        from .._plot import plot_band
+        from .._results._plot import plot_band
 
         return plot_band(self, ax=ax)
 

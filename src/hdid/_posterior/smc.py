@@ -325,7 +325,7 @@ def sample_smc(fit, *, n_particles: int = N_PARTICLES, n_runs: int = N_RUNS,
                target_ess: float = TARGET_ESS):
     """Tempered SMC posterior of ``fit`` (see the module docstring); a
     :class:`PosteriorResult` whose ``chain`` is ``(n_particles, n_runs, D)``."""
-    from .._identifiability import unknown_labels
+    from .._fitting._identifiability import unknown_labels
     from .density import PRIOR_HALF_WIDTH, derived_np, to_physical
     from .diagnostics import width_ratios
     from .result import BAND, _RunNames

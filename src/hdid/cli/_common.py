@@ -81,7 +81,7 @@ def _check_size(data) -> None:
 
 def _with_start_values(model, guesses: dict):
     """The model to fit, with the --start values as its own (the warm start)."""
-    from .._model import Model
+    from .._models._model import Model
 
     model = Model.default() if model is None else model
     specs = model.parameter_specs()
@@ -251,7 +251,7 @@ def _emit(report: str, summary: dict, json_out: str | None, quiet: bool) -> None
 def _with_provenance(summary: dict, fit, path: Path) -> dict:
     """A diagnosis's JSON with the fields the fit JSON has for reuse (version, input and
     its SHA-256, options as given, the model and covariance of the base fit)."""
-    from .._saved import provenance, sha256
+    from .._results._saved import provenance, sha256
 
     fit.input_sha256 = sha256(path)
     fit.options = _options_used(click.get_current_context())
@@ -262,7 +262,7 @@ def _build_model(add, remove, files, ratio=None):
     """The base model with effects removed, library effects added, and user effects."""
     if not (add or remove or files or ratio):
         return None
-    from .._model import Model
+    from .._models._model import Model
     from ..effects import AbstractEffect, library
 
     model = Model.default() if ratio is None else Model.default().with_ratio(ratio)
@@ -311,6 +311,6 @@ def _load_effect_file(path: Path, base):
 
 def _finite(obj):
     """JSON has no NaN/inf: write them as null (the library's rule, ``_saved.finite``)."""
-    from .._saved import finite
+    from .._results._saved import finite
 
     return finite(obj)

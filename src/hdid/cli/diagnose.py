@@ -45,13 +45,13 @@ def diagnose_cmd(log, json_out, plot_out, residuals_out, candidates, steps, iner
     fixed = _parse_fix(fix)
     wanted = [c.strip() for c in candidates.split(",") if c.strip()] if candidates else None
 
-    from .. import _io
-    from .._diagnose import diagnose
+    from .. import _log
+    from .._diagnosis._diagnose import diagnose
     from .._errors import HdidError
-    from .._plot import bare_figures, save_figure
+    from .._results._plot import bare_figures, save_figure
 
     try:
-        data = _io.read_log(log_path, counts_per_rev=counts_per_rev, resolution=resolution)
+        data = _log.read_log(log_path, counts_per_rev=counts_per_rev, resolution=resolution)
         _check_size(data)
         result = diagnose(
             data,

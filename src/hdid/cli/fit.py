@@ -109,15 +109,16 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
     phases = _Phases(enabled=not quiet and _common._stderr_is_tty())
     phases.start("loading JAX")
 
-    from .. import _fit, _io
+    from .._fitting import _fit
+    from .. import _log
     from .._errors import HdidError
-    from .._plot import bare_figures, save_figure
-    from .._saved import sha256
+    from .._results._plot import bare_figures, save_figure
+    from .._results._saved import sha256
 
     try:
         phases.start(f"reading {log_path}")
         digest = sha256(log_path)
-        data = _io.read_log(log_path, counts_per_rev=counts_per_rev, resolution=resolution)
+        data = _log.read_log(log_path, counts_per_rev=counts_per_rev, resolution=resolution)
         if added is not None:
             data = _with_added_inertia(data, added)
         _check_size(data)
@@ -193,16 +194,17 @@ def _fit_driven(paths, model, json_out, plot_out, fix, counts_per_rev, driven_op
         _check_output(out, paths, option, figure=option == "--plot")
     fixed = _parse_fix(fix)
     options = _options_used(click.get_current_context())
-    from .. import _driven_fit, _io
+    from .._fitting import _driven_fit
+    from .. import _log
     from .._errors import HdidError
-    from .._saved import sha256
+    from .._results._saved import sha256
 
     digests = {str(p): sha256(p) for p in paths}
 
     fix_arg = {k: v for k, v in fixed.items() if v is not None} | {
         k: None for k, v in fixed.items() if v is None} or None
     try:
-        logs = [_io.read_log(p, counts_per_rev=counts_per_rev,
+        logs = [_log.read_log(p, counts_per_rev=counts_per_rev,
                              **{k: v for k, v in driven_options.items() if v is not None})
                 for p in paths]
         if len(logs) == 1:
@@ -240,7 +242,7 @@ def _fit_batch(logs, summary_out, json_out, plot_out, inertia, fix, release_time
     _check_output(summary_out, paths, "--summary")
     _check_output(json_out, paths, "--json")
     fixed = _parse_fix(fix)
-    from .._batch import fit_many
+    from .._fitting._batch import fit_many
 
     client = None
     if workers and workers > 1 and not dask_address:

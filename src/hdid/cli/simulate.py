@@ -56,14 +56,14 @@ def simulate_cmd(out, amplitudes, rate, duration, hold, offset, counts_per_rev, 
         raise _Fail(f"{out} exists; add --overwrite to replace it (or choose another file)")
 
     from .._errors import HdidError
-    from .._synthetic import synthesize
+    from .._simulation._synthetic import synthesize
 
     model = None
     if from_json:
         src = Path(from_json)
         if not src.is_file():
             raise _Fail(f"--from {from_json}: no such file")
-        from .._result import FitResult
+        from .._results._result import FitResult
 
         try:
             fitted = FitResult.load(src)

@@ -1,0 +1,179 @@
+"""The verdict rules of :func:`hdid.diagnose` (their list and statistical footing: the
+module docstring of :mod:`hdid._diagnosis._diagnose`), its warnings, and the plain-language reasons.
+Pure functions of the candidate table: no fit, no program."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._candidates import Candidate
+from ._result import CandidateResult
+
+#: ΔBIC below this is "very strong" evidence (Kass & Raftery 1995: |ΔBIC| > 10).
+STRONG_DBIC = -10.0
+#: Two candidates whose BIC differ by less than this explain the data about equally well:
+#: the evidence between them is not "very strong" on the Kass–Raftery scale (> 10).
+AMBIGUOUS_DBIC = 10.0
+
+
+def _features_text(feat: dict[str, float]) -> str:
+    parts = []
+    c = feat.get("corr_sign_omega")
+    if c is not None and np.isfinite(c) and abs(c) > 0.2:
+        parts.append(f"flips with the velocity (corr with sign ω {c:+.2f})")
+    e = feat.get("near_rest_energy_share")
+    if e is not None and np.isfinite(e) and e > 0.35:
+        parts.append(f"{100 * e:.0f} % of its energy in the last fifth before rest")
+    r = feat.get("stuck_signed_counts")
+    if r is not None and np.isfinite(r) and abs(r) > 0.5:
+        side = "beyond" if r > 0 else "short of"
+        parts.append(f"logged rest points lie {abs(r):.1f} counts {side} the model's (towards the release side)")
+    o = feat.get("theta_peak_order")
+    s = feat.get("theta_peak_share")
+    if o is not None and s is not None and np.isfinite(s) and s > 0.3:
+        parts.append(f"periodic in the WG angle (order ≈ {o:.0f} per rev, {100 * s:.0f} % of power)")
+    ce = feat.get("corr_abs_theta")
+    if ce is not None and np.isfinite(ce) and abs(ce) > 0.3:
+        parts.append(f"grows with the twist (corr with |θ| {ce:+.2f})")
+    return "; ".join(parts) if parts else "no single dominant pattern"
+
+
+
+def _reason(c: CandidateResult, cand: Candidate, feat: dict[str, float], floor: float) -> str:
+    if c.error:
+        return f"fit failed: {c.error}"
+    head = (
+        f"{c.label}: RMS {c.rms_before_rad / floor:.2f} → {c.rms_after_rad / floor:.2f}× the "
+        f"quantization floor, ΔBIC {c.delta_bic:.1f} for {c.n_added} more parameter(s)."
+    )
+    return f"{head} The residual before: {_features_text(feat)}. A missing {c.key} leaves this " \
+           f"mark: {cand.mark}."
+
+
+
+def _rivals(best: CandidateResult, ranked: list[CandidateResult], all_cands) -> list:
+    """Candidates of another family within ``AMBIGUOUS_DBIC`` of the (strong) best: the
+    evidence for the best *over them* is not very strong (Kass–Raftery), whether or not
+    theirs against the current model is (a best at −14 and a rival at −6 are 8 apart: no
+    ground to name the first)."""
+    fam = all_cands[best.key].family or best.key
+    return [c for c in ranked if c is not best and c.error is None
+            and c.delta_bic - best.delta_bic < AMBIGUOUS_DBIC
+            and (all_cands[c.key].family or c.key) != fam]
+
+
+def _verdict(rounds, all_cands) -> tuple[str, str, list[str]]:
+    """The verdict of the first round (and the ladder's), by the rules of the module
+    docstring. Returns ``(verdict, summary, notes)``."""
+    first = rounds[0]
+    results, white, floor = first["results"], first["white"], first["floor"]
+    notes: list[str] = []
+    ok = [c for c in results if c.error is None]
+    strong = [c for c in ok if c.delta_bic < STRONG_DBIC]
+    if not strong:
+        if white.at_floor:
+            if not white.white:
+                notes.append(
+                    f"the residual is at the floor but not white (Ljung–Box p = {white.p_value:.2g} "
+                    f"over {white.max_lag} lag(s)): slow rounding near the reversals correlates "
+                    "it, or a small effect remains below what this log can resolve"
+                )
+            return "adequate", (
+                f"no candidate improves the fit strongly (ΔBIC < {STRONG_DBIC:g}) and the "
+                f"moving residual is at the quantization floor ({white.rms_ratio:.2f}×)"
+            ), notes
+        return "unexplained", (
+            f"the residual is above the floor (moving RMS {white.rms_ratio:.2f}× floor, "
+            f"Ljung–Box p = {white.p_value:.2g}) but no library effect improves it strongly"
+        ), notes
+    best = strong[0]
+    rivals = _rivals(best, ok, all_cands)
+    same = [c for c in strong[1:] if c.delta_bic - best.delta_bic < AMBIGUOUS_DBIC
+            and c not in rivals]
+    if same:
+        notes.append(
+            f"{best.key} and {', '.join(c.key for c in same)} leave the same mark "
+            f"({all_cands[best.key].family}) and fit about equally well; to separate them: "
+            f"{all_cands[best.key].experiment}"
+        )
+    if rivals:
+        names = [best.key] + [c.key for c in rivals]
+        exps = "; ".join(f"{c.key}: {all_cands[c.key].experiment}" for c in [best] + rivals)
+        return "ambiguous", (
+            f"ambiguous between {', '.join(names)} (ΔBIC "
+            f"{', '.join(f'{c.delta_bic:.1f}' for c in [best] + rivals)}): the log cannot tell "
+            f"them apart. Separating experiments — {exps}"
+        ), notes
+    if best.adequate_after:
+        if best.white_after is False:
+            notes.append(
+                f"after adding {best.label} the residual is at the floor but not white: a "
+                "second, smaller effect may remain"
+            )
+        alt = (f" — or {', '.join(c.label for c in same)}: the same mark "
+               f"({all_cands[best.key].family}), its form not told apart by this log"
+               if same else "")
+        return "missing_effect", (
+            f"add {best.label}: RMS {best.rms_before_rad / floor:.2f} → "
+            f"{best.rms_after_rad / floor:.2f}× floor, ΔBIC {best.delta_bic:.1f}{alt}"
+        ), notes
+    # several effects missing at once: the ladder may reach the floor in more steps
+    if len(rounds) > 1:
+        every = [c for c in rounds[-1]["results"] if c.error is None]
+        last = [c for c in every if c.delta_bic < STRONG_DBIC]
+        if last and last[0].adequate_after and not _rivals(last[0], every, all_cands):
+            names = [r["results"][0].label for r in rounds]
+            return "missing_effect", (
+                "add " + " and ".join(names) + f": RMS → {last[0].rms_after_rad / floor:.2f}× floor"
+            ), notes
+    return "unexplained", (
+        f"{best.label} improves the fit (ΔBIC {best.delta_bic:.1f}) but leaves the moving "
+        f"residual at {best.moving_ratio_after:.2f}× the floor: the missing physics is "
+        "probably not in the library (or several effects are missing: try --steps 2)"
+    ), notes
+
+
+#: Fewer lags than this in the whiteness test (``max_lag``: a quarter of the shortest
+#: run's moving samples, at most 10) leave it little power against a correlated residual
+#: (a Ljung–Box test over 2–4 lags sees only a lag-1 correlation of ≳ 0.3 at ~40 samples).
+LOW_POWER_LAGS = 5
+
+
+def _warnings(verdict, rounds, all_cands, local_base, fa) -> list[str]:
+    """What is known against trusting the verdict (the module docstring's list)."""
+    from ._rates import TARGET
+
+    first = rounds[0]
+    white, floor = first["white"], first["floor"]
+    ok = [c for c in first["results"] if c.error is None]
+    strong = [c for c in ok if c.delta_bic < STRONG_DBIC]
+    out: list[str] = []
+    if fa is None:
+        out.append("the false-alarm rate of these rules was not measured for a design near "
+                   "this log's (sample rate, number of runs): a claimed effect has no "
+                   "calibrated error rate here")
+    elif fa.upper > TARGET and verdict != "adequate":
+        out.append(f"{fa.text()}: the one-sided upper bound is above the "
+                   f"{100 * TARGET:.0f} % target (not yet shown to meet it)")
+    if local_base:
+        a, b, who = local_base[0]
+        out.append(f"the base model's first optimum was a local one (χ² {a:.1f} → {b:.1f} from "
+                   f"{who}'s optimum with the effect removed): this log's fits have several "
+                   "basins, and a candidate's gain may still hide a base basin no start found")
+    if verdict != "adequate" and white.max_lag < LOW_POWER_LAGS:
+        out.append(f"the whiteness test has little power here ({white.max_lag} lag(s)): "
+                   "'at the floor' rests on the residual's RMS alone")
+    if verdict in ("missing_effect", "ambiguous") and strong:
+        best = strong[0]
+        if best.white_after is False:
+            out.append(f"after adding {best.label} the residual is not white: a second, "
+                       "smaller effect may remain")
+        if best.adequate_after is False:
+            out.append(f"the best candidate ({best.label}) leaves the moving residual at "
+                       f"{best.moving_ratio_after:.2f}× the floor: it does not explain the "
+                       "misfit alone")
+    if any(c.error for c in first["results"]):
+        out.append("some candidate refits failed (" + ", ".join(
+            c.key for c in first["results"] if c.error) + "): they were not compared")
+    return out
+

@@ -1,0 +1,323 @@
+"""Joint least-squares fit of a model to every run of a free-motion log."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import time
+from collections.abc import Iterable, Mapping
+from typing import NamedTuple
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import FitError
+from .._problems._evaluate import dense as _dense
+from ._identifiability import MOVED_COUNTS, analyse
+from .._log import Log, read_log
+from .._models._model import Model
+from ._nested import NESTED_STARTS, against_nested, needs_check, stribeck_pair
+from .._simulation._prepare import Prepared, offset_guess, prepare
+from .._problems._problem import OFFSET_SCALE_REL, Problem, build_problem
+from .._results._result import FitResult
+from .._results._summaries import StartSummary
+from .._simulation._simulate import DEFAULT_MAX_SUBSTEP
+from .._models._transforms import interval_to_u, to_unconstrained
+from ..effects import order_of_magnitude
+from ._lm import _local_fits
+from ._starts import _grid_starts, log_scales
+
+
+#: Natural frequency [Hz] at which the default substep (``DEFAULT_MAX_SUBSTEP``) was
+#: validated against the event-driven reference (error 0.04 of the 250 Hz quantization
+#: floor); other logs scale the substep by powers of two to keep ``h·ω_n`` about the same.
+SUBSTEP_REFERENCE_HZ = 60.0
+
+
+def fit(
+    log: Log | str | os.PathLike | object,
+    model: Model | None = None,
+    *,
+    inertia: float | None = None,
+    fix: Mapping[str, float] | Iterable[str] | None = None,
+    free_inertia: bool | None = None,
+    inertia_prior: tuple[float, float] | None = None,
+    release_time: float | None = None,
+    counts_per_rev: float | None = None,
+    ratio: float | None = None,
+    resolution: float | None = None,
+    n_starts: int = 6,
+    max_substep: float | None = None,
+    max_steps: int = 300,
+    start_from_model: bool = False,
+    nested: bool | str = "auto",
+) -> FitResult:
+    """Fit stiffness, friction (and optionally inertia) to all runs of a log jointly.
+
+    Parameters
+    ----------
+    log:
+        A :class:`~hdid.Log`, a CSV path or a pandas DataFrame (see :func:`hdid.read_log`).
+    model:
+        Structure and starting/fixed values; default :meth:`Model.default`.
+    inertia:
+        Total inertia at the wave generator [kg m²] (default: the model's, i.e. the
+        CSF-8 + small-motor datasheet value 7e-7). Free motion fixes only torques
+        *relative to* the inertia, so this sets the absolute scale.
+    fix:
+        Parameters held fixed: names (at the model's value) or ``{name: value}``.
+    free_inertia:
+        Fit the inertia too. Only meaningful with runs of different known
+        ``added_inertia`` or with ``inertia_prior``; default: free exactly when the
+        runs' added inertias differ.
+    inertia_prior:
+        ``(mean, relative_sd)`` — a log-normal prior on the inertia (e.g. a datasheet
+        value ±30 %).
+    release_time:
+        Known release instant [s] in each run's time axis (otherwise fitted per run).
+    counts_per_rev:
+        Convert a log of raw encoder counts.
+    ratio:
+        Gear ratio N between the logged axis and the output (default: the model's, 100;
+        1 when the logged angle is the output's).
+    resolution:
+        Sensor step of ``theta`` in the log's units (default: from the readings' grid,
+        else the noise is estimated from the log and the report says so).
+    n_starts:
+        Local fits started from the best points of a coarse data-driven grid.
+    max_substep:
+        Longest RK4 substep [s] (default 0.5 ms).
+    max_steps:
+        Levenberg–Marquardt iteration limit per start.
+    start_from_model:
+        Also start from the model's own values (a warm start, e.g. a fitted model with
+        an effect added, as :func:`hdid.diagnose` does); that start is always run.
+    nested:
+        With a free Stribeck law, also fit its nested Coulomb case (``tau_s = tau_c``)
+        and restart from that optimum when the general law ended worse
+        (:mod:`hdid._fitting._nested`); a warning says when it stays worse. ``"auto"`` (default)
+        checks only a fit that shows a symptom — a residual above twice the noise floor,
+        a non-finite standard error of the law, ``tau_s ≤ tau_c`` — since the check costs
+        a second model structure (~4 s of tracing on a cold start); ``True`` always,
+        ``False`` never.
+    """
+    t_start = time.perf_counter()
+    if nested not in (True, False, "auto"):
+        raise ValueError(f"nested = {nested!r}: use True, False or 'auto'")
+    if not isinstance(log, Log):
+        log = read_log(log, counts_per_rev=counts_per_rev, resolution=resolution)
+    elif resolution is not None:  # the log carries it (also into the nested refits)
+        log = dataclasses.replace(log, resolution=float(resolution), resolution_source="given")
+    counts_per_rev = resolution = None
+    setup = _setup(
+        log, model, inertia=inertia, fix=fix, free_inertia=free_inertia,
+        inertia_prior=inertia_prior, release_time=release_time,
+        counts_per_rev=counts_per_rev, max_substep=max_substep, ratio=ratio,
+        resolution=resolution,
+    )
+    problem, prep, model = setup.problem, setup.prep, setup.model
+
+    U0, grid_cost = _grid_starts(problem, prep, model, n_starts, start_from_model)
+    U, costs, ok, steps = _local_fits(problem, U0, max_steps)
+    retry = _untrapped(problem, prep, U[int(np.argmin(np.where(np.isfinite(costs), costs,
+                                                                np.inf)))])
+    if retry is not None:
+        U1, c1, ok1, s1 = _local_fits(problem, retry[None, :], max_steps)
+        U, costs = np.concatenate([U, U1]), np.concatenate([costs, c1])
+        ok, steps = np.concatenate([ok, ok1]), np.concatenate([steps, s1])
+    result = _finish(setup, U, costs, ok, steps, t_start)
+    result = nested_check(result, log, setup, nested=nested, fix=fix,
+                          inertia_prior=inertia_prior, release_time=release_time,
+                          max_substep=max_substep, n_starts=n_starts, max_steps=max_steps)
+    result.wall_time_s = time.perf_counter() - t_start
+    return result
+
+
+def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", fix=None,
+                 inertia_prior=None, release_time=None, max_substep=None, n_starts: int = 6,
+                 max_steps: int = 300) -> FitResult:
+    """:func:`hdid._fitting._nested.against_nested` for a fit of ``log`` (options as in :func:`fit`):
+    ``nested`` True always, ``"auto"`` on a symptom (:func:`hdid._fitting._nested.needs_check`)."""
+    if nested not in (True, False, "auto"):
+        raise ValueError(f"nested = {nested!r}: use True, False or 'auto'")
+    if not (nested is True and stribeck_pair(result.model, setup.fixed) is not None
+            or nested == "auto" and needs_check(result, setup.fixed)):
+        return result
+    options = dict(free_inertia="inertia" not in setup.fixed, inertia_prior=inertia_prior,
+                   release_time=release_time, max_substep=max_substep)
+
+    def fixed_in(m: Model):
+        names = set(m.parameter_specs())
+        if isinstance(fix, Mapping):
+            return {n: v for n, v in fix.items() if n in names} or None
+        return [n for n in (fix or ()) if n in names] or None
+
+    def optimum(m: Model):
+        s = _setup(log, m, fix=fixed_in(m), **options)
+        U0, _ = _grid_starts(s.problem, s.prep, s.model, NESTED_STARTS + 1, True)
+        Un, cn, _, _ = _local_fits(s.problem, U0, max_steps)
+        best = int(np.argmin(np.where(np.isfinite(cn), cn, np.inf)))
+        return _data_rms(s.problem, Un[best], cn[best]), s.problem.values_np(Un[best])
+
+    def refit(m: Model) -> FitResult:
+        return fit(log, m, fix=fixed_in(m), n_starts=n_starts, max_steps=max_steps,
+                   start_from_model=True, nested=False, **options)
+
+    return against_nested(result, setup.fixed, optimum, refit)
+
+
+def _data_rms(problem: Problem, u, cost: float) -> float:
+    """The weighted RMS data residual [log units] at ``u`` from its cost (data χ² plus the
+    prior rows), as :func:`analyse` reports it (``rms_residual_rad``)."""
+    P = problem.n_physical
+    z = (np.asarray(u)[:P] - np.asarray(problem.prior_mean)) / np.asarray(problem.prior_sd)
+    chi2 = float(cost) - float(np.sum(np.where(np.asarray(problem.prior_on), z, 0.0) ** 2))
+    w2 = float(np.sum(np.asarray(problem.weight) ** 2))
+    return float(problem.sigma) * math.sqrt(max(chi2, 0.0) / w2)
+
+
+def trapped_runs(problem: Problem, prep: Prepared, u) -> np.ndarray:
+    """Runs the model never releases at ``u`` (exact stick: speed 0 at every sample)
+    although the log shows them moving (rest ≠ hold by more than ``MOVED_COUNTS``)."""
+    # Jitted: an eager call compiled a fresh `while` program on every fit (its loop body
+    # is a new closure each time), ~140 memory mappings that were never freed.
+    _, omega, _ = map(np.asarray, _dense(problem, jnp.asarray(u), problem.times))
+    moved = np.abs(prep.rest - prep.hold) > MOVED_COUNTS * prep.resolution
+    return np.flatnonzero(moved & (np.max(np.abs(omega), axis=1) == 0.0))
+
+
+def _untrapped(problem: Problem, prep: Prepared, u):
+    """A restart for an optimum that holds runs the log shows moving, or ``None``.
+
+    Such a run has a zero gradient in its release and start angle: once a stick band tried
+    on the way exceeds its start angle, the fit moves the start angle to a compromise
+    between the hold and the rest readings, deep in the band, and cannot come back (seen
+    with ±0.05 rad releases just outside a 0.048 rad band). The restart puts those runs'
+    start angles back at their hold readings, from the other parameters of ``u``."""
+    trapped = trapped_runs(problem, prep, u)
+    if trapped.size == 0:
+        return None
+    v = np.array(u, dtype=float)
+    i = problem.n_physical
+    if problem.release_free:  # the release instant drifted too: back to the data's guess
+        lo, hi = np.asarray(problem.release_lo), np.asarray(problem.release_hi)
+        guess = interval_to_u(prep.release_guess, lo, hi)
+        v[i + trapped] = np.asarray(guess)[trapped]
+        i += problem.n_runs
+    v[i + trapped] = 0.0  # θ0 = hold − offset
+    return v
+
+
+class _Setup(NamedTuple):
+    """A log made ready to fit: its arrays, the model and the least-squares problem."""
+
+    prep: Prepared
+    model: Model
+    problem: Problem
+    fixed: frozenset
+
+
+def _setup(
+    log, model=None, *, inertia=None, fix=None, free_inertia=None, inertia_prior=None,
+    release_time=None, counts_per_rev=None, max_substep=None, ratio=None, resolution=None,
+) -> _Setup:
+    """Read and prepare a log and build its :class:`Problem` (options as in :func:`fit`)."""
+    if not isinstance(log, Log):
+        log = read_log(log, counts_per_rev=counts_per_rev, resolution=resolution)
+    elif resolution is not None:
+        log = dataclasses.replace(log, resolution=float(resolution), resolution_source="given")
+    prep = prepare(log, release_time=release_time)
+
+    model = Model.default() if model is None else model
+    if ratio is not None:
+        model = model.with_ratio(ratio)
+    if inertia is not None:
+        if not inertia > 0:
+            raise ValueError(f"inertia = {inertia!r}: must be > 0 kg m^2")
+        model = model.replace(inertia=float(inertia))
+    fixed_values = _fixed_values(model, fix)
+    if fixed_values:
+        model = model.replace(**fixed_values)
+    specs = model.parameter_specs()
+    added_varies = np.ptp(prep.added_inertia) > 0
+    if free_inertia is None:
+        free_inertia = bool(added_varies) and inertia is None and "inertia" not in fixed_values
+    free = tuple(
+        n for n in specs if n not in fixed_values and (n != "inertia" or free_inertia)
+    )
+    priors = {n: specs[n].prior for n in free if specs[n].prior is not None}
+    if inertia_prior is not None and "inertia" in free:
+        mean, rel = inertia_prior
+        priors["inertia"] = (math.log(mean), rel)
+
+    n_data = int(np.sum(prep.weight > 0))
+    sub = substep_for(prep.frequency_hz) if max_substep is None else float(max_substep)
+    offset0 = offset_guess(prep)
+    scales = log_scales(prep, model, offset0)
+    model = model.with_scales(scales)
+    specs = model.parameter_specs()
+    for n, (mean, sd) in list(priors.items()):  # centred on the log's own scale
+        if mean is None:
+            start = specs[n].start(scales) if specs[n].start else model.float_values()[n]
+            priors[n] = (float(to_unconstrained(specs[n], start)), sd)
+    all_moving = prep.moving_start is not None and bool(np.all(prep.moving_start))
+    problem = build_problem(
+        prep, model, free, offset0, sub, release_time is not None or all_moving, priors,
+        offset_scale=order_of_magnitude(OFFSET_SCALE_REL * scales.amplitude),
+        vel_scale=order_of_magnitude(scales.speed),
+    )
+    if n_data <= problem.n_unknowns:
+        raise FitError(
+            f"{prep.source}: {n_data} samples but {problem.n_unknowns} unknowns; "
+            "log more samples per run, add runs, or fix parameters (fix=/--fix)"
+        )
+    return _Setup(prep, model, problem, frozenset(set(specs) - set(free)))
+
+
+def _finish(setup: _Setup, U, costs, ok, steps, t_start: float, **analyse_options) -> FitResult:
+    """Analyse the best of the local fits (``analyse_options`` go to :func:`analyse`)."""
+    problem, prep = setup.problem, setup.prep
+    finite = np.isfinite(costs)
+    if not finite.any():
+        raise FitError(
+            f"{prep.source}: every start diverged (non-finite residuals); check units "
+            "(rad vs counts) and --inertia, or fix some parameters"
+        )
+    order = np.argsort(np.where(finite, costs, np.inf))
+    best = int(order[0])
+    u = U[best]
+    starts = StartSummary.from_solutions(problem, U, costs, ok, steps, best)
+    result = analyse(problem, prep, u, starts, fixed=set(setup.fixed), **analyse_options)
+    result.wall_time_s = time.perf_counter() - t_start
+    if not ok[best]:
+        result.warnings.append(
+            f"the best start stopped after {int(steps[best])} iterations without meeting "
+            "the convergence tolerance; results may not be at the optimum"
+        )
+    return result
+
+
+def substep_for(frequency_hz: float) -> float:
+    """Longest RK4 substep [s] for a log whose oscillation frequency is ``frequency_hz``:
+    ``DEFAULT_MAX_SUBSTEP`` at ``SUBSTEP_REFERENCE_HZ``, halved per octave above (so
+    ``h·ω_n`` stays ≲ 0.26), doubled per octave below; powers of two, so logs of similar
+    gears share compiled programs."""
+    if not (math.isfinite(frequency_hz) and frequency_hz > 0):
+        return DEFAULT_MAX_SUBSTEP
+    octaves = math.floor(math.log2(frequency_hz / SUBSTEP_REFERENCE_HZ) + 0.5)
+    return DEFAULT_MAX_SUBSTEP * 2.0 ** (-octaves)
+
+
+def _fixed_values(model: Model, fix) -> dict[str, float]:
+    if fix is None:
+        return {}
+    specs = model.parameter_specs()
+    current = model.float_values()
+    items = fix.items() if isinstance(fix, Mapping) else ((n, None) for n in fix)
+    out = {}
+    for name, value in items:
+        if name not in specs:
+            raise KeyError(f"fix: unknown parameter {name!r}; choose from {list(specs)}")
+        out[name] = current[name] if value is None else float(value)
+    return out

@@ -1,0 +1,266 @@
+""":func:`read_log`: a CSV file or DataFrame to a validated :class:`~hdid.Log` (the table
+is read by :mod:`._table`, its columns found by :mod:`._columns`, its rows checked by
+:mod:`._validate`)."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pandas as pd
+
+from .._errors import LogError
+from ._names import (
+    _COUNTS_HINT, _INERTIA, _LOAD_TORQUE, _MOTOR, _OUTPUT_COUNTS_HINT, _RUN, _SETUP, _THETA,
+    _THETA_OUT, _TIME,
+)
+from ._types import Log, Run
+from ._resolution import estimate_resolution
+from ._table import _Cells, _Table, _load_csv, _load_frame, _show
+from ._columns import (
+    _check_args, _column_scales, _find_columns, _first, _missing_cells, _positive_arg,
+    _to_radians,
+)
+from ._validate import check_lengths, check_motion, check_within_runs, run_blocks, sample_period
+
+
+def read_log(
+    source: str | os.PathLike[str] | pd.DataFrame,
+    *,
+    counts_per_rev: float | None = None,
+    period_tolerance: float = 0.02,
+    min_samples_per_run: int = 8,
+    output_counts_per_rev: float | None = None,
+    torque_constant: float | None = None,
+    resolution: float | None = None,
+) -> Log:
+    """Read and validate a free-motion or driven log.
+
+    Parameters
+    ----------
+    source : str, os.PathLike or pandas.DataFrame
+        Path of a CSV file with a header line, or a table with the same columns.
+        For a DataFrame, row numbers in messages are those the table would have
+        as a CSV file (first row is row 2) and the source is ``<DataFrame>``.
+    counts_per_rev : float, optional
+        Encoder counts per revolution. When given, ``theta`` (or ``counts``)
+        holds raw integer counts and is converted to radians with
+        ``2*pi/counts_per_rev``, which is also the resolution.
+    period_tolerance : float, default 0.02
+        Allowed relative deviation of every time step from the log's median
+        step.
+    min_samples_per_run : int, default 8
+        Fewest samples a run may have (at least 2).
+    output_counts_per_rev : float, optional
+        Output encoder counts per revolution (driven logs). When given,
+        ``theta_out`` (or ``output_counts``) holds raw integer counts and is
+        converted to radians with ``2*pi/output_counts_per_rev``, which is also
+        the output resolution.
+    torque_constant : float, optional
+        Motor torque constant [N m/A]; required with a ``motor_current`` column
+        (``motor_torque = torque_constant * current``) and an error for a driven
+        log without one. ``output_counts_per_rev`` and ``torque_constant`` are
+        ignored for a free-motion log (no driven column), so that one set of
+        arguments reads both logs of a joint fit.
+    resolution : float, optional
+        Encoder step (or sensor resolution) of ``theta`` in the log's own units. Without
+        it (and without ``counts_per_rev``) the step is estimated from the readings'
+        grid; readings on no grid (interpolated, analog) get ``None`` and the fit
+        estimates their noise instead.
+
+    Returns
+    -------
+    Log
+        The validated runs with their common sample period and resolution.
+
+    Raises
+    ------
+    LogError
+        For any problem with the file, its contents or the arguments, with a
+        one-line message naming the file, column and/or CSV line and the fix.
+        The file is never modified.
+
+    Notes
+    -----
+    Checks, in order: the file can be read as CSV; required columns exist; every
+    cell of the used columns is filled and numeric/finite (first bad cell in the
+    file is reported); raw counts vs. ``counts_per_rev`` consistency;
+    ``added_inertia >= 0``; runs are contiguous; ``setup`` and
+    ``added_inertia`` are constant within a run; time strictly increases within
+    a run; each run has enough samples; the sampling is uniform and shared by
+    all runs; each run shows motion (at least 2 encoder steps, or 1e-9 rad when
+    the resolution is unknown). Fully blank lines are skipped.
+
+    Driven logs (a ``motor_torque`` or ``motor_current`` column) are checked
+    further: the torque / counts arguments match the columns; no run lacks the
+    motor torque while others have it; every driven cell is filled and finite;
+    raw output counts are whole numbers. The motion check is skipped for driven
+    logs (a driven run may stay stuck).
+    """
+    if isinstance(source, pd.DataFrame):
+        path = None
+    elif isinstance(source, str | os.PathLike):
+        path = source
+    else:
+        raise TypeError(
+            f"read_log expects a path or a pandas DataFrame, got {type(source).__name__}"
+        )
+    cpr = _check_args(path, counts_per_rev, period_tolerance, min_samples_per_run)
+    given_step = _positive_arg(
+        path, resolution, "resolution", "pass the encoder step in the log's units, e.g. "
+        "--resolution 0.00157 (or --counts-per-rev N)"
+    )
+    if given_step is not None and cpr is not None:
+        raise LogError(
+            "give either the resolution or the counts per revolution, not both "
+            "(--counts-per-rev N implies a step of 2*pi/N)", path=path,
+        )
+    out_cpr = _positive_arg(
+        path, output_counts_per_rev, "output counts per revolution", _OUTPUT_COUNTS_HINT
+    )
+    kt = _positive_arg(
+        path, torque_constant, "torque constant", "pass the motor's torque constant in N m/A"
+    )
+    table = _load_frame(source) if path is None else _load_csv(path)
+    cols = _find_columns(table, cpr, out_cpr, kt)
+    unit_scale = _column_scales(table, cols)
+    if given_step is not None:  # in theta's units, as the header gives them
+        given_step *= unit_scale[_THETA]
+    driven = _MOTOR in cols
+    if not driven:  # a free-motion log: the driven-only arguments do not apply
+        out_cpr = kt = None
+    n = int(table.lines.size)
+    if n == 0:
+        raise LogError(
+            "no data rows below the header — the log must hold the samples of at least one run",
+            path=path,
+        )
+
+    def name(key: str) -> str:
+        return table.names[cols[key]]
+
+    def fail(message: str, key: str | None = None, pos: int | None = None) -> LogError:
+        return LogError(
+            message,
+            path=path,
+            column=None if key is None else name(key),
+            row=None if pos is None else int(table.lines[pos]),
+        )
+
+    # -- cells -------------------------------------------------------------
+    cells = _Cells(table)
+    run_labels = cells.labels(cols[_RUN]) if _RUN in cols else None
+    setups = cells.labels(cols[_SETUP]) if _SETUP in cols else None
+    time = cells.numbers(cols[_TIME])
+    theta = cells.numbers(cols[_THETA])
+    inertia = cells.numbers(cols[_INERTIA]) if _INERTIA in cols else None
+    motor = cells.numbers(cols[_MOTOR]) if driven else None
+    theta_out = cells.numbers(cols[_THETA_OUT]) if _THETA_OUT in cols else None
+    load = cells.numbers(cols[_LOAD_TORQUE]) if _LOAD_TORQUE in cols else None
+    if driven and run_labels is not None:
+        _check_not_mixed(table, cols[_MOTOR], run_labels)
+    cells.raise_first()
+    time, theta = time * unit_scale[_TIME], theta * unit_scale[_THETA]
+    if inertia is not None:
+        inertia = inertia * unit_scale[_INERTIA]
+    if motor is not None:
+        motor = motor * unit_scale[_MOTOR]
+    if theta_out is not None:
+        theta_out = theta_out * unit_scale[_THETA_OUT]
+    if load is not None:
+        load = load * unit_scale[_LOAD_TORQUE]
+    if motor is not None and kt is not None:
+        motor = motor * kt
+
+    # -- counts vs. radians ------------------------------------------------
+    theta, resolution = _to_radians(
+        theta, cpr, fail, _THETA, "encoder", "--counts-per-rev", _COUNTS_HINT
+    )
+    if given_step is not None:
+        resolution = given_step
+    resolution_source = "given" if resolution is not None else None
+    output_resolution: float | None = None
+    if theta_out is not None:
+        theta_out, output_resolution = _to_radians(
+            theta_out, out_cpr, fail, _THETA_OUT, "output encoder",
+            "output_counts_per_rev", _OUTPUT_COUNTS_HINT,
+        )
+
+    if inertia is not None:
+        pos = _first(inertia < 0)
+        if pos is not None:
+            raise fail(
+                f"added inertia {inertia[pos]:.6g} is negative — it must be >= 0 kg m^2",
+                _INERTIA,
+                pos,
+            )
+
+    # -- runs, sampling, motion (hdid._log._validate) ------------------------
+    starts, names = run_blocks(run_labels, n, fail)
+    ends = np.append(starts[1:], n)
+    new_run = np.zeros(n, dtype=bool)
+    new_run[starts] = True
+    within = ~new_run[1:]  # step i -> i+1 stays inside one run
+    check_within_runs(setups, inertia, time, within, fail)
+    lengths = ends - starts
+    check_lengths(lengths, starts, names, min_samples_per_run, _RUN in cols, fail)
+    period = sample_period(time, within, starts, ends, names, period_tolerance, fail)
+    if resolution is None:
+        offsets = np.repeat(theta[starts], lengths)
+        resolution = estimate_resolution(theta - offsets)
+        resolution_source = "estimated" if resolution is not None else None
+    if theta_out is not None and output_resolution is None:
+        offsets = np.repeat(theta_out[starts], lengths)
+        output_resolution = estimate_resolution(theta_out - offsets)
+    if not driven:  # a driven run may stay stuck
+        check_motion(theta, starts, names, resolution, fail)
+
+    def part(values: np.ndarray | None, k: int) -> np.ndarray | None:
+        return None if values is None else values[starts[k] : ends[k]]
+
+    runs = tuple(
+        Run(
+            name=names[k],
+            time=time[starts[k] : ends[k]],
+            theta=theta[starts[k] : ends[k]],
+            setup="1" if setups is None else str(setups[starts[k]]),
+            added_inertia=0.0 if inertia is None else float(inertia[starts[k]]),
+            first_row=int(table.lines[starts[k]]),
+            motor_torque=part(motor, k),
+            theta_out=part(theta_out, k),
+            load_torque=part(load, k),
+        )
+        for k in range(len(starts))
+    )
+    return Log(
+        source=table.source,
+        runs=runs,
+        sample_period=period,
+        resolution=resolution,
+        resolution_source=resolution_source,
+        counts_per_rev=cpr,
+        output_resolution=output_resolution,
+        output_counts_per_rev=out_cpr,
+        torque_constant=kt,
+    )
+
+
+def _check_not_mixed(table: _Table, col: int, run_labels: np.ndarray) -> None:
+    """Raise a LogError if some runs have no motor torque at all and others have it."""
+    missing = _missing_cells(table.columns[col])
+    if not missing.any() or missing.all():
+        return
+    starts = np.concatenate(([0], np.flatnonzero(run_labels[1:] != run_labels[:-1]) + 1))
+    empty = np.logical_and.reduceat(missing, starts)
+    full = ~np.logical_or.reduceat(missing, starts)
+    if empty.any() and (full | ~empty).any():
+        b = int(np.argmax(empty))
+        other = int(np.argmax(~empty))
+        raise LogError(
+            f"run {_show(run_labels[starts[b]])} has no motor torque but run "
+            f"{_show(run_labels[starts[other]])} has — a log must be all driven or all "
+            "free-motion; split it into two files",
+            path=table.path,
+            column=table.names[col],
+            row=int(table.lines[starts[b]]),
+        )

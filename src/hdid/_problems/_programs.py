@@ -1,0 +1,321 @@
+"""Programs kept on disk under hdid's own key, so that a later process skips tracing.
+
+JAX's persistent compilation cache (:mod:`hdid._config`) saves the XLA compile, but its
+key is the lowered program: every new process still traces and lowers each program
+first — for the stick-exact simulator inside a Levenberg–Marquardt loop that is ~5–25 s
+per model structure on a shared 2-core machine, most of a warm ``hdid diagnose``.
+:func:`call` keys a program by what determines it — a name, the arguments' tree
+structure (which holds every static field: model structure, free parameters, layout),
+the shapes and dtypes of their arrays, the source of hdid and the versions of JAX and
+its backend — and keeps the traced and lowered program (a :mod:`jax.export`
+``Exported``: StableHLO plus its calling convention) under ``<cache>/programs``. A later
+process reads it instead of tracing: it only wraps the StableHLO in a call, and the XLA
+compile of that call is read from JAX's persistent cache, so what runs is compiled by
+JAX's ordinary path. (An earlier version kept serialized *executables*; some of them did
+not restore on jax 0.10's CPU backend — "Function multiply_sine_fusion not found" — so
+it was off by default.)
+
+Any failure (a program that cannot be exported, a stale or unreadable file, a call that
+fails) falls back to compiling in the process, and a program that failed is never loaded
+again (``<key>.bad``), so results never depend on the store. The store is on unless
+``HDID_NO_CACHE=1`` or ``HDID_PROGRAM_STORE=0``.
+
+:data:`STATS` records, per call that had to prepare a program, where the time went
+(read from the store or traced and lowered; compiled or read from JAX's cache), for
+``benchmarks/diagnose_speed.py``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import os
+import pickle
+import re
+import time
+from collections import OrderedDict
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import equinox as eqx
+import jax
+
+from .. import _config
+
+#: Modules that only orchestrate (no function of theirs is traced into a stored program:
+#: those come from ``_refit``, ``_residuals`` and the problem, model and effects they
+#: call; this module only wraps them, and a stored program that no longer loads is
+#: traced again): editing them does not invalidate the store.
+UNTRACED = frozenset({"_problems/_programs.py"})
+#: Packages of such modules: the command line, log reading (NumPy only).
+UNTRACED_PACKAGES = frozenset({"cli", "_log", "_diagnosis"})
+_ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
+#: Compiled programs of this process, most recently used last. Bounded: every XLA:CPU
+#: executable holds memory mappings for its code (see tests/conftest.py).
+_LOADED: OrderedDict[str, Any] = OrderedDict()
+MAX_LOADED = 64
+#: ... and bounded by what they cost: a model's programs hold ~1 400–2 700 memory
+#: mappings (``/proc/self/maps``), so 64 of them can exceed the kernel's limit
+#: (``vm.max_map_count``, 65 530 by default), and JAX's own caches keep executables of
+#: their own besides. When the process holds more than this fraction of the limit after a
+#: new program, every compiled program is dropped — this store's and JAX's caches
+#: (:func:`release`) — and later calls read them again from the store. (A process that
+#: diagnosed ~40 logs died of "LLVM compilation error: Cannot allocate memory".)
+MAX_MAPS_FRACTION = 0.5
+#: Times :func:`release` ran in this process (for tests and benchmarks).
+RELEASES = 0
+_SALT: str | None = None
+#: One dict per program prepared in this process: name, how (``stored``: read from the
+#: store; ``traced``: traced and lowered here; ``jit``: store off), and seconds spent
+#: reading/tracing (``prepare_s``), wrapping the program in a call and lowering it
+#: (``wrap_s``) and compiling or reading JAX's cache (``compile_s``),
+#: and the wall-clock ``span`` (``time.time()``, as JAX's compile events) of both.
+STATS: list[dict[str, Any]] = []
+
+
+def _salt() -> str:
+    """hdid's source, JAX's and the backend's versions: a change invalidates every key."""
+    global _SALT
+    if _SALT is None:
+        h = hashlib.sha256()
+        root = Path(__file__).resolve().parents[1]  # src/hdid
+        for f in sorted(root.rglob("*.py")):
+            rel = f.relative_to(root).as_posix()
+            if rel in UNTRACED or rel.split("/")[0] in UNTRACED_PACKAGES:
+                continue
+            h.update(str(f.relative_to(root)).encode())
+            h.update(f.read_bytes())
+        try:
+            import jaxlib
+
+            h.update(jaxlib.__version__.encode())
+        except ImportError:  # pragma: no cover
+            pass
+        h.update(jax.__version__.encode())
+        dev = jax.devices()[0]
+        h.update(f"{dev.platform}:{getattr(dev, 'device_kind', '')}".encode())
+        h.update(str(jax.config.jax_enable_x64).encode())
+        _SALT = h.hexdigest()
+    return _SALT
+
+
+#: A folder of programs of another source (or JAX) not used for this long is removed.
+STALE_DAYS = 7.0
+
+
+def _store() -> Path | None:
+    """The store's folder for this source and JAX (``<cache>/programs/<salt>``), or
+    ``None`` (``HDID_NO_CACHE=1`` or ``HDID_PROGRAM_STORE=0``)."""
+    if os.environ.get("HDID_NO_CACHE") or os.environ.get("HDID_PROGRAM_STORE") == "0":
+        return None
+    root = _config._cache_dir() / "programs"
+    path = root / _salt()[:16]
+    if not path.is_dir():
+        try:
+            path.mkdir(parents=True, exist_ok=True)
+        except OSError:
+            return None
+        _prune(root, path)
+    return path
+
+
+def _prune(root: Path, keep: Path) -> None:
+    """Remove other sources' folders unused for :data:`STALE_DAYS` (a new folder is made
+    for every edit of hdid's source)."""
+    now = time.time()
+    for d in root.iterdir():
+        try:
+            if d != keep and d.is_dir() and now - d.stat().st_mtime > STALE_DAYS * 86400:
+                for f in d.iterdir():
+                    f.unlink()
+                d.rmdir()
+        except OSError:
+            pass
+
+
+def _key(name: str, treedef, static, leaves) -> str:
+    avals = tuple((tuple(x.shape), str(x.dtype), bool(getattr(x, "weak_type", False)))
+                  for x in leaves)
+    static_leaves = jax.tree_util.tree_leaves(static)
+    text = "|".join([
+        name, _ADDRESS.sub("", str(treedef)), _ADDRESS.sub("", repr(static_leaves)),
+        repr(avals), _salt(),
+    ])
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def call(name: str, fn: Callable, *args):
+    """``fn(*args)`` compiled once per key (arrays dynamic, everything else static) and
+    read from the store in later processes."""
+    dyn, static = eqx.partition(args, eqx.is_array)
+    leaves, treedef = jax.tree_util.tree_flatten(dyn)
+    try:
+        key = _key(name, treedef, static, leaves)
+    except Exception:  # noqa: BLE001 - an unkeyable argument: the ordinary path
+        return eqx.filter_jit(fn)(*args)
+    prog = _LOADED.get(key)
+    if prog is not None:
+        _LOADED.move_to_end(key)
+        return prog(*leaves)
+    prog, out = _prepare(name, key, fn, treedef, static, leaves)
+    _LOADED[key] = prog
+    while len(_LOADED) > MAX_LOADED:
+        _LOADED.popitem(last=False)
+    if _maps_over_limit():
+        release()
+    return out
+
+
+def _maps() -> int | None:
+    """Memory mappings of this process (Linux), or ``None`` where it cannot tell."""
+    try:
+        with open("/proc/self/maps", "rb") as f:
+            return sum(1 for _ in f)
+    except OSError:
+        return None
+
+
+def _max_maps() -> int:
+    try:
+        return int(Path("/proc/sys/vm/max_map_count").read_text())
+    except (OSError, ValueError):
+        return 65530
+
+
+def _maps_over_limit() -> bool:
+    n = _maps()
+    return n is not None and n > MAX_MAPS_FRACTION * _max_maps()
+
+
+def release() -> None:
+    """Drop every compiled program of this process: this store's and JAX's own caches
+    (:func:`jax.clear_caches`), so their executables' memory is returned; later calls
+    read the programs again from the store (or trace them)."""
+    import gc
+
+    global RELEASES
+    _LOADED.clear()
+    jax.clear_caches()
+    gc.collect()
+    RELEASES += 1
+
+
+def _prepare(name, key, fn, treedef, static, leaves):
+    """A compiled program for ``key`` and its first result."""
+    w0 = time.time()  # (the clock of JAX's compile events, for hdid._fitting._vfit's union)
+    t0 = time.perf_counter()
+    exported = _load(key)
+    how = "stored" if exported is not None else "traced"
+    if exported is None:
+        exported = _export(key, fn, treedef, static, leaves)
+    t1 = time.perf_counter()
+    if exported is not None:
+        try:
+            lowered = jax.jit(exported.call).lower(*leaves)
+            t2 = time.perf_counter()
+            prog = lowered.compile()
+            t3 = time.perf_counter()
+            out = jax.block_until_ready(prog(*leaves))
+            STATS.append({"name": name, "how": how, "prepare_s": t1 - t0, "wrap_s": t2 - t1,
+                          "compile_s": t3 - t2, "key": key[:12], "span": (w0, w0 + t3 - t0)})
+            return prog, out
+        except Exception:  # noqa: BLE001 - never load it again; compile it here
+            _mark_bad(key)
+    t1 = time.perf_counter()
+    prog = _compile(fn, treedef, static, leaves)
+    t2 = time.perf_counter()
+    STATS.append({"name": name, "how": "jit", "prepare_s": 0.0, "wrap_s": 0.0, "compile_s": t2 - t1,
+                  "key": key[:12], "span": (w0, w0 + t2 - t0)})
+    return prog, prog(*leaves)
+
+
+def _flat(fn, treedef, static):
+    def flat(*xs):
+        return fn(*eqx.combine(jax.tree_util.tree_unflatten(treedef, xs), static))
+
+    return flat
+
+
+def _compile(fn, treedef, static, leaves):
+    return jax.jit(_flat(fn, treedef, static)).lower(*leaves).compile()
+
+
+def _export(key: str, fn, treedef, static, leaves):
+    """Trace and lower ``fn`` once (a :mod:`jax.export` ``Exported``) and keep it, or
+    ``None`` where the store is off, marked bad, or the program cannot be exported."""
+    store = _store()
+    if store is None or (store / f"{key}.bad").exists():
+        return None
+    try:
+        from jax import export
+
+        exported = export.export(jax.jit(_flat(fn, treedef, static)))(*leaves)
+        # (the VJP hook is a closure and cannot be pickled; the store only calls)
+        blob = pickle.dumps(dataclasses.replace(exported, _get_vjp=None))
+    except Exception:  # noqa: BLE001 - cannot export here: in-process only
+        _mark_bad(key)
+        return None
+    try:
+        tmp = store / f"{key}.{os.getpid()}.tmp"
+        tmp.write_bytes(blob)
+        os.replace(tmp, store / f"{key}.exp")
+        os.utime(store)  # in use: not stale
+    except OSError:
+        pass
+    return exported
+
+
+def _mark_bad(key: str) -> None:
+    store = _store()
+    if store is not None:
+        try:
+            (store / f"{key}.bad").touch()
+        except OSError:
+            pass
+
+
+def _load(key: str):
+    """The stored ``Exported`` of ``key``, or ``None``."""
+    store = _store()
+    if store is None:
+        return None
+    path = store / f"{key}.exp"
+    if not path.exists() or (store / f"{key}.bad").exists():
+        return None
+    try:
+        return pickle.loads(path.read_bytes())
+    except Exception:  # noqa: BLE001 - stale or unreadable: trace again
+        return None
+
+
+def phase_reporter(progress):
+    """For :func:`hdid.diagnose`: ``say(msg)`` with the elapsed time, and ``timing()``:
+    wall seconds in all, compiling/loading programs (JAX's compile events and this
+    store's :data:`STATS` spans: reading or tracing, compiling or reading JAX's cache)
+    and the rest, CPU seconds, and how many programs were read from the store."""
+    from .._compile_clock import _clock, union_length
+
+    clock = _clock()
+    mark, first = clock.mark(), len(STATS)
+    t0, c0 = time.perf_counter(), time.process_time()
+
+    def say(msg: str) -> None:
+        if progress is not None:
+            progress(f"[{time.perf_counter() - t0:5.1f} s] {msg}")
+
+    def timing() -> dict[str, float]:
+        total = time.perf_counter() - t0
+        progs = STATS[first:]
+        # JAX's compile events and the store's own spans (reading or tracing a program,
+        # compiling it or reading JAX's cache), overlaps counted once
+        with clock.lock:
+            spans = list(clock.spans[mark:])
+        comp = union_length(spans + [p["span"] for p in progs])
+        return {"total_s": total, "compile_s": comp, "run_s": max(total - comp, 0.0),
+                "cpu_s": time.process_time() - c0,
+                "programs": len(progs),
+                "programs_stored": sum(p["how"] == "stored" for p in progs),
+                "programs_traced": sum(p["how"] != "stored" for p in progs)}
+
+    return say, timing

@@ -1,0 +1,1 @@
+"""Simulation: the free-motion and driven simulators, data preparation and the synthetic-log generators."""

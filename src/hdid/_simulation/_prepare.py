@@ -1,0 +1,363 @@
+"""From a validated :class:`~hdid._log.Log` to padded arrays, weights and data-driven guesses.
+
+Nothing here fits; it finds the release, the hold and the rest point of every run,
+pads the runs to one length (so they can be vmapped) and builds observation weights.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._errors import LogError
+from .._log import Log
+
+#: Shortest bracket [s] allowed before the last sample at the hold reading for the
+#: release instant (a release just outside the stick band starts slowly); the bracket is
+#: also at least three sample periods and a quarter of the log's own oscillation period.
+MAX_SILENT_START = 0.012
+
+#: Samples right after the last motion that keep full weight (they time the stop).
+FULL_WEIGHT_TAIL = 3
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A log as fixed-shape arrays (runs × samples), plus what the data say directly.
+
+    Attributes
+    ----------
+    times, theta, weight:
+        ``(R, T)`` arrays; runs shorter than ``T`` are padded by repeating their last
+        sample with weight 0 (zero-length intervals, so the simulation is unchanged).
+    weight:
+        Observation weights. On a quantized sensor a stretch of identical readings — the
+        pre-release hold and the stuck tail — carries *one* observation's worth of
+        information (its quantization error is the same for every sample), so its samples
+        share a total weight of one: ``w = 1/sqrt(n)`` on the residual. Readings on no
+        grid (analog, interpolated) carry independent noise and keep full weight.
+    hold, rest:
+        Reading before release (a run that starts in motion: its first reading) and at
+        the end of each run.
+    release_lo, release_hi, release_guess:
+        Bracket of the release instant per run [s]: after the last sample at the hold
+        reading, before the first sample that moved. A run that starts in motion is
+        "released" at its first sample (``lo == hi``) with a fitted initial velocity.
+    first_moved:
+        Index of the first sample that moved.
+    moving_start:
+        Runs that the log shows already moving at their first sample (no hold).
+    ends_moving:
+        Runs whose log ends before the motion stops (no stuck tail).
+    resolution, resolution_known, resolution_source:
+        The sensor's step in the log's units: ``"given"`` (by the user), ``"estimated"``
+        (the readings lie on a grid of that step) — both ``resolution_known`` — or
+        ``"noise"``: the readings lie on no grid and ``resolution = σ·√12`` from the
+        noise ``σ`` estimated in the log's still stretches (or its third differences),
+        so that the residual scale ``resolution/√12`` is that noise.
+    frequency_hz:
+        The log's own oscillation frequency [Hz] from its turning points (median over
+        runs): where the start grid is centred.
+    speed:
+        Largest speed the log shows [units/s] (chord between samples).
+    omega_guess:
+        Initial velocity of each run that starts moving (one-sided three-point
+        difference at its first sample; 0 for held runs): the start of its fit.
+    """
+
+    source: str
+    run_names: tuple[str, ...]
+    setup_names: tuple[str, ...]
+    setup_index: np.ndarray
+    added_inertia: np.ndarray
+    times: np.ndarray
+    theta: np.ndarray
+    weight: np.ndarray
+    lengths: np.ndarray
+    hold: np.ndarray
+    rest: np.ndarray
+    release_lo: np.ndarray
+    release_hi: np.ndarray
+    release_guess: np.ndarray
+    first_moved: np.ndarray
+    resolution: float
+    resolution_known: bool
+    sample_period: float
+    moving_start: np.ndarray = None
+    ends_moving: np.ndarray = None
+    resolution_source: str = "estimated"
+    frequency_hz: float = float("nan")
+    speed: float = float("nan")
+    omega_guess: np.ndarray = None
+
+    @property
+    def n_runs(self) -> int:
+        return len(self.run_names)
+
+    @property
+    def n_setups(self) -> int:
+        return len(self.setup_names)
+
+    @property
+    def n_effective(self) -> float:
+        """Effective number of observations, ``Σ w²``."""
+        return float(np.sum(self.weight**2))
+
+    @property
+    def quantized(self) -> bool:
+        """Whether the readings lie on a known grid (an encoder)."""
+        return self.resolution_source != "noise"
+
+    def direction(self) -> np.ndarray:
+        """Initial direction of motion of each run (+1 / −1)."""
+        moved = self.theta[np.arange(self.n_runs), self.first_moved]
+        return np.sign(moved - self.hold)
+
+
+def noise_sigma(runs, step: float | None, still_only: bool = False) -> float:
+    """Noise standard deviation of the readings [log units], robustly.
+
+    From the still stretches (hold, stuck tail: runs of samples within a few MADs of each
+    other at the start and end of every run) where there are any, else from the third
+    differences (variance ``20·σ²`` for white noise; an upper bound where the motion is
+    coarsely sampled). Never below ``1e-4`` of the log's angle span (the simulator's accuracy).
+    """
+    pieces = []
+    for run in runs:
+        th = np.asarray(run.theta, dtype=float)
+        n = len(th)
+        m = max(4, min(50, n // 10))
+        for seg in (th[:m], th[-m:]):
+            d = np.diff(seg)
+            if d.size >= 3:
+                pieces.append(d)
+    span = max(float(np.ptp(np.concatenate([r.theta for r in runs]))), 1e-300)
+    sig_still = np.inf
+    if pieces:
+        # first differences of a still stretch: variance 2σ²; the smaller of the head's
+        # and tail's estimates per run (one of them may move)
+        mads = [1.4826 * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(2) for d in pieces]
+        sig_still = float(np.min(mads)) if mads else np.inf
+    if still_only:  # (nan where the still stretches say nothing)
+        return sig_still if np.isfinite(sig_still) else float("nan")
+    d3 = np.concatenate([np.diff(np.asarray(r.theta, float), 3) for r in runs if len(r.theta) > 4])
+    sig_d3 = 1.4826 * float(np.median(np.abs(d3))) / math.sqrt(20.0) if d3.size else np.inf
+    # Both are upper bounds where the "still" stretches move (a ring-down has none) or the
+    # motion is coarse: the smaller positive one.
+    positive = [x for x in (sig_still, sig_d3) if np.isfinite(x) and x > 0]
+    sig = min(positive) if positive else 0.0
+    # The simulator's own error (RK4 substeps: 1.9e-5 rad on a 0.157 rad swing,
+    # benchmarks/results/simulator_schemes.md) is ~1e-4 of the swing; weights finer than
+    # what the model can resolve only make the fit ill-conditioned (a noiseless log).
+    return max(sig, 1e-4 * span)
+
+
+def turning_points(th: np.ndarray, threshold: float) -> list[int]:
+    """Sample indices of the turning points of ``th``: where it reverses by more than
+    ``threshold`` (a zig-zag filter, so quantization flicker and noise are not turns).
+    The motion's first direction is set once it leaves ``th[0]`` by ``threshold``."""
+    out: list[int] = []
+    d, ext_i, ext_v, ref = 0, 0, th[0], th[0]
+    for k in range(1, len(th)):
+        v = th[k]
+        if d == 0:
+            if abs(v - ref) > threshold:
+                d, ext_i, ext_v = (1 if v > ref else -1), k, v
+            continue
+        if (v - ext_v) * d > 0:
+            ext_i, ext_v = k, v
+        elif (ext_v - v) * d > threshold:
+            out.append(ext_i)
+            d, ext_i, ext_v = -d, k, v
+            if len(out) >= 40:  # enough for a median; long ring-downs stay cheap
+                break
+    return out
+
+
+def _vertex(t: np.ndarray, th: np.ndarray, i: int) -> float:
+    """Time of the extremum near sample ``i`` (parabola through its neighbours)."""
+    if 0 < i < len(th) - 1:
+        y0, y1, y2 = th[i - 1], th[i], th[i + 1]
+        den = y0 - 2 * y1 + y2
+        if den != 0:
+            return float(t[i] + 0.5 * (y0 - y2) / den * (t[i + 1] - t[i]))
+    return float(t[i])
+
+
+def prepare(log: Log, release_time: float | None = None) -> Prepared:
+    """Pad the runs, find holds (or moving starts), releases and rest points, weights."""
+    if getattr(log, "is_driven", False):
+        raise LogError(
+            f"{log.source}: this is a driven log (it has a motor torque column), not a "
+            "free-motion log; fit it with hdid.fit_driven() or `hdid fit LOG` on its own, "
+            "or together with a free-motion log via hdid.fit_joint() / --joint"
+        )
+    runs = log.runs
+    if log.resolution:
+        step = float(log.resolution)
+        source = "given" if getattr(log, "resolution_source", None) == "given" else "estimated"
+        # A grid found in the readings may be the printing precision of a noisy analog
+        # sensor, not an encoder: then the still stretches wander over many levels.
+        if source == "estimated" and noise_sigma(runs, None, still_only=True) > 2.0 * step:
+            step = noise_sigma(runs, None) * math.sqrt(12.0)
+            source = "noise"
+    else:
+        step = noise_sigma(runs, None) * math.sqrt(12.0)
+        source = "noise"
+    quantized = source != "noise"
+    sigma = step / math.sqrt(12.0)
+    dt = log.sample_period
+    T = max(len(r.time) for r in runs)
+    R = len(runs)
+    times = np.zeros((R, T))
+    theta = np.zeros((R, T))
+    weight = np.zeros((R, T))
+    hold = np.zeros(R)
+    rest = np.zeros(R)
+    lo = np.zeros(R)
+    hi = np.zeros(R)
+    guess = np.zeros(R)
+    first_moved = np.zeros(R, dtype=int)
+    moving = np.zeros(R, dtype=bool)
+    omega_guess = np.zeros(R)
+    ends_moving = np.zeros(R, dtype=bool)
+    k0s = np.zeros(R, dtype=int)
+    tails = np.zeros(R)  # duration of the still stretch at the end of each run [s]
+    half_periods: list[float] = []
+    # A reading that differs from its neighbour by more than this is motion (not a flicker
+    # of the last digit, not noise).
+    still = (1.0 * step + 3.0 * sigma) if quantized else 5.0 * sigma
+    for i, run in enumerate(runs):
+        n = len(run.time)
+        t, th = run.time, run.theta
+        times[i, :n], times[i, n:] = t, t[-1]
+        theta[i, :n], theta[i, n:] = th, th[-1]
+        # A hold: the first readings agree (within the flicker/noise). Otherwise the run
+        # starts in motion (a ring-down, a log cut after the release).
+        held = n >= 3 and abs(th[1] - th[0]) <= still and abs(th[2] - th[0]) <= still
+        if held:
+            head = th[: max(3, min(10, n // 10))]
+            h = float(np.median(head))
+            noise = 1.4826 * float(np.median(np.abs(head - h)))
+            thr = max(1.5 * step, 5.0 * noise) if quantized else max(6.0 * sigma, 5.0 * noise)
+            away = np.abs(th - h) > thr
+            # A release moves the gear away for good; a noise spike lasts one sample.
+            moved = np.flatnonzero(away & np.append(away[1:], away[-1:]))
+            if moved.size == 0:
+                raise LogError(
+                    f"run {run.name!r} never moves more than "
+                    + (f"{thr / step:.3g} encoder steps" if quantized else f"{thr:.3g} (5 noise σ)")
+                    + " from its first reading; check that it contains the release or drop "
+                    "the run",
+                    path=log.source,
+                    row=run.first_row,
+                )
+            j = int(moved[0])
+            at_hold = np.flatnonzero(np.abs(th[:j] - h) <= (1.0 * step + 3.0 * noise if quantized
+                                                            else max(5.0 * sigma, 3.0 * noise)))
+            k0 = int(at_hold[-1]) if at_hold.size else 0
+            hold[i] = np.median(th[: k0 + 1])
+        else:
+            k0 = 0
+            moving[i] = True
+            hold[i] = th[0]
+            omega_guess[i] = ((-3.0 * th[0] + 4.0 * th[1] - th[2]) / (2.0 * dt) if n >= 3
+                              else (th[1] - th[0]) / dt)
+        k0s[i] = k0
+        first_moved[i] = k0 + 1
+        # Rest: the final reading; the tail is the trailing stretch within the flicker of it.
+        rest[i] = np.median(th[max(n - max(n // 10, 1), 0):]) if quantized else float(
+            np.median(th[max(n - 5, 0):]))
+        off = np.flatnonzero(np.abs(th - th[-1]) > still)
+        tail_start = int(off[-1]) + 1 if off.size else n
+        tails[i] = (n - tail_start) * dt
+        w = np.ones(n)
+        if quantized:
+            w[: k0 + 1] = 1.0 / math.sqrt(k0 + 1)
+            free_tail = min(tail_start + FULL_WEIGHT_TAIL, n)
+            n_tail = n - free_tail
+            if n_tail > 0:
+                w[free_tail:] = 1.0 / math.sqrt(n_tail)
+        weight[i, :n] = w
+        # Half periods from the turning points of the moving part.
+        seg = slice(k0, max(tail_start, k0 + 2))
+        tp = turning_points(th[seg], max(2.0 * still, 1e-300))
+        tt = [_vertex(t[seg], th[seg], int(k)) for k in tp]
+        if len(tt) >= 2:
+            half_periods.extend(np.diff(tt))
+        elif len(tt) == 1 and not moving[i]:
+            half_periods.append(tt[0] - 0.5 * (t[k0] + t[min(k0 + 1, n - 1)]))
+        elif not moving[i] and tail_start < n:
+            # reached rest without a turn: the stop (a Coulomb stop is a turning point)
+            half_periods.append(max(t[min(tail_start, n - 1)] - t[k0], dt))
+    hp = np.asarray([h for h in half_periods if h > 0])
+    if hp.size:
+        frequency = 1.0 / (2.0 * float(np.median(hp)))
+    else:  # a log shorter than half a swing: at least one quarter period long
+        frequency = 0.25 / max(float(np.max([r.time[-1] - r.time[0] for r in runs])), dt)
+    frequency = min(frequency, 0.5 / dt * 4.0)
+    silent = max(MAX_SILENT_START, 3.0 * dt, 0.25 / frequency)
+    # A run has come to rest when its final still stretch lasts longer than a swing could
+    # pause at a turning point (half a period) and more than three samples; otherwise the
+    # log ends before the motion does (a ring-down cut short).
+    ends_moving = tails < max(3.0 * dt, 0.5 / frequency)
+    rest = np.where(ends_moving, [r.theta[-1] for r in runs], rest)
+    for i, run in enumerate(runs):
+        t = run.time
+        n = len(t)
+        k0 = k0s[i]
+        if moving[i]:
+            lo[i] = hi[i] = guess[i] = t[0]
+        elif release_time is not None:
+            lo[i] = hi[i] = guess[i] = release_time
+        else:
+            lo[i] = t[k0] - silent
+            hi[i] = t[min(k0 + 1, n - 1)]
+            guess[i] = 0.5 * (t[k0] + t[min(k0 + 1, n - 1)])
+    speeds = [np.max(np.abs(np.diff(r.theta))) / dt for r in runs if len(r.theta) > 1]
+    return Prepared(
+        source=log.source,
+        run_names=tuple(r.name for r in runs),
+        setup_names=log.setups,
+        setup_index=np.array([log.setups.index(r.setup) for r in runs]),
+        added_inertia=np.array([r.added_inertia for r in runs], dtype=float),
+        times=times,
+        theta=theta,
+        weight=weight,
+        lengths=np.array([len(r.time) for r in runs]),
+        hold=hold,
+        rest=rest,
+        release_lo=lo,
+        release_hi=hi,
+        release_guess=guess,
+        first_moved=first_moved,
+        resolution=step,
+        resolution_known=quantized,
+        sample_period=dt,
+        moving_start=moving,
+        ends_moving=ends_moving,
+        resolution_source=source,
+        frequency_hz=float(frequency),
+        speed=float(max(speeds)) if speeds else float("nan"),
+        omega_guess=omega_guess,
+    )
+
+
+def offset_guess(prep: Prepared) -> np.ndarray:
+    """Per set-up guess of the encoder reading at the spring's zero.
+
+    With releases to both sides the midpoint of the extreme holds (symmetric designs
+    like the paper's ±0.157 rad); with one side only, the mean rest point (which lies
+    inside the stick band, i.e. within a few hundredths of a radian of the zero).
+    """
+    out = np.zeros(prep.n_setups)
+    d = prep.direction()
+    for s in range(prep.n_setups):
+        sel = prep.setup_index == s
+        if np.any(d[sel] > 0) and np.any(d[sel] < 0):
+            out[s] = 0.5 * (prep.hold[sel].max() + prep.hold[sel].min())
+        else:
+            out[s] = prep.rest[sel].mean()
+    return out
