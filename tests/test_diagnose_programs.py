@@ -237,3 +237,74 @@ def test_residual_frame_and_whiteness_reuse_the_analysis_parts_unchanged():
     pd.testing.assert_frame_equal(frame, frame0, rtol=1e-9)
     assert white.p_value == pytest.approx(white0.p_value, rel=1e-6)
     assert white.rms_ratio == pytest.approx(white0.rms_ratio, rel=1e-9)
+
+
+def test_a_prefetched_program_is_read_in_the_background_with_the_same_numbers(store, monkeypatch):
+    """:func:`hdid._problems._programs.prefetch` reads a stored program in a background
+    thread; the later call uses it (no tracing: the function given raises if traced) and
+    gets the jit path's numbers. Nothing is started for a program not stored yet (tracing
+    stays in the caller's thread) or already loaded."""
+    args = _args()
+    assert not _programs.prefetch("solve", _solve, *args)  # not stored yet
+    _programs.call("solve", _solve, *args)
+    assert not _programs.prefetch("solve", _solve, *args)  # loaded in this process
+    monkeypatch.setattr(_programs, "_LOADED", OrderedDict())  # as a new process
+    assert _programs.prefetch("solve", _solve, *args)
+    assert not _programs.prefetch("solve", _solve, *args)  # already being read
+
+    def untraceable(*a):
+        raise AssertionError("traced although prefetched")
+
+    n = len(_programs.STATS)
+    out = _programs.call("solve", untraceable, *args)
+    np.testing.assert_allclose(out, eqx.filter_jit(_solve)(*args), rtol=1e-14)
+    rows = _programs.STATS[n:]
+    assert [(r["how"], r.get("background")) for r in rows] == [("stored", True)]
+    assert rows[0]["span"][1] - rows[0]["span"][0] == pytest.approx(
+        rows[0]["wait_s"], abs=1e-6)  # (time.time() has ~0.2 µs resolution near 1.8e9 s)
+    assert not _programs._PENDING
+
+
+def test_a_background_read_that_fails_is_prepared_by_the_caller(store, monkeypatch):
+    args = _args()
+    _programs.call("solve", _solve, *args)
+    monkeypatch.setattr(_programs, "_LOADED", OrderedDict())
+    monkeypatch.setattr(_programs, "_load", lambda key: None)  # unreadable in the background
+    assert _programs.prefetch("solve", _solve, *args)
+    np.testing.assert_allclose(_programs.call("solve", _solve, *args),
+                               eqx.filter_jit(_solve)(*args), rtol=1e-14)
+    assert _programs.STATS[-1]["how"] == "traced"
+
+
+def test_refit_prefetch_asks_for_the_program_run_calls(monkeypatch):
+    """:func:`hdid._fitting._refit.prefetch` builds the arguments by shape; its key must be
+    the one :func:`hdid._fitting._refit.run`'s first call computes (same tree, static
+    fields, shapes, dtypes and weak types), or the background read is wasted."""
+    import jax
+
+    import hdid
+    from hdid._fitting import _refit
+    from hdid._log import read_log
+
+    keys = []
+
+    class Stop(Exception):
+        pass
+
+    def key_of(name, fn, *args):
+        dyn, static = eqx.partition(args, eqx.is_array)
+        leaves, treedef = jax.tree_util.tree_flatten(dyn)
+        keys.append(_programs._key(name, treedef, static, leaves))
+
+    def call(name, fn, *args):
+        key_of(name, fn, *args)
+        raise Stop
+
+    monkeypatch.setattr(_programs, "prefetch", lambda *a: key_of(*a) or True)
+    monkeypatch.setattr(_programs, "call", call)
+    log = read_log(SRC.parent / "data" / "synthetic" / "hidden_hysteresis_1khz.csv")
+    s = _refit.setup(log, hdid.Model.default(), {})
+    assert _refit.prefetch(s)
+    with pytest.raises(Stop):
+        _refit.run("base", s, [("zero", np.zeros(s.problem.n_unknowns))])
+    assert len(keys) == 2 and keys[0] == keys[1]

@@ -1,7 +1,8 @@
 """The candidates of :func:`hdid.diagnose`: the effects of the registry that declare a
 :class:`~hdid.effects.Candidate` (``effects/<key>.py``: trial order, data-derived starts,
 scanned orders, residual mark, separating experiment), the catalog-shape restart, the
-residual periodogram that proposes ripple orders and the order scan's machinery. (See
+residual periodogram that proposes ripple orders, the variants' set-ups and the order scan's
+machinery. (See
 :mod:`hdid._diagnosis._diagnose` for how they are refitted and judged.)"""
 
 from __future__ import annotations
@@ -218,3 +219,39 @@ def _scan_note(key: str, table: dict[str, float], refitted: list[str]) -> str:
             f"first: {gains}); refitted (the best {SCAN_REFITS} and every one within "
             f"{SCAN_TIE_DCHI2:g} of the best, at most {SCAN_MAX_REFITS}): "
             f"{', '.join(_order(lb) for lb in refitted)}")
+
+
+def _at_optimum(model, values):
+    """``model`` with every parameter it has at ``values`` (a fit's optimum)."""
+    own = model.float_values()
+    return model.replace(**{k: v for k, v in values.items() if k in own})
+
+
+def _candidate_setups(log, cand, current, hints, opts):
+    """The variants of ``cand`` built on ``current`` at its optimum (grouped by label) and
+    one least-squares set-up per group: ``(groups, setups)``."""
+    from .._fitting import _refit
+
+    values = current.values()
+    # The current model *at its optimum*: ``current.model`` is the model the refit was
+    # set up with (its starting values, e.g. the catalog's), and a variant built on it
+    # would start every shared parameter there — not from the current optimum.
+    fitted = _at_optimum(current.model, values)
+    bases = [(fitted, values)]
+    if cand.reset_shape and _shape_is_unusual(values):
+        reset = _shape_reset(values)
+        bases.append((fitted.replace(**reset), {**values, **reset}))
+    groups: dict[str, list] = {}
+    for m0, v0 in bases:
+        for label, m in cand.variants(m0, v0, hints):
+            groups.setdefault(label, []).append(m)
+    setups = {}
+    for label, models in groups.items():
+        if cand.scanned and setups:
+            # the settings differ only in the order, a traced value: one set-up, the
+            # order replaced (the same problem, leaf for leaf; ~27 ms of set-up each)
+            setups[label] = _reorder(next(iter(setups.values())), cand.key,
+                                     _effect_of(models[0], cand.key).order)
+        else:
+            setups[label] = _refit.setup(log, models[0], opts)
+    return groups, setups

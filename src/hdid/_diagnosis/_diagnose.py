@@ -84,6 +84,8 @@ from ._candidates import (  # noqa: F401  (re-exported: tests, CLI)
     SCAN_MAX_REFITS,
     SCAN_REFITS,
     SCAN_TIE_DCHI2,
+    _at_optimum,
+    _candidate_setups,
     _effect_of,
     _merge,
     _reorder,
@@ -181,7 +183,7 @@ def _base_starts(base_setup, current, cand_fits, values_reset):
 
 
 def _candidate_fits(log, cand, current, hints, opts, grid_points, say, scans,
-                    scan_refitted=None):
+                    scan_refitted=None, prepared=None):
     """Refit ``cand`` on ``log`` from ``current``: a list of StructureFits (one per
     discrete setting refitted) — warm starts from the current optimum with the effect at
     each variant's data-derived values (and from the catalog friction shape), plus the
@@ -189,33 +191,14 @@ def _candidate_fits(log, cand, current, hints, opts, grid_points, say, scans,
     pairs) with the effect at its first variant's values. (The base grid's points, not
     the candidate's own grid: the same data-driven rule, and one compiled grid program
     instead of one per candidate.) Scanned settings (orders) are first
-    screened by one Gauss–Newton step; the best ``SCAN_REFITS`` are refitted."""
+    screened by one Gauss–Newton step; the best ``SCAN_REFITS`` are refitted.
+    (``prepared``: :func:`_candidate_setups`'s result for the same arguments.)"""
     from .._fitting import _refit
 
-    values = current.values()
     tail = _refit.tail_of(current.setup.problem, current.u)
-    # The current model *at its optimum*: ``current.model`` is the model the refit was
-    # set up with (its starting values, e.g. the catalog's), and a variant built on it
-    # would start every shared parameter there — not from the current optimum.
     scan_refitted = {} if scan_refitted is None else scan_refitted
-    fitted = _at_optimum(current.model, values)
-    bases = [(fitted, values)]
-    if cand.reset_shape and _shape_is_unusual(values):
-        reset = _shape_reset(values)
-        bases.append((fitted.replace(**reset), {**values, **reset}))
-    groups: dict[str, list] = {}
-    for m0, v0 in bases:
-        for label, m in cand.variants(m0, v0, hints):
-            groups.setdefault(label, []).append(m)
-    setups = {}
-    for label, models in groups.items():
-        if cand.scanned and setups:
-            # the settings differ only in the order, a traced value: one set-up, the
-            # order replaced (the same problem, leaf for leaf; ~27 ms of set-up each)
-            setups[label] = _reorder(next(iter(setups.values())), cand.key,
-                                     _effect_of(models[0], cand.key).order)
-        else:
-            setups[label] = _refit.setup(log, models[0], opts)
+    groups, setups = (prepared if prepared is not None
+                      else _candidate_setups(log, cand, current, hints, opts))
     fits = []
     if cand.scanned:
         return _scan_fits(cand, groups, setups, current, tail, grid_points, say, scans,
@@ -228,12 +211,6 @@ def _candidate_fits(log, cand, current, hints, opts, grid_points, say, scans,
         say(f"  + {label}  ({len(starts)} starts)")
         fits.append(_refit.run(label, s, starts))
     return fits
-
-
-def _at_optimum(model, values):
-    """``model`` with every parameter it has at ``values`` (a fit's optimum)."""
-    own = model.float_values()
-    return model.replace(**{k: v for k, v in values.items() if k in own})
 
 
 def _cand_bic(sf, cand) -> float:
@@ -321,6 +298,7 @@ def diagnose(
 
     say(f"fitting the base model ({' + '.join(model.effect_names)})")
     base_setup = _refit.setup(log, model, fit_options)
+    _refit.prefetch(base_setup)  # read while the grid's costs are computed
     base_grid = _refit.grid(base_setup, FULL_GRID_STARTS)
     current = _refit.run("base", base_setup, [("grid", u) for u in base_grid])
     if not current.finite:
@@ -353,13 +331,24 @@ def diagnose(
         grid_points = [({k: float(v) for k, v in p0.unpack_np(u)[0].items()},
                         _refit.tail_of(p0, u)) for u in base_grid[:n_grid]]
         by_key: dict[str, list] = {}
+        # every candidate's set-ups first, and their programs read from the store in the
+        # background while the first candidates are refitted (_programs.prefetch)
+        prepared: dict[str, Any] = {}
         for key in wanted:
             cand = all_cands[key]
             if not cand.applies(current.model):
                 continue
             try:
-                by_key[key] = _candidate_fits(log, cand, current, hints, fit_options,
-                                              grid_points, say, scans, refitted)
+                prepared[key] = _candidate_setups(log, cand, current, hints, fit_options)
+            except Exception as exc:  # one candidate failing must not stop the others
+                by_key[key] = exc
+                continue
+            for setup in prepared[key][1].values():
+                _refit.prefetch(setup)
+        for key, prep in prepared.items():
+            try:
+                by_key[key] = _candidate_fits(log, all_cands[key], current, hints, fit_options,
+                                              grid_points, say, scans, refitted, prepared=prep)
             except Exception as exc:  # one candidate failing must not stop the others
                 by_key[key] = exc
         # The current model gets every start a candidate got: from each candidate's

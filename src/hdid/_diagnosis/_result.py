@@ -141,6 +141,9 @@ class Diagnosis:
             t = self.timing
             progs = (f" ({t['programs_stored']:.0f} of {t['programs']:.0f} programs read from "
                      "the store, the rest traced here)" if t.get("programs") else "")
+            if t.get("programs_prefetched"):
+                progs += (f"; {t['programs_prefetched']:.0f} read in the background while "
+                          f"fitting ({t['compile_background_s']:.1f} s, only the wait counted)")
             lines += ["[[timing]]",
                       f"    {t['total_s']:.1f} s: compiling/loading programs {t['compile_s']:.1f} s"
                       f"{progs}, fitting {t['run_s']:.1f} s (CPU {t['cpu_s']:.1f} s)"]

@@ -29,7 +29,7 @@ from .._problems import _programs
 from .._results import _residuals
 from ._fit import _finish, _setup, _Setup
 from ._identifiability import MOVED_COUNTS
-from ._lm import LMState, _lm_lanes, _Schedule, lanes_vmap
+from ._lm import PHASE1_STEPS, LMState, _lm_lanes, _Schedule, lanes_vmap
 from .._problems._problem import Problem
 from ._starts import _choose_starts, _grid_candidates
 from .._models._transforms import interval_to_u, to_unconstrained
@@ -87,6 +87,24 @@ def _stored_solve(problem: Problem, U, active, k, state):
 LANES = 1
 
 
+def _call_args(U, on, k, state: LMState):
+    """The arguments of one :func:`_stored_solve` call (their types decide the program's key)."""
+    return jnp.asarray(U), jnp.asarray(on), jnp.asarray(k), state
+
+
+def prefetch(s: _Setup) -> bool:
+    """Start reading the Levenberg–Marquardt program of ``s`` (:func:`run`'s one program
+    per model structure) from the store in a background thread
+    (:func:`hdid._problems._programs.prefetch`); ``True`` if a read was started."""
+    p = s.problem
+    n = p.n_unknowns
+    m = int(np.prod(p.times.shape)) + p.n_physical
+    state = LMState(*(np.asarray(f) for f in LMState.empty(LANES, m, n)))
+    return _programs.prefetch("solve_lanes", _solve_lanes, p,
+                              *_call_args(np.zeros((LANES, n)), np.ones(LANES, dtype=bool),
+                                          PHASE1_STEPS, state))
+
+
 def _local_fits(problem: Problem, U0, max_steps: int, lanes: int = LANES, solve=None):
     """:func:`hdid._fitting._lm._local_fits` (the same schedule, :class:`hdid._fitting._lm._Schedule`,
     and, lanes not interacting, the same iterates for every start up to rounding: a
@@ -112,8 +130,7 @@ def _local_fits(problem: Problem, U0, max_steps: int, lanes: int = LANES, solve=
             on = np.arange(lanes) < len(rows)
             st = LMState(*(f[take] for f in state))
             st = st._replace(fresh=np.where(on, fresh, st.fresh))
-            U2, c2, d2, s2, st2 = solve(problem, jnp.asarray(U[take]), jnp.asarray(on),
-                                   jnp.asarray(k), st)
+            U2, c2, d2, s2, st2 = solve(problem, *_call_args(U[take], on, k, st))
             h = len(rows)
             U[rows] = np.asarray(U2)[:h]
             costs[rows], done[rows], steps[rows] = (np.asarray(c2)[:h], np.asarray(d2)[:h],

@@ -23,6 +23,13 @@ again (``<key>.bad``), so results never depend on the store. The store is on unl
 :data:`STATS` records, per call that had to prepare a program, where the time went
 (read from the store or traced and lowered; compiled or read from JAX's cache), for
 ``benchmarks/diagnose_speed.py``.
+
+:func:`prefetch` starts reading a stored program in a background thread (``hdid-programs``)
+before it is called — the XLA compile's cache read releases the GIL and takes 0.2–2.7 s
+per program, so ``hdid diagnose`` reads its candidates' programs on the second core while
+the base model is fitted on the first. :func:`call` then waits for it (only the wait
+counts as the caller's compile time) or, where the read failed, prepares it as before.
+``HDID_PREFETCH=0`` turns it off.
 """
 
 from __future__ import annotations
@@ -35,13 +42,14 @@ import re
 import time
 from collections import OrderedDict
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
 import equinox as eqx
 import jax
 
-from .. import _config
+from .. import _compile_clock, _config
 
 #: Modules that only orchestrate (no function of theirs is traced into a stored program:
 #: those come from ``_refit``, ``_residuals`` and the problem, model and effects they
@@ -66,6 +74,14 @@ MAX_MAPS_FRACTION = 0.5
 #: Times :func:`release` ran in this process (for tests and benchmarks).
 RELEASES = 0
 _SALT: str | None = None
+#: Programs being read in the background (:func:`prefetch`), by key.
+_PENDING: dict[str, Future] = {}
+_POOL: ThreadPoolExecutor | None = None
+#: Background threads reading programs: one (the caller's thread runs on the other core of
+#: a 2-core machine; more readers would compete with it).
+PREFETCH_WORKERS = 1
+#: Name prefix of those threads (:mod:`hdid._compile_clock` tells their compile events apart).
+PREFETCH_THREAD = _compile_clock.BACKGROUND_THREAD
 #: One dict per program prepared in this process: name, how (``stored``: read from the
 #: store; ``traced``: traced and lowered here; ``jit``: store off), and seconds spent
 #: reading/tracing (``prepare_s``), wrapping the program in a call and lowering it
@@ -158,7 +174,11 @@ def call(name: str, fn: Callable, *args):
     if prog is not None:
         _LOADED.move_to_end(key)
         return prog(*leaves)
-    prog, out = _prepare(name, key, fn, treedef, static, leaves)
+    got = _prefetched(key, leaves)
+    if got is not None:
+        prog, out = got
+    else:
+        prog, out = _prepare(name, key, fn, treedef, static, leaves)
     _LOADED[key] = prog
     while len(_LOADED) > MAX_LOADED:
         _LOADED.popitem(last=False)
@@ -195,10 +215,93 @@ def release() -> None:
     import gc
 
     global RELEASES
+    _drain()
     _LOADED.clear()
     jax.clear_caches()
     gc.collect()
     RELEASES += 1
+
+
+def prefetch(name: str, fn: Callable, *args) -> bool:
+    """Start reading the stored program that ``call(name, fn, *args)`` will need, in a
+    background thread; ``args`` need only the right tree, static fields, shapes and dtypes
+    (their values are not used). Returns whether a read was started: not where the program
+    is loaded or already being read, not stored yet (tracing stays in the caller's
+    thread), the store is off, or ``HDID_PREFETCH=0``."""
+    if os.environ.get("HDID_PREFETCH") == "0":
+        return False
+    dyn, static = eqx.partition(args, eqx.is_array)
+    leaves, treedef = jax.tree_util.tree_flatten(dyn)
+    try:
+        key = _key(name, treedef, static, leaves)
+    except Exception:  # noqa: BLE001 - an unkeyable argument: call() will jit it
+        return False
+    if key in _LOADED or key in _PENDING:
+        return False
+    store = _store()
+    if store is None or not (store / f"{key}.exp").exists() or (store / f"{key}.bad").exists():
+        return False
+    specs = [jax.ShapeDtypeStruct(x.shape, x.dtype, weak_type=bool(getattr(x, "weak_type", False)))
+             for x in leaves]
+    global _POOL
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(PREFETCH_WORKERS, thread_name_prefix=PREFETCH_THREAD)
+    _PENDING[key] = _POOL.submit(_read_compiled, name, key, specs)
+    return True
+
+
+def _read_compiled(name: str, key: str, specs):
+    """(background thread) The stored program of ``key`` compiled for ``specs`` (JAX's
+    persistent cache read), and its :data:`STATS` row; ``None`` on any failure."""
+    w0, t0 = time.time(), time.perf_counter()
+    exported = _load(key)
+    if exported is None:
+        return None
+    t1 = time.perf_counter()
+    try:
+        lowered = jax.jit(exported.call).lower(*specs)
+        t2 = time.perf_counter()
+        prog = lowered.compile()
+    except Exception:  # noqa: BLE001 - the caller prepares it as without a prefetch
+        return None
+    t3 = time.perf_counter()
+    return prog, {"name": name, "how": "stored", "background": True, "prepare_s": t1 - t0,
+                  "wrap_s": t2 - t1, "compile_s": t3 - t2, "key": key[:12],
+                  "background_span": (w0, w0 + t3 - t0)}
+
+
+def _prefetched(key: str, leaves):
+    """The program read in the background for ``key`` and its result on ``leaves``, or
+    ``None`` (none started, or it failed: the caller prepares it in its own thread). The
+    caller's wait is its compile time (``span``)."""
+    fut = _PENDING.pop(key, None)
+    if fut is None:
+        return None
+    w0, t0 = time.time(), time.perf_counter()
+    try:
+        got = fut.result()
+    except Exception:  # noqa: BLE001
+        got = None
+    wait = time.perf_counter() - t0
+    if got is None:
+        return None
+    prog, row = got
+    try:
+        out = jax.block_until_ready(prog(*leaves))
+    except Exception:  # noqa: BLE001 - e.g. an argument layout the specs did not give
+        return None
+    STATS.append({**row, "wait_s": wait, "span": (w0, w0 + wait)})
+    return prog, out
+
+
+def _drain() -> None:
+    """Wait for every background read and drop what it read (before :func:`release`)."""
+    while _PENDING:
+        _, fut = _PENDING.popitem()
+        try:
+            fut.result()
+        except Exception:  # noqa: BLE001
+            pass
 
 
 def _prepare(name, key, fn, treedef, static, leaves):
@@ -298,6 +401,8 @@ def phase_reporter(progress):
 
     clock = _clock()
     mark, first = clock.mark(), len(STATS)
+    with clock.lock:
+        bg_mark = len(clock.background)
     t0, c0 = time.perf_counter(), time.process_time()
 
     def say(msg: str) -> None:
@@ -311,8 +416,14 @@ def phase_reporter(progress):
         # compiling it or reading JAX's cache), overlaps counted once
         with clock.lock:
             spans = list(clock.spans[mark:])
+            background = list(clock.background[bg_mark:])
         comp = union_length(spans + [p["span"] for p in progs])
+        # (a program read in the background counts as compile time only while the caller
+        # waited for it; the background reads themselves overlap the fitting)
         return {"total_s": total, "compile_s": comp, "run_s": max(total - comp, 0.0),
+                "compile_background_s": union_length(
+                    background + [p["background_span"] for p in progs if "background_span" in p]),
+                "programs_prefetched": sum(bool(p.get("background")) for p in progs),
                 "cpu_s": time.process_time() - c0,
                 "programs": len(progs),
                 "programs_stored": sum(p["how"] == "stored" for p in progs),
