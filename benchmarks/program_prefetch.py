@@ -19,35 +19,24 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, interpretation_section, load_text, parse_or_render, run_meta  # noqa: E402
-from diagnose_speed import CHILD, LOG, summarize_programs  # noqa: E402
+import diagnose_speed  # noqa: E402
+from diagnose_speed import LOG, summarize_programs  # noqa: E402
 
 
 def measure(src: str, cache: Path, prefetch: bool) -> dict:
-    env = {**os.environ, "HDID_CACHE_DIR": str(cache), "PYTHONPATH": str(Path(src).resolve()),
-           "HDID_PREFETCH": "1" if prefetch else "0"}
-    env.pop("HDID_NO_CACHE", None)
-    with tempfile.TemporaryDirectory() as tmp:
-        load0 = load_text()
-        t0 = time.perf_counter()
-        r = subprocess.run([sys.executable, "-c", CHILD, str(LOG), str(Path(tmp) / "d.json")],
-                           capture_output=True, text=True, env=env)
-        wall = time.perf_counter() - t0
-        load1 = load_text()
-    line = next((x for x in r.stdout.splitlines() if x.startswith("@@")), None)
-    if line is None:
-        return {"error": (r.stderr or r.stdout)[-3000:], "process_wall_s": wall,
-                "load_start": load0, "load_end": load1}
-    rec = json.loads(line[2:])
-    rec.update(process_wall_s=wall, load_start=load0, load_end=load1)
-    return rec
+    """One process of :mod:`diagnose_speed` on both cores (``taskset -c 0,1``)."""
+    old = os.environ.get("HDID_PREFETCH")
+    os.environ["HDID_PREFETCH"] = "1" if prefetch else "0"
+    try:
+        return diagnose_speed.measure(src, cache, "0,1", LOG)
+    finally:
+        os.environ.pop("HDID_PREFETCH") if old is None else os.environ.update(HDID_PREFETCH=old)
 
 
 def render(res: dict) -> str:
@@ -67,8 +56,7 @@ def render(res: dict) -> str:
     ]
     for r in res["rows"]:
         if "error" in r:
-            lines.append(f"| {r['prefetch']} | {r['cache']} | {r['process_wall_s']:.0f} | — | — "
-                         f"| — | — | — | {r['load_start']} → {r['load_end']} | error: "
+            lines.append(f"| {r['prefetch']} | {r['cache']} | error: "
                          f"{r['error'].strip().splitlines()[-1][:120]} |")
             continue
         t = r["timing"]
@@ -76,12 +64,12 @@ def render(res: dict) -> str:
         prog = "; ".join(f"{k} {v['n']}" for k, v in sorted(ps.items()))
         if t.get("programs_prefetched"):
             prog += f" ({t['programs_prefetched']} in the background)"
-        cands = ", ".join(f"{lb} {d:.3f}" for lb, d in r["candidates"][:3])
-        lines.append(
-            f"| {r['prefetch']} | {r['cache']} | {r['process_wall_s']:.1f} | {r['cpu_s']:.1f} | "
-            f"{t.get('compile_s', float('nan')):.1f} | {t.get('compile_background_s', 0.0):.1f} | "
-            f"{t.get('run_s', float('nan')):.1f} | {prog} | {r['load_start']} → {r['load_end']} "
-            f"| {r['verdict']} ({cands}) |")
+        first = ", ".join(f"{lb} {d:.3f}" for lb, d in r["candidates"][:3])
+        cells = [r["prefetch"], r["cache"], f"{r['process_wall_s']:.1f}", f"{r['cpu_s']:.1f}",
+                 f"{t['compile_s']:.1f}", f"{t.get('compile_background_s', 0.0):.1f}",
+                 f"{t['run_s']:.1f}", prog, f"{r['load_start']} → {r['load_end']}",
+                 f"{r['verdict']} ({first})"]
+        lines.append("| " + " | ".join(cells) + " |")
     warm = [r for r in res["rows"] if r["cache"] == "warm" and "error" not in r]
     same = len({json.dumps([r["verdict"], r["candidates"]]) for r in warm}) == 1
     lines += ["", f"Every warm row's verdict and candidates' ΔBIC identical: **{same}**.", ""]
