@@ -79,6 +79,7 @@ def sample_posterior(
     method: str = "emcee",
     n_particles: int | None = None,
     prior: dict | None = None,
+    coordinates: str = "plain",
 ) -> PosteriorResult:
     """Sample the posterior of ``fit``'s parameters with emcee, until converged.
 
@@ -170,7 +171,7 @@ def sample_posterior(
     if likelihood not in ("auto", "gaussian"):
         raise ValueError(f"likelihood must be 'auto' or 'gaussian', not {likelihood!r} (the "
                          "interval likelihood was retired: benchmarks/README.md)")
-    dens = posterior_density(fit, sigma_floor, linear_prior, sample_linear, prior)
+    dens = posterior_density(fit, sigma_floor, linear_prior, sample_linear, prior, coordinates)
     lp, temper, rho1, lin, bounds, u_fit = (dens.lp, dens.temper, dens.rho1, dens.lin,
                                             dens.bounds, dens.u_fit)
     warnings += dens.warnings
@@ -264,9 +265,12 @@ def sample_posterior(
             if n_steps is None and conv.converged:
                 break
     t_kept = time.perf_counter() - t_kept
+    # τ of the parameters as the plain coordinates sample them (the same quantities
+    # whatever the walkers' coordinates)
+    chain_p = _plain_chain(lp, sampler.get_chain())
     with np.errstate(invalid="ignore", divide="ignore"):  # a walker that never moved
-        tau_e = sampler.get_autocorr_time(tol=0)
-    tau = np.fmax(tau_e, tau_pooled(sampler.get_chain()))
+        tau_e = emcee.autocorr.integrated_time(chain_p, tol=0, quiet=True)
+    tau = np.fmax(tau_e, tau_pooled(chain_p))
     finite_tau = np.isfinite(tau)
     tau_max = float(np.max(tau[finite_tau])) if finite_tau.any() else float(done)
     if not conv.converged:
@@ -376,11 +380,28 @@ def _tune(counted, burn_draws, D):
         m.proposed = m.accepted = 0
 
 
+def _plain_chain(lp, chain):
+    """``chain`` in the plain sampled coordinates (the fit's parameters, some in their
+    value: :meth:`LogPosterior.to_sampled_np` without the friction map); itself when the
+    walkers move in those."""
+    if lp.friction is None:
+        return chain
+    import equinox as eqx
+
+    plain = eqx.tree_at(lambda t: t.friction, lp, None)
+    return plain.to_sampled_np(lp.from_sampled_np(chain))
+
+
 def _converge(sampler, lp, prob, labels):
-    """arviz diagnostics of the kept chain's sampled quantities and the band."""
+    """arviz diagnostics of the kept chain's quantities (the parameters in the plain
+    sampled coordinates, whatever coordinates the walkers move in) and the band."""
     chain = sampler.get_chain()
-    chain = chain[:: diagnostic_stride(chain.shape[0])]
+    chain = _plain_chain(lp, chain[:: diagnostic_stride(chain.shape[0])])
     S, W, D = chain.shape
-    U = lp.from_sampled_np(chain.reshape(-1, D))
+    U = lp.from_sampled_np(chain.reshape(-1, D)) if lp.friction is None else None
+    if U is None:
+        import equinox as eqx
+
+        U = eqx.tree_at(lambda t: t.friction, lp, None).from_sampled_np(chain.reshape(-1, D))
     band = derived_np(prob, U)[BAND].reshape(S, W, 1)
     return convergence(np.concatenate([chain, band], axis=2), labels + [BAND])
