@@ -191,7 +191,8 @@ def draw_physical(gen, rng, design, seed, max_iter=8):
     return t, df, info, notes
 
 
-def run_one(gen, design_name, design, seed, max_steps, method="smc", prior_mode="none"):
+def run_one(gen, design_name, design, seed, max_steps, method="smc", prior_mode="none",
+            coordinates=None):
     import numpy as np
 
     import hdid
@@ -232,16 +233,19 @@ def run_one(gen, design_name, design, seed, max_steps, method="smc", prior_mode=
         o = dict(out)
         o["load_start"] = _load()
         outs.append(_sample_one(hdid, fit, modes, shared_modes_s, m, seed, max_steps, prior,
-                                truth, info, o, t0))
+                                truth, info, o, t0, coordinates))
     return outs
 
 
 def _sample_one(hdid, fit, modes, modes_s, method, seed, max_steps, prior, truth, info, out,
-                t0):
+                t0, coordinates=None):
     import numpy as np
 
     t1 = time.perf_counter()
     kw = {} if method == "smc" else {"max_steps": max_steps}
+    if coordinates and method != "smc":
+        kw["coordinates"] = coordinates
+        out["coordinates"] = coordinates
     post = hdid.sample_posterior(fit, seed=seed % 1000, method=method, prior=prior,
                                  modes=modes, **kw)
     out["posterior_s"] = time.perf_counter() - t1 + modes_s
@@ -401,6 +405,8 @@ def main(argv=None):
                          "truths drawn from exactly that prior (exact SBC); catalog: catalog "
                          "Gaussians on every parameter (CAL_PRIOR_SD), exact SBC; none: the "
                          "default prior, truths drawn around the catalog (not exact)")
+    ap.add_argument("--coordinates", default=None, choices=("plain", "friction"),
+                    help="emcee's walker coordinates (default: the library's)")
     args = ap.parse_args(argv)
     out_json = args.out_dir / f"{args.name}.json"
     out_md = args.out_dir / f"{args.name}.md"
@@ -424,7 +430,8 @@ def main(argv=None):
         if time.perf_counter() - t_start > 60 * args.budget_min:
             break
         try:
-            rs = run_one(gen, name, design, seed, args.max_steps, args.method, args.prior)
+            rs = run_one(gen, name, design, seed, args.max_steps, args.method, args.prior,
+                         args.coordinates)
         except Exception:  # record and go on
             rs = [{"design": name, "seed": seed, "method": m, "error": traceback.format_exc()}
                   for m in args.method.split(",")]
