@@ -3,10 +3,11 @@ Gaussian when the friction law is written as its torque at the log's own speeds?
 
 Run (pinned to one core)::
 
-    taskset -c 1 python benchmarks/posterior_coordinates_check.py chain LOG STEPS
+    taskset -c 1 python benchmarks/posterior_coordinates_check.py chain LOG STEPS [plain|friction]
     taskset -c 1 python benchmarks/posterior_coordinates_check.py analyse LOG
+    taskset -c 1 python benchmarks/posterior_coordinates_check.py profile
 
-``chain``: today's default sampler (plain coordinates), ``n_steps=STEPS`` fixed, seed 1,
+``chain``: today's default sampler (plain coordinates; ``friction`` as a 4th argument), ``n_steps=STEPS`` fixed, seed 1,
 on LOG (``shipped`` or a seed of the independent simulator, drawn as in
 ``posterior_coordinates.py``); the chain, the fit's trajectory speeds and τ are saved to
 ``/tmp/post6/chain_LOG.npz`` (not committed: ~100 MB). ``analyse``: the last 80 % of the
@@ -33,7 +34,7 @@ import numpy as np
 OUT = "/tmp/post6"
 
 
-def chain(name, steps):
+def chain(name, steps, coordinates="plain"):
     import hdid
     from hdid._posterior.density import posterior_density
     from hdid._posterior.modes import sampled_modes
@@ -49,10 +50,19 @@ def chain(name, steps):
     dens = posterior_density(fit, prior=prior)
     found = sampled_modes(fit, "auto", 1, dens.u_fit, dens.lin, dens.lp.gauss_prior)
     t = time.perf_counter()
-    post = hdid.sample_posterior(fit, modes=found, seed=1, prior=prior, n_steps=steps)
+    post = hdid.sample_posterior(fit, modes=found, seed=1, prior=prior, n_steps=steps,
+                                 coordinates=coordinates)
     print(name, "sample", time.perf_counter() - t, os.getloadavg(), flush=True)
     print(post.convergence.worst, np.max(post.tau))
-    np.savez(f"{OUT}/chain_{name}.npz", chain=post.chain, free=np.array(prob.free),
+    tag = "" if coordinates == "plain" else f"_{coordinates}"
+    free = list(prob.free)
+    tc = np.exp(post.chain[:, :, free.index("tau_c")])
+    for b in range(0, steps, steps // 6):
+        print(f"steps {b}–{b + steps // 6}: tau_c 0.5/2.5/50 % "
+              f"{np.round(np.percentile(tc[b:b + steps // 6], [0.5, 2.5, 50]) * 1e3, 3).tolist()} mN m")
+    s = post.summary()
+    print({q: s[q]["ci95"] for q in ("tau_c", "c_v", "v_s", "delta", "tau_s", "stick_band_halfwidth_rad")})
+    np.savez(f"{OUT}/chain_{name}{tag}.npz", chain=post.chain, free=np.array(prob.free),
              omega=omega, stuck=stuck, lengths=np.asarray([len(x) for x in prob.times]),
              tau=post.tau, labels=np.array(post.labels), truth=json.dumps(truth or {}))
 
@@ -109,8 +119,28 @@ def analyse(name):
                base + [F(w) for w in ws] + [X[:, i("delta")], lg(v["tau_s"])])
 
 
+def profile():
+    """Least-squares cost of the shipped log with tau_c fixed below its optimum (the other
+    parameters refitted): how flat the likelihood is along the Coulomb-limit ridge."""
+    import hdid
+
+    p = str(_common.ROOT / "data" / "synthetic" / "csf8_paper.csv")
+    f0 = hdid.fit(p)
+    c0 = f0.starts.costs[f0.starts.best]
+    keys = ("v_s", "c_v", "delta", "tau_s")
+    print(f"free: tau_c {f0.parameters['tau_c'].value:.4g}, χ² {c0:.2f}, "
+          + ", ".join(f"{k} {f0.parameters[k].value:.4g}" for k in keys))
+    for tc in (1.5e-3, 1e-3, 5e-4, 2e-4, 5e-5):
+        f = hdid.fit(p, fix={"tau_c": tc})
+        c = f.starts.costs[f.starts.best]
+        print(f"tau_c {tc:.1e}: Δχ² {c - c0:+.2f}, " + ", ".join(
+            f"{k} {f.parameters[k].value:.4g}" for k in keys) + f"; load {os.getloadavg()[0]:.2f}")
+
+
 if __name__ == "__main__":
-    if sys.argv[1] == "chain":
-        chain(sys.argv[2], int(sys.argv[3]))
+    if sys.argv[1] == "profile":
+        profile()
+    elif sys.argv[1] == "chain":
+        chain(sys.argv[2], int(sys.argv[3]), *sys.argv[4:5])
     else:
         analyse(sys.argv[2])
