@@ -6,6 +6,7 @@ Run (pinned to one core)::
     taskset -c 1 python benchmarks/posterior_coordinates_check.py chain LOG STEPS [plain|friction]
     taskset -c 1 python benchmarks/posterior_coordinates_check.py analyse LOG
     taskset -c 1 python benchmarks/posterior_coordinates_check.py profile
+    taskset -c 1 python benchmarks/posterior_coordinates_check.py tail shipped _friction
 
 ``chain``: today's default sampler (plain coordinates; ``friction`` as a 4th argument), ``n_steps=STEPS`` fixed, seed 1,
 on LOG (``shipped`` or a seed of the independent simulator, drawn as in
@@ -137,8 +138,38 @@ def profile():
             f"{k} {f.parameters[k].value:.4g}" for k in keys) + f"; load {os.getloadavg()[0]:.2f}")
 
 
+def tail(name="shipped", tag="_friction"):
+    """log p(u) (the posterior density of the fit's unknowns: the same whatever the
+    sampler's coordinates) of 36 draws per decade of tau_c from the last half of a saved
+    chain: is the Coulomb-limit plateau the chain reached real?"""
+    import jax.numpy as jnp
+
+    from hdid._posterior.density import posterior_density
+    from posterior_coordinates import load_fit
+
+    fit, prior, _ = load_fit(name)
+    lp = posterior_density(fit, prior=prior).lp
+    d = np.load(f"{OUT}/chain_{name}{tag}.npz")
+    ch, free = d["chain"], list(d["free"])
+    U = ch[ch.shape[0] // 2:].reshape(-1, ch.shape[2])
+    tc = np.exp(U[:, free.index("tau_c")])
+    rng = np.random.default_rng(0)
+    for lo, hi in [(2e-3, 3e-3), (1e-3, 2e-3), (1e-4, 1e-3), (1e-5, 1e-4), (0, 1e-5)]:
+        m = np.flatnonzero((tc >= lo) & (tc < hi))
+        if m.size == 0:
+            continue
+        pick = rng.choice(m, size=min(36, m.size), replace=False)
+        X = lp.to_sampled_np(U[pick])
+        v = np.asarray(lp.batch(jnp.asarray(X))) - np.array(
+            [float(lp.to_u(jnp.asarray(x))[1]) for x in X])
+        med = {n: float(f"{np.median(np.exp(U[pick, free.index(n)])):.3g}") for n in ("v_s", "c_v", "tau_s")}
+        print(f"| [{lo:.0e}, {hi:.0e}) | {m.size / tc.size:.3f} | {v.max():.1f} | {np.median(v):.1f} | {med} |")
+
+
 if __name__ == "__main__":
-    if sys.argv[1] == "profile":
+    if sys.argv[1] == "tail":
+        tail(*sys.argv[2:4])
+    elif sys.argv[1] == "profile":
         profile()
     elif sys.argv[1] == "chain":
         chain(sys.argv[2], int(sys.argv[3]), *sys.argv[4:5])
