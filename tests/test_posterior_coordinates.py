@@ -128,3 +128,24 @@ def test_no_friction_law_means_plain(fit):
     assert friction_coordinates(fixed) is None
     d = posterior_density(fixed, coordinates="friction")
     assert d.lp.friction is None and any("coordinates='friction'" in w for w in d.warnings)
+
+
+def test_default_samples_in_friction_coordinates(fit):
+    """``sample_posterior``'s default (``coordinates="auto"``) moves the walkers in the
+    friction coordinates when the law is free, and reports it; a short chain's draws are
+    the fit's parameters (tau_c, c_v positive and finite), not the torques."""
+    from hdid._posterior import sample_posterior
+
+    post = sample_posterior(fit, n_steps=20, burn_in=0, seed=0, modes="fit")
+    assert post.coordinates == "friction"
+    assert post.to_dict()["posterior_diagnostics"]["coordinates"] == "friction"
+    for n in ("tau_c", "c_v"):
+        v = np.asarray(post.samples[n])
+        assert np.all(np.isfinite(v) & (v > 0))
+    # the draws sit near the fit's values (≤ 2 of its standard errors at the median),
+    # which torques of order 1 (the data coordinates) would not
+    for n in ("tau_c", "c_v"):
+        p = fit.parameters[n]
+        assert abs(np.median(post.samples[n]) - p.value) < 2 * p.std
+    with pytest.raises(ValueError, match="coordinates"):
+        sample_posterior(fit, n_steps=5, burn_in=0, modes="fit", coordinates="torque")
