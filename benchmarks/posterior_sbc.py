@@ -229,11 +229,16 @@ def run_one(gen, design_name, design, seed, max_steps, method="smc", prior_mode=
     modes = sampled_modes(fit, "auto", seed % 1000, dens.u_fit, dens.lin, dens.lp.gauss_prior)
     shared_modes_s = time.perf_counter() - t1
     outs = []
+    # several coordinates (comma-separated): each sampler run once per coordinates, same
+    # fit and optima; the order alternates with the seed
+    cs = (coordinates or "").split(",")
+    cs = cs if seed % 2 == 0 else cs[::-1]
     for m in method.split(","):
-        o = dict(out)
-        o["load_start"] = _load()
-        outs.append(_sample_one(hdid, fit, modes, shared_modes_s, m, seed, max_steps, prior,
-                                truth, info, o, t0, coordinates))
+        for c in (cs if m != "smc" else [None]):
+            o = dict(out)
+            o["load_start"] = _load()
+            outs.append(_sample_one(hdid, fit, modes, shared_modes_s, m, seed, max_steps,
+                                    prior, truth, info, o, t0, c or None))
     return outs
 
 
@@ -405,8 +410,9 @@ def main(argv=None):
                          "truths drawn from exactly that prior (exact SBC); catalog: catalog "
                          "Gaussians on every parameter (CAL_PRIOR_SD), exact SBC; none: the "
                          "default prior, truths drawn around the catalog (not exact)")
-    ap.add_argument("--coordinates", default=None, choices=("plain", "friction"),
-                    help="emcee's walker coordinates (default: the library's)")
+    ap.add_argument("--coordinates", default=None,
+                    help="emcee's walker coordinates, comma-separated for several side by "
+                         "side (plain, friction; default: the library's)")
     args = ap.parse_args(argv)
     out_json = args.out_dir / f"{args.name}.json"
     out_md = args.out_dir / f"{args.name}.md"
@@ -439,7 +445,7 @@ def main(argv=None):
         out_json.write_text(json.dumps(res, indent=1))
         out_md.write_text(render(res))
         for r in rs:
-            print(name, seed, {k: r.get(k) for k in ("method", "converged", "steps", "posterior_s",
+            print(name, seed, {k: r.get(k) for k in ("method", "coordinates", "converged", "steps", "posterior_s",
                                                     "rhat_max", "ess_bulk_min")}, _load(), flush=True)
 
 

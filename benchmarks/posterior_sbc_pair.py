@@ -3,6 +3,10 @@
 Run::
 
     python benchmarks/posterior_sbc_pair.py A.json B.json [--labels plain,friction] > out.md
+    python benchmarks/posterior_sbc_pair.py --split RUN.json   # RUN_plain.json, RUN_friction.json
+
+``--split``: one ``posterior_sbc.py --coordinates plain,friction`` file into one file per
+coordinates (then pair those; ``posterior_sbc.py --render`` renders each).
 
 Per seed: R-hat max, ESS bulk/tail min, τ_max, chain length in τ_max, wall time, the
 independence move's acceptance and how many of the six checked quantities the 95 %
@@ -28,7 +32,18 @@ def _cp(k, n, a=0.05):
     return lo, hi
 
 
+def split(path):
+    from pathlib import Path
+
+    res = json.load(open(path))
+    for c in sorted({r.get("coordinates") for r in res["logs"]} - {None}):
+        out = dict(res, logs=[r for r in res["logs"] if r.get("coordinates") == c])
+        Path(path).with_name(Path(path).stem + f"_{c}.json").write_text(json.dumps(out, indent=1))
+
+
 def main(argv):
+    if argv[0] == "--split":
+        return split(argv[1])
     labels = ["A", "B"]
     if "--labels" in argv:
         i = argv.index("--labels")
