@@ -191,8 +191,7 @@ def draw_physical(gen, rng, design, seed, max_iter=8):
     return t, df, info, notes
 
 
-def run_one(gen, design_name, design, seed, max_steps, method="smc", prior_mode="none",
-            coordinates=None):
+def run_one(gen, design_name, design, seed, max_steps, method="smc", prior_mode="none"):
     import numpy as np
 
     import hdid
@@ -229,28 +228,20 @@ def run_one(gen, design_name, design, seed, max_steps, method="smc", prior_mode=
     modes = sampled_modes(fit, "auto", seed % 1000, dens.u_fit, dens.lin, dens.lp.gauss_prior)
     shared_modes_s = time.perf_counter() - t1
     outs = []
-    # several coordinates (comma-separated): each sampler run once per coordinates, same
-    # fit and optima; the order alternates with the seed
-    cs = (coordinates or "").split(",")
-    cs = cs if seed % 2 == 0 else cs[::-1]
     for m in method.split(","):
-        for c in (cs if m != "smc" else [None]):
-            o = dict(out)
-            o["load_start"] = _load()
-            outs.append(_sample_one(hdid, fit, modes, shared_modes_s, m, seed, max_steps,
-                                    prior, truth, info, o, t0, c or None))
+        o = dict(out)
+        o["load_start"] = _load()
+        outs.append(_sample_one(hdid, fit, modes, shared_modes_s, m, seed, max_steps, prior,
+                                truth, info, o, t0))
     return outs
 
 
 def _sample_one(hdid, fit, modes, modes_s, method, seed, max_steps, prior, truth, info, out,
-                t0, coordinates=None):
+                t0):
     import numpy as np
 
     t1 = time.perf_counter()
     kw = {} if method == "smc" else {"max_steps": max_steps}
-    if coordinates and method != "smc":
-        kw["coordinates"] = coordinates
-        out["coordinates"] = coordinates
     post = hdid.sample_posterior(fit, seed=seed % 1000, method=method, prior=prior,
                                  modes=modes, **kw)
     out["posterior_s"] = time.perf_counter() - t1 + modes_s
@@ -410,9 +401,6 @@ def main(argv=None):
                          "truths drawn from exactly that prior (exact SBC); catalog: catalog "
                          "Gaussians on every parameter (CAL_PRIOR_SD), exact SBC; none: the "
                          "default prior, truths drawn around the catalog (not exact)")
-    ap.add_argument("--coordinates", default=None,
-                    help="emcee's walker coordinates, comma-separated for several side by "
-                         "side (plain, friction; default: the library's)")
     args = ap.parse_args(argv)
     out_json = args.out_dir / f"{args.name}.json"
     out_md = args.out_dir / f"{args.name}.md"
@@ -436,8 +424,7 @@ def main(argv=None):
         if time.perf_counter() - t_start > 60 * args.budget_min:
             break
         try:
-            rs = run_one(gen, name, design, seed, args.max_steps, args.method, args.prior,
-                         args.coordinates)
+            rs = run_one(gen, name, design, seed, args.max_steps, args.method, args.prior)
         except Exception:  # record and go on
             rs = [{"design": name, "seed": seed, "method": m, "error": traceback.format_exc()}
                   for m in args.method.split(",")]
@@ -445,7 +432,7 @@ def main(argv=None):
         out_json.write_text(json.dumps(res, indent=1))
         out_md.write_text(render(res))
         for r in rs:
-            print(name, seed, {k: r.get(k) for k in ("method", "coordinates", "converged", "steps", "posterior_s",
+            print(name, seed, {k: r.get(k) for k in ("method", "converged", "steps", "posterior_s",
                                                     "rhat_max", "ess_bulk_min")}, _load(), flush=True)
 
 

@@ -3,7 +3,6 @@
 One job per module:
 
 - :mod:`.density` — the log-posterior (likelihood, priors, sampled coordinates), batched;
-- :mod:`.coordinates` — the friction law sampled as its torque at the log's own speeds;
 - :mod:`.modes` — local optima near the fit and their Laplace masses (where walkers start);
 - :mod:`.moves` — emcee moves, the t-mixture independence proposal, the start;
 - :mod:`.diagnostics` — arviz convergence (R-hat, ESS), τ, posterior/prior widths;

@@ -42,7 +42,6 @@ from .. import _config  # noqa: F401
 from .._problems._evaluate import predict_rows
 from .._problems._problem import Problem
 from .._models._transforms import from_unconstrained
-from .coordinates import FrictionCoordinates
 
 #: Flat prior half-width around the least-squares value in the transformed space
 #: (±7 in log ≈ a factor 1000 either way: uninformative but proper).
@@ -85,28 +84,13 @@ class LogPosterior(eqx.Module):
     #: ``(K, 2)`` index pairs ``(i, j)`` of free physical parameters with ``value_i ≤
     #: value_j`` imposed (:func:`ordered_pairs`: ``tau_c ≤ tau_s``); ``None``: none
     order: jax.Array | None = None
-    #: the friction law's ``(tau_c, c_v)`` sampled as its torque at two of the log's
-    #: sliding speeds (:mod:`.coordinates`); ``None``: as above
-    friction: FrictionCoordinates | None = None
 
     @property
     def ndim(self) -> int:
         return self.problem.n_unknowns + 1
 
     def to_u(self, x):
-        """``(u, log|du/dx|, inside)`` of one sampled vector's unknowns (JAX)."""
-        fc = self.friction
-        if fc is None:
-            return self._to_u_plain(x)
-        # the friction block: placeholders (1: the fit's value when sampled in value, a
-        # finite log otherwise) through the plain map, then (tau_c, c_v) from the torques
-        i_c, i_v = fc.idx[:2]
-        z = jnp.stack([x[i_c], x[i_v]])
-        u, log_jac, inside = self._to_u_plain(x.at[i_c].set(1.0).at[i_v].set(1.0))
-        lc, lv, lj, valid = fc.inverse(z, u)
-        return u.at[i_c].set(lc).at[i_v].set(lv), log_jac + lj, inside & valid
-
-    def _to_u_plain(self, x):
+        """``(u, log|du/dy|, inside)`` of one sampled vector's unknowns (JAX)."""
         u = x[:-1]
         m = self.sample_linear
         if m is None:
@@ -124,55 +108,25 @@ class LogPosterior(eqx.Module):
         if self.sample_linear is not None:
             on = np.flatnonzero(np.asarray(self.sample_linear) > 0)
             X[..., on] = np.exp(X[..., on] - np.asarray(self.centre)[on])
-        fc = self.friction
-        if fc is not None:
-            z = fc.forward(np.asarray(U, dtype=float)[..., :-1], np)
-            X[..., fc.idx[0]], X[..., fc.idx[1]] = z[..., 0], z[..., 1]
         return X
 
     def from_sampled_np(self, X):
         """Inverse of :meth:`to_sampled_np` (NumPy)."""
         U = np.array(X, dtype=float)
-        fc = self.friction
-        if fc is not None:
-            i_c, i_v = fc.idx[:2]
-            z = np.stack([U[..., i_c], U[..., i_v]], axis=-1)
-            U[..., i_c] = U[..., i_v] = 1.0
         if self.sample_linear is not None:
             on = np.flatnonzero(np.asarray(self.sample_linear) > 0)
             with np.errstate(divide="ignore", invalid="ignore"):
                 U[..., on] = np.asarray(self.centre)[on] + np.log(U[..., on])
-        if fc is not None:
-            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-                lc, lv, _, valid = fc.inverse(z, U[..., :-1], np)
-            U[..., i_c] = np.where(valid, lc, np.nan)
-            U[..., i_v] = np.where(valid, lv, np.nan)
         return U
 
     def sampled_cov_np(self, u, cov):
         """Covariance ``cov`` of ``u`` carried to the sampled coordinates at ``u`` (linearised)."""
-        if self.friction is not None:
-            J = np.asarray(jax.jacfwd(self._to_sampled_jax)(jnp.asarray(u, dtype=float)))
-            return J @ np.asarray(cov, dtype=float) @ J.T
         if self.sample_linear is None:
             return np.asarray(cov, dtype=float)
         d = np.ones(len(u))
         on = np.flatnonzero(np.asarray(self.sample_linear) > 0)
         d[on] = np.exp(np.asarray(u)[on] - np.asarray(self.centre)[on])
         return d[:, None] * np.asarray(cov, dtype=float) * d[None, :]
-
-    def _to_sampled_jax(self, u):
-        """The sampled coordinates of the unknowns ``u`` (JAX; for Jacobians)."""
-        x = u
-        if self.sample_linear is not None:
-            P = self.sample_linear.shape[0]
-            on = self.sample_linear > 0
-            x = x.at[:P].set(jnp.where(on, jnp.exp(u[:P] - self.centre[:P]), u[:P]))
-        fc = self.friction
-        if fc is not None:
-            z = fc.forward(u)
-            x = x.at[fc.idx[0]].set(z[0]).at[fc.idx[1]].set(z[1])
-        return x
 
     def log_prob(self, x):
         """Log-posterior of one sampled vector ``x`` (unknowns, then ``log σ_n``)."""
@@ -400,18 +354,13 @@ def declared(specs, flag: str) -> tuple[str, ...]:
 
 
 def posterior_density(fit, sigma_floor=None, linear_prior=None,
-                      sample_linear=None, prior=None, coordinates="plain") -> PosteriorDensity:
+                      sample_linear=None, prior=None) -> PosteriorDensity:
     """:class:`LogPosterior` of ``fit``: tempered by the residuals' lag-1 autocorrelation
     (effective sample size), σ bounded in steps, a flat prior in the value of the
     log-transformed parameters named in ``linear_prior`` and sampling in the value of
     those in ``sample_linear`` (``None``: as the effects declare them, see above); ``prior`` (:func:`gaussian_prior`) replaces the default
-    prior of the parameters it names. ``coordinates="friction"``: the friction law's
-    ``(tau_c, c_v)`` sampled as its torque at two of the log's sliding speeds
-    (:mod:`.coordinates`; the density is the same distribution of ``u``); ``"plain"``: not."""
+    prior of the parameters it names."""
     import math
-
-    if coordinates not in ("plain", "friction"):
-        raise ValueError(f"coordinates must be 'plain' or 'friction', not {coordinates!r}")
 
     prob = fit.problem
     warnings: list[str] = []
@@ -445,13 +394,4 @@ def posterior_density(fit, sigma_floor=None, linear_prior=None,
                       sample_linear=jnp.asarray(samp) if samp.any() else None,
                       gauss_prior=None if G is None else jnp.asarray(G),
                       order=None if order is None else jnp.asarray(order))
-    if coordinates == "friction":
-        from .coordinates import friction_coordinates
-
-        fc = friction_coordinates(fit)
-        if fc is None:
-            warnings.append("coordinates='friction': the model has no free Stribeck + viscous "
-                            "law (tau_c, c_v, tau_s, v_s, delta) to map; sampled as 'plain'")
-        else:
-            lp = eqx.tree_at(lambda t: t.friction, lp, fc, is_leaf=lambda x: x is None)
     return PosteriorDensity(lp, warnings, temper, rho1, lin, bounds, u_fit)

@@ -79,7 +79,6 @@ def sample_posterior(
     method: str = "emcee",
     n_particles: int | None = None,
     prior: dict | None = None,
-    coordinates: str = "auto",
 ) -> PosteriorResult:
     """Sample the posterior of ``fit``'s parameters with emcee, until converged.
 
@@ -147,18 +146,6 @@ def sample_posterior(
         Log-transformed parameters the walkers move in the *value* of (default: those
         whose declaration says ``sample_in_value``); the density carries the Jacobian, so
         only the mixing changes.
-    coordinates:
-        ``"auto"`` (default): ``"friction"`` where the model has the Stribeck + viscous law
-        free (``tau_c, c_v, tau_s, v_s, delta``), else ``"plain"``. ``"friction"``: the
-        walkers move in the friction torque at the quartiles of the fit's sliding speeds
-        in place of ``(tau_c, c_v)`` (:mod:`~hdid._posterior.coordinates`: the ridge of laws
-        with the same torque where the log slides becomes straight; exact Jacobian, the
-        same posterior). Measured on 20 paper-design logs against ``"plain"``
-        (benchmarks/README.md, issue 17, branch ``post6``): τ_max median 217 → 188 steps,
-        worst 2862 → 555, R-hat lower on 15 of 20, coverage 90.0 → 91.7 %; on the shipped
-        paper log it reaches the Coulomb-limit plateau of tau_c (flat density down to the
-        prior box's floor) that the plain walkers never leave the top decade of.
-        Convergence and τ are judged on the parameters, whichever coordinates.
     """
     if method == "smc":
         from .smc import N_PARTICLES, sample_smc
@@ -183,13 +170,7 @@ def sample_posterior(
     if likelihood not in ("auto", "gaussian"):
         raise ValueError(f"likelihood must be 'auto' or 'gaussian', not {likelihood!r} (the "
                          "interval likelihood was retired: benchmarks/README.md)")
-    if coordinates not in ("auto", "plain", "friction"):
-        raise ValueError(f"coordinates must be 'auto', 'plain' or 'friction', not {coordinates!r}")
-    if coordinates == "auto":
-        from .coordinates import friction_coordinates
-
-        coordinates = "friction" if friction_coordinates(fit) is not None else "plain"
-    dens = posterior_density(fit, sigma_floor, linear_prior, sample_linear, prior, coordinates)
+    dens = posterior_density(fit, sigma_floor, linear_prior, sample_linear, prior)
     lp, temper, rho1, lin, bounds, u_fit = (dens.lp, dens.temper, dens.rho1, dens.lin,
                                             dens.bounds, dens.u_fit)
     warnings += dens.warnings
@@ -283,12 +264,9 @@ def sample_posterior(
             if n_steps is None and conv.converged:
                 break
     t_kept = time.perf_counter() - t_kept
-    # τ of the parameters as the plain coordinates sample them (the same quantities
-    # whatever the walkers' coordinates)
-    chain_p = _plain_chain(lp, sampler.get_chain())
     with np.errstate(invalid="ignore", divide="ignore"):  # a walker that never moved
-        tau_e = emcee.autocorr.integrated_time(chain_p, tol=0, quiet=True)
-    tau = np.fmax(tau_e, tau_pooled(chain_p))
+        tau_e = sampler.get_autocorr_time(tol=0)
+    tau = np.fmax(tau_e, tau_pooled(sampler.get_chain()))
     finite_tau = np.isfinite(tau)
     tau_max = float(np.max(tau[finite_tau])) if finite_tau.any() else float(done)
     if not conv.converged:
@@ -380,7 +358,6 @@ def sample_posterior(
         compile_s=t_compile,
         stage_s={"mode_search": t_modes, "compile": t_compile, "burn_in": t_burn,
                  "kept_chain": t_kept, "diagnostics": t_diag},
-        coordinates="plain" if lp.friction is None else "friction",
     )
 
 
@@ -399,28 +376,11 @@ def _tune(counted, burn_draws, D):
         m.proposed = m.accepted = 0
 
 
-def _plain_chain(lp, chain):
-    """``chain`` in the plain sampled coordinates (the fit's parameters, some in their
-    value: :meth:`LogPosterior.to_sampled_np` without the friction map); itself when the
-    walkers move in those."""
-    if lp.friction is None:
-        return chain
-    import equinox as eqx
-
-    plain = eqx.tree_at(lambda t: t.friction, lp, None)
-    return plain.to_sampled_np(lp.from_sampled_np(chain))
-
-
 def _converge(sampler, lp, prob, labels):
-    """arviz diagnostics of the kept chain's quantities (the parameters in the plain
-    sampled coordinates, whatever coordinates the walkers move in) and the band."""
+    """arviz diagnostics of the kept chain's sampled quantities and the band."""
     chain = sampler.get_chain()
-    chain = _plain_chain(lp, chain[:: diagnostic_stride(chain.shape[0])])
+    chain = chain[:: diagnostic_stride(chain.shape[0])]
     S, W, D = chain.shape
-    U = lp.from_sampled_np(chain.reshape(-1, D)) if lp.friction is None else None
-    if U is None:
-        import equinox as eqx
-
-        U = eqx.tree_at(lambda t: t.friction, lp, None).from_sampled_np(chain.reshape(-1, D))
+    U = lp.from_sampled_np(chain.reshape(-1, D))
     band = derived_np(prob, U)[BAND].reshape(S, W, 1)
     return convergence(np.concatenate([chain, band], axis=2), labels + [BAND])

@@ -55,7 +55,6 @@ class PosteriorResult:
     stage_s: dict = field(default_factory=dict)  # wall time of each stage
     method: str = "emcee"                    # "smc" (tempered SMC) or "emcee"
     smc: dict = field(default_factory=dict)  # SMC: runs, particles, temperatures, evidence
-    coordinates: str = "plain"               # the walkers' coordinates (coordinates.py)
 
     @property
     def converged(self) -> bool:
@@ -87,7 +86,6 @@ class PosteriorResult:
                 "engine": ("tempered SMC alone" if self.method == "smc" else
                            "emcee, walkers from the optima's Laplace approximations"),
                 "smc": dict(self.smc) if self.smc else None,
-                "coordinates": self.coordinates,
                 "n_walkers": int(self.chain.shape[1]),
                 "n_steps": int(self.chain.shape[0]),
                 "burn_in": self.burn_in,
