@@ -101,8 +101,13 @@ def sample_posterior(
 
     Modes: with ``modes="auto"`` (default) :func:`find_modes` restarts the local fit
     around ``fit`` and keeps every distinct optimum with its Laplace mass; the walkers
-    start spread over them in proportion to that mass. ``modes="fit"`` uses the fit's
-    optimum only; a list of :class:`Mode` is used as given.
+    start spread over them in proportion to that mass; it adds the *limit fits* of the
+    parameters whose prior is flat in value (each held near zero, the rest refitted:
+    :mod:`~hdid._posterior.limits`), which keep a share of the independence proposal, and
+    the result warns ``LOWER END NOT MEASURED`` when the data allow values below a chain's
+    95 % interval (``BOUNDED ABOVE ONLY`` when the chain reaches the vanishing end).
+    ``modes="fit"`` uses the fit's optimum only (the limit fits are still sought, for the
+    warning); a list of :class:`Mode` is used as given.
 
     Burn-in (discarded): ``burn_in`` steps of differential evolution plus independence
     Metropolis–Hastings from a t-mixture over the optima (:class:`MixtureProposal`),

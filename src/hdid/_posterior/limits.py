@@ -38,8 +38,8 @@ import numpy as np
 
 #: A limit fit holds its parameter at this fraction of the least-squares value: e⁻⁶ ≈
 #: 0.25 %, inside the ±7 (log) prior box and far enough below the value for the term to
-#: be absent at the log's precision (the shipped log's tau_c plateau reaches < 10 µN m,
-#: 0.4 % of the fit's 2.5 mN m).
+#: be absent at the log's precision (the shipped log's Coulomb ridge reaches < 10 µN m,
+#: 0.4 % of the fit's 2.2 mN m).
 LIMIT_FRACTION = math.exp(-6.0)
 #: No limit fit for a parameter the least-squares fit measures to better than this
 #: (relative standard error, the sd of its log): its vanishing end is then ≥ 5 linearised
@@ -47,7 +47,8 @@ LIMIT_FRACTION = math.exp(-6.0)
 #: calls) on a paper log. The shipped log's tau_c, c_v and k2 are at 106 %, 236 %, 34 %.
 LIMIT_SCREEN_REL_SD = 0.2
 #: The continuation that reaches it: held at ``exp(−s)`` of the least-squares value for
-#: each ``s`` (steps of 1.5 in log; ``LIMIT_FRACTION`` is the last).
+#: each ``s`` (``LIMIT_FRACTION`` is the last). The first step is short: in steps of 1.5
+#: from the shipped log's optimum the tau_c path ended at Δχ² 16 instead of 1.2.
 LIMIT_PATH = (0.75, 1.5, 3.0, 4.5, 6.0)
 #: sd in log of the row that holds it there (the others are refitted around it).
 LIMIT_PIN_SD = 1e-3
