@@ -176,14 +176,15 @@ def test_stribeck_priors_are_relative_to_the_log_and_physical(fit):
 def test_sampling_coordinates_and_orders_are_declared_by_the_effects(fit):
     """The posterior reads its coordinates from the parameters' declarations (issue 20:
     no list of names in the posterior): the library's ``k1, k2, tau_c, c_v`` are sampled
-    in value and ``k2, c_v`` get a value-flat prior, and a user's effect that declares
+    in value and ``k2, tau_c, c_v`` get a value-flat prior (coefficients of terms that may
+    vanish; tau_c since issue 17 ``post7``), and a user's effect that declares
     ``sample_in_value`` / ``flat_in_value`` and an order is treated the same way."""
     from hdid._posterior.density import declared, ordered_pairs
     from hdid.effects import parameter
 
     specs = hdid.Model.default().parameter_specs()
     assert declared(specs, "sample_in_value") == ("k1", "k2", "tau_c", "c_v")
-    assert declared(specs, "flat_in_value") == ("k2", "c_v")
+    assert declared(specs, "flat_in_value") == ("k2", "tau_c", "c_v")
 
     class Drag(hdid.AbstractEffect):
         c_d: float = parameter("N m s^2/rad^2", "quadratic drag", start=lambda s: 1e-9,
@@ -206,3 +207,32 @@ def test_sampling_coordinates_and_orders_are_declared_by_the_effects(fit):
     free = list(problem.free)
     assert [free.index("c_d"), free.index("c_e")] in pairs.tolist()
     assert [free.index("tau_c"), free.index("tau_s")] in pairs.tolist()
+
+
+def test_tau_c_default_prior_is_flat_in_value_and_a_user_prior_replaces_it(fit):
+    """The default posterior prior of tau_c is flat in its value (the Coulomb limit is a
+    law of its own, effects/stribeck.py): moving tau_c by Δ in log changes the default
+    log-density by exactly Δ more than a log-flat prior does (density ∝ e^u in u), at two
+    points; the box stays (±7 in log). A Gaussian of the user's on tau_c (and the
+    calibration's ``--prior physical``, which gives one) replaces it: no value-flat term."""
+    prob = fit.problem
+    free = list(prob.free)
+    j = free.index("tau_c")
+    dflt = posterior_density(fit, sample_linear=())
+    logflat = posterior_density(fit, sample_linear=(), linear_prior=("k2", "c_v"))
+    assert dflt.lin[j] == 1.0 and logflat.lin[j] == 0.0
+    assert [free[i] for i in np.flatnonzero(dflt.lin)] == ["k2", "tau_c", "c_v"]
+    x0 = _x(fit)
+    for d in (-0.7, -2.5):  # tau_c lowered (stays below tau_s: the order holds)
+        x = _x(fit, {j: d})
+        a = float(dflt.lp.log_prob(jnp.asarray(x)) - dflt.lp.log_prob(jnp.asarray(x0)))
+        b = float(logflat.lp.log_prob(jnp.asarray(x)) - logflat.lp.log_prob(jnp.asarray(x0)))
+        assert a - b == pytest.approx(d, abs=1e-9)
+    assert float(dflt.lp.log_prob(jnp.asarray(_x(fit, {j: -PRIOR_HALF_WIDTH - 0.1})))) == -np.inf
+    vals = fit.values
+    user = posterior_density(fit, sample_linear=(), prior={"tau_c": (vals["tau_c"], 0.3)})
+    assert user.lin[j] == 0.0 and user.lin[free.index("c_v")] == 1.0
+    x = _x(fit, {j: -0.7})
+    a = float(user.lp.log_prob(jnp.asarray(x)) - user.lp.log_prob(jnp.asarray(x0)))
+    b = float(logflat.lp.log_prob(jnp.asarray(x)) - logflat.lp.log_prob(jnp.asarray(x0)))
+    assert a - b == pytest.approx(-0.5 * (0.7 / 0.3) ** 2, abs=1e-9)

@@ -4,6 +4,7 @@ One job per module:
 
 - :mod:`.density` — the log-posterior (likelihood, priors, sampled coordinates), batched;
 - :mod:`.modes` — local optima near the fit and their Laplace masses (where walkers start);
+- :mod:`.limits` — the vanishing ends of value-flat parameters: limit fits, the warning;
 - :mod:`.moves` — emcee moves, the t-mixture independence proposal, the start;
 - :mod:`.diagnostics` — arviz convergence (R-hat, ESS), τ, posterior/prior widths;
 - :mod:`.driver` — :func:`sample_posterior`;

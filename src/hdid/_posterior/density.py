@@ -23,7 +23,13 @@ Priors (documented defaults, all in the sampled space):
   effects declare (``tau_s ≥ tau_c``: zero density otherwise, :func:`ordered_pairs`), times
   a flat prior in the transformed space (flat in log for positive ones)
   within ``± PRIOR_HALF_WIDTH`` of the least-squares value; the coefficients of terms that
-  may vanish (declared ``flat_in_value``: ``k2``, ``c_v``) are flat in their value instead (same box);
+  may vanish (declared ``flat_in_value``: ``k2``, ``c_v``, ``tau_c``) are flat in their value
+  instead (same box): a log-flat prior gives their "absent" end — no cubic spring, no
+  viscous term, the Coulomb limit of the Stribeck law (a Stribeck hump on a viscous
+  line) — equal mass per decade down to the box's floor wherever the data cannot exclude
+  it (the paper design's k2 → 0; the shipped log's tau_c, flat from 3 mN m to < 10 µN m:
+  ``effects/stribeck.py``); the posterior then reports when a chain's interval stops short
+  of such an end that the data allow (:mod:`.limits`);
 - release instant: uniform on its bracket between samples; start angle flat within
   ±5 encoder steps of its least-squares value; offset and other per-run unknowns flat;
 - ``σ_n``: log-uniform between ``0.05 q`` (the simulator's accuracy) and ``20 q``.
@@ -54,9 +60,10 @@ SIGMA_BOUNDS = (0.05, 20.0)
 #: Which log-transformed parameters have a default prior flat in their *value* (not
 #: their log) and which the walkers move in their value is declared by each effect's
 #: parameters (``Parameter.flat_in_value``, ``Parameter.sample_in_value``: the library
-#: declares ``k2``, ``c_v`` flat in value — coefficients of terms that may vanish, whose
-#: "absent" end a log-flat prior gives an unbounded volume that pulled the paper design to
-#: k2 → 0 and a 92 mrad band — and samples ``k1``, ``k2``, ``tau_c``, ``c_v`` in value — the
+#: declares ``k2``, ``c_v`` and ``tau_c`` flat in value — coefficients of terms that may
+#: vanish, whose "absent" end a log-flat prior gives an unbounded volume that pulled the
+#: paper design to k2 → 0 and a 92 mrad band, and made the shipped log's tau_c interval
+#: one of the box's floor (issue 17, ``post7``) — and samples ``k1``, ``k2``, ``tau_c``, ``c_v`` in value — the
 #: data fix ``k1·d + k2·d³`` and ``τ_c + c_v·v`` as straight lines, bananas in their logs;
 #: benchmarks/results/posterior_calibration.md, posterior_coordinates.md).
 #: Half-width of the start angle's flat prior around its least-squares value [encoder steps].

@@ -24,7 +24,8 @@ from .diagnostics import (
     tau_pooled,
     width_ratios,
 )
-from .modes import sampled_modes
+from .limits import assess_limits, limit_proposal_weights, limit_shares
+from .modes import found_limits, sampled_modes
 from .moves import (
     START_SCALE,
     MixtureProposal,
@@ -100,8 +101,13 @@ def sample_posterior(
 
     Modes: with ``modes="auto"`` (default) :func:`find_modes` restarts the local fit
     around ``fit`` and keeps every distinct optimum with its Laplace mass; the walkers
-    start spread over them in proportion to that mass. ``modes="fit"`` uses the fit's
-    optimum only; a list of :class:`Mode` is used as given.
+    start spread over them in proportion to that mass; it adds the *limit fits* of the
+    parameters whose prior is flat in value (each held near zero, the rest refitted:
+    :mod:`~hdid._posterior.limits`), which keep a share of the independence proposal, and
+    the result warns ``LOWER END NOT MEASURED`` when the data allow values below a chain's
+    95 % interval (``BOUNDED ABOVE ONLY`` when the chain reaches the vanishing end).
+    ``modes="fit"`` uses the fit's optimum only (the limit fits are still sought, for the
+    warning); a list of :class:`Mode` is used as given.
 
     Burn-in (discarded): ``burn_in`` steps of differential evolution plus independence
     Metropolis–Hastings from a t-mixture over the optima (:class:`MixtureProposal`),
@@ -186,6 +192,7 @@ def sample_posterior(
     q = float(prob.step)
     t_modes = time.perf_counter()
     found = sampled_modes(fit, modes, seed, u_fit, lin, lp.gauss_prior)
+    limits = found_limits(fit, found, modes, lin, lp.gauss_prior, seed)
     t_modes = time.perf_counter() - t_modes
     log_lo = math.log(bounds[0] * q)
     log_rms = math.log(max(fit.rms_residual_rad, bounds[0] * q))
@@ -208,7 +215,9 @@ def sample_posterior(
         covs[k, :-1, :-1] = lp.sampled_cov_np(m.u, START_SCALE**2 * m.cov)
         covs[k, -1, -1] = s_sd**2
     start_mix = MixtureProposal(means, covs, [m.weight for m in found])
-    proposal = _Adaptive(start_mix)
+    # the limit optima the data allow keep a share of the proposal through the burn-in
+    w_prop, frozen = limit_proposal_weights(found)
+    proposal = _Adaptive(MixtureProposal(means, covs, w_prop, frozen=frozen))
     if moves is None:
         moves = default_moves(proposal)
     elif callable(moves) and not hasattr(moves, "propose"):
@@ -300,11 +309,12 @@ def sample_posterior(
     # highest at the draw (the adapted mixture's components drift, so not those).
     comp = np.argmax(start_mix.component_logpdf(chain_s.reshape(-1, D)), axis=1)
     share = np.bincount(comp, minlength=len(found)) / comp.size
-    if len(found) > 1:
+    optima = [i for i, m in enumerate(found) if m.kind == "optimum"]
+    if len(optima) > 1:
         warnings.append(
-            f"MULTIMODAL: {len(found)} separate optima of the fit's cost (Laplace weights "
-            + ", ".join(f"{m.weight:.2f}" for m in found)
-            + "; share of the draws " + ", ".join(f"{s:.2f}" for s in share)
+            f"MULTIMODAL: {len(optima)} separate optima of the fit's cost (Laplace weights "
+            + ", ".join(f"{found[i].weight:.2f}" for i in optima)
+            + "; share of the draws " + ", ".join(f"{share[i]:.2f}" for i in optima)
             + "); the walkers started in all of them and the independence move lets them "
             "change mode — see `modes` for their parameters"
         )
@@ -320,6 +330,10 @@ def sample_posterior(
             "that has not mixed between modes are unreliable"
         )
     phys = to_physical(prob, draws)
+    # the ends of value-flat parameters the data allow, and whether the chain reached them
+    warnings += assess_limits(limits, lp, lin, [m.u for m in found if m.kind == "optimum"]
+                              or [u_fit], log_prob, (log_lo, log_rms), phys, fit.values,
+                              limit_shares(found, share))
     # Fixed parameters appear with their constant value so every name is present.
     values = fit.model.float_values()
     for n in values:
@@ -355,6 +369,7 @@ def sample_posterior(
         n_components=len(proposal.mix.weights),
         convergence=conv,
         widths=widths,
+        limits=[lim.to_dict() for lim in limits],
         compile_s=t_compile,
         stage_s={"mode_search": t_modes, "compile": t_compile, "burn_in": t_burn,
                  "kept_chain": t_kept, "diagnostics": t_diag},

@@ -33,10 +33,13 @@ class Mode:
     log_evidence: float      # −cost/2 + ½ log det(2π cov): relative Laplace mass
     weight: float = 1.0      # normalised share of the posterior mass (Laplace)
     values: dict[str, float] = field(default_factory=dict)
+    #: "optimum", or "limit:NAME": a limit fit (NAME held near zero, :mod:`.limits`)
+    kind: str = "optimum"
+    limit: Any = None        # its :class:`~hdid._posterior.limits.LimitFit`
 
     def to_dict(self) -> dict[str, Any]:
         return {"cost": self.cost, "weight": self.weight, "log_evidence": self.log_evidence,
-                "values": dict(self.values)}
+                "values": dict(self.values), "kind": self.kind}
 
 
 def _rj(problem: Problem, u):
@@ -274,9 +277,45 @@ def with_user_prior(fit, gauss_prior, seed: int = 0, n_prior_draws: int = N_PRIO
     return _PriorFit(fit, prob2), starts
 
 
+def seek_limits(fit, lin, best_cost: float, dchi2_max: float = MODE_DCHI2_MAX) -> list[Mode]:
+    """The limit fits (:mod:`.limits`) of the parameters ``lin`` marks (prior flat in
+    value), and their continuation's first point, whose least-squares cost is within
+    ``dchi2_max`` of the best, as optima of ``kind="limit:NAME"`` (the end carrying its
+    :class:`~hdid._posterior.limits.LimitFit`; never merged: the plateau they stand for is
+    one ridge with the fit's optimum)."""
+    from .limits import limit_fits, limit_names
+
+    prob: Problem = fit.problem
+    out = []
+    names = limit_names(prob, lin, getattr(fit, "covariance", None))
+    for lim in limit_fits(fit, names, best_cost, MODE_LANES, dchi2_max):
+        # the end, and the continuation's first point (half-way down the ridge in value)
+        for u, c, end in [(lim.u, lim.dchi2_lsq, lim)] + [(u, c, None) for u, c in lim.path[:1]]:
+            if c < dchi2_max:
+                cost, cov, logz = _laplace(prob, u)
+                out.append(Mode(u=u, cost=cost, cov=cov, log_evidence=logz,
+                                values=prob.values_np(u), kind=f"limit:{lim.name}", limit=end))
+    return out
+
+
+def found_limits(fit, found, modes, lin, gauss_prior=None, seed: int = 0) -> list:
+    """The limit fits (:class:`~hdid._posterior.limits.LimitFit`) behind ``found``'s limit
+    optima; with ``modes="fit"`` (no limit optima to start from) sought here, for the
+    warning only."""
+    limits = [m.limit for m in found if m.limit is not None]
+    if isinstance(modes, str) and modes == "fit" and np.any(np.asarray(lin) > 0):
+        from .limits import limit_fits, limit_names
+
+        view = with_user_prior(fit, gauss_prior, seed)[0]
+        names = limit_names(fit.problem, lin, getattr(fit, "covariance", None))
+        limits = limit_fits(view, names, found[0].cost, MODE_LANES)
+    return limits
+
+
 def sampled_modes(fit, modes, seed: int, u_fit: np.ndarray, lin: np.ndarray,
                   gauss_prior=None) -> list[Mode]:
-    """The optima a sampler starts from: ``modes`` ``"auto"`` (:func:`find_modes`),
+    """The optima a sampler starts from: ``modes`` ``"auto"`` (:func:`find_modes`, and the
+    limit fits of the parameters whose prior is flat in value, :mod:`.limits`),
     ``"fit"`` or a list of :class:`Mode` (copied: their weights are re-set), kept inside
     the prior box around the fit (±``PRIOR_HALF_WIDTH``) and on the allowed side of the
     orders the prior imposes (``tau_s ≥ tau_c``), else they cannot be sampled (the fit's
@@ -294,6 +333,8 @@ def sampled_modes(fit, modes, seed: int, u_fit: np.ndarray, lin: np.ndarray,
         view, extra = with_user_prior(fit, gauss_prior, seed)
         found = (find_modes(view, seed=seed, extra_starts=extra)
                  if modes == "auto" else [_fit_mode(view)])
+        if modes == "auto":
+            found += seek_limits(view, lin, min(m.cost for m in found))
     else:
         found = [replace(m) for m in modes]
     from .density import ordered_pairs

@@ -29,8 +29,11 @@ class MixtureProposal:
     importance ratio bounded. Adapt it (:meth:`refit`) during the burn-in only.
     """
 
-    def __init__(self, means, covs, weights, nu: float = 8.0):
+    def __init__(self, means, covs, weights, nu: float = 8.0, frozen=None):
         self.means = np.atleast_2d(np.asarray(means, dtype=float))
+        #: components :meth:`refit` leaves as they are (mean, covariance, weight)
+        self.frozen = (np.zeros(len(self.means), dtype=bool) if frozen is None
+                       else np.asarray(frozen, dtype=bool))
         self.covs = np.asarray(covs, dtype=float).reshape(len(self.means), *self.means.shape[1:] * 2)
         w = np.clip(np.asarray(weights, dtype=float), 1e-12, None)
         self.weights = w / w.sum()
@@ -77,7 +80,8 @@ class MixtureProposal:
     def refit(self, X, shrink: float = 20.0, iterations: int = 3) -> MixtureProposal:
         """A mixture fitted to draws ``X`` (EM from this one; covariances shrunk towards
         the current ones with ``shrink`` pseudo-draws; weights kept if a component gets
-        no draws)."""
+        no draws). Frozen components (:attr:`frozen`: the limit fits' regions, which the
+        draws may not have reached yet) keep their mean, covariance and weight."""
         X = np.asarray(X, dtype=float)
         means, covs, weights = self.means.copy(), self.covs.copy(), self.weights.copy()
         cur = self
@@ -87,7 +91,7 @@ class MixtureProposal:
             r /= r.sum(axis=1, keepdims=True)
             nk = r.sum(axis=0)
             for k in range(len(weights)):
-                if nk[k] < 2.0:
+                if nk[k] < 2.0 or self.frozen[k]:
                     continue
                 mu = (r[:, k] @ X) / nk[k]
                 d = X - mu
@@ -97,7 +101,12 @@ class MixtureProposal:
             total = nk.sum()
             if total > 0:
                 weights = np.where(nk >= 2.0, nk / total, self.weights * 0.5)
-            cur = MixtureProposal(means, covs, weights, self.nu)
+                f = self.frozen
+                if f.any():
+                    free_w = weights[~f].sum()
+                    weights = np.where(f, self.weights, weights * (1.0 - self.weights[f].sum())
+                                       / (free_w if free_w > 0 else 1.0))
+            cur = MixtureProposal(means, covs, weights, self.nu, self.frozen)
         return cur
 
 

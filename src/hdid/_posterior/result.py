@@ -51,6 +51,7 @@ class PosteriorResult:
     n_components: int = 0                    # components of the adapted mixture proposal
     convergence: Any = None                  # diagnostics.Convergence of the kept chain
     widths: dict = field(default_factory=dict)  # name -> posterior/prior width, verdict
+    limits: list = field(default_factory=list)  # limit fits of value-flat parameters (dicts)
     compile_s: float = 0.0                   # first (compiling) log-posterior call
     stage_s: dict = field(default_factory=dict)  # wall time of each stage
     method: str = "emcee"                    # "smc" (tempered SMC) or "emcee"
@@ -105,6 +106,7 @@ class PosteriorResult:
                                                       if self.mode_share is not None else None)}
                     for i, m in enumerate(self.modes)
                 ],
+                "limits": list(self.limits),
                 "acceptance_mean": float(np.mean(self.acceptance)),
                 "acceptance_min": float(np.min(self.acceptance)),
                 "residual_lag1_autocorrelation": self.residual_rho1,

@@ -265,7 +265,7 @@ def _failed(conv):
 def _setup(fit, seed, sigma_floor=None, modes="auto", prior=None):
     """Log-posterior, optima and reference mixture, as :func:`sample_posterior` builds them."""
     from .density import posterior_density
-    from .modes import sampled_modes
+    from .modes import found_limits, sampled_modes
     from .moves import MixtureProposal
 
     prob = fit.problem
@@ -276,6 +276,7 @@ def _setup(fit, seed, sigma_floor=None, modes="auto", prior=None):
     warnings += dens.warnings
     t = time.perf_counter()
     found = sampled_modes(fit, modes, seed, u_fit, lin, lp.gauss_prior)
+    limits = found_limits(fit, found, modes, lin, lp.gauss_prior, seed)
     t_modes = time.perf_counter() - t
     q = float(prob.step)
     log_lo = math.log(bounds[0] * q)
@@ -289,7 +290,7 @@ def _setup(fit, seed, sigma_floor=None, modes="auto", prior=None):
         covs[k, -1, -1] = s_sd**2
     weights = [max(m.weight, 0.02) for m in found]
     ref = MixtureProposal(means, covs, weights, nu=REF_NU)
-    return lp, found, ref, warnings, temper, rho1, lin, t_modes
+    return lp, found, ref, warnings, temper, rho1, lin, t_modes, limits
 
 
 #: Particles per run and independent runs (the runs are the "chains" of the convergence test).
@@ -328,6 +329,7 @@ def sample_smc(fit, *, n_particles: int = N_PARTICLES, n_runs: int = N_RUNS,
     from .._fitting._identifiability import unknown_labels
     from .density import PRIOR_HALF_WIDTH, derived_np, to_physical
     from .diagnostics import width_ratios
+    from .limits import assess_limits, limit_shares
     from .result import BAND, _RunNames
     from .result import PosteriorResult
 
@@ -338,8 +340,8 @@ def sample_smc(fit, *, n_particles: int = N_PARTICLES, n_runs: int = N_RUNS,
     max_final = MAX_FINAL if max_final is None else max_final
     t0 = time.perf_counter()
     prob = fit.problem
-    lp, found, ref, warnings, temper, rho1, lin, t_modes = _setup(fit, seed, sigma_floor, modes,
-                                                                  prior)
+    lp, found, ref, warnings, temper, rho1, lin, t_modes, limits = _setup(
+        fit, seed, sigma_floor, modes, prior)
     D = lp.ndim
     labels = unknown_labels(prob, _RunNames(fit)) + ["log_noise_sigma"]
     t_c = time.perf_counter()
@@ -404,12 +406,19 @@ def sample_smc(fit, *, n_particles: int = N_PARTICLES, n_runs: int = N_RUNS,
     der["noise_sigma_rad"] = np.exp(U[:, -1])
     comp = np.argmax(ref.component_logpdf(C.reshape(-1, D)), axis=1)
     share = np.bincount(comp, minlength=len(found)) / comp.size
-    if len(found) > 1:
+    optima = [i for i, m in enumerate(found) if m.kind == "optimum"]
+    if len(optima) > 1:
         warnings.append(
-            f"MULTIMODAL: {len(found)} separate optima of the fit's cost (Laplace weights "
-            + ", ".join(f"{m.weight:.2f}" for m in found)
-            + "; share of the particles " + ", ".join(f"{s:.2f}" for s in share)
+            f"MULTIMODAL: {len(optima)} separate optima of the fit's cost (Laplace weights "
+            + ", ".join(f"{found[i].weight:.2f}" for i in optima)
+            + "; share of the particles " + ", ".join(f"{share[i]:.2f}" for i in optima)
             + "); SMC weighs them by their posterior mass — see `modes`")
+    q = float(prob.step)
+    log_lo = math.log(lp.sigma_bounds[0] * q)
+    warnings += assess_limits(
+        limits, lp, lin, [m.u for m in found if m.kind == "optimum"] or [np.asarray(fit.u)],
+        lambda X: np.asarray(lp.batch(X)), (log_lo, math.log(max(fit.rms_residual_rad, q * lp.sigma_bounds[0]))),
+        phys, fit.values, limit_shares(found, share))
     acc = np.array([np.mean(st["acceptance"]) for st in steps])
     widths = width_ratios(prob, U, np.asarray(fit.u, dtype=float), PRIOR_HALF_WIDTH, lin,
                           lp.gauss_prior)
@@ -420,6 +429,7 @@ def sample_smc(fit, *, n_particles: int = N_PARTICLES, n_runs: int = N_RUNS,
         draws=U, burn_in=0, modes=found, mode_share=share, mode_search_s=t_modes,
         move_acceptance={"random_walk": float(np.mean(acc))}, n_components=len(found),
         convergence=conv if reached else _failed(conv), widths=widths, compile_s=t_compile,
+        limits=[lim.to_dict() for lim in limits],
         stage_s={"mode_search": t_modes, "compile": t_compile, "smc": t_s,
                  "diagnostics": t_diag},
         method="smc",

@@ -61,6 +61,22 @@ class StribeckFriction(AbstractFriction):
       1 Tustin/exponential, 2 Armstrong-Hélouvry's Gaussian law). The previous logit sd of
       2 around the interval's middle was U-shaped in the value and put the paper log's
       posterior at the interval's top (median 2.9) wherever the data cannot see the shape.
+    - ``tau_c``: flat in its *value* (``flat_in_value``, like ``k2`` and ``c_v``), on the
+      box of ±7 in log around the least-squares value that every parameter without a
+      prior of its own has. Footing: ``tau_c`` is the coefficient of a term that may
+      vanish — with ``tau_c → 0`` the Stribeck+viscous law becomes a Stribeck hump on a
+      viscous line (``tau_s·e + c_v·ω``), its Coulomb limit, a law in its own right. A
+      prior flat in the log gives that "absent" end equal mass per decade down to the
+      box's floor, so where the data cannot exclude the limit the posterior is set by an
+      arbitrary box: on the shipped paper log (``data/synthetic/csf8_paper.csv``) the
+      least-squares cost rises by less than 1.6 (χ²) from the fit's ``tau_c`` of 2.2 mN m
+      down to 6 µN m along laws with ``v_s`` ≈ 20–24 rad/s and ``c_v`` ≈ 5–7e-5
+      (benchmarks/README.md, issue 17, ``post6`` and ``post7``). Flat in value, the mass
+      there is proportional to the torque range the data allow: the data bound ``tau_c``
+      above; where they do not bound it below, the posterior says so (a warning, see
+      ``hdid._posterior.limits``), instead of a box-made interval. A
+      ``prior=`` of the user's (a datasheet's Gaussian, the calibration's ``--prior
+      physical``) replaces it.
     - ``tau_s ≥ tau_c`` (:attr:`ordered`): breakaway (static) friction is by definition
       at least the sliding friction it gives way to; the posterior gives ``tau_s < tau_c``
       zero density. Chosen as a constraint rather than a reparameterisation
@@ -72,7 +88,7 @@ class StribeckFriction(AbstractFriction):
 
     tau_c: Float[ArrayLike, ""] = parameter(
         "N m", "Coulomb friction torque at the wave generator",
-        start=lambda s: s.torque, sample_in_value=True)
+        start=lambda s: s.torque, flat_in_value=True, sample_in_value=True)
     # breakaway above Coulomb, and enough to hold the largest logged rest point
     tau_s: Float[ArrayLike, ""] = parameter(
         "N m", "static (breakaway) friction torque at the wave generator",

@@ -1,0 +1,110 @@
+"""The vanishing ends of value-flat parameters (``_posterior/limits.py``): the limit fits,
+their place among the optima, and the warning when a chain stops short of an end the
+data allow (issue 17, ``post7``)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import hdid
+from hdid._posterior.limits import LIMIT_DCHI2, LIMIT_FRACTION, LimitFit, limit_fits, limit_warnings
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "data" / "synthetic" / "csf8_paper.csv"
+
+
+@pytest.fixture(scope="module")
+def fit():
+    return hdid.fit(EXAMPLE)
+
+
+def _limit(name, dchi2, lsq=2.5e-3, mid=None):
+    """A limit fit of ``name`` at e⁻⁶ of ``lsq`` with Δ ``dchi2``, and a path point at
+    0.4 × ``lsq`` with Δ ``mid`` (default: the same)."""
+    end = LIMIT_FRACTION * lsq
+    mid = dchi2 if mid is None else mid
+    return LimitFit(name=name, u=np.zeros(3), value=end, lsq_value=lsq, dchi2_lsq=dchi2,
+                    dchi2=dchi2, profile=[(0.4 * lsq, mid), (end, dchi2)])
+
+
+def test_warning_fires_where_the_data_allow_values_the_chain_never_reached():
+    """Synthetic draws, no sampling. tau_c's limit path within reach (Δ 0.4) and draws in
+    [2.3, 2.8] mN m (the plain chain on the shipped log) → "LOWER END NOT MEASURED" naming
+    tau_c, the lowest allowed value, its Δ and what to do — also when only the path's
+    point is allowed (Δ 2 at 1 mN m, 9 at the end). Draws spread down to zero → "BOUNDED
+    ABOVE ONLY" instead. Limits the data exclude (Δ above 3.84 all along) → nothing,
+    whatever the draws."""
+    rng = np.random.default_rng(0)
+    narrow = {"tau_c": rng.uniform(2.3e-3, 2.8e-3, 4000)}
+    spread = {"tau_c": rng.uniform(0.0, 2.8e-3, 4000)}
+    lsq = {"tau_c": 2.5e-3}
+    w = limit_warnings([_limit("tau_c", 0.4)], narrow, lsq)
+    assert len(w) == 1 and w[0].startswith("LOWER END NOT MEASURED: tau_c")
+    assert "0.40" in w[0] and "prior={'tau_c'" in w[0] and "run longer" in w[0]
+    assert f"{LIMIT_FRACTION * 2.5e-3:.3g}" in w[0]
+    w = limit_warnings([_limit("tau_c", 9.0, mid=2.0)], narrow, lsq)
+    assert len(w) == 1 and w[0].startswith("LOWER END NOT MEASURED: tau_c") and "0.001 " in w[0]
+    assert "Δ = 9.00" in w[0]
+    w = limit_warnings([_limit("tau_c", 0.4)], spread, lsq)
+    assert len(w) == 1 and w[0].startswith("BOUNDED ABOVE ONLY") and "NOT MEASURED" not in w[0]
+    assert limit_warnings([_limit("tau_c", 25.0)], narrow, lsq) == []
+    assert limit_warnings([_limit("tau_c", LIMIT_DCHI2 + 0.01)], narrow, lsq) == []
+    w = limit_warnings([_limit("tau_c", 0.4)], narrow, lsq, {"tau_c": (0.2, 0.0)})
+    assert len(w) == 1 and "20.0% of the Laplace mass and 0.0% of the draws" in w[0]
+    # a limit fit whose Δ is unknown, or of a parameter not sampled: nothing
+    assert limit_warnings([_limit("tau_c", math.nan)], narrow, lsq) == []
+    assert limit_warnings([_limit("k2", 0.1)], narrow, lsq) == []
+
+
+def test_limit_fits_on_the_shipped_log(fit):
+    """tau_c held at e⁻⁶ of its least-squares value, the rest refitted: the shipped log's
+    Coulomb limit is within the data's reach (least-squares Δχ² below 3.84; post6's
+    profile: 0.32 at 1 mN m); the viscous term's vanishing end is not (c_v → 0)."""
+    import jax.numpy as jnp
+
+    from hdid._posterior.modes import MODE_LANES
+
+    best = float(fit.problem.cost(jnp.asarray(fit.u)))
+    lims = {lim.name: lim for lim in limit_fits(fit, ["tau_c", "c_v"], best, MODE_LANES)}
+    tc = lims["tau_c"]
+    assert tc.value == pytest.approx(LIMIT_FRACTION * fit.values["tau_c"], rel=0.01)
+    assert tc.lsq_value == pytest.approx(fit.values["tau_c"], rel=1e-12)
+    assert tc.dchi2_lsq < LIMIT_DCHI2
+    assert lims["c_v"].dchi2_lsq > 2 * LIMIT_DCHI2
+
+
+def test_short_chain_from_the_fit_warns_that_the_coulomb_limit_was_not_sampled(fit):
+    """End to end on the shipped log: 100 steps from the fit's optimum alone cannot go down
+    the Coulomb-limit ridge the data allow, so the result says so for tau_c; the viscous
+    term's vanishing end is excluded by the data (not within reach); the limit fits are in
+    the JSON with their profiles."""
+    post = hdid.sample_posterior(fit, n_steps=100, burn_in=40, seed=3, modes="fit",
+                                 progress=False)
+    w = [x for x in post.warnings if x.startswith("LOWER END NOT MEASURED")]
+    assert any(x.startswith("LOWER END NOT MEASURED: tau_c") for x in w)
+    d = post.to_dict()["posterior_diagnostics"]["limits"]
+    by = {x["name"]: x for x in d}
+    assert set(by) == {"k2", "tau_c", "c_v"}
+    assert min(p["dchi2"] for p in by["tau_c"]["profile"]) <= LIMIT_DCHI2
+    assert not by["c_v"]["within_reach"]
+    assert len(by["tau_c"]["profile"]) == 5
+
+
+def test_limit_fits_skip_parameters_the_fit_measures_well(fit):
+    """No limit fit for a value-flat parameter measured to better than 20 % (its end ≥ 5
+    linearised sd away); an unknown (NaN) standard error does not skip it."""
+    from hdid._posterior.density import posterior_density
+    from hdid._posterior.limits import LIMIT_SCREEN_REL_SD, limit_names
+
+    prob = fit.problem
+    free = list(prob.free)
+    lin = posterior_density(fit).lin
+    assert limit_names(prob, lin) == ["k2", "tau_c", "c_v"]
+    assert limit_names(prob, lin, fit.covariance) == ["k2", "tau_c", "c_v"]  # 34, 106, 236 %
+    C = np.array(fit.covariance, dtype=float)
+    C[free.index("tau_c"), free.index("tau_c")] = (0.9 * LIMIT_SCREEN_REL_SD) ** 2
+    C[free.index("k2"), free.index("k2")] = np.nan
+    assert limit_names(prob, lin, C) == ["k2", "c_v"]
