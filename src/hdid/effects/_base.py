@@ -113,8 +113,8 @@ class Parameter:
         starts on a log of any gear size and in any consistent units.
     flat_in_value:
         The posterior's default flat prior on a ``"log"`` parameter is flat in its *value*,
-        not its log: for coefficients of terms that may vanish (``k2``, ``c_v``), whose
-        "absent" end a log-flat prior would give an unbounded volume.
+        not its log: for coefficients of terms that may vanish (``k2``, ``tau_c``, ``c_v``),
+        whose "absent" end a log-flat prior would give an unbounded volume.
     sample_in_value:
         The posterior samples a ``"log"`` parameter in its value (relative to the
         least-squares one): for the terms of sums the data fix as straight lines
