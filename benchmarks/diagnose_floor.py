@@ -24,10 +24,15 @@ restarts from the candidates' optima, which can only lower its χ²), so a clean
 warning rate is at most this.
 
     taskset -c 1 python benchmarks/diagnose_floor.py [N] [paper|rich ...] [--seed0 S]
+    taskset -c 1 python benchmarks/diagnose_floor.py --hidden [paper|rich ...]
     python benchmarks/diagnose_floor.py --threshold   # the generated block, nothing run
     python benchmarks/diagnose_floor.py --render
 
-writes ``results/diagnose_floor.{json,md}`` (rows of other designs are kept) and, with
+``--hidden``: the base fits of the independent suite's 36 logs (``diagnose_independent.py``'s
+seeds 8800/8900/9800/9900 + i, the hidden effect drawn as there), each with the threshold
+of its design and main's verdict on it (``results/diagnose_independent.json``): what the
+warning would say (of the base as first fitted; diagnose's later restarts only lower it).
+Writes ``results/diagnose_floor.{json,md}`` (rows of other designs are kept) and, with
 ``--threshold``, the ``ROWS`` block of ``src/hdid/_diagnosis/_excess.py`` from the JSON.
 """
 
@@ -53,6 +58,10 @@ THRESHOLD_MODULE = ROOT / "src" / "hdid" / "_diagnosis" / "_excess.py"
 DESIGN_SHAPE = {"paper": (250.0, 4), "rich": (1000.0, 8)}
 
 
+CLEAR_EVERY = 40
+_COUNT = [0]
+
+
 def base_row(log, label: str) -> dict:
     from hdid._diagnosis._diagnose import FULL_GRID_STARTS
     from hdid._diagnosis._floor import fit_floor
@@ -71,15 +80,18 @@ def base_row(log, label: str) -> dict:
     row = {"log": label, "chi2": cur.cost, "n": n, "k": k, "n_minus_k": n - k,
            "floor": F, "floor_sd": sd, "ratio": cur.cost / F, "fit_s": t1 - t0,
            "floor_s": time.perf_counter() - t1, "load1": os.getloadavg()[0]}
-    # free the process's compiled programs: every XLA:CPU executable holds memory
-    # mappings, and ~120 logs' simulations and fits reached the kernel's limit (LLVM
-    # "Cannot allocate memory"; tests/conftest.py); the program store keeps reloads cheap
-    import gc
+    # free the process's compiled programs every CLEAR_EVERY logs: every XLA:CPU
+    # executable holds memory mappings, and ~120 logs' simulations and fits reached the
+    # kernel's limit (LLVM "Cannot allocate memory"; tests/conftest.py). Every log: 7 s a
+    # log instead of 1.5 (the programs reloaded from the store each time).
+    _COUNT[0] += 1
+    if _COUNT[0] % CLEAR_EVERY == 0:
+        import gc
 
-    import jax
+        import jax
 
-    jax.clear_caches()
-    gc.collect()
+        jax.clear_caches()
+        gc.collect()
     print(f"{label:18s} χ² {cur.cost:7.2f} n {n:6.1f} k {k:3d} n−k {n - k:6.1f} "
           f"F {F:6.2f} ± {sd:5.2f}  χ²/F {cur.cost / F:5.2f}  (fit {row['fit_s']:.1f} s, "
           f"floor {row['floor_s']:.2f} s, load {row['load1']:.1f})", flush=True)
@@ -143,13 +155,57 @@ def render(res: dict) -> str:
                      f"{r.max():.3f} | {t['threshold']:.4f} ({t['above']}) | "
                      f"{100 * (t['above'] + 1) / (n + 1):.2f} % | "
                      f"{100 * upper_bound(t['above'], n):.2f} % | {np.mean(a):.3f} |")
+    thr = {t["design"]: t["threshold"] for t in threshold_table(rows, meta)}
+    hidden = [x for x in rows if x["kind"] == "hidden"]
+    if hidden:
+        h = meta.get("hidden", {})
+        lines += ["", "## The independent suite's logs (base as first fitted; "
+                  f"`{h.get('cmd')}`, {h.get('date')}, load {h.get('load')} → "
+                  f"{h.get('load_end')})", "",
+                  "| design | seed | hidden | main's verdict | χ² | n − k | F ± sd | χ²/F | "
+                  "above threshold | warned (verdict names no effect) |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
+        for x in hidden:
+            up = x["ratio"] > thr.get(x["design"], math.inf)
+            warn = up and x["main_verdict"] in ("adequate", "unexplained")
+            lines.append(f"| {x['design']} | {x['seed']} | {x['hidden']} | "
+                         f"{x['main_verdict']} | {x['chi2']:.2f} | {x['n_minus_k']:.1f} | "
+                         f"{x['floor']:.2f} ± {x['floor_sd']:.2f} | {x['ratio']:.3f} | "
+                         f"{'yes' if up else ''} | {'**warned**' if warn else ''} |")
     lines += ["", "| design | kind | log | χ² | n − k | F ± sd | χ²/F | fit s | load |",
               "|---|---|---|---|---|---|---|---|---|"]
     for x in rows:
+        if x["kind"] == "hidden":
+            continue
         lines.append(f"| {x['design']} | {x['kind']} | {x['log']} | {x['chi2']:.2f} | "
                      f"{x['n_minus_k']:.1f} | {x['floor']:.2f} ± {x['floor_sd']:.2f} | "
                      f"{x['ratio']:.3f} | {x['fit_s']:.1f} | {x['load1']:.1f} |")
     return "\n".join(lines) + "\n"
+
+
+def hidden_rows(designs: list) -> list:
+    """Base χ²/F of the independent suite's logs (as ``diagnose_independent.run_design``
+    draws them), with main's verdict from its committed results."""
+    from diagnose_independent import HIDDEN, _hidden_module, draw, hidden_params
+
+    gen, hid = import_generate(), _hidden_module()
+    verdicts = {(r["design"], r["seed"]): r.get("named") for r in json.loads(
+        (RESULTS / "diagnose_independent.json").read_text())["records"]}
+    out = []
+    for design in designs:
+        for seed0 in {"rich": (8800, 8900), "paper": (9800, 9900)}[design]:
+            for i, name in enumerate(HIDDEN):
+                seed = seed0 + i
+                truth, des = draw(design, seed)
+                rng = np.random.default_rng(seed + 10_000)
+                hp = hidden_params(name, truth, des, rng) if name != "none" else {}
+                kw = hid.reference_kwargs(name, truth, **hp) if name != "none" else None
+                df = gen.make_log(truth, **{k: v for k, v in des.items() if k != "gear_factor"},
+                                  seed=seed, hidden=kw)
+                out.append({"design": design, "kind": "hidden", "hidden": name, "seed": seed,
+                            "main_verdict": verdicts.get((design, seed)),
+                            **base_row(df, f"{design} {seed} {name}")})
+    return out
 
 
 def main(argv):
@@ -165,6 +221,19 @@ def main(argv):
         (RESULTS / f"{NAME}.md").write_text(render(res))
         if "--threshold" in argv:
             print(write_threshold(res["rows"], res["meta"]))
+        return
+    if "--hidden" in argv:
+        designs = [a for a in argv if a in ("paper", "rich")] or ["paper", "rich"]
+        res = json.loads(out.read_text())
+        res["rows"] = [r for r in res["rows"] if not (r["kind"] == "hidden"
+                                                      and r["design"] in designs)]
+        res["rows"] += hidden_rows(designs)
+        res["meta"]["hidden"] = {**run_meta(cmd="taskset -c 1 python benchmarks/diagnose_floor.py "
+                                            + " ".join(argv)),
+                                 "load_end": " ".join(f"{x:.1f}" for x in os.getloadavg())}
+        out.write_text(json.dumps(res, indent=2, default=float) + "\n")
+        (RESULTS / f"{NAME}.md").write_text(render(res))
+        print(render(res))
         return
     n = int(argv[0]) if argv and argv[0].isdigit() else 6
     seed0 = int(argv[argv.index("--seed0") + 1]) if "--seed0" in argv else 5000
