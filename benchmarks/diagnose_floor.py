@@ -25,6 +25,7 @@ warning rate is at most this.
 
     taskset -c 1 python benchmarks/diagnose_floor.py [N] [paper|rich ...] [--seed0 S]
     taskset -c 1 python benchmarks/diagnose_floor.py --hidden [paper|rich ...]
+    taskset -c 1 python benchmarks/diagnose_floor.py --diagnose paper SEED ...
     python benchmarks/diagnose_floor.py --threshold   # the generated block, nothing run
     python benchmarks/diagnose_floor.py --render
 
@@ -32,6 +33,8 @@ warning rate is at most this.
 seeds 8800/8900/9800/9900 + i, the hidden effect drawn as there), each with the threshold
 of its design and main's verdict on it (``results/diagnose_independent.json``): what the
 warning would say (of the base as first fitted; diagnose's later restarts only lower it).
+``--diagnose DESIGN SEED …``: those logs of the suite through ``hdid.diagnose`` (all
+candidates): the verdict, the ratio it reports (of its final base) and its warnings.
 Writes ``results/diagnose_floor.{json,md}`` (rows of other designs are kept) and, with
 ``--threshold``, the ``ROWS`` block of ``src/hdid/_diagnosis/_excess.py`` from the JSON.
 """
@@ -172,6 +175,18 @@ def render(res: dict) -> str:
                          f"{x['main_verdict']} | {x['chi2']:.2f} | {x['n_minus_k']:.1f} | "
                          f"{x['floor']:.2f} ± {x['floor_sd']:.2f} | {x['ratio']:.3f} | "
                          f"{'yes' if up else ''} | {'**warned**' if warn else ''} |")
+    if res.get("diagnosed"):
+        h = meta.get("diagnosed", {})
+        lines += ["", f"## Through `hdid.diagnose` (`{h.get('cmd')}`, {h.get('date')}, src "
+                  f"{h.get('src')}, load {h.get('load')} → {h.get('load_end')})", "",
+                  "| design | seed | hidden | verdict | χ² | F ± sd | χ²/F | floor warning | "
+                  "wall s |", "|---|---|---|---|---|---|---|---|---|"]
+        for x in res["diagnosed"]:
+            warned = any("names no effect" in w for w in x["warnings"])
+            lines.append(f"| {x['design']} | {x['seed']} | {x['hidden']} | {x['summary']} | "
+                         f"{x['chi2']:.2f} | {x['floor']:.2f} ± {x['floor_sd']:.2f} | "
+                         f"{x['ratio']:.3f} | {'**yes**' if warned else 'no'} | "
+                         f"{x['wall_s']:.0f} |")
     lines += ["", "| design | kind | log | χ² | n − k | F ± sd | χ²/F | fit s | load |",
               "|---|---|---|---|---|---|---|---|---|"]
     for x in rows:
@@ -183,28 +198,58 @@ def render(res: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def hidden_rows(designs: list) -> list:
-    """Base χ²/F of the independent suite's logs (as ``diagnose_independent.run_design``
-    draws them), with main's verdict from its committed results."""
+def _suite_log(design: str, seed: int):
+    """The independent suite's log ``seed`` of ``design`` and its hidden effect's name, as
+    ``diagnose_independent.run_design`` draws them."""
     from diagnose_independent import HIDDEN, _hidden_module, draw, hidden_params
 
-    gen, hid = import_generate(), _hidden_module()
+    name = HIDDEN[seed % 100]
+    truth, des = draw(design, seed)
+    rng = np.random.default_rng(seed + 10_000)
+    hp = hidden_params(name, truth, des, rng) if name != "none" else {}
+    kw = _hidden_module().reference_kwargs(name, truth, **hp) if name != "none" else None
+    return import_generate().make_log(truth, **{k: v for k, v in des.items()
+                                               if k != "gear_factor"}, seed=seed,
+                                      hidden=kw), name
+
+
+def diagnosed_rows(design: str, seeds: list) -> list:
+    import hdid
+
+    out = []
+    for seed in seeds:
+        df, name = _suite_log(design, seed)
+        t0 = time.perf_counter()
+        d = hdid.diagnose(df)
+        rf = d.rounding_floor or {}
+        out.append({"design": design, "seed": seed, "hidden": name, "verdict": d.verdict,
+                    "summary": d.summary, "chi2": rf.get("chi2"), "floor": rf.get("floor"),
+                    "floor_sd": rf.get("floor_sd"), "ratio": rf.get("chi2_over_floor"),
+                    "n_minus_k": rf.get("n_minus_k"), "exceeded": rf.get("exceeded"),
+                    "warnings": d.warnings, "wall_s": time.perf_counter() - t0,
+                    "load1": os.getloadavg()[0]})
+        print(f"{design} {seed} {name}: {d.verdict} ({d.summary[:60]}); χ²/F "
+              f"{rf.get('chi2_over_floor', math.nan):.2f}; floor warning "
+              f"{any('names no effect' in w for w in d.warnings)} "
+              f"({out[-1]['wall_s']:.0f} s, load {out[-1]['load1']:.1f})", flush=True)
+    return out
+
+
+def hidden_rows(designs: list) -> list:
+    """Base χ²/F of the independent suite's logs (:func:`_suite_log`), with main's verdict
+    from its committed results."""
+    from diagnose_independent import HIDDEN
+
     verdicts = {(r["design"], r["seed"]): r.get("named") for r in json.loads(
         (RESULTS / "diagnose_independent.json").read_text())["records"]}
     out = []
     for design in designs:
         for seed0 in {"rich": (8800, 8900), "paper": (9800, 9900)}[design]:
-            for i, name in enumerate(HIDDEN):
-                seed = seed0 + i
-                truth, des = draw(design, seed)
-                rng = np.random.default_rng(seed + 10_000)
-                hp = hidden_params(name, truth, des, rng) if name != "none" else {}
-                kw = hid.reference_kwargs(name, truth, **hp) if name != "none" else None
-                df = gen.make_log(truth, **{k: v for k, v in des.items() if k != "gear_factor"},
-                                  seed=seed, hidden=kw)
-                out.append({"design": design, "kind": "hidden", "hidden": name, "seed": seed,
-                            "main_verdict": verdicts.get((design, seed)),
-                            **base_row(df, f"{design} {seed} {name}")})
+            for i in range(len(HIDDEN)):
+                df, name = _suite_log(design, seed0 + i)
+                out.append({"design": design, "kind": "hidden", "hidden": name,
+                            "seed": seed0 + i, "main_verdict": verdicts.get((design, seed0 + i)),
+                            **base_row(df, f"{design} {seed0 + i} {name}")})
     return out
 
 
@@ -221,6 +266,19 @@ def main(argv):
         (RESULTS / f"{NAME}.md").write_text(render(res))
         if "--threshold" in argv:
             print(write_threshold(res["rows"], res["meta"]))
+        return
+    if "--diagnose" in argv:
+        design = next(a for a in argv if a in ("paper", "rich"))
+        seeds = [int(a) for a in argv if a.isdigit()]
+        res = json.loads(out.read_text())
+        keep = [r for r in res.get("diagnosed", []) if (r["design"], r["seed"]) not in
+                {(design, s) for s in seeds}]
+        res["diagnosed"] = keep + diagnosed_rows(design, seeds)
+        res["meta"]["diagnosed"] = {**run_meta(cmd="taskset -c 1 python benchmarks/"
+                                               "diagnose_floor.py " + " ".join(argv)),
+                                    "load_end": " ".join(f"{x:.1f}" for x in os.getloadavg())}
+        out.write_text(json.dumps(res, indent=2, default=float) + "\n")
+        (RESULTS / f"{NAME}.md").write_text(render(res))
         return
     if "--hidden" in argv:
         designs = [a for a in argv if a in ("paper", "rich")] or ["paper", "rich"]
