@@ -172,7 +172,9 @@ def test_the_base_fits_rounding_floor_is_reported(hysteresis_diagnosis):
     assert rf is not None and d.to_dict()["rounding_floor"] == rf
     assert rf["chi2_over_floor"] == pytest.approx(rf["chi2"] / rf["floor"], rel=1e-12)
     assert rf["n_minus_k"] == rf["n_effective"] - rf["n_unknowns"]
-    assert 0 < rf["floor_sd"] < rf["floor"] and 0 < rf["floor"] <= rf["n_minus_k"] * 1.05
+    # a rounding error is at most half a step, saw² ≤ 3σ_q²: F ≤ 3·n (F is not bounded by
+    # n − k: 1.27× on the shipped 1 kHz log)
+    assert 0 < rf["floor_sd"] < rf["floor"] <= 3 * rf["n_effective"]
     assert floor_text(rf) in d.report()
     # the BIC's floor is still the white one, n − k: the ladder's base row is
     # bic_value(χ², n, k) of the reported numbers (not floored at F)
