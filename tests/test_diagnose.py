@@ -159,3 +159,46 @@ def test_a_ripple_order_outside_the_old_list_is_named():
     assert d.best.label == "ripple (order 36)"
     assert d.best.rms_after_rad < 1.3 * d.floor_rad
     assert any("orders scanned 1–48" in n for n in d.notes)
+
+
+def test_the_base_fits_rounding_floor_is_reported(hysteresis_diagnosis):
+    """χ², the floor a correct model leaves (F ± its phase sd), χ²/F and n − k, in the
+    report (one line) and the JSON; each candidate's χ² against the same F."""
+    from hdid._diagnosis._excess import floor_text
+    from hdid._diagnosis._ladder import bic_value
+
+    d = hysteresis_diagnosis
+    rf = d.rounding_floor
+    assert rf is not None and d.to_dict()["rounding_floor"] == rf
+    assert rf["chi2_over_floor"] == pytest.approx(rf["chi2"] / rf["floor"], rel=1e-12)
+    assert rf["n_minus_k"] == rf["n_effective"] - rf["n_unknowns"]
+    # a rounding error is at most half a step, saw² ≤ 3σ_q²: F ≤ 3·n (F is not bounded by
+    # n − k: 1.27× on the shipped 1 kHz log)
+    assert 0 < rf["floor_sd"] < rf["floor"] <= 3 * rf["n_effective"]
+    assert floor_text(rf) in d.report()
+    # the BIC's floor is still the white one, n − k: the ladder's base row is
+    # bic_value(χ², n, k) of the reported numbers (not floored at F)
+    assert d.ladder[0]["bic"] == pytest.approx(
+        bic_value(rf["chi2"], rf["n_effective"], rf["n_unknowns"]), abs=1e-9)
+    for c in d.candidates:
+        if c.error is None:
+            assert c.chi2_over_floor == pytest.approx(c.fit.cost / rf["floor"], rel=1e-12)
+    # hidden hysteresis: the base leaves far more than a correct model (base RMS ≈ 2–3×
+    # the floor, χ² ≈ 4–9× F) — but the verdict names the effect, so no floor warning
+    assert rf["chi2_over_floor"] > 2 and rf["exceeded"]
+    assert not any("names no effect" in w for w in d.warnings)
+
+
+def test_reporting_the_floor_leaves_verdict_and_bic_alone(hysteresis_diagnosis, monkeypatch):
+    """The same log diagnosed without the floor check: the same verdict, summary,
+    candidates and ΔBIC to the last bit (the floor is reported, never used by the rules)."""
+    import hdid._diagnosis._diagnose as D
+
+    monkeypatch.setattr(D, "floor_check", lambda *a, **k: None)
+    bare = hdid.diagnose(_log("hysteresis", 11), candidates=CANDIDATES)
+    d = hysteresis_diagnosis
+    assert bare.rounding_floor is None and d.rounding_floor is not None
+    assert (bare.verdict, bare.summary) == (d.verdict, d.summary)
+    assert [(c.label, c.delta_bic) for c in bare.candidates] == [
+        (c.label, c.delta_bic) for c in d.candidates]
+    assert [s["bic"] for s in bare.ladder] == [s["bic"] for s in d.ladder]

@@ -324,20 +324,32 @@ def test_diagnose_json_has_the_fit_provenance(fitted, tmp_path, monkeypatch):
 
     data, result, _ = fitted
 
+    from hdid._diagnosis._excess import FloorCheck, FloorThreshold
+
+    # the rounding floor's block as diagnose writes it (a threshold, and one without)
+    t = FloorThreshold("paper", 250.0, 4, 200, 4, 1.5, "test")
+    rf = [FloorCheck(30.0, 20.0, 6.0, 36.0, 17, th).to_dict() for th in (t, None)]
+
     def stub(log, model=None, **kw):
         return Diagnosis(source=str(EXAMPLE), verdict="adequate", summary="stub", base=result,
                          candidates=[], whiteness_before=whiteness(result), notes=[],
-                         ladder=[], floor_rad=result.quantization_floor_rad)
+                         ladder=[], floor_rad=result.quantization_floor_rad,
+                         rounding_floor=rf.pop(0))
 
     monkeypatch.setattr(hdid._diagnosis._diagnose, "diagnose", stub)
-    out = tmp_path / "diag.json"
-    res = CliRunner().invoke(main, ["diagnose", str(EXAMPLE), "--fix", "delta=1", "-q",
-                                    "--json", str(out)])
-    assert res.exit_code == 0, res.output
-    diag = json.loads(out.read_text())
     validator, _ = _schema_validator("diagnose")
-    errors = sorted(validator.iter_errors(diag), key=str)
-    assert not errors, errors[0]
+    for i in range(2):
+        out = tmp_path / f"diag{i}.json"
+        res = CliRunner().invoke(main, ["diagnose", str(EXAMPLE), "--fix", "delta=1", "-q",
+                                        "--json", str(out)])
+        assert res.exit_code == 0, res.output
+        diag = json.loads(out.read_text())
+        errors = sorted(validator.iter_errors(diag), key=str)
+        assert not errors, errors[0]
+        assert diag["rounding_floor"]["chi2_over_floor"] == 1.5
+    broken = json.loads(json.dumps(diag))
+    broken["rounding_floor"]["floor"] = "20"
+    assert list(validator.iter_errors(broken))  # the block is checked, not only allowed
     assert diag["input"]["sha256"] == hashlib.sha256(EXAMPLE.read_bytes()).hexdigest()
     assert diag["options"] == {"fix": ["delta=1"]}
     assert diag["hdid_version"] == version("hdid")

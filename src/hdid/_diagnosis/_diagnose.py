@@ -67,7 +67,10 @@ Warnings (:func:`_warnings`, ``Diagnosis.warnings``)
     design, or one whose one-sided 95 % upper bound is above the 5 % target; the current model's
     first optimum was a local one (its fits have several basins); a whiteness test with
     fewer than ``LOW_POWER_LAGS`` lags; the named effect leaves a residual that is not
-    white or not at the floor; candidate refits that failed.
+    white or not at the floor; candidate refits that failed; a verdict naming no effect
+    while the base leaves more than clean logs' fits do over the floor a correct model
+    leaves on this log (:mod:`hdid._diagnosis._excess`: χ², that floor ``F`` and ``χ²/F``
+    are reported, ``Diagnosis.rounding_floor``; the BIC's floor stays ``n − k``).
 """
 
 from __future__ import annotations
@@ -115,6 +118,7 @@ from ._verdict import (  # noqa: F401
     _warnings,
 )
 from ._ladder import _chi2, _ladder_step, bic, bic_value, model_ladder  # noqa: F401
+from ._excess import floor_check
 
 #: A current fit with RMS above this many quantization floors is a poor warm start ...
 FAR_FROM_FLOOR = 3.0
@@ -408,6 +412,8 @@ def diagnose(
                         pass
         if step == 0:
             ladder.append(_ladder_step(" + ".join(current.model.effect_names), current, None))
+            prep = base_setup.prep  # the floor a correct model leaves: reported (_excess)
+            fcheck = floor_check(current, 1.0 / float(prep.sample_period), len(prep.lengths))
         results: list[CandidateResult] = []
         k_base = current.n_unknowns
         for key, fits in by_key.items():
@@ -422,6 +428,8 @@ def diagnose(
         rms_before = current.rms_rad()
         for c in results:
             c.rms_before_rad = rms_before
+            if fcheck is not None and c.fit is not None:  # against the base's F
+                c.chi2_over_floor = float(c.fit.cost) / fcheck.floor
         results.sort(key=lambda c: (c.error is not None, c.delta_bic))
         strong = [c for c in results if c.error is None and c.delta_bic < STRONG_DBIC]
         for c in strong[:MAX_ANALYSED]:
@@ -453,9 +461,11 @@ def diagnose(
         notes.append(_scan_note(key, table, refitted.get(key, [])))
     from ._rates import false_alarm
 
-    prep = base_setup.prep
     fa = false_alarm(1.0 / float(prep.sample_period), len(prep.lengths))
     warns = _warnings(verdict, rounds, all_cands, local_base, fa)
+    if fcheck is not None:
+        warns += fcheck.warnings(verdict)
+        notes += fcheck.notes()
     t = clock()
     say("done")
     return Diagnosis(
@@ -473,6 +483,7 @@ def diagnose(
         refitted={k: list(v) for k, v in refitted.items()},
         warnings=warns,
         false_alarm=fa.to_dict() if fa is not None else None,
+        rounding_floor=fcheck.to_dict() if fcheck is not None else None,
     )
 
 

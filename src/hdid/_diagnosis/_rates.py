@@ -91,13 +91,11 @@ def upper_bound(k: int, n: int, level: float = 0.95) -> float:
     return 1.0 if k >= n else float(beta.ppf(level, k + 1, n - k))
 
 
-def false_alarm(rate_hz: float, runs: int,
-                measured: tuple[DesignRate, ...] | None = None) -> DesignRate | None:
-    """The measured design nearest a log of ``runs`` runs at ``rate_hz`` (within
-    ``NEAR_FACTOR`` on both), or ``None``."""
-    measured = MEASURED if measured is None else measured
+def nearest(rate_hz: float, runs: int, measured):
+    """The measured design (any row with ``rate_hz``, ``runs`` and ``logs``) nearest a log
+    of ``runs`` runs at ``rate_hz``, within ``NEAR_FACTOR`` on both; ``None`` if none is."""
 
-    def dist(d: DesignRate) -> float:
+    def dist(d) -> float:
         return abs(math.log(rate_hz / d.rate_hz)) + abs(math.log(max(runs, 1) / d.runs))
 
     # (a tolerance: a 500 Hz log's rate from its time stamps is 499.99999999999955 Hz,
@@ -107,3 +105,10 @@ def false_alarm(rate_hz: float, runs: int,
             and abs(math.log(rate_hz / d.rate_hz)) <= lim
             and abs(math.log(max(runs, 1) / d.runs)) <= lim]
     return min(near, key=dist) if near else None
+
+
+def false_alarm(rate_hz: float, runs: int,
+                measured: tuple[DesignRate, ...] | None = None) -> DesignRate | None:
+    """The measured design nearest a log of ``runs`` runs at ``rate_hz`` (within
+    ``NEAR_FACTOR`` on both: :func:`nearest`), or ``None``."""
+    return nearest(rate_hz, runs, MEASURED if measured is None else measured)

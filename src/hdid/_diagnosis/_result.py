@@ -10,6 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from ._excess import floor_text
+
 
 @dataclass
 class CandidateResult:
@@ -28,6 +30,8 @@ class CandidateResult:
     fit: Any = field(default=None, repr=False)
     white_after: bool | None = None
     moving_ratio_after: float = math.nan
+    #: the refit's χ² over the *base* fit's rounding floor F (:mod:`._excess`)
+    chi2_over_floor: float = math.nan
 
     def to_dict(self) -> dict[str, Any]:
         from .._results._saved import finite
@@ -42,6 +46,7 @@ class CandidateResult:
             "residual_adequate_after": self.adequate_after,
             "residual_white_after": self.white_after,
             "moving_rms_after_floors": self.moving_ratio_after,
+            "chi2_over_floor": self.chi2_over_floor,
             "fitted": self.values,
             "reason": self.reason,
             **({"error": self.error} if self.error else {}),
@@ -73,6 +78,9 @@ class Diagnosis:
     #: the verdict rules' measured false-alarm rate on clean logs of the nearest design
     #: (:mod:`hdid._diagnosis._rates`), ``None`` when none was measured near this log's
     false_alarm: dict[str, Any] | None = None
+    #: the base fit's χ² against the rounding floor a correct model leaves on this log
+    #: (:meth:`hdid._diagnosis._excess.FloorCheck.to_dict`), ``None`` where not computed
+    rounding_floor: dict[str, Any] | None = None
 
     @property
     def best(self) -> CandidateResult | None:
@@ -96,6 +104,7 @@ class Diagnosis:
             "refitted": self.refitted,
             "warnings": self.warnings,
             "false_alarm": self.false_alarm,
+            "rounding_floor": self.rounding_floor,
             "timing": self.timing,
         })
 
@@ -109,9 +118,12 @@ class Diagnosis:
             f"{self.base.rms_residual_rad / fl:.2f}× the quantization floor "
             f"({fl:.2e} rad); moving residual {w.rms_ratio:.2f}× floor, Ljung–Box p = "
             f"{w.p_value:.2g}",
+            *([f"    {floor_text(self.rounding_floor)}"] if self.rounding_floor else []),
             *([f"    rules' {_false_alarm_text(self.false_alarm)}"] if self.false_alarm else []),
-            "[[candidates]] (best first; ΔBIC < −10 is strong evidence)",
-            f"    {'effect':22s} {'RMS before':>11s} {'RMS after':>10s} {'ΔBIC':>9s}  fixes it",
+            "[[candidates]] (best first; ΔBIC < −10 is strong evidence; χ²/F against the "
+            "base's F)",
+            f"    {'effect':22s} {'RMS before':>11s} {'RMS after':>10s} {'ΔBIC':>9s} "
+            f"{'χ²/F':>6s}  fixes it",
         ]
         for c in self.candidates:
             if c.error:
@@ -120,7 +132,7 @@ class Diagnosis:
             fixes = {True: "yes", False: "no", None: "—"}[c.adequate_after]
             lines.append(
                 f"    {c.label:22s} {c.rms_before_rad / fl:10.2f}× {c.rms_after_rad / fl:9.2f}× "
-                f"{c.delta_bic:9.1f}  {fixes}"
+                f"{c.delta_bic:9.1f} {c.chi2_over_floor:6.2f}  {fixes}"
             )
         if self.best is not None and not self.best.error:
             lines += ["[[why]]", "    " + self.best.reason]
