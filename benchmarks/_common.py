@@ -80,6 +80,21 @@ def rerender(name: str, render, interpretation: str | None = None) -> int:
     return 0
 
 
+def result_writer(name: str, render):
+    """A ``write(res)`` that stores ``results/<name>.json`` and its markdown (``render``):
+    called after every row, so a long benchmark leaves its partial results if stopped;
+    ``write(res, end=True)`` also records the load at the end."""
+    import json
+
+    def write(res: dict, end: bool = False) -> None:
+        if end:
+            res["meta"]["load_end"] = load_text()
+        (RESULTS / f"{name}.json").write_text(json.dumps(res, indent=2) + "\n")
+        (RESULTS / f"{name}.md").write_text(render(res))
+
+    return write
+
+
 def interpretation_section(res: dict) -> list[str]:
     """Markdown lines of the hand-written interpretation stored in ``res``, if any."""
     text = res.get("interpretation")

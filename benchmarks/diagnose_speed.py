@@ -31,7 +31,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import DATA, RESULTS, interpretation_section, load_text, parse_or_render, run_meta  # noqa: E402
+from _common import DATA, interpretation_section, load_text, parse_or_render, result_writer, run_meta  # noqa: E402
 
 LOG = DATA / "hidden_hysteresis_1khz.csv"
 
@@ -137,11 +137,7 @@ def main(argv=None) -> int:
     if args is None:
         return 0
     res = {"meta": run_meta(), "log": args.log, "core": args.core, "rows": []}
-    out_json = RESULTS / f"{args.out}.json"
-
-    def write():
-        out_json.write_text(json.dumps(res, indent=2) + "\n")
-        (RESULTS / f"{args.out}.md").write_text(render(res))
+    write = result_writer(args.out, render)
 
     for spec in args.code:
         label, src = spec.split("=", 1)
@@ -153,9 +149,8 @@ def main(argv=None) -> int:
                 print(f"{label} {state}: {rec.get('process_wall_s', 0):.1f} s "
                       f"(load {rec['load_start']} → {rec['load_end']}) "
                       f"{rec.get('verdict', rec.get('error', '')[-300:])}", flush=True)
-                write()
-    res["meta"]["load_end"] = load_text()
-    write()
+                write(res)
+    write(res, end=True)
     return 0
 
 

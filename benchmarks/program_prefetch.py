@@ -24,7 +24,7 @@ import tempfile
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, interpretation_section, load_text, parse_or_render, run_meta  # noqa: E402
+from _common import interpretation_section, parse_or_render, result_writer, run_meta  # noqa: E402
 import diagnose_speed  # noqa: E402
 from diagnose_speed import LOG, summarize_programs  # noqa: E402
 
@@ -91,11 +91,7 @@ def main(argv=None) -> int:
     if args is None:
         return 0
     res = {"meta": run_meta(), "log": str(LOG), "src": args.src, "rows": []}
-    out_json = RESULTS / f"{args.out}.json"
-
-    def write():
-        out_json.write_text(json.dumps(res, indent=2) + "\n")
-        (RESULTS / f"{args.out}.md").write_text(render(res))
+    write = result_writer(args.out, render)
 
     plan = [("cold", True)] + [("warm", on) for _ in range(args.repeats) for on in (False, True)]
     with tempfile.TemporaryDirectory(prefix="program_prefetch_") as cache:
@@ -105,9 +101,8 @@ def main(argv=None) -> int:
             res["rows"].append(rec)
             print(f"{rec['prefetch']} {state}: {rec.get('process_wall_s', 0):.1f} s "
                   f"(load {rec['load_start']} → {rec['load_end']})", flush=True)
-            write()
-    res["meta"]["load_end"] = load_text()
-    write()
+            write(res)
+    write(res, end=True)
     return 0
 
 
