@@ -83,10 +83,17 @@ def rerender(name: str, render, interpretation: str | None = None) -> int:
 def result_writer(name: str, render):
     """A ``write(res)`` that stores ``results/<name>.json`` and its markdown (``render``):
     called after every row, so a long benchmark leaves its partial results if stopped;
-    ``write(res, end=True)`` also records the load at the end."""
+    ``write(res, row=rec, label=..., tail=...)`` first appends the process row ``rec`` to
+    ``res["rows"]`` and prints its wall time and loads; ``write(res, end=True)`` also
+    records the load at the end."""
     import json
 
-    def write(res: dict, end: bool = False) -> None:
+    def write(res: dict, end: bool = False, row: dict | None = None, label: str = "",
+              tail: str = "") -> None:
+        if row is not None:
+            res["rows"].append(row)
+            print(f"{label}: {row.get('process_wall_s', 0):.1f} s (load {row.get('load_start')} "
+                  f"→ {row.get('load_end')}){' ' + tail if tail else ''}", flush=True)
         if end:
             res["meta"]["load_end"] = load_text()
         (RESULTS / f"{name}.json").write_text(json.dumps(res, indent=2) + "\n")

@@ -145,11 +145,8 @@ def main(argv=None) -> int:
             for state in args.runs.split(","):
                 rec = measure(src, Path(cache), args.core, Path(args.log))
                 rec.update(code=label, cache=state, src=src)
-                res["rows"].append(rec)
-                print(f"{label} {state}: {rec.get('process_wall_s', 0):.1f} s "
-                      f"(load {rec['load_start']} → {rec['load_end']}) "
-                      f"{rec.get('verdict', rec.get('error', '')[-300:])}", flush=True)
-                write(res)
+                write(res, row=rec, label=f"{label} {state}",
+                      tail=rec.get("verdict", rec.get("error", "")[-300:]))
     write(res, end=True)
     return 0
 

@@ -98,10 +98,7 @@ def main(argv=None) -> int:
         for state, on in plan:
             rec = measure(args.src, Path(cache), on)
             rec.update(prefetch="on" if on else "off", cache=state)
-            res["rows"].append(rec)
-            print(f"{rec['prefetch']} {state}: {rec.get('process_wall_s', 0):.1f} s "
-                  f"(load {rec['load_start']} → {rec['load_end']})", flush=True)
-            write(res)
+            write(res, row=rec, label=f"{rec['prefetch']} {state}")
     write(res, end=True)
     return 0
 
