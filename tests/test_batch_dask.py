@@ -25,16 +25,30 @@ def _other_log(path: Path) -> Path:
     return path
 
 
-def test_fit_many_on_a_local_cluster(tmp_path):
-    bad = tmp_path / "bad.csv"
+#: The plumbing under test is the cluster's, not the fit's: two starts and no nested
+#: check (one LM program per process instead of three; every worker process reads its
+#: programs from the store, ~10 s each) — tests/test_batch.py checks that fit_many passes
+#: ``nested`` and the other options through.
+OPTIONS = dict(n_starts=2, nested=False)
+
+
+@pytest.fixture(scope="module")
+def logs_and_local(tmp_path_factory):
+    """Three logs (one unreadable) and their fits in this process, shared by the tests."""
+    tmp = tmp_path_factory.mktemp("dask")
+    bad = tmp / "bad.csv"
     bad.write_text("time,theta\n0,abc\n")
-    logs = [EXAMPLE, bad, _other_log(tmp_path / "other.csv")]
-    local = hdid.fit_many(logs, n_starts=2)
+    logs = [EXAMPLE, bad, _other_log(tmp / "other.csv")]
+    return logs, hdid.fit_many(logs, **OPTIONS)
+
+
+def test_fit_many_on_a_local_cluster(logs_and_local):
+    logs, local = logs_and_local
     with distributed.LocalCluster(
         n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
     ) as cluster, distributed.Client(cluster) as client:
         # chunk_size=2: two tasks, i.e. both workers busy
-        table = hdid.fit_many(logs, client=client, chunk_size=2, n_starts=2)
+        table = hdid.fit_many(logs, client=client, chunk_size=2, **OPTIONS)
         workers = {w["id"] for w in client.scheduler_info()["workers"].values()}
     assert len(workers) == 2
     assert table.attrs["timing"]["mode"] == "dask" and table.attrs["timing"]["n_tasks"] == 2
@@ -53,15 +67,12 @@ def test_fit_many_on_a_local_cluster(tmp_path):
             )
 
 
-def test_workers_fit_in_local_processes_like_in_this_one(tmp_path):
+def test_workers_fit_in_local_processes_like_in_this_one(logs_and_local):
     """``workers=2``: a LocalCluster of two single-threaded processes, started and closed
     by the call — the way to use several cores (threads in one process do not: JAX runs
     one CPU program at a time per process). Same fits as in-process, bad file in its row."""
-    bad = tmp_path / "bad.csv"
-    bad.write_text("time,theta\n0,abc\n")
-    logs = [EXAMPLE, bad, _other_log(tmp_path / "other.csv")]
-    local = hdid.fit_many(logs, n_starts=2)
-    table = hdid.fit_many(logs, workers=2, chunk_size=1, n_starts=2)
+    logs, local = logs_and_local
+    table = hdid.fit_many(logs, workers=2, chunk_size=1, **OPTIONS)
     timing = table.attrs["timing"]
     assert timing["mode"] == "dask" and timing["workers"] == 2 and timing["n_tasks"] == 3
     assert list(table["log"]) == [str(p) for p in logs]

@@ -108,6 +108,7 @@ def test_a_plugin_package_adds_an_effect_everywhere(plugin, tmp_path):
 DIAGNOSE_AND_POSTERIOR = """
 import json, sys
 import hdid
+hdid.configure()  # as the CLI does: programs from the persistent cache (tests/test_config.py checks the library without it)
 from hdid._diagnosis._diagnose import default_candidates
 from hdid._posterior.density import gaussian_prior
 
