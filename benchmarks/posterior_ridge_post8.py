@@ -9,7 +9,9 @@ Run (pinned to one core)::
 
 ``main``: ``limits.LIMIT_PATH_POINTS = 1`` (the default: post7's limit optima); ``path``:
 ``len(LIMIT_PATH) − 1`` (a frozen t-component at every continuation point within reach,
-each ``LIMIT_PROPOSAL_WEIGHT`` of the independence proposal). Records per run: R-hat /
+each ``LIMIT_PROPOSAL_WEIGHT`` of the independence proposal); ``ridge``: main plus
+``RidgeMove`` along the continuations (``driver.RIDGE_MOVE_WEIGHT = 0.2``);
+``path+ridge``: both. Records per run: R-hat /
 ESS / τ, tau_c's and the band's 95 % intervals, the share of the kept chain below
 tau_c 1 mN m and with k2 < 0.1 × the fit's (the k2 → 0 optimum), move acceptances, wall
 per stage and the load; appends to ``results/posterior_ridge_post8.json`` and rewrites the
@@ -37,6 +39,8 @@ RESULTS = ROOT / "benchmarks" / "results"
 SHIPPED = ROOT / "data" / "synthetic" / "csf8_paper.csv"
 NAME = "posterior_ridge_post8"
 BAND = "stick_band_halfwidth_rad"
+#: share of the steps the ``ridge`` variants give ``RidgeMove``
+RIDGE_WEIGHT = 0.2
 
 
 def _load():
@@ -44,13 +48,14 @@ def _load():
 
 
 def run(fit, variant: str, seed: int, max_steps: int) -> dict:
-    from hdid._posterior import limits
+    from hdid._posterior import driver, limits
 
-    limits.LIMIT_PATH_POINTS = {"main": 1, "path": len(limits.LIMIT_PATH) - 1}[variant]
+    limits.LIMIT_PATH_POINTS = len(limits.LIMIT_PATH) - 1 if "path" in variant else 1
+    driver.RIDGE_MOVE_WEIGHT = RIDGE_WEIGHT if "ridge" in variant else 0.0
     la0 = _load()
     post = hdid.sample_posterior(fit, seed=seed, max_steps=max_steps, progress=False)
     la1 = _load()
-    limits.LIMIT_PATH_POINTS = 1
+    limits.LIMIT_PATH_POINTS, driver.RIDGE_MOVE_WEIGHT = 1, 0.0
     d = post.to_dict()
     diag = d["posterior_diagnostics"]
     conv = diag["convergence"] or {}
@@ -112,19 +117,20 @@ def k2_report(fit) -> dict:
 
 def render(records: list[dict]) -> str:
     head = ("| variant | seed | steps | R-hat max | ESS bulk/tail min | τ_max (of) | tau_c 95 % "
-            "[mN m] | share tau_c < 1 mN m | share k2 → 0 | band 95 % [mrad] | indep. acc. "
+            "[mN m] | share tau_c < 1 mN m | share k2 → 0 | band 95 % [mrad] | acc. indep. / ridge "
             "| wall s | load start→end |\n|" + "---|" * 13 + "\n")
     rows = []
     for r in records:
         lo, hi = r["tau_c_ci95"]
         blo, bhi = r["band_ci95"]
         acc = r["move_acceptance"].get("independence (mixture)", float("nan"))
+        rac = r["move_acceptance"].get("ridge", float("nan"))
         rows.append(
             f"| {r['variant']} | {r['seed']} | {r['steps']} | {r['rhat_max']:.3f} "
             f"| {r['ess_bulk_min']:.0f} / {r['ess_tail_min']:.0f} | {r['tau_max']:.0f} "
             f"({r['tau_max_of']}) | [{lo * 1e3:.3g}, {hi * 1e3:.3g}] "
             f"| {r['share_tau_c_below_1mNm']:.3f} | {r['share_k2_below_0.1_fit']:.3f} "
-            f"| [{blo * 1e3:.1f}, {bhi * 1e3:.1f}] | {acc:.3f} | {r['wall_s']:.0f} "
+            f"| [{blo * 1e3:.1f}, {bhi * 1e3:.1f}] | {acc:.3f} / {rac:.3f} | {r['wall_s']:.0f} "
             f"| {r['load_start'][0]}→{r['load_end'][0]} |")
     return ("# The shipped log's Coulomb ridge: components along the limit path (issue 17, "
             "post8)\n\nWritten by `benchmarks/posterior_ridge_post8.py`; one core "
