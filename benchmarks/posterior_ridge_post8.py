@@ -2,6 +2,11 @@
 every point of the limit continuation against post7's (the end and the first point),
 side by side in one process on one fit, seeds alternating which goes first.
 
+The ``path`` and ``ridge`` variants were retired by these measurements (benchmarks/
+README.md, ``post8``): the library knobs they set are last in commit c355578 — run the
+script on that tree (``git archive c355578``) for them; ``main`` and ``--k2-report`` run
+on any tree since.
+
 Run (pinned to one core)::
 
     PYTHONPATH=src taskset -c 0 python benchmarks/posterior_ridge_post8.py \
@@ -50,6 +55,9 @@ def _load():
 def run(fit, variant: str, seed: int, max_steps: int) -> dict:
     from hdid._posterior import driver, limits
 
+    if variant != "main" and not hasattr(driver, "RIDGE_MOVE_WEIGHT"):
+        raise SystemExit("the path/ridge variants were retired from the library (post8): "
+                         "run this script on the tree of commit c355578")
     limits.LIMIT_PATH_POINTS = len(limits.LIMIT_PATH) - 1 if "path" in variant else 1
     driver.RIDGE_MOVE_WEIGHT = RIDGE_WEIGHT if "ridge" in variant else 0.0
     la0 = _load()
@@ -101,14 +109,29 @@ def k2_report(fit) -> dict:
     grid = np.linspace(lo, lo + 3.0, 301)
     out = {"q_rad": q, "sigma_floor_rad": dens.bounds[0] * q,
            "rms_residual_rad": fit.rms_residual_rad}
+    from hdid._diagnosis._floor import projected_floor
+    from hdid._posterior.modes import _rj
+
+    lin = np.asarray(dens.lin, dtype=float)
+    P = prob.n_physical
+    w = np.asarray(prob.weight, dtype=float).ravel()
+    rows = np.flatnonzero(w > 0)
+    sig = float(prob.sigma)
     for tag, u in (("fit", np.asarray(fit.u)), ("k2_limit", lim.u)):
         cost, cov, logz = _laplace(prob, u)
+        r, J = _rj(prob, u)
+        yhat = np.asarray(prob.theta, dtype=float).ravel()[rows] + r[: w.size][rows] * sig / w[rows]
+        F, F_sd = projected_floor(yhat, w[rows], J, sig, sig * math.sqrt(12.0), rows)
+        out.setdefault("floor", {})[tag] = {"F": F, "F_sd_over_phases": F_sd,
+                                            "n_minus_k": float(np.sum(w**2)) - len(u)}
         X = np.column_stack([np.tile(u, (grid.size, 1)), grid])
         lps = np.asarray(lp.batch(lp.to_sampled_np(X)), dtype=float)
         j = int(np.argmax(lps))
         out[tag] = {"cost": cost, "laplace_log_evidence": logz,
+                    "laplace_log_evidence_value_flat": logz + float(lin @ (u[:P] - np.asarray(fit.u)[:P])),
+                    "values": {k: float(v) for k, v in prob.values_np(u).items()},
                     "k2": float(prob.values_np(u)["k2"]),
-                    "band_rad": None, "best_sigma_rad": float(math.exp(grid[j])),
+                    "best_sigma_rad": float(math.exp(grid[j])),
                     "log_p_at_best_sigma": float(lps[j]), "log_p_at_floor": float(lps[0]),
                     "sd_log_k2": float(math.sqrt(cov[list(prob.free).index("k2"),
                                                       list(prob.free).index("k2")]))}

@@ -29,7 +29,6 @@ from .modes import found_limits, sampled_modes
 from .moves import (
     START_SCALE,
     MixtureProposal,
-    RidgeMove,
     _Adaptive,
     _Counted,
     _mode_start,
@@ -221,10 +220,6 @@ def sample_posterior(
     proposal = _Adaptive(MixtureProposal(means, covs, w_prop, frozen=frozen))
     if moves is None:
         moves = default_moves(proposal)
-        curves = ridge_curves(limits, lp, u_fit, s_mid) if RIDGE_MOVE_WEIGHT > 0 else []
-        if curves:
-            moves = [(m, w * (1.0 - RIDGE_MOVE_WEIGHT)) for m, w in moves] + [
-                (emcee.moves.MHMove(RidgeMove(curves)), RIDGE_MOVE_WEIGHT)]
     elif callable(moves) and not hasattr(moves, "propose"):
         # a factory for moves that need the log-posterior itself (e.g. gradient-based)
         moves = moves(lp, proposal)
@@ -379,28 +374,6 @@ def sample_posterior(
         stage_s={"mode_search": t_modes, "compile": t_compile, "burn_in": t_burn,
                  "kept_chain": t_kept, "diagnostics": t_diag},
     )
-
-
-#: Share of the emcee steps that use :class:`~hdid._posterior.moves.RidgeMove` along the
-#: limit fits' continuations (0: off, the default; benchmarks/README.md, ``post8``).
-RIDGE_MOVE_WEIGHT = 0.0
-
-
-def ridge_curves(limits, lp, u_fit, s_mid) -> list:
-    """``[(index, points)]`` for :class:`~hdid._posterior.moves.RidgeMove`: per limit fit,
-    the least-squares optimum and the path's points (the end included) within the data's
-    reach (least-squares Δχ² ≤ ``LIMIT_DCHI2``), in the sampled coordinates."""
-    from .limits import LIMIT_DCHI2
-
-    free = list(lp.problem.free)
-    out = []
-    for lim in limits:
-        pts = [u for u, c in list(lim.path) + [(lim.u, lim.dchi2_lsq)] if c <= LIMIT_DCHI2]
-        if pts:
-            U = np.array([u_fit] + pts)
-            X = lp.to_sampled_np(np.column_stack([U, np.full(len(U), s_mid)]))
-            out.append((free.index(lim.name), X))
-    return out
 
 
 def _tune(counted, burn_draws, D):

@@ -68,9 +68,6 @@ LIMIT_REACH = 0.1
 #: have not reached it, it fades (weight halved per stage) or is pulled onto the main
 #: optimum. Any weight keeps the move exact.
 LIMIT_PROPOSAL_WEIGHT = 0.05
-#: Points of the continuation before the end that become limit optima too (the first
-#: ``LIMIT_PATH_POINTS``; ``len(LIMIT_PATH) − 1``: a component at every point of the path).
-LIMIT_PATH_POINTS = 1
 
 
 def limit_proposal_weights(found) -> tuple[np.ndarray, np.ndarray]:

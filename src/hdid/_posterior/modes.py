@@ -307,17 +307,14 @@ def seek_limits(fit, lin, best_cost: float, dchi2_max: float = MODE_DCHI2_MAX) -
     ``dchi2_max`` of the best, as optima of ``kind="limit:NAME"`` (the end carrying its
     :class:`~hdid._posterior.limits.LimitFit`; never merged: the plateau they stand for is
     one ridge with the fit's optimum)."""
-    from . import limits
     from .limits import limit_fits, limit_names
 
     prob: Problem = fit.problem
     out = []
     names = limit_names(prob, lin, getattr(fit, "covariance", None))
     for lim in limit_fits(fit, names, best_cost, MODE_LANES, dchi2_max):
-        # the end, and the continuation's first points (the first: half-way down the
-        # ridge in value)
-        pts = [(u, c, None) for u, c in lim.path[: limits.LIMIT_PATH_POINTS]]
-        for u, c, end in [(lim.u, lim.dchi2_lsq, lim)] + pts:
+        # the end, and the continuation's first point (half-way down the ridge in value)
+        for u, c, end in [(lim.u, lim.dchi2_lsq, lim)] + [(u, c, None) for u, c in lim.path[:1]]:
             if c < dchi2_max:
                 cost, cov, logz = _laplace(prob, u)
                 out.append(Mode(u=u, cost=cost, cov=cov, log_evidence=logz,

@@ -110,46 +110,6 @@ class MixtureProposal:
         return cur
 
 
-class RidgeMove:
-    """Symmetric Metropolis move along known curves (the limit fits' continuations): a
-    walker's coordinate ``t`` (the held parameter, sampled coordinates) moves by ``ε`` and
-    every other coordinate by ``g(t + ε) − g(t)``, ``g`` the piecewise-linear curve through
-    the path's points (the least-squares optimum first; constant beyond its ends). For a
-    fixed ``ε`` the map is a shear — triangular Jacobian, unit diagonal, volume 1 — and
-    ``−ε`` undoes it; ``ε`` is drawn from a symmetric distribution (a normal whose scale is
-    ``scales`` × the curve's span, picked at random) and the curve at random, neither from
-    the state: the Hastings factor is 0 and the move is exact. A walker keeps its offset
-    from the ridge while it travels along it (the DE moves' steps are short there)."""
-
-    def __init__(self, curves, scales=(0.05, 0.25, 1.0)):
-        #: ``[(i, T, G)]``: the coordinate index, the path's ``t`` (sorted), its points
-        self.curves = []
-        for i, pts in curves:
-            pts = np.asarray(pts, dtype=float)
-            o = np.argsort(pts[:, i])
-            self.curves.append((int(i), pts[o, i], pts[o]))
-        self.scales = np.asarray(scales, dtype=float)
-
-    def _g(self, k, t):
-        _, T, G = self.curves[k]
-        return np.stack([np.interp(t, T, G[:, d]) for d in range(G.shape[1])], axis=1)
-
-    def __call__(self, coords, random):
-        X = np.array(coords, dtype=float)
-        new = X.copy()
-        which = random.randint(len(self.curves), size=len(X))
-        for k, (i, T, _) in enumerate(self.curves):
-            w = np.flatnonzero(which == k)
-            if w.size == 0:
-                continue
-            t = X[w, i]
-            eps = (T[-1] - T[0]) * self.scales[random.randint(len(self.scales), size=w.size)]
-            eps = eps * random.randn(w.size)
-            new[w] += self._g(k, t + eps) - self._g(k, t)
-            new[w, i] = t + eps
-        return new, np.zeros(len(X))
-
-
 def default_moves(proposal=None):
     """emcee moves used by default: differential evolution (+ snooker, mode jumps) and,
     given a :class:`MixtureProposal`, independence Metropolis–Hastings from it.
@@ -247,8 +207,6 @@ def _move_name(move) -> str:
 
     if isinstance(move, emcee.moves.MHMove) and isinstance(move.get_proposal, _Adaptive):
         return "independence (mixture)"
-    if isinstance(move, emcee.moves.MHMove) and isinstance(move.get_proposal, RidgeMove):
-        return "ridge"
     if isinstance(move, emcee.moves.DEMove) and move.gamma0 == 1.0:
         return "DE gamma=1"
     return type(move).__name__
