@@ -111,13 +111,13 @@ def test_limit_fits_skip_parameters_the_fit_measures_well(fit):
 
 
 def test_mode_search_solver_is_the_fits_program_without_its_trace(fit):
-    """``modes.solve_fresh`` (no ``jax.eval_shape`` per call: 0.24–0.30 s of tracing each on
+    """``lanes.solve_fresh`` (no ``jax.eval_shape`` per call: 0.24–0.30 s of tracing each on
     this log, ~150 calls per default ``sample_posterior``; ``post8``) returns what
     ``_lm.solve_fresh`` returns, bit for bit: the same compiled program, the same inputs."""
     import jax.numpy as jnp
 
     from hdid._fitting._lm import solve_fresh as reference
-    from hdid._posterior.modes import MODE_LANES, solve_fresh
+    from hdid._posterior.lanes import MODE_LANES, solve_fresh
 
     rng = np.random.default_rng(0)
     U = np.asarray(fit.u) + 0.05 * rng.standard_normal((MODE_LANES, len(fit.u)))

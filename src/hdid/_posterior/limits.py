@@ -166,7 +166,7 @@ def _limit_paths(fit, names, lanes) -> list:
     import jax.numpy as jnp
 
     from .._fitting._lm import PHASE1_STEPS, PHASE2_CHUNK
-    from .modes import _solve_in_lanes, solve_fresh
+    from .lanes import _solve_in_lanes, solve_fresh
 
     prob = fit.problem
     free = list(prob.free)
