@@ -108,3 +108,41 @@ def test_limit_fits_skip_parameters_the_fit_measures_well(fit):
     C[free.index("tau_c"), free.index("tau_c")] = (0.9 * LIMIT_SCREEN_REL_SD) ** 2
     C[free.index("k2"), free.index("k2")] = np.nan
     assert limit_names(prob, lin, C) == ["k2", "c_v"]
+
+
+def test_mode_search_solver_is_the_fits_program_without_its_trace(fit):
+    """``lanes.solve_fresh`` (no ``jax.eval_shape`` per call: 0.24–0.30 s of tracing each on
+    this log, ~150 calls per default ``sample_posterior``; ``post8``) returns what
+    ``_lm.solve_fresh`` returns, bit for bit: the same compiled program, the same inputs."""
+    import jax.numpy as jnp
+
+    from hdid._fitting._lm import solve_fresh as reference
+    from hdid._posterior.lanes import MODE_LANES, solve_fresh
+
+    rng = np.random.default_rng(0)
+    U = np.asarray(fit.u) + 0.05 * rng.standard_normal((MODE_LANES, len(fit.u)))
+    active = np.arange(MODE_LANES) < 4
+    for a, b in zip(solve_fresh(fit.problem, jnp.asarray(U), active, 12),
+                    reference(fit.problem, jnp.asarray(U), jnp.asarray(active), 12)):
+        assert np.array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_limit_fits_are_made_once_per_fit(fit, monkeypatch):
+    """A second call on the same fit and names (the SMC after the emcee call, ``modes="fit"``)
+    reuses the continuation — whatever its best cost or stop — and hands out copies (the
+    caller sets their profile)."""
+    import jax.numpy as jnp
+
+    from hdid._posterior import limits
+    from hdid._posterior.modes import MODE_LANES
+
+    best = float(fit.problem.cost(jnp.asarray(fit.u)))
+    first = limit_fits(fit, ["tau_c"], best, MODE_LANES)
+    monkeypatch.setattr(limits, "_limit_paths", lambda *a: pytest.fail("limit fits redone"))
+    again = limit_fits(fit, ["tau_c"], best, MODE_LANES)
+    assert np.array_equal(first[0].u, again[0].u) and first[0].u is not again[0].u
+    assert first[0].dchi2_lsq == again[0].dchi2_lsq
+    # a stop below the path's first point's cost ends the path there, as before the cache
+    short = limit_fits(fit, ["tau_c"], best, MODE_LANES, stop=-1.0)
+    assert short[0].path == [] and np.array_equal(short[0].u, first[0].path[0][0])
+

@@ -43,8 +43,8 @@ import numpy as np
 LIMIT_FRACTION = math.exp(-6.0)
 #: No limit fit for a parameter the least-squares fit measures to better than this
 #: (relative standard error, the sd of its log): its vanishing end is then ≥ 5 linearised
-#: sd away (Δχ² ≥ 25), far beyond ``LIMIT_DCHI2``; each limit fit costs ~5 s (five LM
-#: calls) on a paper log. The shipped log's tau_c, c_v and k2 are at 106 %, 236 %, 34 %.
+#: sd away (Δχ² ≥ 25), far beyond ``LIMIT_DCHI2``; each limit fit costs five LM
+#: calls (0.3–1 s on a paper log since ``post8``, ~5 s before). The shipped log's tau_c, c_v and k2 are at 106 %, 236 %, 34 %.
 LIMIT_SCREEN_REL_SD = 0.2
 #: The continuation that reaches it: held at ``exp(−s)`` of the least-squares value for
 #: each ``s`` (``LIMIT_FRACTION`` is the last). The first step is short: in steps of 1.5
@@ -130,15 +130,47 @@ def limit_fits(fit, names, best_cost: float, lanes: int,
     Δχ² 3·10⁵), each a call of the fit's Levenberg–Marquardt program at its lane count
     ``lanes`` (one lane active: the program the fit compiled). A path whose cost rises
     more than ``stop`` above ``best_cost`` ends there (the data exclude that end)."""
+    prob = fit.problem
+    key = (np.asarray(fit.u, dtype=float).tobytes(), tuple(names), int(lanes)) + tuple(
+        np.asarray(a).tobytes() for a in (prob.prior_mean, prob.prior_sd, prob.prior_on))
+    if key not in _CACHE:
+        if len(_CACHE) >= _CACHE_SIZE:
+            _CACHE.pop(next(iter(_CACHE)))
+        _CACHE[key] = _limit_paths(fit, names, lanes)
+    lsq = prob.values_np(np.asarray(fit.u, dtype=float))
+    out = []
+    for name, pts in _CACHE[key]:
+        path = []
+        for u, cost in pts:  # the path ends at the first point beyond ``stop``
+            path.append((u.copy(), float(cost) - float(best_cost)))
+            if path[-1][1] > stop:
+                break
+        if path:
+            u, c = path[-1]
+            out.append(LimitFit(name=name, u=u, value=float(prob.values_np(u)[name]),
+                                lsq_value=float(lsq[name]), dchi2_lsq=c, path=path[:-1]))
+    return out
+
+
+#: Continuations already made (``[(name, [(u, cost), ...]), ...]``, whole paths), by the
+#: fit's unknowns, the names, the lanes and the problem's prior rows (a user prior's view
+#: differs): the emcee and SMC calls and ``modes="fit"`` on one fit do not redo them.
+_CACHE: dict = {}
+_CACHE_SIZE = 16
+
+
+def _limit_paths(fit, names, lanes) -> list:
+    """Every parameter's whole continuation: ``(name, [(u, cost), ...])``, the cost under
+    the fit's own prior rows; a path ends early only where the cost is not finite."""
     import equinox as eqx
     import jax.numpy as jnp
 
-    from .._fitting._lm import PHASE1_STEPS, PHASE2_CHUNK, solve_fresh
+    from .._fitting._lm import PHASE1_STEPS, PHASE2_CHUNK
+    from .lanes import _solve_in_lanes, solve_fresh
 
     prob = fit.problem
     free = list(prob.free)
     u0 = np.asarray(fit.u, dtype=float)
-    lsq = prob.values_np(u0)
     active = jnp.asarray(np.arange(lanes) == 0)
     out = []
     for name in names:
@@ -160,16 +192,13 @@ def limit_fits(fit, names, best_cost: float, lanes: int,
                     break
                 steps = PHASE2_CHUNK
             u = np.asarray(U[0], dtype=float)
-            c = float(prob.cost(jnp.asarray(u))) - float(best_cost)
+            # its cost under the fit's own prior rows: the LM program with no step
+            # (``Problem.cost``, not jitted, traces the simulation: ~1 s a call)
+            c = float(_solve_in_lanes(solve_fresh, prob, u[None], [True], 0, lanes)[1][0])
             if not np.isfinite(c):
                 break
             path.append((u, c))
-            if c > stop:
-                break
-        if path:
-            u, c = path[-1]
-            out.append(LimitFit(name=name, u=u, value=float(prob.values_np(u)[name]),
-                                lsq_value=float(lsq[name]), dchi2_lsq=c, path=path[:-1]))
+        out.append((name, path))
     return out
 
 

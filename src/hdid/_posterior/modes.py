@@ -11,6 +11,7 @@ import numpy as np
 
 from .._problems._problem import Problem
 from .density import PRIOR_HALF_WIDTH
+from .lanes import MODE_LANES, _solve_in_lanes, solve_fresh  # noqa: F401 (re-exported)
 
 #: Local optima more than this far above the best (χ² in the fit's q/√12 units) carry
 #: a posterior mass ``exp(−Δχ²/2) < 1e-13`` of the best one's: ignored.
@@ -61,9 +62,7 @@ def _rj(problem: Problem, u):
 
 def _path_costs(problem: Problem, U):
     """Cost of every row of ``U``: the LM program with no iteration (its cost at the
-    start), in calls of the fit's lane count — the fit's compiled program again."""
-    from .._fitting._lm import solve_fresh
-
+    start), in one call of all rows."""
     return _solve_in_lanes(solve_fresh, problem, U, np.ones(len(U), dtype=bool), 0)[1]
 
 
@@ -132,38 +131,6 @@ def _restart_candidates(fit, rng, n_random: int) -> np.ndarray:
     return np.array(cands)
 
 
-#: Lanes per call of the mode search's Levenberg–Marquardt: the fit's own (``hdid.fit``'s
-#: default ``n_starts``), so that the search runs the program the fit compiled (same
-#: problem, same lane count: one in-memory or persistent-cache hit) instead of compiling
-#: one for its own number of candidates, which varies from log to log (27–32 s in a fresh
-#: process, benchmarks/README.md, issue 17 ``post3``).
-MODE_LANES = 6
-
-
-def _solve_in_lanes(solve_fresh, prob, U, active, steps, lanes: int | None = None):
-    """``solve_fresh`` over the rows of ``U`` in calls of ``lanes`` rows (the last padded
-    with inactive copies; ``lanes`` 0: one call of every row); calls whose rows are all
-    inactive are skipped. Returns
-    ``(U, cost, done)`` as NumPy arrays (inactive rows: unchanged, cost inf, not done)."""
-    U = np.array(U, dtype=float)
-    active = np.asarray(active, dtype=bool)
-    n = len(U)
-    lanes = MODE_LANES if lanes is None else int(lanes)
-    lanes = n if lanes <= 0 else lanes  # 0: every row in one call
-    U_out, cost, done = U.copy(), np.full(n, np.inf), np.zeros(n, dtype=bool)
-    for i in range(0, n, lanes):
-        a = active[i : i + lanes]
-        if not a.any():
-            continue
-        blk, k = U[i : i + lanes], len(a)
-        if k < lanes:
-            blk = np.concatenate([blk, np.repeat(blk[:1], lanes - k, axis=0)])
-            a = np.concatenate([a, np.zeros(lanes - k, dtype=bool)])
-        u2, c2, d2, _ = map(np.asarray, solve_fresh(prob, jnp.asarray(blk), jnp.asarray(a), steps))
-        U_out[i : i + k], cost[i : i + k], done[i : i + k] = u2[:k], c2[:k], d2[:k]
-    return U_out, cost, done
-
-
 #: Restarts drawn from the widened Laplace approximation in :func:`find_modes`. 30 instead
 #: of 6 found more optima (paper log 1007 with seed 0: the one nearest the truth, which 6
 #: missed; with seed 7 not) but did not change the coverage on 14 paper logs (95 %
@@ -184,7 +151,7 @@ def find_modes(fit, *, n_random: int = N_RANDOM_RESTARTS, seed: int = 0, max_ste
     than ``MODE_BARRIER``, and each remaining one is weighted by its Laplace evidence.
     Sorted by weight, largest first.
     """
-    from .._fitting._lm import PHASE1_STEPS, PHASE2_CHUNK, solve_fresh
+    from .._fitting._lm import PHASE1_STEPS, PHASE2_CHUNK
 
     prob: Problem = fit.problem
     rng = np.random.default_rng(seed)

@@ -1,0 +1,64 @@
+"""The fit's Levenberg–Marquardt program over rows of starts, for the mode search and the
+limit fits (:mod:`.modes`, :mod:`.limits`)."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+_ROWS: dict = {}
+
+
+def solve_fresh(problem, U0, active, max_steps):
+    """``hdid._fitting._lm.solve_fresh`` — the same compiled program, the same inputs, so
+    the same numbers — without its per-call ``jax.eval_shape`` of the residuals (which
+    traces the simulation: 0.24–0.30 s a call on the shipped paper log against 17 ms for
+    the program itself; the mode search and the limit fits make ~150 such calls). The
+    residual count is kept per problem structure (type and the shapes of its arrays: a
+    problem whose prior rows are changed has the same)."""
+    import jax
+
+    from .._fitting._lm import LMState, _solve_lanes
+
+    U0 = jnp.asarray(U0)
+    L, n = U0.shape
+    key = (type(problem), n) + tuple(
+        (tuple(x.shape), str(x.dtype)) for x in jax.tree_util.tree_leaves(problem)
+        if hasattr(x, "shape"))
+    if key not in _ROWS:
+        _ROWS[key] = jax.eval_shape(problem.residuals, U0[0]).shape[0]
+    U, cost, done, k, _ = _solve_lanes(problem, U0, jnp.asarray(active), jnp.asarray(max_steps),
+                                       LMState.empty(L, _ROWS[key], n))
+    return U, cost, done, k
+
+
+#: Lanes per call of the mode search's Levenberg–Marquardt: the fit's own (``hdid.fit``'s
+#: default ``n_starts``), so that the search runs the program the fit compiled (same
+#: problem, same lane count: one in-memory or persistent-cache hit) instead of compiling
+#: one for its own number of candidates, which varies from log to log (27–32 s in a fresh
+#: process, benchmarks/README.md, issue 17 ``post3``).
+MODE_LANES = 6
+
+
+def _solve_in_lanes(solve_fresh, prob, U, active, steps, lanes: int | None = None):
+    """``solve_fresh`` over the rows of ``U`` in calls of ``lanes`` rows (the last padded
+    with inactive copies; ``lanes`` 0: one call of every row); calls whose rows are all
+    inactive are skipped. Returns
+    ``(U, cost, done)`` as NumPy arrays (inactive rows: unchanged, cost inf, not done)."""
+    U = np.array(U, dtype=float)
+    active = np.asarray(active, dtype=bool)
+    n = len(U)
+    lanes = MODE_LANES if lanes is None else int(lanes)
+    lanes = n if lanes <= 0 else lanes  # 0: every row in one call
+    U_out, cost, done = U.copy(), np.full(n, np.inf), np.zeros(n, dtype=bool)
+    for i in range(0, n, lanes):
+        a = active[i : i + lanes]
+        if not a.any():
+            continue
+        blk, k = U[i : i + lanes], len(a)
+        if k < lanes:
+            blk = np.concatenate([blk, np.repeat(blk[:1], lanes - k, axis=0)])
+            a = np.concatenate([a, np.zeros(lanes - k, dtype=bool)])
+        u2, c2, d2, _ = map(np.asarray, solve_fresh(prob, jnp.asarray(blk), jnp.asarray(a), steps))
+        U_out[i : i + k], cost[i : i + k], done[i : i + k] = u2[:k], c2[:k], d2[:k]
+    return U_out, cost, done
