@@ -27,6 +27,8 @@ warnings; the confusion matrix (hidden effect × verdict's effect) per design.
 
     taskset -c 0 python benchmarks/diagnose_independent.py [rich|paper ...] [--per N]
     python benchmarks/diagnose_independent.py --report
+    ... [--out diagnose_independent_diag8]   (another results file; copy the old one first
+                                              to keep its other rows)
 """
 
 from __future__ import annotations
@@ -304,6 +306,9 @@ def write(records: list, meta: dict) -> None:
 
 
 def main(argv: list[str]) -> None:
+    global NAME
+    if "--out" in argv:  # --out NAME: results/NAME.{json,md} (a branch's copy)
+        NAME = argv[argv.index("--out") + 1]
     if "--report" in argv:
         doc = json.loads((RESULTS / f"{NAME}.json").read_text())
         write(doc["records"], doc["meta"])
