@@ -125,3 +125,40 @@ def test_diagnose_ranks_within_families_after_sorting():
     src = inspect.getsource(D.diagnose)
     assert src.index("results.sort(") < src.index("rank_within_families(") < src.index(
         "strong = [c for c in results")
+
+
+def _paper_9905():
+    # seed 9905 (paper design, hidden ripple of order 16): all three fit below n − k;
+    # asymmetric friction first by the penalties alone (one parameter and no scan less)
+    return [_cand("asymmetric_friction", -100.5, 11.54, n=35.0, k=18),
+            _cand("kinematic_error", -87.8, 2.53, n=35.0, k=19),
+            _cand("ripple", -85.9, 2.75, n=35.0, k=19),
+            _cand("backlash", 3.0, 327.4, n=35.0, k=18)]
+
+
+def test_below_the_floor_a_penalty_gap_the_chi2_difference_contradicts_is_a_rival():
+    """9905: the χ² difference favours the ripple (2·ln LR −7.0 for asymmetric friction,
+    −5.5 against the kinematic error): the evidence for asymmetric friction over them is
+    7.6 and 7.2, not very strong: ambiguous, not a confident wrong name."""
+    results = _paper_9905()
+    lr = {"ripple": -7.0, "kinematic_error": -5.5}
+    notes = R.rank_within_families(
+        results, CANDS, D.STRONG_DBIC, D.AMBIGUOUS_DBIC,
+        evidence=lambda a, b: R.Evidence(b.fit.cost - a.fit.cost, -1.9, 1.9, -4.3, 1.9,
+                                         lr[b.key]))
+    assert [round(c.floor_gap, 1) for c in results[1:3]] == [7.2, 7.6]
+    assert math.isnan(results[3].floor_gap)  # not strong, not compared
+    assert sum("a rival" in n for n in notes) == 2
+    verdict, summary, _ = D._verdict([{"results": results, "white": None, "floor": 1.0}],
+                                     CANDS)
+    assert verdict == "ambiguous" and "asymmetric_friction, kinematic_error" in summary
+
+
+def test_below_the_floor_evidence_for_the_best_keeps_it_named():
+    results = _paper_9905()
+    R.rank_within_families(
+        results, CANDS, D.STRONG_DBIC, D.AMBIGUOUS_DBIC,
+        evidence=lambda a, b: R.Evidence(b.fit.cost - a.fit.cost, 1.0, 1.0, -1.0, 1.0, 3.0))
+    verdict, summary, _ = D._verdict([{"results": results, "white": None, "floor": 1.0}],
+                                     CANDS)
+    assert verdict == "missing_effect" and summary.startswith("add asymmetric_friction")

@@ -58,7 +58,8 @@ Verdicts (the only four; :func:`_verdict`)
         rounding alone decides which is named first (:mod:`hdid._diagnosis._rival`).
     ``ambiguous``
         the best candidate has strong evidence and candidates of other families are
-        within ``AMBIGUOUS_DBIC`` of it: "ambiguous between A, B", with each one's
+        within ``AMBIGUOUS_DBIC`` of it (below the floor, the BIC gap plus the rounding's
+        ``2·ln LR``: :mod:`hdid._diagnosis._rival`): "ambiguous between A, B", with each one's
         separating experiment — never a single confident name (a warning says when none
         of them brings the residual to the floor).
     ``unexplained``

@@ -28,10 +28,15 @@ the BIC's order stands; the report says the form is not told apart. When ``D`` i
 than ``OUTSIDE`` standard deviations from both means, neither hypothesis explains it
 (the linearisation does not hold there) and it is no evidence.
 
-Only the ranking inside one family changes (who is named first, with the other named as
-the same mark): no candidate becomes strong or weak, and a log whose verdict is
-``adequate`` (no strong candidate) is never touched, so the false-alarm rates
-(:mod:`hdid._diagnosis._rates`) are those of the rules without it.
+Two uses (:func:`rank_within_families`): inside one family it decides who is named first
+(the other named as the same mark); across families it is the evidence for the best over
+another strong candidate that also fits below the floor (``floor_gap``), and a gap less
+than ``AMBIGUOUS_DBIC`` makes that candidate a rival (an ``ambiguous`` verdict) even where
+the penalties alone put it further behind (seed 9905: a ripple named asymmetric friction
+by the penalty gap 14.6, with the χ² difference favouring the ripple, 2·ln LR −7.0).
+No candidate becomes strong or weak, and a log with no strong candidate (``adequate``)
+is never touched, so the false-alarm rates (:mod:`hdid._diagnosis._rates`) are those of
+the rules without it; a ``missing_effect`` can only become ``ambiguous``.
 """
 
 from __future__ import annotations
@@ -151,37 +156,49 @@ def _floored(c) -> bool:
     return sf is not None and sf.finite and sf.cost <= max(sf.n_effective - sf.n_unknowns, 1.0)
 
 
+def _evidence_of(evidence):
+    """``evidence(a, b)`` as given, or :func:`cross_evidence` of the two candidates'
+    linearised fits (each linearised once)."""
+    if evidence is not None:
+        return evidence
+    cache = {}
+
+    def lin(c):
+        if id(c) not in cache:
+            cache[id(c)] = linear_of(c.fit)
+        return cache[id(c)]
+
+    def default(a, b):
+        la, lb = lin(a), lin(b)
+        return None if la is None or lb is None else cross_evidence(la, lb)
+
+    return default
+
+
 def rank_within_families(results, all_cands, strong_dbic: float, tie_dbic: float,
                          evidence=None) -> list[str]:
-    """Put first, among the strong best's family within ``tie_dbic`` of it whose fits
-    the BIC holds at the floor, the candidate the log favours (the BIC difference plus
-    ``2·ln LR`` for the BIC's best; module docstring). Reorders ``results`` (sorted by ΔBIC) in place;
-    returns the notes. ``evidence(a, b)``: :class:`Evidence` of ``b`` against ``a``
-    (default: :func:`cross_evidence` of their linearised fits)."""
+    """Below the floor, the χ² difference judged under the rounding (module docstring):
+
+    1. among the strong best's family within ``tie_dbic`` of it, with both fits held at
+       the floor by the BIC, the candidate the log favours (the BIC difference plus
+       ``2·ln LR`` for the BIC's best) is put first;
+    2. every strong candidate of another family whose fit the BIC holds at the floor as
+       it does the best's gets ``floor_gap``: its BIC gap to the best plus ``2·ln LR``
+       for the best — the evidence for the best over it, which the verdict's rival rule
+       reads beside the BIC gap (:func:`hdid._diagnosis._verdict._rivals`).
+
+    Reorders ``results`` (sorted by ΔBIC) in place; returns the notes. ``evidence(a,
+    b)``: :class:`Evidence` of ``b`` against ``a`` (default: :func:`cross_evidence` of
+    their linearised fits)."""
     ok = [c for c in results if c.error is None]
     if not ok or ok[0].delta_bic >= strong_dbic or not _floored(ok[0]):
         return []
+    evidence = _evidence_of(evidence)
     best = ok[0]
     fam = all_cands[best.key].family
-    if not fam:
-        return []
-    tied = [c for c in ok[1:] if all_cands[c.key].family == fam and c.key != best.key
-            and c.delta_bic < strong_dbic and c.delta_bic - best.delta_bic < tie_dbic
-            and _floored(c)]
-    if not tied:
-        return []
-    if evidence is None:
-        cache = {}
-
-        def lin(c):
-            if id(c) not in cache:
-                cache[id(c)] = linear_of(c.fit)
-            return cache[id(c)]
-
-        def evidence(a, b):
-            la, lb = lin(a), lin(b)
-            return None if la is None or lb is None else cross_evidence(la, lb)
-
+    tied = [c for c in ok[1:] if fam and all_cands[c.key].family == fam
+            and c.key != best.key and c.delta_bic < strong_dbic
+            and c.delta_bic - best.delta_bic < tie_dbic and _floored(c)]
     notes, winner, score = [], best, 0.0
     for c in tied:
         ev = evidence(best, c)
@@ -203,6 +220,23 @@ def rank_within_families(results, all_cands, strong_dbic: float, tie_dbic: float
     if winner is not best:
         results.remove(winner)
         results.insert(results.index(best), winner)
+        best = winner
+    fam = all_cands[best.key].family or best.key
+    for c in ok:
+        if (c is best or (all_cands[c.key].family or c.key) == fam
+                or c.delta_bic >= strong_dbic or not _floored(c)
+                or c.delta_bic - best.delta_bic < tie_dbic):
+            continue  # (within tie_dbic it is a rival by the BIC already)
+        ev = evidence(best, c)
+        if ev is None:
+            continue
+        c.floor_gap = (c.delta_bic - best.delta_bic) + ev.two_ln_lr
+        rival = c.floor_gap < tie_dbic
+        notes.append(
+            f"{best.key} and {c.key} both fit below the white floor n − k (ΔBIC "
+            f"{best.delta_bic:.1f} and {c.delta_bic:.1f}); {ev.text(best.label, c.label)}. "
+            f"The evidence for {best.key} over it, BIC gap plus this: {c.floor_gap:.1f}"
+            + (f", less than {tie_dbic:g}: a rival" if rival else ""))
     return notes
 
 
