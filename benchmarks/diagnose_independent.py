@@ -315,7 +315,8 @@ def main(argv: list[str]) -> None:
         return
     per = int(argv[argv.index("--per") + 1]) if "--per" in argv else 1
     designs = [a for a in argv if a in ("rich", "paper")] or ["rich", "paper"]
-    meta = run_meta(cmd="taskset -c 0 python benchmarks/diagnose_independent.py "
+    cores = ",".join(map(str, sorted(os.sched_getaffinity(0))))  # the cores it ran on
+    meta = run_meta(cmd=f"taskset -c {cores} python benchmarks/diagnose_independent.py "
                         + " ".join(argv))
     # --seed0 S: a further batch (seeds S, S+1, …) added to the earlier records
     seed0 = int(argv[argv.index("--seed0") + 1]) if "--seed0" in argv else None
