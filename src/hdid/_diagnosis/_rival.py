@@ -1,6 +1,6 @@
-"""Which of two same-family candidates the log favours when the BIC sees neither fit:
-the χ² difference between their optima, against its distribution under the rounding
-alone (issue 19, branch ``diag8``).
+"""Which of two candidates the log favours when the BIC sees neither fit (both below its
+floor): the χ² difference between their optima, against its distribution under the
+rounding alone (issue 19, branch ``diag8``).
 
 Where both candidates' fits go below the white-noise floor ``n − k``, the BIC
 (:func:`hdid._diagnosis._ladder.bic_value`) holds both at that floor: their likelihoods
@@ -36,7 +36,9 @@ the penalties alone put it further behind (seed 9905: a ripple named asymmetric 
 by the penalty gap 14.6, with the χ² difference favouring the ripple, 2·ln LR −7.0).
 No candidate becomes strong or weak, and a log with no strong candidate (``adequate``)
 is never touched, so the false-alarm rates (:mod:`hdid._diagnosis._rates`) are those of
-the rules without it; a ``missing_effect`` can only become ``ambiguous``.
+the rules without it. A ``missing_effect`` can become ``ambiguous`` or name the other
+member of its family first (and, were that member's moving residual above the floor,
+``unexplained``: the rule only swaps two fits both below ``n − k``, so not seen).
 """
 
 from __future__ import annotations
