@@ -27,6 +27,8 @@ warnings; the confusion matrix (hidden effect × verdict's effect) per design.
 
     taskset -c 0 python benchmarks/diagnose_independent.py [rich|paper ...] [--per N]
     python benchmarks/diagnose_independent.py --report
+    ... [--out diagnose_independent_diag8]   (another results file; copy the old one first
+                                              to keep its other rows)
 """
 
 from __future__ import annotations
@@ -304,13 +306,17 @@ def write(records: list, meta: dict) -> None:
 
 
 def main(argv: list[str]) -> None:
+    global NAME
+    if "--out" in argv:  # --out NAME: results/NAME.{json,md} (a branch's copy)
+        NAME = argv[argv.index("--out") + 1]
     if "--report" in argv:
         doc = json.loads((RESULTS / f"{NAME}.json").read_text())
         write(doc["records"], doc["meta"])
         return
     per = int(argv[argv.index("--per") + 1]) if "--per" in argv else 1
     designs = [a for a in argv if a in ("rich", "paper")] or ["rich", "paper"]
-    meta = run_meta(cmd="taskset -c 0 python benchmarks/diagnose_independent.py "
+    cores = ",".join(map(str, sorted(os.sched_getaffinity(0))))  # the cores it ran on
+    meta = run_meta(cmd=f"taskset -c {cores} python benchmarks/diagnose_independent.py "
                         + " ".join(argv))
     # --seed0 S: a further batch (seeds S, S+1, …) added to the earlier records
     seed0 = int(argv[argv.index("--seed0") + 1]) if "--seed0" in argv else None

@@ -53,10 +53,13 @@ Verdicts (the only four; :func:`_verdict`)
         the floor a whiteness test with little power (a few lags at 250 Hz) does not
         overrule it: a non-white residual is noted and warned about, not turned into
         ``unexplained``. Candidates of one family (``ripple``/``kinematic_error``: a
-        torque periodic in the WG angle) tying is noted with the separating experiment.
+        torque periodic in the WG angle) tying is noted with the separating experiment;
+        where the BIC holds both fits at the floor, the χ² difference judged under the
+        rounding alone decides which is named first (:mod:`hdid._diagnosis._rival`).
     ``ambiguous``
         the best candidate has strong evidence and candidates of other families are
-        within ``AMBIGUOUS_DBIC`` of it: "ambiguous between A, B", with each one's
+        within ``AMBIGUOUS_DBIC`` of it (below the floor, the BIC gap plus the rounding's
+        ``2·ln LR``: :mod:`hdid._diagnosis._rival`): "ambiguous between A, B", with each one's
         separating experiment — never a single confident name (a warning says when none
         of them brings the residual to the floor).
     ``unexplained``
@@ -119,6 +122,7 @@ from ._verdict import (  # noqa: F401
 )
 from ._ladder import _chi2, _ladder_step, bic, bic_value, model_ladder  # noqa: F401
 from ._excess import floor_check
+from ._rival import rank_within_families
 
 #: A current fit with RMS above this many quantization floors is a poor warm start ...
 FAR_FROM_FLOOR = 3.0
@@ -431,6 +435,8 @@ def diagnose(
             if fcheck is not None and c.fit is not None:  # against the base's F
                 c.chi2_over_floor = float(c.fit.cost) / fcheck.floor
         results.sort(key=lambda c: (c.error is not None, c.delta_bic))
+        # same-family ties the BIC holds at the floor: the χ² difference decides (_rival)
+        notes += rank_within_families(results, all_cands, STRONG_DBIC, AMBIGUOUS_DBIC)
         strong = [c for c in results if c.error is None and c.delta_bic < STRONG_DBIC]
         for c in strong[:MAX_ANALYSED]:
             c.result = c.fit.result()

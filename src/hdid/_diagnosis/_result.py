@@ -32,6 +32,9 @@ class CandidateResult:
     moving_ratio_after: float = math.nan
     #: the refit's χ² over the *base* fit's rounding floor F (:mod:`._excess`)
     chi2_over_floor: float = math.nan
+    #: below the floor, the evidence for the round's best over this candidate: the BIC
+    #: gap plus the rounding's ``2·ln LR`` (:mod:`._rival`; NaN where not computed)
+    floor_gap: float = math.nan
 
     def to_dict(self) -> dict[str, Any]:
         from .._results._saved import finite

@@ -55,10 +55,13 @@ def _rivals(best: CandidateResult, ranked: list[CandidateResult], all_cands) -> 
     """Candidates of another family within ``AMBIGUOUS_DBIC`` of the (strong) best: the
     evidence for the best *over them* is not very strong (Kass–Raftery), whether or not
     theirs against the current model is (a best at −14 and a rival at −6 are 8 apart: no
-    ground to name the first)."""
+    ground to name the first). Where both fit below the floor, the BIC sees neither χ²
+    and the gap is the penalties': the evidence is then ``floor_gap`` (the BIC gap plus
+    the rounding's ``2·ln LR``, :mod:`hdid._diagnosis._rival`)."""
     fam = all_cands[best.key].family or best.key
     return [c for c in ranked if c is not best and c.error is None
-            and c.delta_bic - best.delta_bic < AMBIGUOUS_DBIC
+            and (c.delta_bic - best.delta_bic < AMBIGUOUS_DBIC
+                 or c.floor_gap < AMBIGUOUS_DBIC)  # below the floor: _rival's evidence
             and (all_cands[c.key].family or c.key) != fam]
 
 

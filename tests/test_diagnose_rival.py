@@ -1,0 +1,164 @@
+"""Same-family candidates the BIC holds at the floor (``hdid._diagnosis._rival``): the χ²
+difference of their fits judged under the rounding alone decides which is named first.
+Pure NumPy and constructed candidate tables: milliseconds."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+
+from hdid._diagnosis import _diagnose as D
+from hdid._diagnosis import _rival as R
+
+CANDS = {c.key: c for c in D.default_candidates()}
+SIGMA = 1.0 / math.sqrt(12.0)  # the quantization sd of a unit grid step
+
+
+def _fits(truth: str, amp: float = 0.2, n: int = 600, phase: float = 0.37):
+    """A logged swing read on a unit grid, fitted linearly by two position-periodic forms:
+    ``ripple`` (constant amplitude in the angle ``x``) and ``kinematic_error`` (amplitude
+    growing with the twist, ∝ ``x``), the truth one of them. Returns the two
+    :class:`~hdid._diagnosis._rival.Linear` fits (ripple, kinematic error)."""
+    t = np.linspace(0.0, 1.0, n)
+    x = np.exp(-3 * t) * np.cos(12 * t)
+    base = np.column_stack([np.ones(n), t, 40 * x])
+    forms = {"ripple": np.column_stack([np.sin(9 * x), np.cos(9 * x)]),
+             "kinematic_error": 3 * x[:, None] * np.column_stack([np.sin(9 * x), np.cos(9 * x)])}
+    y = base @ np.array([0.3, -0.5, 1.1]) + forms[truth] @ np.array([amp, -0.4 * amp])
+    theta = np.round(y + phase)  # the reading: the angle rounded on the grid
+    out = []
+    for key in ("ripple", "kinematic_error"):
+        X = np.column_stack([base, forms[key]])
+        beta, *_ = np.linalg.lstsq(X, theta, rcond=None)
+        r = (X @ beta - theta) / SIGMA
+        out.append(R.linear(r, X / SIGMA, np.ones(n), theta, SIGMA, float(r @ r)))
+    return out
+
+
+def test_the_chi2_difference_under_the_rounding_favours_the_true_form():
+    """Two fits of one rounded log, the truth either form: the observed χ² difference is
+    typical of the true form's rounding and not of the other's."""
+    for truth, sign in (("ripple", 1), ("kinematic_error", -1)):
+        rip, ke = _fits(truth)
+        ev = R.cross_evidence(rip, ke)
+        assert sign * ev.two_ln_lr > 10, (truth, ev)
+        under_truth = (ev.mean_a, ev.sd_a) if truth == "ripple" else (ev.mean_b, ev.sd_b)
+        assert abs(ev.d - under_truth[0]) < 3 * under_truth[1]
+
+
+def test_one_form_against_itself_is_no_evidence():
+    rip, _ = _fits("ripple")
+    ev = R.cross_evidence(rip, rip)
+    assert ev.d == 0 and ev.two_ln_lr == 0
+
+
+def test_fits_of_other_samples_are_not_compared():
+    rip, ke = _fits("ripple")
+    other = R.Linear(ke.r, ke.U, ke.rows[:-1], ke.w[:-1], ke.sigma, ke.yhat[:-1], ke.cost)
+    assert R.cross_evidence(rip, other) is None
+
+
+def _cand(key, dbic, chi2, n=141.0, k=26):
+    fit = SimpleNamespace(finite=True, cost=chi2, n_effective=n, n_unknowns=k)
+    return D.CandidateResult(key, key, 4.1, 0.9, dbic, 2, True, "", {}, None, None,
+                             fit=fit, white_after=True, moving_ratio_after=0.9)
+
+
+def _table():
+    # seed 8905's (hidden ripple, order 36): both position-periodic fits below n − k = 115,
+    # the BIC gap 1.83 = 2·ln(120/48), the two scans' cost
+    return [_cand("kinematic_error", -404.71, 108.17), _cand("ripple", -402.88, 105.65),
+            _cand("hysteresis", -270.61, 325.7)]
+
+
+def _evidence(two_ln_lr):
+    return lambda a, b: R.Evidence(b.fit.cost - a.fit.cost, 12.9, 9.2, -13.0, 5.6, two_ln_lr)
+
+
+def test_below_the_floor_the_evidence_not_the_scan_cost_names_the_form():
+    """The suite's hidden ripples were named kinematic error by the scans' cost alone;
+    with the χ² difference favouring the ripple (2·ln LR 5.4 > 1.83) the ripple is named,
+    the kinematic error as the same mark, and the note gives the numbers."""
+    results = _table()
+    notes = R.rank_within_families(results, CANDS, D.STRONG_DBIC, D.AMBIGUOUS_DBIC,
+                                   evidence=_evidence(-5.4))
+    assert [c.key for c in results] == ["ripple", "kinematic_error", "hysteresis"]
+    assert len(notes) == 1 and "ranked first" in notes[0] and "-3.6" in notes[0]
+    verdict, summary, _ = D._verdict([{"results": results, "white": None, "floor": 1.0}],
+                                     CANDS)
+    assert verdict == "missing_effect"
+    assert summary.startswith("add ripple") and "or kinematic_error" in summary
+
+
+def test_no_evidence_leaves_the_bic_order_and_says_so():
+    results = _table()
+    notes = R.rank_within_families(results, CANDS, D.STRONG_DBIC, D.AMBIGUOUS_DBIC,
+                                   evidence=_evidence(0.3))
+    assert [c.key for c in results] == ["kinematic_error", "ripple", "hysteresis"]
+    assert "not ranked first" in notes[0] and "does not tell the two forms apart" in notes[0]
+
+
+def test_above_the_floor_the_bic_decides():
+    """A fit above n − k is seen by the BIC (its χ² is in it): no reordering, no note."""
+    results = _table()
+    results[0].fit.cost = 130.0
+    assert R.rank_within_families(results, CANDS, D.STRONG_DBIC, D.AMBIGUOUS_DBIC,
+                                  evidence=_evidence(-50.0)) == []
+    assert results[0].key == "kinematic_error"
+
+
+def test_other_families_and_weak_candidates_are_left_alone():
+    results = [_cand("hysteresis", -30.0, 100.0), _cand("backlash", -29.0, 99.0)]
+    assert R.rank_within_families(results, CANDS, D.STRONG_DBIC, D.AMBIGUOUS_DBIC,
+                                  evidence=_evidence(-50.0)) == []
+    results = [_cand("kinematic_error", -9.0, 100.0), _cand("ripple", -8.0, 99.0)]
+    assert R.rank_within_families(results, CANDS, D.STRONG_DBIC, D.AMBIGUOUS_DBIC,
+                                  evidence=_evidence(-50.0)) == []
+
+
+def test_diagnose_ranks_within_families_after_sorting():
+    """``diagnose`` applies the rule to its sorted table (the wiring: the call is there)."""
+    import inspect
+
+    src = inspect.getsource(D.diagnose)
+    assert src.index("results.sort(") < src.index("rank_within_families(") < src.index(
+        "strong = [c for c in results")
+
+
+def _paper_9905():
+    # seed 9905 (paper design, hidden ripple of order 16): all three fit below n − k;
+    # asymmetric friction first by the penalties alone (one parameter and no scan less)
+    return [_cand("asymmetric_friction", -100.5, 11.54, n=35.0, k=18),
+            _cand("kinematic_error", -87.8, 2.53, n=35.0, k=19),
+            _cand("ripple", -85.9, 2.75, n=35.0, k=19),
+            _cand("backlash", 3.0, 327.4, n=35.0, k=18)]
+
+
+def test_below_the_floor_a_penalty_gap_the_chi2_difference_contradicts_is_a_rival():
+    """9905: the χ² difference favours the ripple (2·ln LR −7.0 for asymmetric friction,
+    −5.5 against the kinematic error): the evidence for asymmetric friction over them is
+    7.6 and 7.2, not very strong: ambiguous, not a confident wrong name."""
+    results = _paper_9905()
+    lr = {"ripple": -7.0, "kinematic_error": -5.5}
+    notes = R.rank_within_families(
+        results, CANDS, D.STRONG_DBIC, D.AMBIGUOUS_DBIC,
+        evidence=lambda a, b: R.Evidence(b.fit.cost - a.fit.cost, -1.9, 1.9, -4.3, 1.9,
+                                         lr[b.key]))
+    assert [round(c.floor_gap, 1) for c in results[1:3]] == [7.2, 7.6]
+    assert math.isnan(results[3].floor_gap)  # not strong, not compared
+    assert sum("a rival" in n for n in notes) == 2
+    verdict, summary, _ = D._verdict([{"results": results, "white": None, "floor": 1.0}],
+                                     CANDS)
+    assert verdict == "ambiguous" and "asymmetric_friction, kinematic_error" in summary
+
+
+def test_below_the_floor_evidence_for_the_best_keeps_it_named():
+    results = _paper_9905()
+    R.rank_within_families(
+        results, CANDS, D.STRONG_DBIC, D.AMBIGUOUS_DBIC,
+        evidence=lambda a, b: R.Evidence(b.fit.cost - a.fit.cost, 1.0, 1.0, -1.0, 1.0, 3.0))
+    verdict, summary, _ = D._verdict([{"results": results, "white": None, "floor": 1.0}],
+                                     CANDS)
+    assert verdict == "missing_effect" and summary.startswith("add asymmetric_friction")
