@@ -78,3 +78,48 @@ def test_solve_fresh_runs_on_any_problem_of_the_abstraction():
     # the inherited cost is the engine's χ² (to summation order: 40 rows, rel 1e-12)
     assert float(Decay().cost(jnp.asarray(best))) == pytest.approx(float(np.min(np.asarray(cost))),
                                                                    rel=1e-12)
+
+
+def test_residual_rows_are_evaluated_once_per_problem_structure(monkeypatch):
+    """``solve_fresh`` sizes its state with ``residual_rows``: ``jax.eval_shape`` of the
+    residuals (which traces a simulation: 0.24–0.30 s on the shipped paper log) once per
+    structure. A problem with other data values or prior rows reuses the count; one with
+    another data length or another static field (which may add rows) gets its own."""
+    import equinox as eqx
+
+    from hdid._fitting import _lm
+    from hdid._problems._base import AbstractProblem
+
+    class Decay(AbstractProblem):
+        t: jax.Array
+        y: jax.Array
+        extra: int = eqx.field(static=True, default=0)  # prior-like rows: u[:extra]
+        n_unknowns: int = eqx.field(static=True, default=3)
+
+        def residuals(self, u):
+            r = (u[0] * jnp.exp(-u[1] * self.t) + u[2] - self.y) / 0.01
+            return jnp.concatenate([r, u[: self.extra]])
+
+        def residuals_and_jacobian(self, u):
+            return self.residuals(u), jax.jacfwd(self.residuals)(u)
+
+    calls = []
+    real = jax.eval_shape
+    monkeypatch.setattr(_lm.jax, "eval_shape", lambda *a, **k: calls.append(1) or real(*a, **k))
+    monkeypatch.setattr(_lm, "_ROWS", {})
+    u = jnp.asarray(TRUE)
+    a = Decay(jnp.asarray(T), jnp.asarray(Y))
+    assert _lm.residual_rows(a, u) == 40 and len(calls) == 1
+    assert _lm.residual_rows(Decay(jnp.asarray(T), jnp.asarray(Y) + 1.0), u) == 40
+    assert len(calls) == 1  # other values, same structure: no new trace
+    assert _lm.residual_rows(Decay(jnp.asarray(T[:30]), jnp.asarray(Y[:30])), u) == 30
+    assert _lm.residual_rows(Decay(jnp.asarray(T), jnp.asarray(Y), extra=2), u) == 42
+    assert len(calls) == 3
+    # and the engine sized by it gives what a state sized by eval_shape gives, bit for bit
+    starts = jnp.asarray(np.array([[1.0, 0.5, 0.0], [3.0, 3.0, 1.0]]))
+    on = jnp.ones(2, dtype=bool)
+    got = _lm.solve_fresh(a, starts, on, 50)
+    ref = _lm._solve_lanes(a, starts, on, jnp.asarray(50),
+                           LMState.empty(2, real(a.residuals, u).shape[0], 3))[:4]
+    for x, y in zip(got, ref):
+        assert np.array_equal(np.asarray(x), np.asarray(y))

@@ -111,20 +111,28 @@ def test_limit_fits_skip_parameters_the_fit_measures_well(fit):
 
 
 def test_mode_search_solver_is_the_fits_program_without_its_trace(fit):
-    """``lanes.solve_fresh`` (no ``jax.eval_shape`` per call: 0.24–0.30 s of tracing each on
-    this log, ~150 calls per default ``sample_posterior``; ``post8``) returns what
-    ``_lm.solve_fresh`` returns, bit for bit: the same compiled program, the same inputs."""
+    """The mode search's and limit fits' ``solve_fresh`` (its residual count evaluated
+    once per problem structure, not per call: 0.24–0.30 s of tracing each on this log,
+    ~150 calls per default ``sample_posterior``; ``post8``) returns what the fit's
+    compiled program returns for a state sized by ``jax.eval_shape`` now, bit for bit —
+    also for the limit fits' problems, whose prior rows differ."""
+    import equinox as eqx
+    import jax
     import jax.numpy as jnp
 
-    from hdid._fitting._lm import solve_fresh as reference
+    from hdid._fitting._lm import LMState, _solve_lanes
     from hdid._posterior.lanes import MODE_LANES, solve_fresh
 
     rng = np.random.default_rng(0)
-    U = np.asarray(fit.u) + 0.05 * rng.standard_normal((MODE_LANES, len(fit.u)))
-    active = np.arange(MODE_LANES) < 4
-    for a, b in zip(solve_fresh(fit.problem, jnp.asarray(U), active, 12),
-                    reference(fit.problem, jnp.asarray(U), jnp.asarray(active), 12)):
-        assert np.array_equal(np.asarray(a), np.asarray(b))
+    U = jnp.asarray(np.asarray(fit.u) + 0.05 * rng.standard_normal((MODE_LANES, len(fit.u))))
+    active = jnp.asarray(np.arange(MODE_LANES) < 4)
+    prob = fit.problem
+    pinned = eqx.tree_at(lambda p: p.prior_on, prob, jnp.ones_like(prob.prior_on))
+    for p in (prob, pinned):
+        m = jax.eval_shape(p.residuals, U[0]).shape[0]
+        ref = _solve_lanes(p, U, active, jnp.asarray(12), LMState.empty(MODE_LANES, m, len(fit.u)))
+        for a, b in zip(solve_fresh(p, U, active, 12), ref[:4]):
+            assert np.array_equal(np.asarray(a), np.asarray(b))
 
 
 def test_limit_fits_are_made_once_per_fit(fit, monkeypatch):

@@ -266,6 +266,33 @@ def _solve_lanes(problem: Problem, U0, active, max_steps, state: LMState):
     )
 
 
+#: Residual rows per problem structure (:func:`residual_rows`).
+_ROWS: dict = {}
+
+
+def residual_rows(problem, u) -> int:
+    """Rows of ``problem.residuals(u)``: ``jax.eval_shape`` once per
+    problem structure — its tree (type and static fields) and its arrays' shapes and
+    dtypes; a problem whose prior rows or data values change has the same count. The
+    shape evaluation traces the simulation (0.24–0.30 s on the shipped paper log, against
+    17 ms for a 6-lane LM call; the driven fit and the posterior's mode search and limit
+    fits call :func:`solve_fresh` tens to hundreds of times, benchmarks/README.md, issue
+    17 ``post8``)."""
+    leaves, treedef = jax.tree_util.tree_flatten(problem)
+    try:
+        key = (treedef, tuple(u.shape), str(u.dtype), tuple((tuple(np.shape(x)), str(getattr(x, "dtype", type(x))))
+                                 for x in leaves))
+        hash(key)
+    except TypeError:  # an unhashable static field: no cache
+        key = None
+    if key is None or key not in _ROWS:
+        m = jax.eval_shape(problem.residuals, jax.ShapeDtypeStruct(u.shape, u.dtype)).shape[0]
+        if key is None:
+            return m
+        _ROWS[key] = m
+    return _ROWS[key]
+
+
 def solve_fresh(problem, U0, active, max_steps):
     """Levenberg–Marquardt from every row of ``U0``, at most ``max_steps`` iterations,
     every lane started fresh: ``(U, cost, done, iterations)``. The one engine
@@ -273,7 +300,7 @@ def solve_fresh(problem, U0, active, max_steps):
     driven, joint) — what the driven fit calls in chunks."""
     U0 = jnp.asarray(U0)
     L, n = U0.shape
-    m = jax.eval_shape(problem.residuals, U0[0]).shape[0]
+    m = residual_rows(problem, U0[0])
     U, cost, done, k, _ = _solve_lanes(problem, U0, jnp.asarray(active), jnp.asarray(max_steps),
                                        LMState.empty(L, m, n))
     return U, cost, done, k

@@ -6,30 +6,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-_ROWS: dict = {}
-
-
-def solve_fresh(problem, U0, active, max_steps):
-    """``hdid._fitting._lm.solve_fresh`` — the same compiled program, the same inputs, so
-    the same numbers — without its per-call ``jax.eval_shape`` of the residuals (which
-    traces the simulation: 0.24–0.30 s a call on the shipped paper log against 17 ms for
-    the program itself; the mode search and the limit fits make ~150 such calls). The
-    residual count is kept per problem structure (type and the shapes of its arrays: a
-    problem whose prior rows are changed has the same)."""
-    import jax
-
-    from .._fitting._lm import LMState, _solve_lanes
-
-    U0 = jnp.asarray(U0)
-    L, n = U0.shape
-    key = (type(problem), n) + tuple(
-        (tuple(x.shape), str(x.dtype)) for x in jax.tree_util.tree_leaves(problem)
-        if hasattr(x, "shape"))
-    if key not in _ROWS:
-        _ROWS[key] = jax.eval_shape(problem.residuals, U0[0]).shape[0]
-    U, cost, done, k, _ = _solve_lanes(problem, U0, jnp.asarray(active), jnp.asarray(max_steps),
-                                       LMState.empty(L, _ROWS[key], n))
-    return U, cost, done, k
+from .._fitting._lm import solve_fresh  # noqa: E402,F401 (the fit's engine, re-exported)
 
 
 #: Lanes per call of the mode search's Levenberg–Marquardt: the fit's own (``hdid.fit``'s
