@@ -162,3 +162,38 @@ def test_below_the_floor_evidence_for_the_best_keeps_it_named():
     verdict, summary, _ = D._verdict([{"results": results, "white": None, "floor": 1.0}],
                                      CANDS)
     assert verdict == "missing_effect" and summary.startswith("add asymmetric_friction")
+
+
+def test_the_evidence_is_in_each_compared_candidates_json_entry():
+    """The numbers behind a reordering or a rival are in the JSON (``floor_evidence``, as
+    declared in diagnose.schema.json), not only in the notes; a candidate not compared
+    has none."""
+    import json
+
+    jsonschema = __import__("pytest").importorskip("jsonschema")
+    from hdid._results._saved import schema
+
+    results = _table()
+    R.rank_within_families(results, CANDS, D.STRONG_DBIC, D.AMBIGUOUS_DBIC,
+                           evidence=_evidence(-5.4))
+    ripple, kinematic, hysteresis = results
+    entry = json.loads(json.dumps(ripple.to_dict(), allow_nan=False))["floor_evidence"]
+    # compared against the BIC's best of the family (kinematic error), 2·ln LR as given
+    assert entry["against"] == "kinematic_error" and entry["two_ln_lr_for_against"] == -5.4
+    assert entry["chi2_difference"] == ripple.fit.cost - kinematic.fit.cost
+    assert "floor_evidence" not in kinematic.to_dict() and "floor_evidence" not in hysteresis.to_dict()
+    results = _paper_9905()
+    R.rank_within_families(
+        results, CANDS, D.STRONG_DBIC, D.AMBIGUOUS_DBIC,
+        evidence=lambda a, b: R.Evidence(b.fit.cost - a.fit.cost, -1.9, 1.9, -4.3, 1.9, -7.0))
+    rip = next(c for c in results if c.key == "ripple").to_dict()
+    assert rip["floor_evidence"]["against"] == "asymmetric_friction"
+    assert rip["floor_evidence"]["floor_gap"] == next(
+        c for c in results if c.key == "ripple").floor_gap
+    validator = jsonschema.Draft202012Validator(
+        schema("diagnose")["properties"]["candidates"]["items"])
+    for c in (ripple, rip):
+        d = c if isinstance(c, dict) else c.to_dict()
+        assert not list(validator.iter_errors(d)), list(validator.iter_errors(d))[:1]
+    bad = {**rip, "floor_evidence": {"against": "ripple"}}
+    assert list(validator.iter_errors(bad))  # the entry's fields are required, not only allowed

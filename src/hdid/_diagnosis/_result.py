@@ -35,6 +35,9 @@ class CandidateResult:
     #: below the floor, the evidence for the round's best over this candidate: the BIC
     #: gap plus the rounding's ``2·ln LR`` (:mod:`._rival`; NaN where not computed)
     floor_gap: float = math.nan
+    #: below the floor, this candidate's fit against the best's under the rounding alone
+    #: (:meth:`hdid._diagnosis._rival.Evidence.to_dict`; ``None`` where not compared)
+    floor_evidence: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         from .._results._saved import finite
@@ -50,6 +53,7 @@ class CandidateResult:
             "residual_white_after": self.white_after,
             "moving_rms_after_floors": self.moving_ratio_after,
             "chi2_over_floor": self.chi2_over_floor,
+            **({"floor_evidence": self.floor_evidence} if self.floor_evidence else {}),
             "fitted": self.values,
             "reason": self.reason,
             **({"error": self.error} if self.error else {}),

@@ -125,6 +125,13 @@ class Evidence:
     sd_b: float
     two_ln_lr: float
 
+    def to_dict(self, a: str) -> dict:
+        """The JSON entry of ``b`` (the candidate holding it) against ``a``."""
+        return {"against": a, "chi2_difference": self.d,
+                "mean_if_against_true": self.mean_a, "sd_if_against_true": self.sd_a,
+                "mean_if_this_true": self.mean_b, "sd_if_this_true": self.sd_b,
+                "two_ln_lr_for_against": self.two_ln_lr}
+
     def text(self, a: str, b: str) -> str:
         return (f"χ²({b}) − χ²({a}) = {self.d:.1f}; under the rounding alone it is "
                 f"{self.mean_a:.1f} ± {self.sd_a:.1f} if {a} is the truth, "
@@ -209,6 +216,7 @@ def rank_within_families(results, all_cands, strong_dbic: float, tie_dbic: float
         # c against the BIC's best: its BIC difference plus the evidence for the best
         # (2·ln LR of the best over c; the same scale, −2·ln of a likelihood ratio)
         s = (c.delta_bic - best.delta_bic) + ev.two_ln_lr
+        c.floor_evidence = ev.to_dict(best.key)
         verdict = "ranked first" if s < score else "not ranked first"
         notes.append(
             f"{best.key} and {c.key} both fit below the white floor n − k, where the BIC "
@@ -233,6 +241,7 @@ def rank_within_families(results, all_cands, strong_dbic: float, tie_dbic: float
         if ev is None:
             continue
         c.floor_gap = (c.delta_bic - best.delta_bic) + ev.two_ln_lr
+        c.floor_evidence = {**ev.to_dict(best.key), "floor_gap": c.floor_gap}
         rival = c.floor_gap < tie_dbic
         notes.append(
             f"{best.key} and {c.key} both fit below the white floor n − k (ΔBIC "
