@@ -161,3 +161,20 @@ def run_designs(designs, run, write, records: list, meta: dict) -> None:
     meta["load_end"] = load_text()
     write(records, meta)
 
+
+def chain_cells(r: dict, share_digits: int = 2) -> dict:
+    """Table cells of one posterior-benchmark record (``posterior_coulomb_limit``,
+    ``posterior_ridge_post8``): tau_c's 95 % interval in mN m, the band's in mrad, R-hat,
+    ESS, τ, the share of draws below 1 mN m, wall seconds and the load."""
+    lo, hi = r["tau_c_ci95"]
+    blo, bhi = r["band_ci95"]
+    return {"tau_c": f"[{lo * 1e3:.3g}, {hi * 1e3:.3g}]", "band": f"[{blo * 1e3:.1f}, {bhi * 1e3:.1f}]",
+            "share": f"{r['share_tau_c_below_1mNm']:.{share_digits}f}", "rhat": f"{r['rhat_max']:.3f}",
+            "ess": f"{r['ess_bulk_min']:.0f} / {r['ess_tail_min']:.0f}",
+            "tau": f"{r['tau_max']:.0f} ({r['tau_max_of']})", "wall": f"{r['wall_s']:.0f}",
+            "load": f"{r['load_start'][0]}→{r['load_end'][0]}"}
+
+
+def md_head(columns: list[str]) -> str:
+    """A markdown table's header and separator lines for ``columns``."""
+    return "| " + " | ".join(columns) + " |\n|" + "---|" * len(columns) + "\n"

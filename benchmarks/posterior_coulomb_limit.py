@@ -108,20 +108,18 @@ def run(log: Path, seed: int, max_steps: int, tag: str) -> dict:
 
 
 def render(records: list[dict]) -> str:
-    head = ("| tag | rev | seed | steps | tau_c 95 % [mN m] | share < 1 mN m | band 95 % [mrad] "
-            "| converged | R-hat max | ESS bulk/tail min | τ_max (of) | optima (tau_c mN m) "
-            "| wall s | load start→end |\n|" + "---|" * 14 + "\n")
+    head = _common.md_head(
+        ["tag", "rev", "seed", "steps", "tau_c 95 % [mN m]", "share < 1 mN m", "band 95 % [mrad]",
+         "converged", "R-hat max", "ESS bulk/tail min", "τ_max (of)", "optima (tau_c mN m)",
+         "wall s", "load start→end"])
     rows = []
     for r in records:
-        lo, hi = r["tau_c_ci95"]
-        blo, bhi = r["band_ci95"]
+        c = _common.chain_cells(r)
         opt = ", ".join(f"{m['values']['tau_c'] * 1e3:.3g} ({m['weight']:.2f})" for m in r["modes"])
         rows.append(
-            f"| {r['tag']} | {r['rev']} | {r['seed']} | {r['steps']} | [{lo * 1e3:.3g}, {hi * 1e3:.3g}] "
-            f"| {r['share_tau_c_below_1mNm']:.2f} | [{blo * 1e3:.1f}, {bhi * 1e3:.1f}] "
-            f"| {r['converged']} | {r['rhat_max']:.3f} | {r['ess_bulk_min']:.0f} / {r['ess_tail_min']:.0f} "
-            f"| {r['tau_max']:.0f} ({r['tau_max_of']}) | {opt} | {r['wall_s']:.0f} "
-            f"| {r['load_start'][0]}→{r['load_end'][0]} |")
+            f"| {r['tag']} | {r['rev']} | {r['seed']} | {r['steps']} | {c['tau_c']} | {c['share']} "
+            f"| {c['band']} | {r['converged']} | {c['rhat']} | {c['ess']} | {c['tau']} | {opt} "
+            f"| {c['wall']} | {c['load']} |")
     warn = []
     for r in records:
         for w in r["warnings"]:

@@ -139,22 +139,19 @@ def k2_report(fit) -> dict:
 
 
 def render(records: list[dict]) -> str:
-    head = ("| variant | seed | steps | R-hat max | ESS bulk/tail min | τ_max (of) | tau_c 95 % "
-            "[mN m] | share tau_c < 1 mN m | share k2 → 0 | band 95 % [mrad] | acc. indep. / ridge "
-            "| wall s | load start→end |\n|" + "---|" * 13 + "\n")
+    head = _common.md_head(
+        ["variant", "seed", "steps", "R-hat max", "ESS bulk/tail min", "τ_max (of)",
+         "tau_c 95 % [mN m]", "share tau_c < 1 mN m", "share k2 → 0", "band 95 % [mrad]",
+         "acc. indep. / ridge", "wall s", "load start→end"])
     rows = []
     for r in records:
-        lo, hi = r["tau_c_ci95"]
-        blo, bhi = r["band_ci95"]
+        c = _common.chain_cells(r, share_digits=3)
         acc = r["move_acceptance"].get("independence (mixture)", float("nan"))
         rac = r["move_acceptance"].get("ridge", float("nan"))
         rows.append(
-            f"| {r['variant']} | {r['seed']} | {r['steps']} | {r['rhat_max']:.3f} "
-            f"| {r['ess_bulk_min']:.0f} / {r['ess_tail_min']:.0f} | {r['tau_max']:.0f} "
-            f"({r['tau_max_of']}) | [{lo * 1e3:.3g}, {hi * 1e3:.3g}] "
-            f"| {r['share_tau_c_below_1mNm']:.3f} | {r['share_k2_below_0.1_fit']:.3f} "
-            f"| [{blo * 1e3:.1f}, {bhi * 1e3:.1f}] | {acc:.3f} / {rac:.3f} | {r['wall_s']:.0f} "
-            f"| {r['load_start'][0]}→{r['load_end'][0]} |")
+            f"| {r['variant']} | {r['seed']} | {r['steps']} | {c['rhat']} | {c['ess']} | {c['tau']} "
+            f"| {c['tau_c']} | {c['share']} | {r['share_k2_below_0.1_fit']:.3f} | {c['band']} "
+            f"| {acc:.3f} / {rac:.3f} | {c['wall']} | {c['load']} |")
     return ("# The shipped log's Coulomb ridge: components along the limit path (issue 17, "
             "post8)\n\nWritten by `benchmarks/posterior_ridge_post8.py`; one core "
             "(`taskset -c 0`), one fit per process, variants alternating. Shares: kept "
