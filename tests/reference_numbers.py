@@ -19,6 +19,16 @@ Two tolerances (``compare``):
 - exact (``HDID_REFERENCE_EXACT=1``, same machine as the recording): relative 1e-10 — a
   pure move of code does not change one floating-point operation.
 
+In default mode a multistart start that the recording marks *not converged* is compared
+by its cost only (``starts/costs``, ``starts/dchi2_to_best``), not by where it stopped
+(``starts/parameter_values/*/i``, ``starts/iterations/i``, ``starts/converged/i``): such
+a start was stopped by the schedule part-way along a path through a flat valley, and that
+path depends on the order of XLA's sums, hence on the cores the process may use. Measured
+(2026-11-25): the hidden-hysteresis log fitted in a process pinned to one core moved
+start 1's k1 from 1009 to 985 and ran start 3 to convergence in 58 iterations instead of
+stopping it after 312, with the result (start 0, converged) unchanged; the 2-core CI run
+matches the 2-core recording. Exact mode compares them all.
+
 Not recorded: wall times, versions, file hashes, module paths of effect classes (they move
 by design), the posterior (issue 17 changes its sampler) and ``diagnose`` (issue 19 changes
 its rules).
@@ -28,6 +38,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import sys
 from pathlib import Path
 
@@ -127,11 +138,26 @@ def record(name: str) -> dict:
     return {k: [_encode(v), s] for k, (v, s) in flatten(_cases()[name]()).items()}
 
 
+def _unconverged_start_keys(stored: dict) -> set[str]:
+    """Keys of where the recording's unconverged starts stopped (see the module's text)."""
+    out = set()
+    for key, (value, _) in stored.items():
+        m = re.fullmatch(r"(.*starts)/converged/(\d+)", key)
+        if m and value is False:
+            head, i = m.groups()
+            out |= {f"{head}/converged/{i}", f"{head}/iterations/{i}"}
+            out |= {k for k in stored if re.fullmatch(rf"{re.escape(head)}/parameter_values/[^/]+/{i}", k)}
+    return out
+
+
 def compare(stored: dict, now: dict, exact: bool) -> list[str]:
     """Differences between a stored and a fresh flattening, one line each."""
     bad = []
     rtol = EXACT_RTOL if exact else DEFAULT_RTOL
+    path_dependent = set() if exact else _unconverged_start_keys(stored)
     for key in sorted(set(stored) | set(now)):
+        if key in path_dependent:
+            continue
         if key not in now:
             bad.append(f"{key}: recorded, now missing")
             continue
