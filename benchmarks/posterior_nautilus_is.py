@@ -39,6 +39,7 @@ def main(argv=None):
     ap.add_argument("--draws", type=int, default=1_000_000)
     ap.add_argument("--inflate", type=float, default=2.0)
     ap.add_argument("--block", type=int, default=65536)
+    ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args(argv)
     from scipy.special import logsumexp
 
@@ -61,7 +62,7 @@ def main(argv=None):
         lw = np.array([m.weight for m in found])
         wts = 0.5 * lw / lw.sum() + 0.5 / len(found)
         mix = MixtureProposal(means, covs, wts, nu=4.0)
-        rng = np.random.default_rng(1)
+        rng = np.random.default_rng(args.seed)
         f = Density(lp)
         f(np.tile(np.concatenate([means[0], [slo + 1]]), (128, 1)))  # compile
         f.n, f.t = 0, 0.0
@@ -95,7 +96,7 @@ def main(argv=None):
             return float(v.sum() ** 2 / np.sum(v**2)) if v.sum() > 0 else 0.0
 
         rec = {"log": which, "date_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-               "src": _common.src_fingerprint(), "draws": len(w), "inflate": args.inflate,
+               "src": _common.src_fingerprint(), "draws": len(w), "inflate": args.inflate, "seed": args.seed,
                "wall_s": wall, "cpu_s": cpu, "like_s": f.t, "load_start": la0, "load_end": la1,
                "finite_share": float(ok.mean()), "kish": kish(np.ones(len(w), bool)),
                "max_weight": float(w.max()), "log_z_unnorm": log_z,
