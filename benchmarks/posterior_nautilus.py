@@ -244,9 +244,10 @@ def emcee_record(post, fit, seed, wall, cpu, la0, la1):
             "band_ci95": d["posterior"][BAND]["ci95"]}
 
 
-def precond_moves(X, w, n_comp, rng, inflate=1.2):
+def precond_moves(X, w, n_comp, rng, inflate=1.2, extra=None):
     """DE moves as the default's plus independence MH from a t-mixture fitted to the
-    nautilus draws (sampled coordinates)."""
+    nautilus draws (sampled coordinates); ``extra`` = ``(means, covs, weight each)``:
+    components added as they are (the limit fits', ``--precond-limits``)."""
     import emcee
     from sklearn.mixture import GaussianMixture
 
@@ -259,7 +260,12 @@ def precond_moves(X, w, n_comp, rng, inflate=1.2):
                          n_init=1, max_iter=300).fit(Y / sc)
     means = gm.means_ * sc
     covs = gm.covariances_ * np.outer(sc, sc)[None] * inflate**2
-    mix = MixtureProposal(means, covs, gm.weights_, nu=8.0)
+    weights = gm.weights_
+    if extra is not None and len(extra[0]):
+        em, ec, ew = extra
+        weights = np.concatenate([weights * (1 - ew * len(em)), np.full(len(em), ew)])
+        means, covs = np.concatenate([means, em]), np.concatenate([covs, ec])
+    mix = MixtureProposal(means, covs, weights, nu=8.0)
     return [(emcee.moves.DEMove(), 0.4), (emcee.moves.DEMove(gamma0=1.0), 0.05),
             (emcee.moves.DESnookerMove(), 0.2), (emcee.moves.MHMove(mix), 0.35)], mix
 
@@ -288,6 +294,9 @@ def main(argv=None):
     ap.add_argument("--max-steps", type=int, default=10000)
     ap.add_argument("--precond", action="store_true")
     ap.add_argument("--precond-components", type=int, default=12)
+    ap.add_argument("--precond-limits", action="store_true",
+                    help="add the limit fits' t-components (5 %% each) to the fitted mixture")
+    ap.add_argument("--no-default", action="store_true", help="skip the default emcee runs")
     ap.add_argument("--tag", default="")
     args = ap.parse_args(argv)
     from hdid._fitting._identifiability import unknown_labels
@@ -333,7 +342,7 @@ def main(argv=None):
             rec["nautilus_across"] = across_runs(lp, fit, labels, runs, rng)
             print(which, "across", json.dumps({k: rec["nautilus_across"][k] for k in (
                 "rhat_max", "ess_bulk_min", "ess_tail_min", "worst", "draws_per_chain")}), flush=True)
-        for s in args.emcee_seeds:
+        for s in ([] if args.no_default else args.emcee_seeds):
             la0, ta, ca = _load(), time.perf_counter(), time.process_time()
             post = hdid.sample_posterior(fit, seed=s, max_steps=args.max_steps, progress=False,
                                          modes=found, prior=prior)
@@ -349,7 +358,19 @@ def main(argv=None):
             rec["precond"] = []
             for s in args.emcee_seeds:
                 rngp = np.random.default_rng(s)
-                moves, mix = precond_moves(Xp, wp, args.precond_components, rngp)
+                extra = None
+                if args.precond_limits:
+                    from hdid._posterior.moves import START_SCALE
+
+                    lim = [m for m in found if m.kind != "optimum"]
+                    s_mid = float(np.sum(wp * Xp[:, -1]))
+                    em = lp.to_sampled_np(np.array([np.concatenate([m.u, [s_mid]]) for m in lim]))
+                    ec = np.zeros((len(lim), lp.ndim, lp.ndim))
+                    for k, m in enumerate(lim):
+                        ec[k, :-1, :-1] = lp.sampled_cov_np(m.u, START_SCALE**2 * m.cov)
+                        ec[k, -1, -1] = 0.6**2
+                    extra = (em, ec, 0.05)
+                moves, mix = precond_moves(Xp, wp, args.precond_components, rngp, extra=extra)
                 W = max(32, 2 * lp.ndim)
                 start = walker_modes(lp, found, Xp, wp, W, rngp)
                 la0, ta, ca = _load(), time.perf_counter(), time.process_time()
@@ -359,6 +380,7 @@ def main(argv=None):
                 e = emcee_record(post, fit, s, time.perf_counter() - ta,
                                  time.process_time() - ca, la0, _load())
                 e["components"] = args.precond_components
+                e["limit_components"] = bool(args.precond_limits)
                 # the mixture's own importance ESS against the nautilus draws' log p
                 rec["precond"].append(e)
                 print(which, "precond", json.dumps({k: e[k] for k in (
@@ -400,7 +422,9 @@ def render(allres):
                      f"{a['ess_bulk_min']:.0f} / {a['ess_tail_min']:.0f} (Kish Σ {a['kish_total']:.0f}) | | | | | | | |")
         for kind in ("emcee", "precond"):
             for e in rec.get(kind, []):
-                L.append(f"| {'default emcee' if kind == 'emcee' else 'emcee, nautilus-preconditioned'} | {e['seed']} | "
+                name = ("default emcee" if kind == "emcee" else "emcee, nautilus-preconditioned"
+                        + (" + limit components" if e.get("limit_components") else ""))
+                L.append(f"| {name} | {e['seed']} | "
                          f"{e['wall_s']:.0f} | {e['cpu_s']:.0f} | {e['load_start']} | {e['n_like']} | "
                          f"{_f(e['rhat_max'], 4)} | {_f(e['ess_bulk_min'], 3)} / {_f(e['ess_tail_min'], 3)} | "
                          f"{e['tau_max']:.0f} | | {e['share_k2_below_0.1_fit']:.4f} | "
