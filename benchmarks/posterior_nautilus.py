@@ -27,7 +27,9 @@ sampler), then
   optima (``--emcee-seeds``).
 - ``--precond``: emcee, walkers started from the pooled nautilus draws, its independence
   move a t-mixture (``MixtureProposal``) fitted to them by sklearn's GaussianMixture
-  (``--precond-components``), DE moves as in the default; same cap.
+  (``--precond-components``), DE moves as in the default; same cap. ``--precond-limits``
+  adds the limit fits' t-components of the default's proposal (5 % each) to that mixture;
+  ``--no-default`` skips the default runs.
 
 Every time with the 1-min load before/after and the process CPU time; results appended to
 ``results/posterior_nautilus.json`` and the ``.md`` rewritten from it.
