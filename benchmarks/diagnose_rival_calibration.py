@@ -20,7 +20,8 @@ two fits (:func:`~hdid._diagnosis._rival.cross_evidence`): the observed ``D = χ
 χ²_A``, its claimed mean and sd under each form, ``2·ln LR``, and the z-score of ``D``
 under the *true* form — which must be about N(0, 1) if the rounding-phase scale is right.
 Logs are interleaved (A, B, A, B, … per seed) so a stopped run is balanced. Writes
-``results/diagnose_rival_calibration.json`` after every log.
+``results/diagnose_rival_calibration.json`` (``HDID_RIVAL_OUT``: another name) after every
+log; ``--report [FILES]`` prints its table.
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import diagnose_independent as di  # noqa: E402
 from _common import RESULTS, import_generate, run_meta  # noqa: E402
 
-OUT = RESULTS / "diagnose_rival_calibration.json"
+OUT = RESULTS / (os.environ.get("HDID_RIVAL_OUT", "diagnose_rival_calibration") + ".json")
 #: a folder for both forms' linearised fits per log (``HDID_RIVAL_SAVE``; none if unset)
 SAVE = os.environ.get("HDID_RIVAL_SAVE")
 STEP = 2 * math.pi / 4000
@@ -177,5 +178,42 @@ def main(argv: list[str]) -> None:
     OUT.write_text(json.dumps({"meta": meta, "records": records}, indent=1) + "\n")
 
 
+def report(paths: list[str]) -> str:
+    """Markdown of one or more results files: per plant and true form, the verdicts (what
+    is named first; ``A|…`` ambiguous) and the z-score of ``D`` under the true form with
+    the shipped scale (mean, sd, largest |z|), and ``2·ln LR`` for the truth (median, the
+    share of logs where it favours the other form by more than 2)."""
+    import collections
+
+    recs = []
+    for path in paths:
+        recs += [r for r in json.loads(Path(path).read_text())["records"]
+                 if "reference" not in r and "error" not in r]
+    lines = ["| plant | true form | logs | named first (verdicts) | z of D under the truth: "
+             "mean, sd, max abs | 2 ln LR for the truth: median; share < −2 | CPU s median |",
+             "|---|---|---|---|---|---|---|"]
+    groups = collections.defaultdict(list)
+    for r in recs:
+        groups[(r["plant"], r["truth"])].append(r)
+    for (plant, truth), rows in sorted(groups.items()):
+        named = collections.Counter(r["named"].split("|")[0] + (" (ambiguous)" if "|" in
+                                                                r["named"] else "")
+                                    for r in rows)
+        ev = [r["pair"]["evidence"] for r in rows if r["pair"].get("evidence")]
+        z = np.array([e["z_true"] for e in ev])
+        sign = [1 if truth == r["a"] else -1 for r in rows if r["pair"].get("evidence")]
+        lr = np.array([s * e["two_ln_lr_for_a"] for s, e in zip(sign, ev)])
+        cpu = sorted(r["cpu_s"] for r in rows)[len(rows) // 2]
+        lines.append(
+            f"| {plant} | {truth} | {len(rows)} | "
+            + ", ".join(f"{k} {v}" for k, v in named.most_common())
+            + f" | {z.mean():+.2f}, {z.std(ddof=1):.2f}, {np.abs(z).max():.1f} | "
+            f"{np.median(lr):+.1f}; {np.mean(lr < -2):.0%} | {cpu:.0f} |")
+    return "\n".join(lines) + "\n"
+
+
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    if sys.argv[1:2] == ["--report"]:
+        print(report(sys.argv[2:] or [str(OUT)]))
+    else:
+        main(sys.argv[1:])
