@@ -1,7 +1,7 @@
 """Is the rival test's ``2·ln LR`` calibrated? Logs drawn from each of two *fitted* forms,
 diagnosed (issue 19, branch ``diag9``; :mod:`hdid._diagnosis._rival`).
 
-    taskset -c 1 python benchmarks/diagnose_rival_calibration.py N \
+    taskset -c 1 python benchmarks/diagnose_rival_calibration.py N|J0:J1 \
         rich:8905:ripple,kinematic_error rich:8805:ripple,kinematic_error \
         rich:8901:backlash,kinematic_error paper:9905:ripple,asymmetric_friction
 
@@ -128,7 +128,8 @@ def main(argv: list[str]) -> None:
     import hdid
 
     hdid.configure()
-    n = int(argv[0])
+    # N: seeds j = 0 … N−1; "J0:J1": j = J0 … J1−1 (a further batch)
+    j0, n = (int(x) for x in argv[0].split(":")) if ":" in argv[0] else (0, int(argv[0]))
     meta = run_meta(cmd="taskset -c 1 python benchmarks/diagnose_rival_calibration.py "
                     + " ".join(argv))
     records: list[dict] = []
@@ -150,7 +151,7 @@ def main(argv: list[str]) -> None:
         records.append({"reference": ref})
         print(json.dumps({"reference": {x: ref[x] for x in ("plant", "verdict", "named", "top")}}),
               flush=True)
-    for j in range(n):
+    for j in range(j0, n):
         for design, seed, a, b, truth, model, des in forms:
             s = seed * 1000 + (0 if truth == a else 500) + j
             df = draw_log(model, des, s)
