@@ -146,7 +146,9 @@ def test_below_the_floor_a_penalty_gap_the_chi2_difference_contradicts_is_a_riva
         results, CANDS, D.STRONG_DBIC, D.AMBIGUOUS_DBIC,
         evidence=lambda a, b: R.Evidence(b.fit.cost - a.fit.cost, -1.9, 1.9, -4.3, 1.9,
                                          lr[b.key]))
-    assert [round(c.floor_gap, 1) for c in results[1:3]] == [7.2, 7.6]
+    # the two D distributions (−1.9 ± 1.9, −4.3 ± 1.9) overlap: power 1.6 < SEPARABLE, so
+    # the penalties' gap is dropped and 2·ln LR alone is the evidence (diag9)
+    assert [round(c.floor_gap, 1) for c in results[1:3]] == [-5.5, -7.0]
     assert math.isnan(results[3].floor_gap)  # not strong, not compared
     assert sum("a rival" in n for n in notes) == 2
     verdict, summary, _ = D._verdict([{"results": results, "white": None, "floor": 1.0}],
@@ -197,3 +199,54 @@ def test_the_evidence_is_in_each_compared_candidates_json_entry():
         assert not list(validator.iter_errors(d)), list(validator.iter_errors(d))[:1]
     bad = {**rip, "floor_evidence": {"against": "ripple"}}
     assert list(validator.iter_errors(bad))  # the entry's fields are required, not only allowed
+
+
+def test_the_power_is_the_expected_evidence_of_the_two_distributions():
+    """``Evidence.power``: 2·KL of the two normals, the worse way round; equal sds give
+    (Δμ/s)², one distribution against itself 0, and it equals the Monte Carlo mean of
+    2·ln LR under the truth (tolerance: 5 standard errors of a 40 000-draw mean)."""
+    assert R.Evidence(0.0, 1.0, 2.0, 1.0, 2.0, 0.0).power() == 0.0
+    assert math.isclose(R.Evidence(0.0, 3.0, 2.0, -1.0, 2.0, 0.0).power(), 4.0)
+    ev = R.Evidence(0.0, 13.8, 12.6, -11.8, 7.1, 0.0)  # seed 8901's backlash vs KE
+    rng = np.random.default_rng(1)
+    two_ln = []
+    for (m, s) in ((ev.mean_a, ev.sd_a), (ev.mean_b, ev.sd_b)):
+        d = rng.normal(m, s, 40_000)
+        lr = (-((d - ev.mean_a) / ev.sd_a) ** 2 - 2 * math.log(ev.sd_a)
+              + ((d - ev.mean_b) / ev.sd_b) ** 2 + 2 * math.log(ev.sd_b))
+        two_ln.append((abs(lr.mean()), lr.std() / math.sqrt(lr.size)))
+    low = min(two_ln)
+    assert abs(ev.power() - low[0]) < 5 * low[1]
+
+
+def _blind(a, b):
+    # 9905's distributions of D (power 1.6: the paper log cannot tell the fits apart) with
+    # D typical of both, as on logs drawn from its fitted ripple (2·ln LR ≈ +0.5)
+    return R.Evidence(b.fit.cost - a.fit.cost, -1.9, 1.9, -4.3, 1.9, 0.5)
+
+
+def test_below_the_floor_a_log_that_cannot_tell_two_families_apart_names_neither():
+    """Asymmetric friction 12.7 and 14.6 ahead of the kinematic error and the ripple by the
+    penalties alone, the log giving no evidence either way: ambiguous (before diag9 it
+    was named with confidence, floor gaps 13.2 and 15.1), and the note says why."""
+    results = _paper_9905()
+    notes = R.rank_within_families(results, CANDS, D.STRONG_DBIC, D.AMBIGUOUS_DBIC,
+                                   evidence=_blind)
+    assert [round(c.floor_gap, 1) for c in results[1:3]] == [0.5, 0.5]
+    assert sum("cannot tell the two apart" in n and "a rival" in n for n in notes) == 2
+    verdict, _, _ = D._verdict([{"results": results, "white": None, "floor": 1.0}], CANDS)
+    assert verdict == "ambiguous"
+
+
+def test_below_the_floor_a_log_that_separates_the_fits_keeps_the_penalty_gap():
+    """The same gaps and 2·ln LR with distributions the log separates (8901's, power 4.6):
+    the BIC gap counts, asymmetric friction stays named."""
+    results = _paper_9905()
+    R.rank_within_families(
+        results, CANDS, D.STRONG_DBIC, D.AMBIGUOUS_DBIC,
+        evidence=lambda a, b: R.Evidence(b.fit.cost - a.fit.cost, 13.8, 12.6, -11.8, 7.1,
+                                         0.5))
+    assert [round(c.floor_gap, 1) for c in results[1:3]] == [13.2, 15.1]
+    verdict, summary, _ = D._verdict([{"results": results, "white": None, "floor": 1.0}],
+                                     CANDS)
+    assert verdict == "missing_effect" and summary.startswith("add asymmetric_friction")
