@@ -192,6 +192,10 @@ def test_the_evidence_is_in_each_compared_candidates_json_entry():
     assert rip["floor_evidence"]["against"] == "asymmetric_friction"
     assert rip["floor_evidence"]["floor_gap"] == next(
         c for c in results if c.key == "ripple").floor_gap
+    # the log's power to tell them apart, which decided that the BIC gap was dropped:
+    # D's two distributions, −1.9 ± 1.9 and −4.3 ± 1.9, expect 2·ln LR = 2.4²/1.9² = 1.6 < 2
+    assert abs(rip["floor_evidence"]["expected_two_ln_lr"] - 2.4**2 / 1.9**2) < 1e-12
+    assert rip["floor_evidence"]["expected_two_ln_lr"] < R.SEPARABLE
     validator = jsonschema.Draft202012Validator(
         schema("diagnose")["properties"]["candidates"]["items"])
     for c in (ripple, rip):

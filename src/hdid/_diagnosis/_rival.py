@@ -163,7 +163,8 @@ class Evidence:
         return {"against": a, "chi2_difference": self.d,
                 "mean_if_against_true": self.mean_a, "sd_if_against_true": self.sd_a,
                 "mean_if_this_true": self.mean_b, "sd_if_this_true": self.sd_b,
-                "two_ln_lr_for_against": self.two_ln_lr}
+                "two_ln_lr_for_against": self.two_ln_lr,
+                "expected_two_ln_lr": self.power()}
 
     def text(self, a: str, b: str) -> str:
         return (f"χ²({b}) − χ²({a}) = {self.d:.1f}; under the rounding alone it is "
