@@ -6,9 +6,12 @@ design's second set-up shifted by whole steps), new seeds 7000 + i, each through
 final base's χ²/F and whether it is above the design's threshold). The thresholds of
 ``_excess.py`` were calibrated on the base *as first fitted* (``diagnose_floor.py``).
 
-    taskset -c 1 python benchmarks/diagnose_floor_final.py N rich|paper
+    taskset -c 1 python benchmarks/diagnose_floor_final.py N rich|paper [FIRST]
 
-Writes ``results/diagnose_floor_final_{design}.json``; ``--summary FILES`` prints a line each.
+Writes ``results/diagnose_floor_final_{design}.json`` (seeds 7000 … 7000 + N − 1), or with
+FIRST > 0 ``…_{design}_from{FIRST}.json`` (seeds 7000 + FIRST onwards: more logs without
+overwriting); ``--summary FILES`` prints a line each (several files of one design: also
+pooled).
 """
 
 from __future__ import annotations
@@ -24,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import RESULTS, import_generate  # noqa: E402
 
 
-def main(n: int, design_name: str) -> None:
+def main(n: int, design_name: str, first: int = 0) -> None:
     import hdid
     from hdid._simulation._synthetic import synthesize
 
@@ -35,9 +38,10 @@ def main(n: int, design_name: str) -> None:
     design = dict(RICH if design_name == "rich" else gen.PAPER_DESIGN)
     truth = {k: v for k, v in gen.TRUTH_CSF8.items() if k != "ratio"}
     fitted = hdid.fit(gen.make_log(truth, **{**design, "seed": 9001}))
-    out, dest = [], RESULTS / f"diagnose_floor_final_{design_name}.json"
+    suffix = f"_from{first}" if first else ""
+    out, dest = [], RESULTS / f"diagnose_floor_final_{design_name}{suffix}.json"
     with tempfile.TemporaryDirectory() as tmp:
-        for i in range(n):
+        for i in range(first, first + n):
             path = Path(tmp) / f"{design_name}_{i}.csv"
             synthesize(path, amplitudes=list(design["amplitudes"]), rate=design["fs"],
                        duration=design["duration"], hold=design["hold"], offset=0.005,
@@ -60,13 +64,15 @@ def summary(files: list[str]) -> None:
 
     from hdid._diagnosis._rates import upper_bound
 
-    for f in files:
-        R = json.loads(Path(f).read_text())
+    groups = [(Path(f).name, json.loads(Path(f).read_text())) for f in files]
+    if len(groups) > 1:
+        groups.append(("pooled", [x for _, R in groups for x in R]))
+    for name, R in groups:
         r = np.array([x["rounding_floor"]["chi2_over_floor"] for x in R])
         warned = sum(bool(x["rounding_floor"]["exceeded"])
                      and x["verdict"] in ("adequate", "unexplained") for x in R)
         verdicts = {v: sum(x["verdict"] == v for x in R) for v in {x["verdict"] for x in R}}
-        print(f"{Path(f).name}: {len(R)} logs, chi2/F {r.mean():.3f} ± {r.std(ddof=1):.3f}, "
+        print(f"{name}: {len(R)} logs, chi2/F {r.mean():.3f} ± {r.std(ddof=1):.3f}, "
               f"median {np.median(r):.3f}, max {r.max():.3f}; warned {warned} "
               f"(one-sided 95 % bound {upper_bound(warned, len(R)):.1%}); verdicts {verdicts}")
 
@@ -75,4 +81,4 @@ if __name__ == "__main__":
     if sys.argv[1] == "--summary":
         summary(sys.argv[2:])
     else:
-        main(int(sys.argv[1]), sys.argv[2])
+        main(int(sys.argv[1]), sys.argv[2], int(sys.argv[3]) if len(sys.argv) > 3 else 0)
