@@ -178,3 +178,12 @@ def chain_cells(r: dict, share_digits: int = 2) -> dict:
 def md_head(columns: list[str]) -> str:
     """A markdown table's header and separator lines for ``columns``."""
     return "| " + " | ".join(columns) + " |\n|" + "---|" * len(columns) + "\n"
+
+
+def run_head(rec: dict, title: str, setup: str, columns: list[str]) -> list[str]:
+    """A posterior benchmark's markdown for one logged run: its heading (``title`` after
+    the log's name), the fit's and the optima's time with ``setup`` after them, and the
+    table's header for ``columns``."""
+    return [f"\n## log {rec['log']}{title} ({rec['date_utc']}, src {rec['src']})\n",
+            f"fit {rec['fit_s']:.1f} s, optima + limit fits {rec['mode_search_s']:.1f} s{setup}\n",
+            "| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]

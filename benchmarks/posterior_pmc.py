@@ -42,6 +42,7 @@ Appends to ``results/posterior_pmc.json`` and rewrites ``results/posterior_pmc.m
 from __future__ import annotations
 
 import _common  # noqa: F401,E402
+from _common import run_head  # noqa: E402
 import argparse
 import datetime as _dt
 import json
@@ -51,7 +52,7 @@ import time
 import numpy as np
 from scipy.special import gammaln, logsumexp
 
-from posterior_nautilus import BAND, RESULTS, Density, _load, make_log
+from posterior_nautilus import BAND, RESULTS, Density, _load, log_and_optima
 
 NAME = "posterior_pmc"
 NU = 4.0
@@ -231,17 +232,10 @@ def frozen_components(fit, lp, found, inflate):
 
 
 def run(which, args, rng_seed):
-    from hdid._posterior.density import posterior_density, to_physical
-    from hdid._posterior.modes import sampled_modes
+    from hdid._posterior.density import to_physical
 
-    t0 = time.perf_counter()
-    fit, prior, truth = make_log(which)
-    fit_s = time.perf_counter() - t0
-    dens = posterior_density(fit, prior=prior)
+    fit, prior, truth, dens, found, fit_s, modes_s = log_and_optima(which)
     lp = dens.lp
-    t1 = time.perf_counter()
-    found = sampled_modes(fit, "auto", 1, dens.u_fit, dens.lin, lp.gauss_prior)
-    modes_s = time.perf_counter() - t1
     prob = fit.problem
     q = float(prob.step)
     slo, shi = math.log(lp.sigma_bounds[0] * q), math.log(lp.sigma_bounds[1] * q)
@@ -371,14 +365,13 @@ def render(allres):
          "(`taskset -c 0`); times cumulative from the first draw (fit, optima, components "
          "and the density's compile apart); load = 1-min average after the iteration.\n"]
     for rec in allres:
-        L.append(f"\n## log {rec['log']}, seed {rec['seed']} ({rec['date_utc']}, src {rec['src']})\n")
-        L.append(f"fit {rec['fit_s']:.1f} s, optima + limit fits {rec['mode_search_s']:.1f} s, "
-                 f"{rec['n_frozen']} frozen components ({rec['components_s']:.1f} s), compile "
-                 f"{rec['compile_s']:.1f} s; defensive share {rec['defensive']}, frozen ×{rec['inflate']}, "
-                 f"adaptive ×{rec['adapt_inflate']}, {rec['per_iter']} draws per iteration\n")
-        L.append("| iter | evals | wall s | CPU s | load | adaptive comps | Kish (iter alone) | Kish all | max w | "
-                 "log Z | tau_c<1 mN m share (Kish, draws) | k2→0 share (Kish, draws) | band 95 % [mrad] |")
-        L.append("|" + "---|" * 13)
+        L += run_head(rec, f", seed {rec['seed']}",
+                      f", {rec['n_frozen']} frozen components ({rec['components_s']:.1f} s), compile "
+                      f"{rec['compile_s']:.1f} s; defensive share {rec['defensive']}, frozen ×{rec['inflate']}, "
+                      f"adaptive ×{rec['adapt_inflate']}, {rec['per_iter']} draws per iteration",
+                      ["iter", "evals", "wall s", "CPU s", "load", "adaptive comps", "Kish (iter alone)",
+                       "Kish all", "max w", "log Z", "tau_c<1 mN m share (Kish, draws)",
+                       "k2→0 share (Kish, draws)", "band 95 % [mrad]"])
         for r in rec["iters"]:
             L.append(f"| {r['iter']} | {r['evals']} | {r['wall_s']:.0f} | {r['cpu_s']:.0f} | {r['load']} | "
                      f"{r['n_adapt']} | {r['kish_iter']:.0f} | {r['kish']:.0f} | {r['max_weight']:.3f} | "
