@@ -23,7 +23,7 @@ logs allow ``j = 5``. ``diagnose`` reports the ratio of the base it ends with (a
 restarts from the candidates' optima, which can only lower its χ²), so a clean log's
 warning rate is at most this.
 
-    taskset -c 1 python benchmarks/diagnose_floor.py [N] [paper|rich ...] [--seed0 S]
+    taskset -c 1 python benchmarks/diagnose_floor.py [N] [paper|rich ...] [--seed0 S] [--append]
     taskset -c 1 python benchmarks/diagnose_floor.py --hidden [paper|rich ...]
     taskset -c 1 python benchmarks/diagnose_floor.py --diagnose paper SEED ...
     python benchmarks/diagnose_floor.py --threshold   # the generated block, nothing run
@@ -35,6 +35,8 @@ of its design and main's verdict on it (``results/diagnose_independent.json``): 
 warning would say (of the base as first fitted; diagnose's later restarts only lower it).
 ``--diagnose DESIGN SEED …``: those logs of the suite through ``hdid.diagnose`` (all
 candidates): the verdict, the ratio it reports (of its final base) and its warnings.
+``--append`` keeps the designs' calibration logs of other seeds (the threshold is then
+the order statistic of all of them; ``by_design`` keeps the earlier run under ``earlier``).
 Writes ``results/diagnose_floor.{json,md}`` (rows of other designs are kept) and, with
 ``--threshold``, the ``ROWS`` block of ``src/hdid/_diagnosis/_excess.py`` from the JSON.
 """
@@ -119,9 +121,28 @@ def threshold_table(rows: list, meta: dict) -> list[dict]:
         where = meta.get("by_design", {}).get(design, {})
         out.append({"design": design, "rate_hz": rate, "runs": runs, "logs": len(r),
                     "above": above, "threshold": math.ceil(thr * 1e4) / 1e4,
-                    "measured": f"measured {(where.get('date') or '?')[:10]}, src "
-                                f"{where.get('src') or '?'}, seeds {seeds[0]}–{seeds[-1]}"})
+                    "measured": _measured(where, seeds)})
     return out
+
+
+def _measured(where: dict, seeds: list) -> str:
+    """Where and when the calibration logs were fitted (an ``--append`` run and the runs
+    before it)."""
+    runs, w = [], where
+    while w:
+        runs.append(f"{(w.get('date') or '?')[:10]} (src {w.get('src') or '?'})")
+        w = w.get("earlier")
+    return f"measured {' and '.join(reversed(runs))}, seeds {_ranges(seeds)}"
+
+
+def _ranges(seeds: list) -> str:
+    """``[5000, 5001, …, 5199, 7000, …]`` → ``"5000–5199, 7000–7199"``."""
+    parts, start = [], seeds[0]
+    for a, b in zip(seeds, seeds[1:] + [None]):
+        if b != a + 1:
+            parts.append(f"{start}–{a}" if a != start else f"{a}")
+            start = b
+    return ", ".join(parts)
 
 
 def write_threshold(rows: list, meta: dict) -> str:
@@ -299,8 +320,15 @@ def main(argv):
     gen = import_generate()
     meta = run_meta(cmd="taskset -c 1 python benchmarks/diagnose_floor.py " + " ".join(argv))
     res = json.loads(out.read_text()) if out.exists() else {"meta": meta, "rows": []}
-    rows = [r for r in res["rows"] if r["design"] not in designs]
-    by_design = {k: v for k, v in res["meta"].get("by_design", {}).items() if k not in designs}
+    append = "--append" in argv  # keep the designs' calibration logs of other seeds
+    rows = [r for r in res["rows"] if r["design"] not in designs
+            or (append and r["kind"] == "hidden")
+            or (append and r["kind"] == "calibration" and not seed0 <= r["seed"] < seed0 + n)]
+    kept = ({"diagnosed": res["diagnosed"]} if append and "diagnosed" in res else {})
+    kept_meta = ({k: res["meta"][k] for k in ("hidden", "diagnosed") if k in res["meta"]}
+                 if append else {})
+    by_design = {k: v for k, v in res["meta"].get("by_design", {}).items()
+                 if k not in designs or append}
     for name in designs:
         m = run_meta()
         design = dict(RICH if name == "rich" else gen.PAPER_DESIGN)
@@ -322,10 +350,12 @@ def main(argv):
             df = gen.make_log(tr, **mk, seed=seed, hidden=None)
             rows.append({"design": name, "kind": "independent", "seed": seed,
                          **base_row(df, f"{name} ind {seed}")})
+        earlier = by_design.get(name) if append else None
         by_design[name] = {"date": m["date"], "src": m["src"], "load": m["load"],
                            "load_end": " ".join(f"{x:.1f}" for x in os.getloadavg()),
-                           "seeds": [seed0, seed0 + n - 1]}
-        res = {"meta": {**meta, "by_design": by_design}, "rows": rows}
+                           "seeds": [seed0, seed0 + n - 1],
+                           **({"earlier": earlier} if earlier else {})}
+        res = {"meta": {**meta, **kept_meta, "by_design": by_design}, "rows": rows, **kept}
         RESULTS.mkdir(exist_ok=True)
         out.write_text(json.dumps(res, indent=2, default=float) + "\n")
         (RESULTS / f"{NAME}.md").write_text(render(res))
