@@ -249,6 +249,7 @@ def _sample_one(hdid, fit, modes, modes_s, method, seed, max_steps, prior, truth
     diag = post.to_dict()["posterior_diagnostics"]
     out.update(steps=int(post.chain.shape[0]), converged=bool(post.converged),
                rhat_max=diag["convergence"]["rhat_max"],
+               met_by=diag["convergence"].get("met_by"),
                ess_bulk_min=diag["convergence"]["ess_bulk_min"],
                ess_tail_min=diag["convergence"]["ess_tail_min"],
                tau_max=diag["tau_max"], compile_s=post.compile_s, stage_s=post.stage_s,
@@ -370,7 +371,7 @@ def _render(res, all_logs, method=None):
     L.append("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in logs:
         miss = [n for n in REPORTED if not r["quantities"][n]["cover95"]]
-        L.append(f"| {r['design']} | {r['seed']} | {'yes' if r['converged'] else 'NO'} | "
+        L.append(f"| {r['design']} | {r['seed']} | {_verdict(r)} | "
                  f"{_steps(r)} | {r['rhat_max']:.3f} | {r['ess_bulk_min']:.0f} | "
                  f"{r['ess_tail_min']:.0f} | {r['fit_s']:.0f} | {r['posterior_s']:.0f} "
                  f"({r['compile_s']:.1f}, {r['mode_search_s']:.0f}) | {r['load_start'][0]} → "
@@ -381,6 +382,13 @@ def _render(res, all_logs, method=None):
             L.append(f"\nMedian `sample_posterior` time, {des}: {statistics.median(ts):.0f} s "
                      f"(one core of a shared 2-core machine, see loads).")
     return "\n".join(L) + "\n"
+
+
+def _verdict(r):
+    """yes (the rule that passed: R-hat or 50 tau; older files have no rule) or NO."""
+    if not r["converged"]:
+        return "NO"
+    return f"yes ({r['met_by']})" if r.get("met_by") else "yes"
 
 
 def main(argv=None):

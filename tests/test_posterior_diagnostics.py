@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 import hdid
-from hdid._posterior import convergence, sample_posterior
+from hdid._posterior import TAU_MULTIPLE, convergence, sample_posterior, tau_pooled
 
 
 def _ar1(rng, S, W, rho):
@@ -44,6 +44,37 @@ def test_convergence_passes_independent_walkers_and_fails_stuck_or_slow_ones():
     const = good.copy()
     const[:, :, 0] = 1.0
     assert not convergence(const, ["a", "b"]).converged
+
+
+def test_ensemble_rule_passes_a_chain_of_50_tau_and_not_walkers_that_never_swap():
+    """The issue's alternative criterion: ESS ≥ 400 and a chain ≥ 50 τ. AR(1) walkers with
+    ρ = 0.98 have τ = (1 + ρ)/(1 − ρ) = 99 steps; 36 of them over 5500 steps (≈ 55 τ) give
+    ESS ≈ 36·5500/99 ≈ 2000, yet each walker alone holds only ~28 independent draws per
+    split half, so walker-as-chain R-hat sits near 1 + 1/(2·28) ≈ 1.02 > 1.01: here the
+    ensemble rule, not R-hat, passes it. At 3000 steps (≈ 30 τ) it must not. Walkers in two
+    groups 3 sd apart that never swap: each walker's own τ is still ~99 (emcee's estimate,
+    about each walker's mean, would call 5500 steps 55 τ), but τ about the ensemble mean
+    (tau_pooled) is the chain's length: not converged."""
+    import emcee
+
+    rng = np.random.default_rng(1)
+    S, W = 5500, 36
+    x = _ar1(rng, S, W, 0.98)[:, :, None]
+    c = convergence(x, ["a"], tau=tau_pooled(x), steps=S)
+    assert c.ess_bulk.min() > 1000 and c.rhat.max() > 1.01
+    assert c.chain_in_tau >= TAU_MULTIPLE and c.met_by == f"{TAU_MULTIPLE} tau" and c.converged
+    assert "50 tau" in c.to_dict()["criterion"] and c.to_dict()["met_by"] == "50 tau"
+    short = x[:3000]
+    c = convergence(short, ["a"], tau=tau_pooled(short), steps=3000)
+    assert c.chain_in_tau < TAU_MULTIPLE and not c.converged
+    # without τ (SMC's runs) only R-hat can pass
+    assert not convergence(x, ["a"]).converged
+    two = x.copy()
+    two[:, ::2] += 3.0
+    own = emcee.autocorr.integrated_time(two, c=5, tol=0)
+    assert S / own[0] >= TAU_MULTIPLE  # the walker-centred τ would pass it
+    c = convergence(two, ["a"], tau=tau_pooled(two), steps=S)
+    assert c.chain_in_tau < 10 and not c.converged
 
 
 def test_public_api():

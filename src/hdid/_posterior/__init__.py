@@ -20,7 +20,15 @@ from .density import (
     derived_np,
     residual_autocorrelation,
 )
-from .diagnostics import ESS_MIN, RHAT_MAX, Convergence, convergence, tau_pooled, width_ratios
+from .diagnostics import (
+    ESS_MIN,
+    RHAT_MAX,
+    TAU_MULTIPLE,
+    Convergence,
+    convergence,
+    tau_pooled,
+    width_ratios,
+)
 from .driver import BURN_IN_STAGES, MIN_TAU_MULTIPLE, sample_posterior
 from .modes import _BOX_PRECISION, Mode, _laplace, _rj, find_modes
 from .moves import START_SCALE, MixtureProposal, _mode_start, _reset_outliers, default_moves
@@ -29,7 +37,7 @@ from .result import PosteriorResult
 __all__ = [
     "BURN_IN_STAGES", "Convergence", "ESS_MIN", "LogPosterior",
     "MIN_TAU_MULTIPLE", "MixtureProposal", "Mode", "PRIOR_HALF_WIDTH", "PosteriorResult",
-    "RHAT_MAX", "SIGMA_BOUNDS", "START_SCALE", "convergence",
+    "RHAT_MAX", "SIGMA_BOUNDS", "START_SCALE", "TAU_MULTIPLE", "convergence",
     "default_moves", "derived_np", "find_modes", "residual_autocorrelation",
     "sample_posterior", "tau_pooled", "width_ratios",
 ]

@@ -19,6 +19,9 @@ from .density import (
     to_physical,
 )
 from .diagnostics import (
+    ESS_MIN,
+    RHAT_MAX,
+    TAU_MULTIPLE,
     convergence,
     diagnostic_stride,
     tau_pooled,
@@ -40,8 +43,8 @@ from .result import BAND, PosteriorResult, _RunNames
 
 #: The burn-in is run in this many stages, the proposal adapted after each.
 BURN_IN_STAGES = 4
-#: τ multiple reported beside the arviz criterion (the ensemble rule of thumb).
-MIN_TAU_MULTIPLE = 50
+#: The ensemble rule's τ multiple (:data:`~hdid._posterior.diagnostics.TAU_MULTIPLE`).
+MIN_TAU_MULTIPLE = TAU_MULTIPLE
 #: A chain this far (log p) above the least-squares optimum has found another mode
 #: (Δχ² = 10 in the fit's units: beyond the 99.8 % point of χ²₁).
 MODE_GAP = 5.0
@@ -119,8 +122,9 @@ def sample_posterior(
 
     The kept chain grows (checked after ``chunk`` steps, then at every growth by
     ``CHECK_GROWTH``) until it converges — every sampled quantity and the stick-band
-    half-width has a rank-normalised R-hat ≤ 1.01 and bulk and tail ESS
-    ≥ 400 (arviz; :func:`~hdid._posterior.diagnostics.convergence`) — or reaches
+    half-width has bulk and tail ESS ≥ 400 and either a rank-normalised R-hat ≤ 1.01
+    (arviz, walkers as chains) or the chain is ≥ 50 τ long (the ensemble rule; τ about the
+    ensemble mean; :func:`~hdid._posterior.diagnostics.convergence`) — or reaches
     ``max_steps``; ``n_steps`` fixes its length instead. A chain that falls short carries a
     ``NOT CONVERGED`` warning that says what to do.
 
@@ -273,16 +277,15 @@ def sample_posterior(
             if n_steps is None and conv.converged:
                 break
     t_kept = time.perf_counter() - t_kept
-    with np.errstate(invalid="ignore", divide="ignore"):  # a walker that never moved
-        tau_e = sampler.get_autocorr_time(tol=0)
-    tau = np.fmax(tau_e, tau_pooled(sampler.get_chain()))
+    tau_e, tau = _taus(sampler)
     finite_tau = np.isfinite(tau)
     tau_max = float(np.max(tau[finite_tau])) if finite_tau.any() else float(done)
     if not conv.converged:
         name, what = conv.worst
         warnings.append(
             f"NOT CONVERGED: after {done} steps ({burn_in} burn-in before) the worst quantity "
-            f"is {name} ({what}); the criterion is R-hat ≤ 1.01 and bulk/tail ESS ≥ 400 on "
+            f"is {name} ({what}), the chain {conv.chain_in_tau:.1f} τ long; the criterion is "
+            f"bulk/tail ESS ≥ {ESS_MIN} and R-hat ≤ {RHAT_MAX} or a chain ≥ {TAU_MULTIPLE} τ, on "
             f"every sampled quantity and the band. Run longer (max_steps ≥ {2 * done}); if "
             "R-hat stays high the walkers sit in optima they do not leave — check the "
             "modes and the trace plot"
@@ -391,11 +394,24 @@ def _tune(counted, burn_draws, D):
         m.proposed = m.accepted = 0
 
 
+def _taus(sampler):
+    """emcee's τ (walkers about their own means) and the larger of it and the ensemble-mean
+    τ (:func:`tau_pooled`) of each sampled coordinate of the kept chain, in steps."""
+    with np.errstate(invalid="ignore", divide="ignore"):  # a walker that never moved
+        tau_e = sampler.get_autocorr_time(tol=0)
+    return tau_e, np.fmax(tau_e, tau_pooled(sampler.get_chain()))
+
+
 def _converge(sampler, lp, prob, labels):
-    """arviz diagnostics of the kept chain's sampled quantities and the band."""
-    chain = sampler.get_chain()
-    chain = chain[:: diagnostic_stride(chain.shape[0])]
+    """arviz diagnostics and τ of the kept chain's sampled quantities and the band."""
+    full = sampler.get_chain()
+    stride = diagnostic_stride(full.shape[0])
+    chain = full[::stride]
     S, W, D = chain.shape
     U = lp.from_sampled_np(chain.reshape(-1, D))
     band = derived_np(prob, U)[BAND].reshape(S, W, 1)
-    return convergence(np.concatenate([chain, band], axis=2), labels + [BAND])
+    # the band's τ from the thinned chain, in full steps: never below the stride, so an
+    # over-estimate where τ is near it (the rule stays conservative)
+    tau = np.concatenate([_taus(sampler)[1], stride * tau_pooled(band)])
+    return convergence(np.concatenate([chain, band], axis=2), labels + [BAND],
+                       tau=tau, steps=full.shape[0])

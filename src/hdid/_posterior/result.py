@@ -59,7 +59,8 @@ class PosteriorResult:
 
     @property
     def converged(self) -> bool:
-        """The kept chain meets the arviz criterion (``diagnostics.Convergence``)."""
+        """The kept chain meets the convergence criterion (``diagnostics.Convergence``:
+        ESS, and R-hat or, for the ensemble, 50 τ; ``convergence.met_by`` says which)."""
         return bool(self.convergence is not None and self.convergence.converged)
 
     def summary(self) -> dict[str, dict[str, Any]]:
@@ -158,9 +159,10 @@ class PosteriorResult:
         if self.convergence is not None:
             c = self.convergence
             name, what = c.worst
+            verdict = f"converged ({c.met_by} rule)" if c.converged else "NOT CONVERGED"
             lines.append(
-                f"  convergence (arviz, every sampled quantity and the band): "
-                f"{'converged' if c.converged else 'NOT CONVERGED'}; R-hat max "
+                f"  convergence ({c.criterion}): "
+                f"{verdict}; R-hat max "
                 f"{np.max(c.rhat):.3f}, ESS bulk min {np.min(c.ess_bulk):.0f}, tail min "
                 f"{np.min(c.ess_tail):.0f} (worst: {name}, {what})")
         if self.move_acceptance:
