@@ -236,3 +236,29 @@ def test_tau_c_default_prior_is_flat_in_value_and_a_user_prior_replaces_it(fit):
     a = float(user.lp.log_prob(jnp.asarray(x)) - user.lp.log_prob(jnp.asarray(x0)))
     b = float(logflat.lp.log_prob(jnp.asarray(x)) - logflat.lp.log_prob(jnp.asarray(x0)))
     assert a - b == pytest.approx(-0.5 * (0.7 / 0.3) ** 2, abs=1e-9)
+
+
+def test_every_optimum_out_of_order_falls_back_to_the_fits_own_inside_the_order(fit):
+    """When every optimum given (or found) breaks tau_s >= tau_c, the walkers start from the
+    fit's own optimum with each such pair put just inside the allowed side. Paper log 9506
+    of the calibration (benchmarks/posterior_sbc.py --seed0 9500) reached this path and
+    failed writing into the fit's read-only unknowns; the start must now be in order and
+    the fit untouched."""
+    from dataclasses import replace
+
+    from hdid._posterior.density import ordered_pairs
+    from hdid._posterior.modes import _fit_mode, sampled_modes
+
+    prob = fit.problem
+    free = list(prob.free)
+    jc, js = free.index("tau_c"), free.index("tau_s")
+    before = np.array(fit.u, dtype=float)
+    bad = _fit_mode(fit)
+    bad = replace(bad, u=bad.u.copy())
+    bad.u[jc] = bad.u[js] + 0.5  # tau_c above tau_s: outside the order
+    dens = posterior_density(fit)
+    found = sampled_modes(fit, [bad], 0, dens.u_fit, dens.lin, dens.lp.gauss_prior)
+    assert len(found) == 1 and found[0].weight == pytest.approx(1.0)
+    for i, j in ordered_pairs(prob):
+        assert found[0].u[j] >= found[0].u[i]
+    np.testing.assert_array_equal(np.asarray(fit.u, dtype=float), before)

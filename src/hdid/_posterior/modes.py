@@ -198,7 +198,9 @@ def find_modes(fit, *, n_random: int = N_RANDOM_RESTARTS, seed: int = 0, max_ste
 def _fit_mode(fit) -> Mode:
     """The fit's own optimum as the only mode (``modes="fit"``)."""
     cost, cov, logz = _laplace(fit.problem, np.asarray(fit.u, dtype=float))
-    return Mode(u=np.asarray(fit.u, dtype=float), cost=cost, cov=cov, log_evidence=logz,
+    # a writable copy (``fit.u`` may be a JAX array: its NumPy view is read-only, and
+    # :func:`sampled_modes` moves an out-of-order start inside the order in place)
+    return Mode(u=np.array(fit.u, dtype=float), cost=cost, cov=cov, log_evidence=logz,
                 weight=1.0, values=fit.problem.values_np(fit.u))
 
 
