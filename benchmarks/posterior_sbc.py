@@ -142,13 +142,21 @@ PHYSICAL_GIVEN = ("k1", "k2", "tau_c", "tau_s", "c_v")
 
 
 def _default_prior_of(df, truth, name):
-    """``(mean, sd)`` in the transformed space of the library's default prior of ``name``
-    on log ``df`` (as ``hdid.fit`` builds it: relative to the log's own scales)."""
+    """``(mean, sd)`` in the transformed space of the *posterior's* default prior of
+    ``name`` on log ``df`` (relative to the log's own scales, as ``hdid.fit`` builds them;
+    the effects' declared ``posterior_prior``, not the least-squares fit's weak rows: since
+    post4 those differ — v_s: sd 1 in the posterior, sd 2 in the fit — and reading the fit's
+    drew v_s twice as wide as the sampler's prior, so the calibration was not exact; found
+    on seeds 9500–9513, e.g. 9500's v_s 280 rad/s at z = 2.3)."""
     from hdid._fitting._fit import _setup
+    from hdid._posterior.density import gaussian_prior
 
     prob = _setup(df, inertia=truth["inertia"]).problem
     i = list(prob.free).index(name)
-    return float(prob.prior_mean[i]), float(prob.prior_sd[i])
+    G, _ = gaussian_prior(prob, None)
+    if not G[2, i] > 0:
+        raise ValueError(f"{name} has no Gaussian posterior prior to draw from")
+    return float(G[0, i]), float(G[1, i])
 
 
 def draw_physical(gen, rng, design, seed, max_iter=8):
