@@ -8,12 +8,14 @@ Run (pinned to one core)::
         --log shipped --seeds 1 2 3 4 --max-steps 10000 [--variants default jump:0.1]
 
 ``default``: ``hdid.sample_posterior(fit, seed=s, max_steps=N)`` as on main (``default_t``:
-the same chain, its independence move counting its region crossings); ``jump:W``:
-the same with ``moves=`` a factory returning ``default_moves(proposal)`` scaled to
+the same chain, its independence move counting its region crossings; ``walkers:W``: the
+default with ``W`` walkers and the step cap scaled by 36/W, the same density calls);
+``jump:W``: the same with ``moves=`` a factory returning ``default_moves(proposal)`` scaled to
 ``1 − W`` plus :class:`~hdid._posterior.jump.ModeJumpMove` on the driver's mixture
 (``_Adaptive``) at weight ``W`` (``jump_w:W`` weights the assignment by the mixture
 weights; ``jumpm:W`` jumps among the modes proper only — the optima and the limit fits'
-ends, not the continuations' first points: :func:`mode_components`). ``--log 9100`` / ``9101``: the independent-simulator paper logs of
+ends, not the continuations' first points: :func:`mode_components`). ``--log 9100`` /
+``9101``: the independent-simulator paper logs of
 ``posterior_nautilus.make_log`` (with their catalogue priors). Records per run: R-hat
 max (and of which quantity), τ_max, bulk/tail ESS min, tau_c's / k2's / the band's 95 %
 intervals, the kept chain's shares below tau_c 1 mN m and with k2 < 0.1 × the fit's, the
@@ -21,6 +23,11 @@ moves' acceptances, the jump's proposals that passed the assignment check and it
 accepted jumps per pair of components (named by the modes' kinds), wall per stage and the
 1-min load before/after; appends to ``results/posterior_jump_post11.json`` and rewrites
 the ``.md``.
+
+The jump variants need ``src/hdid/_posterior/jump.py`` (``ModeJumpMove``), retired by
+these measurements (benchmarks/README.md, ``post11``): it and its test are last in commit
+24ba95c — run the script on that tree (``git archive 24ba95c``) for them; ``default``,
+``default_t``, ``walkers:W`` and ``--affine-check`` run on any tree since.
 """
 
 from __future__ import annotations
@@ -193,13 +200,17 @@ def run(fit, prior, variant: str, seed: int, max_steps: int, log: str) -> dict:
         except ImportError:
             raise SystemExit("the jump variants need src/hdid/_posterior/jump.py, retired "
                              "from the library (benchmarks/README.md, post11): run this "
-                             "script on the tree of the commit named there") from None
+                             "script on the tree of commit 24ba95c") from None
         tag, w = variant.split(":")
         comps = mode_components(fit, prior, seed) if tag == "jumpm" else None
         moves = _factory(fit, float(w), tag == "jump_w", keep, comps)
+    kw = {}
+    if variant.startswith("walkers:"):  # the default moves, W walkers at the same cost
+        W = int(variant.split(":")[1])
+        kw["n_walkers"], max_steps = W, max_steps * 36 // W
     la0 = _load()
     post = hdid.sample_posterior(fit, seed=seed, max_steps=max_steps, progress=False,
-                                 moves=moves, prior=prior)
+                                 moves=moves, prior=prior, **kw)
     la1 = _load()
     d = post.to_dict()
     diag = d["posterior_diagnostics"]
