@@ -329,8 +329,14 @@ def _render(res, all_logs, method=None):
     if not logs:
         return "\n".join(L)
     conv = [r for r in logs if r["converged"]]
-    L.append(f"**Converged (arviz R-hat ≤ 1.01, bulk/tail ESS ≥ 400 on every sampled quantity "
-             f"and the band): {len(conv)} of {len(logs)}.**\n")
+    if any(r.get("met_by") for r in logs):  # files from the ensemble rule on
+        by_rule = {k: sum(r.get("met_by") == k for r in conv) for k in ("R-hat", "50 tau")}
+        L.append(f"**Converged (bulk/tail ESS ≥ 400 and R-hat ≤ 1.01 or a chain ≥ 50 τ, on every "
+                 f"sampled quantity and the band): {len(conv)} of {len(logs)}** (by R-hat "
+                 f"{by_rule['R-hat']}, by 50 τ {by_rule['50 tau']}).\n")
+    else:
+        L.append(f"**Converged (arviz R-hat ≤ 1.01, bulk/tail ESS ≥ 400 on every sampled quantity "
+                 f"and the band): {len(conv)} of {len(logs)}.**\n")
     L.append("## Coverage of the central intervals (truth inside)\n")
     L.append("| quantity | 95 % paper | 95 % rich | 95 % pooled [Clopper–Pearson 95 %] | 68 % pooled |")
     L.append("|---|---|---|---|---|")
