@@ -77,6 +77,32 @@ def test_ensemble_rule_passes_a_chain_of_50_tau_and_not_walkers_that_never_swap(
     assert c.chain_in_tau < 10 and not c.converged
 
 
+def test_arviz_check_is_put_off_only_while_the_chain_is_under_50_tau():
+    """``driver._short_of_tau``: with AR(1) walkers of τ = 99 steps the arviz check is put
+    off at 2000 steps (≈ 20 τ: neither rule can pass; it returns where 50 τ lies, near
+    50 · 99 ≈ 5000 — within 30 %, the τ estimate's spread at this length) and not at 6000
+    (≈ 60 τ)."""
+    import emcee
+
+    from hdid._posterior.driver import _short_of_tau
+
+    class _Fake:
+        def __init__(self, chain):
+            self.chain = chain
+
+        def get_chain(self):
+            return self.chain
+
+        def get_autocorr_time(self, tol=0):
+            return emcee.autocorr.integrated_time(self.chain, c=5, tol=tol)
+
+    rng = np.random.default_rng(2)
+    x = _ar1(rng, 6000, 36, 0.98)[:, :, None]
+    need = _short_of_tau(_Fake(x[:2000]), 2000)
+    assert 0.7 * 50 * 99 < need < 1.3 * 50 * 99
+    assert _short_of_tau(_Fake(x), 6000) == 0
+
+
 def test_public_api():
     # hdid's entry points run in float64 (hdid._config.float64): the same function inside
     assert hdid.sample_posterior.__wrapped__ is sample_posterior
