@@ -90,11 +90,11 @@ def test_arviz_check_is_put_off_only_while_the_chain_is_under_50_tau():
         def __init__(self, chain):
             self.chain = chain
 
-        def get_chain(self):
-            return self.chain
+        def get_chain(self, thin=1):
+            return self.chain[::thin]
 
-        def get_autocorr_time(self, tol=0):
-            return emcee.autocorr.integrated_time(self.chain, c=5, tol=tol)
+        def get_autocorr_time(self, tol=0, thin=1):  # emcee's: τ in steps of the full chain
+            return thin * emcee.autocorr.integrated_time(self.chain[::thin], c=5, tol=tol)
 
     rng = np.random.default_rng(2)
     x = _ar1(rng, 6000, 36, 0.98)[:, :, None]

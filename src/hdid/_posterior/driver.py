@@ -400,12 +400,21 @@ def _tune(counted, burn_draws, D):
         m.proposed = m.accepted = 0
 
 
+#: τ is estimated on the kept chain thinned to at most this many steps: the FFTs of a
+#: 40 000-step chain cost as much as arviz's check; the ensemble rule's boundary is
+#: τ = steps / 50 ≥ 80 × the stride, where thinning moves the estimate by < 1 %.
+TAU_MAX_STEPS = 4000
+
+
 def _taus(sampler):
     """emcee's τ (walkers about their own means) and the larger of it and the ensemble-mean
-    τ (:func:`tau_pooled`) of each sampled coordinate of the kept chain, in steps."""
+    τ (:func:`tau_pooled`) of each sampled coordinate of the kept chain, in steps (from the
+    chain thinned to ≤ ``TAU_MAX_STEPS``, times the stride)."""
+    chain = sampler.get_chain()
+    thin = max(1, math.ceil(chain.shape[0] / TAU_MAX_STEPS))
     with np.errstate(invalid="ignore", divide="ignore"):  # a walker that never moved
-        tau_e = sampler.get_autocorr_time(tol=0)
-    return tau_e, np.fmax(tau_e, tau_pooled(sampler.get_chain()))
+        tau_e = sampler.get_autocorr_time(tol=0, thin=thin)
+    return tau_e, np.fmax(tau_e, thin * tau_pooled(chain[::thin]))
 
 
 def _short_of_tau(sampler, done: int) -> int:
