@@ -200,6 +200,36 @@ def test_cli_posterior_json_and_chains(tmp_path):
     assert "k1" in az.from_netcdf(str(nc)).posterior
 
 
+def test_cli_prior_reaches_the_posterior_and_bad_ones_exit_2(tmp_path):
+    """``hdid fit --posterior --prior NAME=VALUE,SD``: the prior is the sampler's. With
+    v_s held by a prior of sd 0.01 in log at 5 rad/s (the fit's own optimum has v_s ≈ 14,
+    the data alone leave it ±180 %), the posterior median must sit within 5 sd of the
+    prior's centre (exp(±0.05)) even after 100 steps — the walkers start at the optima
+    sought under that prior. Malformed, unknown or posterior-less priors: exit 2, one line."""
+    import json
+    import math
+
+    from click.testing import CliRunner
+
+    from hdid.cli import main
+
+    out = tmp_path / "fit.json"
+    res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "-q", "--posterior", "--steps", "100",
+                                    "--prior", "v_s=5,0.01", "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    med = json.loads(out.read_text())["posterior"]["v_s"]["median"]
+    assert abs(math.log(med / 5.0)) < 0.05
+    for args, needle in ((["--posterior", "--prior", "tau_c=1"], "NAME=VALUE,SD"),
+                         (["--posterior", "--prior", "tau_c=1,-1"], "SD > 0"),
+                         (["--prior", "tau_c=1,0.3"], "add --posterior"),
+                         (["--posterior", "--steps", "100", "--prior", "foo=1,0.3"],
+                          "--prior: ['foo'] are not free")):
+        res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "-q", *args])
+        assert res.exit_code == 2, (args, res.output)
+        line = res.output.strip()
+        assert needle in line and "\n" not in line and "Traceback" not in line
+
+
 def test_find_modes_keeps_the_fit_and_weights_sum_to_one(fit, modes):
     assert modes and sum(m.weight for m in modes) == pytest.approx(1.0)
     # no optimum it keeps is worse than the fit by more than the cut, and the best is at

@@ -63,6 +63,25 @@ def _parse_fix(items: tuple[str, ...], option: str = "--fix") -> dict[str, float
     return out
 
 
+def _parse_priors(items: tuple[str, ...]) -> dict[str, tuple[float, float]]:
+    """``--prior NAME=VALUE,SD`` (repeatable) as ``sample_posterior(prior=...)`` takes it."""
+    out: dict[str, tuple[float, float]] = {}
+    for item in items:
+        name, _, rest = item.partition("=")
+        parts = rest.split(",")
+        if not name.strip() or len(parts) != 2:
+            raise _Fail(f"--prior {item!r}: expected NAME=VALUE,SD (e.g. --prior tau_c=2.5e-3,0.3: "
+                        "median 2.5 mN m, sd 0.3 in log, i.e. about ±30 %)")
+        try:
+            value, sd = float(parts[0]), float(parts[1])
+        except ValueError:
+            raise _Fail(f"--prior {item!r}: VALUE and SD must be numbers") from None
+        if not (math.isfinite(value) and math.isfinite(sd) and sd > 0):
+            raise _Fail(f"--prior {item!r}: give a finite VALUE and an SD > 0")
+        out[name.strip()] = (value, sd)
+    return out
+
+
 def _check_size(data) -> None:
     """Refuse at once a log whose runs are too long to fit in minutes (see
     benchmarks/results/long_log.md): say how to crop or decimate it."""

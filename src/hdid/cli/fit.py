@@ -40,6 +40,7 @@ from ._common import (
 @click.option("--walkers", type=click.IntRange(4, 4096), help="emcee walkers (default max(32, 2·dim)).")
 @click.option("--sampler", type=click.Choice(["emcee", "smc"]), default="emcee", show_default=True, help="Posterior sampler: emcee (ensemble MCMC from the fit's optima, differential-evolution + independence moves; --steps/--walkers) or smc (tempered SMC alone; gives the log-evidence; its intervals were narrower than emcee's on the same logs). Calibration: benchmarks/README.md, Posterior.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Posterior seed.")
+@click.option("--prior", "priors", multiple=True, metavar="NAME=VALUE,SD", help="Posterior: a Gaussian prior of your own (a datasheet's) on a fitted parameter, replacing the default, e.g. --prior tau_c=2.5e-3,0.3 (median 2.5 mN m, sd 0.3 in log: about ±30 %; delta's sd is in its logit). Repeatable. With the default priors (flat in value for k2, tau_c, c_v) a 4-run paper log's posterior does not converge in 20 000 steps; with priors on k1, k2, tau_c, tau_s, c_v it converged on 40 of 40 calibration logs (benchmarks/README.md).")
 @click.option("--chains", "chains_out", metavar="OUT.nc", help="Save the posterior chains (arviz NetCDF).")
 @click.option("--corner", "corner_out", metavar="OUT.png", help="Corner plot of the posterior.")
 @click.option("--torque-constant", type=float, help="Driven log with a motor_current column: motor torque constant [N m/A].")
@@ -50,7 +51,7 @@ from ._common import (
 @_QUIET
 def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_inertia,
             inertia_prior, fix, add_effects, remove_effects, effect_files, release_time,
-            counts_per_rev, starts, posterior, steps, walkers, sampler, seed, chains_out, corner_out,
+            counts_per_rev, starts, posterior, steps, walkers, sampler, seed, priors, chains_out, corner_out,
             quiet, band_bracket, workers, dask_address, torque_constant,
             output_counts_per_rev, order, joint, ratio, resolution, start_values, input_hold):
     """Fit stiffness, friction (and inertia) jointly to all runs of LOG.csv.
@@ -65,6 +66,9 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
     """
     if sampler == "smc" and (steps or walkers):
         raise _Fail("--steps/--walkers are emcee's options; leave them out with --sampler smc")
+    post_prior = _common._parse_priors(priors)
+    if post_prior and not (posterior or chains_out or corner_out):
+        raise _Fail("--prior is the posterior's: add --posterior (or --chains/--corner)")
     model = _build_model(add_effects, remove_effects, effect_files, ratio)
     driven_options = {"torque_constant": torque_constant, "resolution": resolution,
                       "output_counts_per_rev": output_counts_per_rev}
@@ -149,10 +153,14 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
     if posterior or chains_out or corner_out:
         from .._posterior import sample_posterior
 
-        post = sample_posterior(
-            result, n_steps=steps, n_walkers=walkers, seed=seed, progress=not quiet,
-            method=sampler,
-        )
+        try:
+            post = sample_posterior(
+                result, n_steps=steps, n_walkers=walkers, seed=seed, progress=not quiet,
+                method=sampler, prior=post_prior or None,
+            )
+        except ValueError as exc:  # a --prior naming no free parameter, …
+            msg = str(exc)
+            raise _Fail(("--" + msg if msg.startswith("prior") else msg).replace("\n", " ")) from None
         summary.update(post.to_dict())
         if not quiet:
             click.echo("")
