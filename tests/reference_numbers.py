@@ -44,7 +44,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 SYN = ROOT / "data" / "synthetic"
-EMPS = ROOT / "data" / "real" / "emps"
+EMPS = ROOT.parent / "shared" / "data" / "real" / "emps"  # never copied into the repository
 STORE = Path(__file__).resolve().parent / "data" / "reference_numbers.json"
 
 #: Keys never compared: time, provenance, and code locations that move by design.
@@ -63,7 +63,7 @@ def _cases():
         "csf8_paper_counts": lambda: hdid.fit(SYN / "csf8_paper_counts.csv", counts_per_rev=4000),
         "csf8_rich_1khz": lambda: hdid.fit(SYN / "csf8_rich_1khz.csv"),
         "hidden_hysteresis_1khz": lambda: hdid.fit(SYN / "hidden_hysteresis_1khz.csv"),
-        "emps_train": lambda: hdid.fit_driven(EMPS / "train.csv", _emps_model()),
+        "emps_train": lambda: hdid.fit_driven(EMPS / "emps_train.csv", _emps_model()),
         "driven_csf8": lambda: hdid.fit_driven(SYN / "driven_csf8.csv"),
         "joint_paper_driven": lambda: hdid.fit_joint(
             [SYN / "csf8_paper.csv", SYN / "driven_csf8.csv"]),
@@ -72,7 +72,7 @@ def _cases():
 
 
 def _emps_model():
-    """``hdid fit train.csv --ratio 1 --add torque_offset``, as the CLI builds it."""
+    """``hdid fit emps_train.csv --ratio 1 --add torque_offset``, as the CLI builds it."""
     import hdid
 
     model = hdid.Model.default().with_ratio(1.0)

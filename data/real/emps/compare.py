@@ -1,10 +1,13 @@
 """EMPS: hdid's fit against the authors' IDIM-LS parameters, on the validation log.
 
-    python data/real/emps/compare.py [FIT.json]
+    python data/real/emps/compare.py [FIT.json] [--data DIR]
 
-FIT.json is what ``hdid fit data/real/emps/train.csv --ratio 1 --add torque_offset
---json FIT.json`` writes (fitted here when not given). Two criteria, the same for both
-parameter sets, both on ``validate.csv`` (the pulses set, never used in any fit):
+DIR (default ``../shared/data/real/emps`` beside the repository) holds ``emps_train.csv``
+and ``emps_pulses.csv`` as ``convert.py`` writes them (README.md: where to get the
+benchmark's ``.mat`` files). FIT.json is what ``hdid fit DIR/emps_train.csv --ratio 1
+--add torque_offset --json FIT.json`` writes (fitted here when not given). Two criteria,
+the same for both parameter sets, both on ``emps_pulses.csv`` (the validation set with
+force pulses, never used in any fit):
 
 1. the authors' cross-test validation (``Script_IDIM_LS_CTV.m``): the force predicted by
    the inverse model from the position (4th-order Butterworth at 100 Hz, zero phase,
@@ -21,12 +24,16 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[2]
+#: Where the converted logs live: never in this repository (../shared/data/real/emps).
+DATA = ROOT.parent / "shared" / "data" / "real" / "emps"
+TRAIN, PULSES = "emps_train.csv", "emps_pulses.csv"
 #: The authors' IDIM-LS estimates (EMPS_Description.pdf; Script_IDIM_LS.m on DATA_EMPS).
 IDIM_LS = {"inertia": 95.11, "c_v": 203.5, "tau_c": 20.39, "tau_0": -3.16}
 
@@ -74,24 +81,33 @@ def shooting_rms(csv: Path, p: dict[str, float]) -> float:
 
 
 def main(argv):
+    argv = list(argv)
+    data = DATA
+    if "--data" in argv:
+        k = argv.index("--data")
+        data = Path(argv[k + 1])
+        del argv[k:k + 2]
+    train, val = data / TRAIN, data / PULSES
+    for path in (train, val):
+        if not path.exists():
+            raise SystemExit(f"{path} not found: convert the benchmark's .mat files with "
+                             "data/real/emps/convert.py (data/real/emps/README.md) or pass --data DIR")
     if argv:
         fit = json.loads(Path(argv[0]).read_text())
     else:
-        out = HERE / "_fit.json"
-        subprocess.run([sys.executable, "-m", "hdid.cli", "fit", str(HERE / "train.csv"),
-                        "--ratio", "1", "--add", "torque_offset", "--json", str(out), "-q"],
-                       check=True, cwd=ROOT)
-        fit = json.loads(out.read_text())
-        out.unlink()
+        with tempfile.TemporaryDirectory() as tmp:
+            out = Path(tmp) / "fit.json"
+            subprocess.run([sys.executable, "-m", "hdid.cli", "fit", str(train), "--ratio", "1",
+                            "--add", "torque_offset", "--json", str(out), "-q"], check=True, cwd=ROOT)
+            fit = json.loads(out.read_text())
     ours = {k: v["value"] for k, v in fit["parameters"].items()}
-    val = HERE / "validate.csv"
     print(f"{'':12} {'hdid':>10} {'IDIM-LS':>10}")
     for k in IDIM_LS:
         print(f"{k:12} {ours[k]:10.4g} {IDIM_LS[k]:10.4g}  ({100 * (ours[k] / IDIM_LS[k] - 1):+.1f} %)"
               f"  std {fit['parameters'][k]['std']:.3g}")
-    print(f"inverse-model force error on validate.csv [%]: hdid {inverse_model_error(val, ours):.3f}, "
+    print(f"inverse-model force error on {PULSES} [%]: hdid {inverse_model_error(val, ours):.3f}, "
           f"IDIM-LS {inverse_model_error(val, IDIM_LS):.3f}")
-    print(f"multiple-shooting position RMS on validate.csv [m]: hdid {shooting_rms(val, ours):.4g}, "
+    print(f"multiple-shooting position RMS on {PULSES} [m]: hdid {shooting_rms(val, ours):.4g}, "
           f"IDIM-LS {shooting_rms(val, IDIM_LS):.4g}")
 
 

@@ -1,11 +1,12 @@
 """Convert the EMPS benchmark's MATLAB files into hdid driven logs (CSV, SI units).
 
-    python data/real/emps/convert.py [SOURCE_DIR]
+    python data/real/emps/convert.py [SOURCE_DIR [OUT_DIR]]
 
 SOURCE_DIR holds ``DATA_EMPS.mat`` and ``DATA_EMPS_PULSES.mat`` as distributed by the
-benchmark authors (default ``../shared/data/real/emps`` beside the repository).
-Writes ``train.csv`` (from DATA_EMPS.mat, the estimation set) and ``validate.csv``
-(from DATA_EMPS_PULSES.mat, the validation set with force pulses) next to this script:
+benchmark authors (default ``../shared/data/real/emps`` beside the repository); OUT_DIR
+(default SOURCE_DIR) receives ``emps_train.csv`` (from DATA_EMPS.mat, the estimation
+set) and ``emps_pulses.csv`` (from DATA_EMPS_PULSES.mat, the validation set with force
+pulses). The CSVs are never kept in this repository.
 
 * ``time`` [s]: ``k · 1 ms``. The files' ``t`` is that grid up to 3e-8 s of rounding
   (float32 jitter in the logger), far below the sample period.
@@ -14,6 +15,7 @@ Writes ``train.csv`` (from DATA_EMPS.mat, the estimation set) and ``validate.csv
   torques newtons; gear ratio 1, no output encoder).
 * ``motor_torque`` [N]: ``gtau · vir``, the drive voltage (the controller's output,
   force pulses included in the validation set) times the drive gain gtau = 35.15 N/V.
+* ``run`` = 1, ``setup`` = A: one continuous run of one set-up.
 """
 
 from __future__ import annotations
@@ -26,11 +28,13 @@ import scipy.io
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_SOURCE = HERE.parents[3] / "shared" / "data" / "real" / "emps"
-FILES = {"train.csv": "DATA_EMPS.mat", "validate.csv": "DATA_EMPS_PULSES.mat"}
+FILES = {"emps_train.csv": "DATA_EMPS.mat", "emps_pulses.csv": "DATA_EMPS_PULSES.mat"}
 PERIOD = 1e-3
 
 
 def convert(mat_path: Path, csv_path: Path) -> None:
+    import pandas as pd
+
     d = scipy.io.loadmat(mat_path)
     t = np.asarray(d["t"], dtype=float).ravel()
     qm = np.asarray(d["qm"], dtype=float).ravel()
@@ -38,17 +42,20 @@ def convert(mat_path: Path, csv_path: Path) -> None:
     grid = np.arange(t.size) * PERIOD
     if np.max(np.abs(t - grid)) > 1e-6:
         raise SystemExit(f"{mat_path}: t is not the 1 kHz grid (off by {np.max(np.abs(t - grid)):.3g} s)")
-    with open(csv_path, "w") as f:
-        f.write("time,theta,motor_torque\n")
-        for row in zip(grid, qm, force):
-            f.write("%.3f,%.10g,%.10g\n" % row)
+    frame = pd.DataFrame({"time": grid, "theta": qm, "motor_torque": force, "run": 1, "setup": "A"})
+    frame.to_csv(csv_path, index=False, float_format="%.10g")
 
 
 def main(argv: list[str]) -> None:
     source = Path(argv[0]) if argv else DEFAULT_SOURCE
+    out = Path(argv[1]) if len(argv) > 1 else source
+    out.mkdir(parents=True, exist_ok=True)
     for csv_name, mat_name in FILES.items():
-        convert(source / mat_name, HERE / csv_name)
-        print(f"wrote {HERE / csv_name} from {source / mat_name}")
+        if not (source / mat_name).exists():
+            raise SystemExit(f"{source / mat_name} not found: download DATA_EMPS.mat and "
+                             "DATA_EMPS_PULSES.mat first (data/real/emps/README.md)")
+        convert(source / mat_name, out / csv_name)
+        print(f"wrote {out / csv_name} from {source / mat_name}")
 
 
 if __name__ == "__main__":

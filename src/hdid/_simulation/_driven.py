@@ -44,7 +44,7 @@ from .. import _config  # noqa: F401
 from .._models._model import Model
 from .._models._parameter_set import AbstractParameterSet
 from .._models._positional import PositionalError
-from ._simulate import DEFAULT_MAX_SUBSTEP, _safe_div, crossing_fraction, rk4
+from ._simulate import DEFAULT_MAX_SUBSTEP, _safe_div, crossing_fraction, known_value, rk4
 from ..effects import AbstractSpring, Motion, Parameter
 
 TAU_FOUT_PARAMETER = Parameter(
@@ -302,9 +302,10 @@ def simulate_driven(
     if substeps is None:
         substeps = substeps_for_times(times, max_substep)
     model = joint.model
+    known = known_value(model.inertia)
+    if known is not None and not np.all(known > 0):
+        raise ValueError(f"inertia = {float(known)}: must be > 0 kg m^2")
     inertia = jnp.asarray(model.inertia, dtype=float)
-    if not isinstance(inertia, jax.core.Tracer) and not bool(inertia > 0):
-        raise ValueError(f"inertia = {float(inertia)}: must be > 0 kg m^2")
     wg = joint.wg_model
     N = joint.ratio
     theta0 = jnp.asarray(theta0, dtype=float)

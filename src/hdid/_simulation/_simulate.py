@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .. import _config  # noqa: F401
@@ -41,6 +42,19 @@ def substeps_for(sample_period: float, max_substep: float = DEFAULT_MAX_SUBSTEP)
     import math
 
     return max(1, math.ceil(sample_period / max_substep - 1e-9))
+
+
+def known_value(x):
+    """``x`` as a float64 NumPy array when its value is known while tracing, else None.
+
+    A parameter held fixed is a constant even inside ``jit``; a free one is a tracer.
+    Checks on values (e.g. a positive inertia) run only on the former: a JAX operation
+    on a constant under ``jit`` is itself traced, so the check uses NumPy.
+    """
+    try:
+        return np.asarray(x, dtype=float)
+    except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
+        return None
 
 
 def _accel(model: Model, inertia, theta, omega, direction, states):
@@ -255,11 +269,12 @@ def simulate_runs(
     theta0 = jnp.asarray(theta0, dtype=float)
     R, n = times.shape
     t_release = jnp.broadcast_to(jnp.asarray(t_release, dtype=float), (R,))
-    inertia = jnp.asarray(models.inertia, dtype=float) + added_inertia
-    if not isinstance(inertia, jax.core.Tracer) and not bool(jnp.all(inertia > 0)):
+    known, added = known_value(models.inertia), known_value(added_inertia)
+    if known is not None and added is not None and not np.all(known + added > 0):
         raise ValueError(
-            f"inertia + added_inertia = {inertia}: must be > 0 kg m^2; check both values"
+            f"inertia + added_inertia = {known + added}: must be > 0 kg m^2; check both values"
         )
+    inertia = jnp.asarray(models.inertia, dtype=float) + added_inertia
     inertia = jnp.broadcast_to(inertia, (R,))
     h_max = DEFAULT_MAX_SUBSTEP if max_substep is None else max_substep
     elapsed = jnp.maximum(times - t_release[:, None], 0.0)
