@@ -1,43 +1,283 @@
-"""The encoder step, estimated from the reading levels of a log."""
+"""The encoder step, found in the reading levels of a log as they are printed.
+
+A logger prints every reading with a finite precision: a fixed number of decimals
+(``%.4f``: the *print unit* is 1e-4), a fixed number of significant digits (``%g``,
+``1.5708e-03``) or whole counts. A printed reading is the encoder level rounded to that
+unit, so it lies within half a print unit of ``offset + k·q`` (``q`` the encoder step,
+``offset`` the set-up's reading at the spring zero, which need not be a multiple of
+``q``). Within one run the offset is common, so the difference of two of its printed
+levels lies within one print unit (half of each) of a multiple of ``q``.
+
+:func:`find_step` looks for the largest grid ``q`` for which that holds for every level
+of every run, and decides whether the log *tells* it: a grid ``q`` that is not the
+encoder's passes one level's test by chance with probability ``≈ 2t/q`` (``t`` the level's
+tolerance), so the log tells the grid when the chance that every level passes for a wrong
+grid, ``Π 2t/q`` over the levels the grid places, times the number of grids tried, is
+below :data:`FALSE_GRID_CHANCE`. The print unit itself explains every printed level
+exactly; it is never the step (it fails that test: ``2t/q ≥ 1``). Nor is a grid less than
+:data:`MIN_STEP_PER_PRINT_UNIT` print units: the readings' rounding to the print unit adds
+``p²/12`` to the quantization variance ``q²/12``, at most 1/16 of it (3 % of the floor
+``q/√12``) at that ratio; coarser printing is noise the fit estimates instead.
+"""
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 
 
-# ------------------------------------------------------------------ resolution
+# ------------------------------------------------------------------ print precision
+
+#: A printed number: sign, integer digits, optional decimals, optional exponent.
+_NUMBER = r"^\s*[-+]?(?P<int>\d*)(?:\.(?P<dec>\d*))?(?:[eE](?P<exp>[-+]?\d+))?\s*$"
+
+
+@dataclass(frozen=True)
+class PrintPrecision:
+    """How a numeric column is printed.
+
+    ``kind`` is ``"decimals"`` (every cell with ``value`` decimals, or whole numbers with
+    ``value`` 0) or ``"digits"`` (``value`` significant digits: ``%g``, scientific notation,
+    Python's shortest ``repr``). ``unit`` is the finest print unit of the column in the
+    column's own units (``10**-decimals``; for digits, that of the smallest nonzero
+    reading); ``per_cell`` the print unit of every cell (the rounding of a cell is at most
+    half of it)."""
+
+    kind: str
+    value: int
+    unit: float
+    per_cell: np.ndarray
+
+    def scaled(self, factor: float) -> PrintPrecision:
+        """The same precision in units ``factor`` times the column's (a header unit)."""
+        return PrintPrecision(self.kind, self.value, self.unit * factor, self.per_cell * factor)
+
+    def describe(self, unit_name: str = "") -> str:
+        """``1e-08 rad`` or ``6 significant digits`` (for a message)."""
+        if self.kind == "digits":
+            return f"{self.value} significant digits"
+        return f"{self.unit:.3g}{(' ' + unit_name) if unit_name else ''}"
+
+
+def print_precision(cells) -> PrintPrecision | None:
+    """The printing precision of a column of numeric text cells, or ``None`` (cells that
+    are not text — a DataFrame's numbers — or not plain numbers).
+
+    Each cell's last written digit sits at ``10**(exponent − decimals)``. A column whose
+    every cell has the same number of decimals and no exponent is printed with fixed
+    decimals. Otherwise it is printed to significant digits ``S`` (the most any cell
+    shows, since ``%g`` and ``repr`` drop trailing zeros), and a cell whose leading digit
+    is at ``10**m`` is rounded to ``10**(m − S + 1)``, but never finer than the finest
+    digit any cell shows.
+    """
+    raw = np.asarray(cells, dtype=object)
+    if raw.size == 0 or not all(isinstance(c, str) for c in raw[: min(raw.size, 50)]):
+        return None
+    parts = pd.Series(raw, dtype=object).astype(str).str.extract(_NUMBER)
+    if parts["int"].isna().any():
+        return None
+    ints = parts["int"].fillna("").to_numpy(dtype=str)
+    decs = parts["dec"].fillna("").to_numpy(dtype=str)
+    has_exp = parts["exp"].notna().to_numpy()
+    exps = parts["exp"].fillna("0").astype(int).to_numpy()
+    n_dec = np.char.str_len(decs.astype(str))
+    last = exps - n_dec  # power of ten of the last written digit
+    finest = int(last.min())
+    if not has_exp.any() and np.all(n_dec == n_dec[0]):
+        unit = 10.0 ** (-int(n_dec[0]))
+        return PrintPrecision("decimals", int(n_dec[0]), unit, np.full(raw.size, unit))
+    digits = np.char.add(ints.astype(str), decs.astype(str))
+    stripped = np.char.lstrip(digits, "0")
+    n_sig = np.char.str_len(stripped)
+    # power of ten of the leading digit: the digits before the point, less the zeros
+    lead = exps + np.char.str_len(ints.astype(str)) - 1 - (np.char.str_len(digits) - n_sig)
+    sig = int(n_sig.max())
+    if sig == 0:  # every cell is zero
+        unit = 10.0**finest
+        return PrintPrecision("decimals", max(-finest, 0), unit, np.full(raw.size, unit))
+    per_cell = 10.0 ** np.maximum(np.where(n_sig > 0, lead - sig + 1, finest), finest)
+    nonzero = per_cell[n_sig > 0]
+    return PrintPrecision("digits", sig, float(nonzero.min()), per_cell.astype(float))
+
+
+# ------------------------------------------------------------------ the step
 
 
 #: Largest divisor of the smallest gap between reading levels tried as the step.
 MAX_STEP_DIVISOR = 64
+#: The log tells a grid when a wrong grid passes every level by chance less often than this.
+FALSE_GRID_CHANCE = 1e-6
+#: Smallest encoder step, in print units, reported as found (see the module notes).
+MIN_STEP_PER_PRINT_UNIT = 4.0
+#: Readings closer than this fraction of the largest |reading| are one level (floating
+#: point: values computed as ``offset + k*q`` in float64).
+MERGE_REL = 1e-9
 
 
-def estimate_resolution(theta: np.ndarray, *, rtol: float = 1e-6) -> float | None:
-    """Estimate the quantization step of a quantized signal.
+@dataclass(frozen=True)
+class StepFinding:
+    """What :func:`find_step` found: the step (``None`` when the log does not tell it), the
+    print unit it was found under (``None`` for unprinted numbers) and, without a step,
+    why (one clause for a report)."""
 
-    The distinct levels of `theta` are sorted; the step ``q`` is the largest divisor
-    ``g/k`` (``k`` = 1 … ``MAX_STEP_DIVISOR``) of the smallest gap ``g`` between adjacent
-    levels of which every gap is an integer multiple within ``rtol`` per step. Only differences of
-    values are used, so a constant offset (``offset + k*q``) does not matter.
-    The returned step is refined as (highest - lowest level) / (number of steps).
+    step: float | None
+    print_unit: float | None
+    note: str | None = None
+
+
+def _levels(x: np.ndarray, p: np.ndarray, merge: float) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct levels of one run and the tolerance of each (half its print unit, plus
+    the floating-point merge width)."""
+    order = np.argsort(x, kind="stable")
+    xs, ps = x[order], p[order]
+    new = np.concatenate(([True], np.diff(xs) > merge))
+    idx = np.flatnonzero(new)
+    levels = xs[idx]
+    tol = np.maximum.reduceat(ps, idx) / 2.0 + merge
+    return levels, tol
+
+
+def _place(d: np.ndarray, t: np.ndarray, qlo: float, qhi: float):
+    """Narrow ``[qlo, qhi]`` so that every difference ``d`` (> 0, tolerance ``t``) is within
+    ``t`` of a multiple of ``q``: a difference with one possible multiple fixes it and cuts
+    the interval; repeat until nothing changes. Returns ``(qlo, qhi, m)`` (``m = -1`` where
+    the multiple stays ambiguous — consistent with the interval but not placed) or
+    ``None`` when some difference fits no multiple."""
+    m = np.full(d.size, -1, dtype=np.int64)
+    for _ in range(200):
+        lo = np.ceil((d - t) / qhi - 1e-12)
+        hi = np.floor((d + t) / qlo + 1e-12)
+        lo = np.maximum(lo, 0.0)
+        if np.any(hi < lo):
+            return None
+        one = (hi == lo) & (lo >= 1)
+        m[one] = lo[one].astype(np.int64)
+        placed = m >= 1
+        if not placed.any():
+            return qlo, qhi, m
+        new_lo = max(qlo, float(np.max((d[placed] - t[placed]) / m[placed])))
+        new_hi = min(qhi, float(np.min((d[placed] + t[placed]) / m[placed])))
+        if new_lo > new_hi:
+            return None
+        if new_lo == qlo and new_hi == qhi:
+            return qlo, qhi, m
+        qlo, qhi = new_lo, new_hi
+    return qlo, qhi, m
+
+
+def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") -> StepFinding:
+    """The encoder step of a log's readings, from their levels and printing precision.
 
     Parameters
     ----------
     theta : numpy.ndarray
-        Signal samples (any shape; non-finite values are ignored).
-    rtol : float, default 1e-6
-        Tolerance on each gap, as a fraction of the step. The default accepts
-        values computed in floating point; raise it (e.g. to 1e-3) for values
-        printed with few decimals.
+        Readings (any offset per run; non-finite values are ignored).
+    print_unit : float or numpy.ndarray, optional
+        Print unit of every reading (or one for all) in the readings' units; ``None`` for
+        numbers that were never printed (a DataFrame): then only floating-point rounding
+        (:data:`MERGE_REL` of the largest reading) separates a level from the grid.
+    starts : sequence of int, optional
+        First sample of every run (each run may have its own offset); one run by default.
+    unit_name : str
+        Unit of the readings, for the notes.
+
+    Returns
+    -------
+    StepFinding
+        The largest step ``q`` such that, within every run, every printed level lies
+        within its print unit (half of it on each of two readings) of a multiple of ``q``
+        from the run's middle level — or no step and the reason.
+    """
+    x = np.asarray(theta, dtype=np.float64).ravel()
+    p = (np.zeros_like(x) if print_unit is None
+         else np.broadcast_to(np.asarray(print_unit, dtype=np.float64), x.shape).copy())
+    starts = np.array([0] if starts is None or len(starts) == 0 else starts, dtype=np.int64)
+    bounds = list(zip(starts, np.append(starts[1:], x.size)))
+    ok = np.isfinite(x)
+    if ok.sum() < 2:
+        return StepFinding(None, None, "too few readings to find a grid")
+    merge = MERGE_REL * max(float(np.max(np.abs(x[ok]))), np.finfo(float).tiny)
+    unit = float(np.max(p[ok])) if print_unit is not None else None
+    d_all, t_all, gaps = [], [], []
+    n_levels = 0
+    for a, b in bounds:
+        keep = ok[a:b]
+        if keep.sum() == 0:
+            continue
+        lv, tl = _levels(x[a:b][keep], p[a:b][keep], merge)
+        n_levels += lv.size
+        if lv.size < 2:
+            continue
+        g = np.diff(lv)
+        gaps.append((g, tl[1:] + tl[:-1]))
+        ref = lv.size // 2  # the middle level keeps the multiples small
+        others = np.arange(lv.size) != ref
+        d_all.append(np.abs(lv[others] - lv[ref]))
+        t_all.append(tl[others] + tl[ref])
+    if not gaps or (n_levels <= 2 and ok.sum() < 3):
+        return StepFinding(None, unit, "fewer than two reading levels: no grid to find")
+    d, t = np.concatenate(d_all), np.concatenate(t_all)
+    g = np.concatenate([gg for gg, _ in gaps])
+    gt = np.concatenate([tt for _, tt in gaps])
+    i0 = int(np.argmin(g))
+    g0, t0 = float(g[i0]), float(gt[i0])
+    coarse = False
+    for k in range(1, MAX_STEP_DIVISOR + 1):
+        qlo, qhi = max((g0 - t0) / k, 0.0), (g0 + t0) / k
+        if qhi < MIN_STEP_PER_PRINT_UNIT * float(np.median(t)) or qlo <= 0.0:
+            coarse = True  # finer grids only get closer to the print unit
+            break
+        placed = _place(d, t, qlo, qhi)
+        if placed is None:
+            continue
+        qlo, qhi, m = placed
+        used = m >= 1
+        q = float(np.sum(m[used] * d[used]) / np.sum(m[used] ** 2.0)) if used.any() else g0 / k
+        q = min(max(q, qlo), qhi)
+        if unit is not None and unit > 0 and q < MIN_STEP_PER_PRINT_UNIT * unit:
+            coarse = True
+            break
+        # chance that a wrong grid places every level: Π 2t/q over the placed levels,
+        # times the grids tried (divisors k, and the interval's width in steps of the
+        # largest multiple's precision)
+        per = np.minimum(2.0 * t[used] / q, 1.0)
+        log_chance = float(np.sum(np.log10(per))) if per.size else 0.0
+        trials = MAX_STEP_DIVISOR * max(float(m.max()), 1.0)
+        if log_chance + math.log10(trials) < math.log10(FALSE_GRID_CHANCE):
+            return StepFinding(q, unit, None)
+        return StepFinding(
+            None, unit,
+            f"the readings' {n_levels} levels fit a grid of {q:.4g} {unit_name} but do not "
+            "tell it from chance" + (f" at a print unit of {unit:.3g} {unit_name}"
+                                     if unit else ""),
+        )
+    if coarse and unit:
+        return StepFinding(
+            None, unit,
+            f"the closest reading levels are {g0:.3g} {unit_name} apart, within "
+            f"{MIN_STEP_PER_PRINT_UNIT:g} print units ({unit:.3g} {unit_name}): no encoder "
+            "grid can be told from the printing",
+        )
+    return StepFinding(None, unit, "the readings lie on no grid")
+
+
+def estimate_resolution(theta: np.ndarray, *, print_unit=None, starts=None) -> float | None:
+    """Estimate the quantization step of a quantized signal (:func:`find_step`'s step).
+
+    The distinct levels of `theta` are sorted; the step ``q`` is the largest divisor
+    ``g/k`` (``k`` = 1 … ``MAX_STEP_DIVISOR``) of the smallest gap ``g`` between adjacent
+    levels of which every level is a multiple, within the printing precision (or
+    floating-point rounding for numbers never printed). Only differences of values within
+    a run are used, so an offset (``offset + k*q``) does not matter.
 
     Returns
     -------
     float or None
-        The step, or ``None`` when the signal does not look quantized (gaps not
-        commensurate, fewer than two distinct levels, or two levels from only
-        two samples).
+        The step, or ``None`` when the signal does not tell a grid (gaps not
+        commensurate, fewer than two distinct levels, or printed too coarsely).
 
     Examples
     --------
@@ -45,27 +285,54 @@ def estimate_resolution(theta: np.ndarray, *, rtol: float = 1e-6) -> float | Non
     >>> round(estimate_resolution(0.3 + q * np.array([0, 1, 1, 3, 2, 7])) / q, 9)
     1.0
     """
-    x = np.asarray(theta, dtype=np.float64).ravel()
-    x = x[np.isfinite(x)]
-    if x.size < 2:
+    return find_step(theta, print_unit, starts).step
+
+
+def column_print_units(cells, scale: float = 1.0, counts_per_rev: float | None = None):
+    """Print unit of every cell of a column, in hdid's units (``scale``: the header
+    unit's factor; raw counts with ``counts_per_rev`` are converted like the readings),
+    or ``None`` for numbers that were never text."""
+    found = print_precision(cells)
+    if found is None:
         return None
-    values = np.unique(x)
-    # Merge levels that differ only by floating-point rounding.
-    merge_below = 1e-9 * max(float(np.max(np.abs(values))), np.finfo(float).tiny)
-    gaps = np.diff(values)
-    levels = values[np.concatenate(([True], gaps > merge_below))]
-    if levels.size < 2 or (levels.size == 2 and x.size < 3):
+    factor = scale * (2.0 * math.pi / counts_per_rev if counts_per_rev else 1.0)
+    return found.per_cell * factor
+
+
+def step_against_readings(theta, lengths, step: float, rms: float,
+                          floor_factor: float) -> str | None:
+    """A warning when a fit's residual is far above the floor of ``step`` but within the
+    floor of the spacing the readings actually show — the step, not the model, is wrong.
+
+    ``theta``: readings per run ``(R, T)`` (padded), ``lengths`` their counts; ``rms`` the
+    fit's RMS residual. The readings' level spacing ``g`` is the smallest gap between two
+    distinct levels of one run. Where ``g`` is at least 4 steps (the log never shows two
+    readings closer than that; an encoder's creep to rest and flicker show adjacent
+    counts), and the residual is within ``floor_factor`` of ``g/√12`` (a fit that tracks
+    every run to the readings' own grid), the residual says the step is wrong. ``None``
+    otherwise (the residual is the model's, or the step is plausible).
+    """
+    floor = step / math.sqrt(12.0)
+    if not (math.isfinite(rms) and step > 0 and rms > floor_factor * floor):
         return None
-    gaps = np.diff(levels)
-    # The step is the greatest common divisor of the gaps: the smallest gap divided by
-    # 1, 2, … (a short 250 Hz run may show levels 4, 13 and 25 counts apart but never two
-    # adjacent counts). Readings on no grid fail every divisor: with many gaps the chance
-    # that all lie within rtol of integers is nil.
-    g0 = float(gaps.min())
-    for k in range(1, MAX_STEP_DIVISOR + 1):
-        q0 = g0 / k
-        steps = np.rint(gaps / q0)
-        if np.all(np.abs(gaps / q0 - steps) <= rtol * np.maximum(steps, 1.0)):
-            q = float((levels[-1] - levels[0]) / steps.sum())
-            return q if q > 0 and math.isfinite(q) else None
-    return None
+    theta = np.atleast_2d(np.asarray(theta, dtype=float))
+    gaps = []
+    for row, n in zip(theta, np.asarray(lengths, dtype=int)):
+        lv = np.unique(row[:n][np.isfinite(row[:n])])
+        g = np.diff(lv)
+        g = g[g > MERGE_REL * max(float(np.max(np.abs(lv))) if lv.size else 0.0, 1e-300)]
+        if g.size:
+            gaps.append(float(g.min()))
+    if not gaps:
+        return None
+    g = min(gaps)
+    if g < 4.0 * step or rms > floor_factor * g / math.sqrt(12.0):
+        return None
+    return (
+        f"the RMS residual is {rms / floor:.3g}× the quantization floor of the encoder step "
+        f"{step:.3g} rad, but the readings are never closer than {g:.4g} rad "
+        f"({g / step:.3g} steps) and the fit tracks them to {rms / (g / math.sqrt(12.0)):.2f}× "
+        f"that spacing's floor: the step looks wrong, not the model — pass the encoder's "
+        f"step (--resolution {g:.4g} if that spacing is it) and refit; until then the "
+        "standard errors, which assume the step's noise, are too small"
+    )
