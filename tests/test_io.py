@@ -459,25 +459,45 @@ def test_time_restart_without_run_column_suggests_run(tmp_path):
     assert "'run'" in str(err)
 
 
-def test_uneven_sampling(tmp_path):
+def test_uneven_sampling_is_data(tmp_path):
+    """A jittered step (1.5 periods) is data: the run is kept whole, the period is the
+    median step, and nothing is noted."""
     lines = log_lines()
     t = float(lines[25].split(",")[2])
     path = write_lines(tmp_path / "gap.csv", set_cell(lines, 26, "time", repr(t + 0.5 * DT)))
-    err = error_of(path)
-    assert_error(err, path, column="time", row=26)
-    msg = str(err)
-    assert "0.006" in msg and "0.004" in msg and "resample" in msg
-    # a looser tolerance accepts it
-    assert read_log(path, period_tolerance=0.6).n_samples == 80
+    log = read_log(path)
+    assert [r.n_samples for r in log.runs] == [40, 40] and log.notes == ()
+    assert log.sample_period == pytest.approx(DT, rel=1e-12)
+    assert log.runs[0].time[24] == pytest.approx(t + 0.5 * DT)
 
 
-def test_runs_with_different_rates(tmp_path):
+def test_break_in_time_splits_the_run(tmp_path):
+    """A step of 6 periods (over BREAK_PERIODS = 5) is a break: run 'a' becomes 'a' and
+    'a.2', each with its own first row, and a note names the split."""
+    lines = log_lines()
+    for row in range(22, 42):  # rows 22.. of run 'a' come 5 periods later (a 6-period step)
+        t = float(lines[row - 1].split(",")[2])
+        lines = set_cell(lines, row, "time", repr(t + 5 * DT))
+    path = write_lines(tmp_path / "break.csv", lines)
+    log = read_log(path)
+    assert [r.name for r in log.runs] == ["a", "a.2", "b"]
+    assert [r.n_samples for r in log.runs] == [20, 20, 40]
+    assert log.runs[1].first_row == 22
+    assert len(log.notes) == 1 and "'a'" in log.notes[0] and "'a.2'" in log.notes[0]
+    assert "split" in log.notes[0]
+    # a piece shorter than min_samples_per_run is dropped, and the note says so
+    log = read_log(path, min_samples_per_run=21)
+    assert [r.name for r in log.runs] == ["b"] and "dropped" in log.notes[0]
+
+
+def test_runs_with_different_rates_are_data(tmp_path):
     runs = (("a", "s", 0.0), ("b", "s", 0.0), ("c", "s", 0.0))
     lines = log_lines(runs, periods={"b": 0.005})
     path = write_lines(tmp_path / "rates.csv", lines)
-    err = error_of(path)
-    assert_error(err, path, column="time", row=42)
-    assert "'b'" in str(err) and "0.005" in str(err) and "rate" in str(err)
+    log = read_log(path)
+    assert [r.n_samples for r in log.runs] == [40, 40, 40] and log.notes == ()
+    assert log.sample_period == pytest.approx(DT, rel=1e-12)  # the median step
+    np.testing.assert_allclose(np.diff(log.runs[1].time), 0.005, rtol=1e-9)
 
 
 def test_non_contiguous_run(tmp_path):
@@ -507,24 +527,38 @@ def test_added_inertia_varies_within_run(tmp_path):
     assert "constant" in str(err)
 
 
-def test_run_without_motion(tmp_path):
+def test_run_without_motion_is_kept(tmp_path):
     lines = log_lines((("a", "s", 0.0), ("still", "s", 0.0)))
     for row in range(42, 82):  # run 'still' jitters by one encoder step only
         lines = set_cell(lines, row, "theta", repr(0.1 + Q * (row % 2)))
     path = write_lines(tmp_path / "still.csv", lines)
+    log = read_log(path)
+    assert [r.name for r in log.runs] == ["a", "still"]
+    assert len(log.notes) == 1 and "'still'" in log.notes[0] and "never move" in log.notes[0]
+
+
+def test_log_without_motion(tmp_path):
+    lines = log_lines((("a", "s", 0.0), ("still", "s", 0.0)))
+    for row in range(2, 82):  # every run jitters by one encoder step only
+        lines = set_cell(lines, row, "theta", repr(0.1 + Q * (row % 2)))
+    path = write_lines(tmp_path / "still.csv", lines)
     err = error_of(path)
-    assert_error(err, path, column="theta", row=42)
-    assert "'still'" in str(err) and "no motion" in str(err)
+    assert_error(err, path, column="theta", row=2)
+    assert "no run shows motion" in str(err)
 
 
-def test_run_without_motion_unquantized(tmp_path):
+def test_log_without_motion_unquantized(tmp_path):
     lines = ["time,theta,run"]
-    lines += [f"{i * DT!r},{0.1 * math.sin(i / 7.3)!r},a" for i in range(30)]
+    lines += [f"{i * DT!r},0.1,a" for i in range(30)]
     lines += [f"{i * DT!r},0.25,b" for i in range(30)]
     path = write_lines(tmp_path / "flat.csv", lines)
     err = error_of(path)
-    assert_error(err, path, column="theta", row=32)
-    assert "'b'" in str(err) and "no motion" in str(err) and "1e-09 rad" in str(err)
+    assert_error(err, path, column="theta", row=2)
+    assert "no run shows motion" in str(err) and "1e-09 rad" in str(err)
+    # one moving run makes the still one data
+    lines[1:31] = [f"{i * DT!r},{0.1 * math.sin(i / 7.3)!r},a" for i in range(30)]
+    log = read_log(write_lines(tmp_path / "flat2.csv", lines))
+    assert "'b'" in log.notes[0]
 
 
 def test_too_few_samples(tmp_path):

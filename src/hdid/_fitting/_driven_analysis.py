@@ -99,7 +99,7 @@ def analyse_driven(
     bad = np.array([math.isinf(stds[n]) for n in cov_names], dtype=bool)
     phys_cov[bad, :] = math.inf
     phys_cov[:, bad] = math.inf
-    warnings = []
+    warnings = list(getattr(data, "log_notes", ()))  # runs split at breaks in the time column
     if rms["wg_rad"] > 3 * rms["wg_floor_rad"]:
         warnings.append(
             f"the WG residual RMS is {rms['wg_rad'] / rms['wg_floor_rad']:.1f}× the "

@@ -63,7 +63,7 @@ def analyse(
     J, r = map(np.asarray, pre["jacobian"] if "jacobian" in pre else _jacobian(problem, u))
     P = problem.n_physical
     labels = unknown_labels(problem, prep)
-    warnings: list[str] = []
+    warnings: list[str] = list(getattr(prep, "log_notes", ()))  # split / still runs
 
     n_eff = prep.n_effective
     dof = n_eff - problem.n_unknowns
@@ -421,3 +421,5 @@ def _release_std(problem: Problem, u, std_u, i: int) -> float:
 
 def _pct(x: float) -> str:
     return f"{100 * (math.exp(x) - 1):.0f} %" if x < 3 else "orders of magnitude"
+    if hi == lo:  # a run released at its first sample (moving, or never moving): known
+        return 0.0

@@ -1,13 +1,15 @@
 """Reading, validating and writing encoder logs: free-motion and driven.
 
 A free-motion test twists the wave generator (the motor side of the harmonic
-drive) by about ±0.157 rad, releases it and logs its encoder at a constant rate
-(~250 Hz) while it springs back and sticks. A *log* is a CSV file with a header
-line and the columns
+drive) by about ±0.157 rad, releases it and logs its encoder (~250 Hz) while
+it springs back and sticks. A *log* is a CSV file with a header line and the
+columns
 
 ``time``
     Sample time [s]; strictly increasing within a run (it may restart at each
-    run).
+    run). The steps may vary (logger jitter, dropped samples): the model is
+    evaluated at the logged times. A step longer than 5 of the run's median steps
+    is a break: the run is split there and ``Log.notes`` says so.
 ``theta``
     Wave-generator angle [rad], or raw encoder counts when ``counts_per_rev`` is
     given (``counts`` is accepted as an alias in that case).

@@ -15,13 +15,15 @@ from ._names import (
     _THETA_OUT, _TIME,
 )
 from ._types import Log, Run
-from ._resolution import estimate_resolution
+from ._resolution import column_print_units, find_step
 from ._table import _Cells, _Table, _load_csv, _load_frame, _show
 from ._columns import (
     _check_args, _column_scales, _find_columns, _first, _missing_cells, _positive_arg,
     _to_radians,
 )
-from ._validate import check_lengths, check_motion, check_within_runs, run_blocks, sample_period
+from ._validate import (
+    check_lengths, check_motion, check_within_runs, run_blocks, sample_period, split_at_breaks,
+)
 
 
 def read_log(
@@ -47,8 +49,10 @@ def read_log(
         holds raw integer counts and is converted to radians with
         ``2*pi/counts_per_rev``, which is also the resolution.
     period_tolerance : float, default 0.02
-        Allowed relative deviation of every time step from the log's median
-        step.
+        Kept for compatibility; it no longer refuses a log. Jittered or gapped time
+        steps are data (the model is evaluated at the logged times); a run is split only
+        at a break, a step longer than ``BREAK_PERIODS`` (5) of its median step, and
+        the log's ``notes`` say so.
     min_samples_per_run : int, default 8
         Fewest samples a run may have (at least 2).
     output_counts_per_rev : float, optional
@@ -87,9 +91,12 @@ def read_log(
     file is reported); raw counts vs. ``counts_per_rev`` consistency;
     ``added_inertia >= 0``; runs are contiguous; ``setup`` and
     ``added_inertia`` are constant within a run; time strictly increases within
-    a run; each run has enough samples; the sampling is uniform and shared by
-    all runs; each run shows motion (at least 2 encoder steps, or 1e-9 rad when
-    the resolution is unknown). Fully blank lines are skipped.
+    a run; each run has enough samples; some run shows motion (at least 2 encoder
+    steps, or 1e-9 rad when the resolution is unknown: a run that never moves is
+    kept, a rest point inside the stick band, and named in ``Log.notes``). The
+    sample period is the median time step; the steps may vary (jitter, dropped
+    samples) and a run is split at a break (a step over 5 of its median steps),
+    named in ``Log.notes``. Fully blank lines are skipped.
 
     Driven logs (a ``motor_torque`` or ``motor_current`` column) are checked
     further: the torque / counts arguments match the columns; no run lacks the
@@ -204,16 +211,28 @@ def read_log(
     check_within_runs(setups, inertia, time, within, fail)
     lengths = ends - starts
     check_lengths(lengths, starts, names, min_samples_per_run, _RUN in cols, fail)
-    period = sample_period(time, within, starts, ends, names, period_tolerance, fail)
+    period = sample_period(time, within, fail)
+    starts, ends, names, notes = split_at_breaks(time, starts, ends, names, min_samples_per_run)
+    lengths = ends - starts
+    kept = np.concatenate([np.arange(a, b) for a, b in zip(starts, ends)])
+    # the step from the readings' levels, within their printing precision (per run: any
+    # offset); hdid._log._resolution
+    run_starts = np.concatenate(([0], np.cumsum(lengths)[:-1]))
+    printed = column_print_units(table.columns[cols[_THETA]], unit_scale[_THETA], cpr)
+    print_unit = None if printed is None else float(np.max(printed[kept]))
+    resolution_note = None
     if resolution is None:
-        offsets = np.repeat(theta[starts], lengths)
-        resolution = estimate_resolution(theta - offsets)
+        found = find_step(theta[kept], None if printed is None else printed[kept], run_starts)
+        resolution, resolution_note = found.step, found.note
         resolution_source = "estimated" if resolution is not None else None
     if theta_out is not None and output_resolution is None:
-        offsets = np.repeat(theta_out[starts], lengths)
-        output_resolution = estimate_resolution(theta_out - offsets)
+        printed_out = column_print_units(table.columns[cols[_THETA_OUT]],
+                                         unit_scale[_THETA_OUT], None)
+        output_resolution = find_step(
+            theta_out[kept], None if printed_out is None else printed_out[kept], run_starts
+        ).step
     if not driven:  # a driven run may stay stuck
-        check_motion(theta, starts, names, resolution, fail)
+        notes += check_motion(theta, starts, ends, names, resolution, fail)
 
     def part(values: np.ndarray | None, k: int) -> np.ndarray | None:
         return None if values is None else values[starts[k] : ends[k]]
@@ -242,6 +261,9 @@ def read_log(
         output_resolution=output_resolution,
         output_counts_per_rev=out_cpr,
         torque_constant=kt,
+        notes=tuple(notes),
+        print_unit=print_unit,
+        resolution_note=resolution_note,
     )
 
 

@@ -109,7 +109,7 @@ class Run:
 
 @dataclass(frozen=True)
 class Log:
-    """A validated log: one or more runs at a common sample rate.
+    """A validated log: one or more runs, sampled at the logged times.
 
     Parameters
     ----------
@@ -118,7 +118,8 @@ class Log:
     runs : tuple of Run
         The runs, in order of first appearance in the file.
     sample_period : float
-        Common sample period [s]: median of the time steps over all runs.
+        The log's sample period [s]: median of the time steps over all runs (a scale;
+        the steps themselves may vary, and the model is evaluated at the logged times).
     resolution : float or None
         Encoder step [rad]: ``2*pi/counts_per_rev`` when that was given, else
         estimated from the data by :func:`estimate_resolution`; ``None`` if the
@@ -136,6 +137,15 @@ class Log:
     resolution_source : str or None
         ``"given"`` (``resolution=`` or ``counts_per_rev``), ``"estimated"`` (from the
         readings' grid) or ``None`` (no resolution: readings on no grid).
+    notes : tuple of str
+        What reading did to the log that the report must say, one line each: runs split
+        at a break in their time column, runs that never move (kept as rest points).
+    print_unit : float or None
+        Printing precision of ``theta`` [rad]: the largest rounding unit of its cells as the
+        file prints them (``1e-4`` for four decimals); ``None`` for numbers never printed.
+    resolution_note : str or None
+        Why no encoder step was found in the readings (``resolution`` is ``None``), or
+        ``None``.
 
     Raises
     ------
@@ -152,9 +162,13 @@ class Log:
     output_counts_per_rev: float | None = None
     torque_constant: float | None = None
     resolution_source: str | None = None
+    notes: tuple[str, ...] = ()
+    print_unit: float | None = None
+    resolution_note: str | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "runs", tuple(self.runs))
+        object.__setattr__(self, "notes", tuple(str(n) for n in self.notes))
         kinds = {run.is_driven for run in self.runs}
         if len(kinds) > 1:
             free = next(run.name for run in self.runs if not run.is_driven)

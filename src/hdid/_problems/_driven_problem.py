@@ -39,7 +39,9 @@ class DrivenData:
     motor (WG) angle, ``theta_out`` the output angle (``None`` when the log has no
     output encoder), torques in N m. ``direction0`` is the output friction's sign at
     each window's start, from the data (used only when the window starts at rest).
-    Padding repeats the last time step with zero weight.
+    Padding repeats the last time step with zero weight. Times are the logged ones
+    (jittered or gapped steps included; the inputs are held or interpolated between
+    them); ``sample_period`` (the median step) only sets the window length in samples.
     """
 
     source: str
@@ -65,6 +67,8 @@ class DrivenData:
     #: Speed scale of the log (a power of ten near its 95th-percentile speed), in the
     #: log's units per second: the optimiser's unit for the fitted window velocities.
     omega_scale: float = OMEGA0_SCALE
+    #: The log's notes (:attr:`hdid.Log.notes`, e.g. runs split at a break in time).
+    log_notes: tuple[str, ...] = ()
 
     @property
     def n_runs(self) -> int:
@@ -109,6 +113,7 @@ class DrivenData:
                 b = starts[k + 1] if k + 1 < len(starts) else n
                 pieces.append((i, a, b))
         W = len(pieces)
+        speed_of_run = [_smooth_speed(r.theta, r.time) for r in runs]
         T = max(b - a for _, a, b in pieces)
         times = np.zeros((W, T))
         theta, tau_d, tau_l, out, w = (np.zeros((W, T)) for _ in range(5))
@@ -131,7 +136,7 @@ class DrivenData:
             # changes the 4000-count encoder within a 4 ms sample above 0.4 rad/s, and
             # Stribeck friction does not let it creep slower): its velocity is 0, not fitted.
             mov[j] = float(n > 1 and r.theta[a + 1] != r.theta[a])
-            om0[j] = _smooth_speed(r.theta, dt)[a] * mov[j]
+            om0[j] = speed_of_run[i][a] * mov[j]
             # The output friction's sign at the start: the direction of the encoder's
             # last change (the fit then takes it from the previous window's simulation).
             changed = np.nonzero(np.diff(r.theta[: a + 1]))[0]
@@ -139,8 +144,9 @@ class DrivenData:
             names.append(f"{r.name}@{t[0]:.3g}s")
         step, step_source = log.resolution, getattr(log, "resolution_source", None) or "given"
         if step is None:
-            step, step_source = _noise_step([r.theta for r in runs], dt), "estimated"
-        speeds = np.concatenate([np.abs(_smooth_speed(r.theta, dt)) for r in runs])
+            step = _noise_step([r.theta for r in runs], [r.time for r in runs])
+            step_source = "estimated"
+        speeds = np.concatenate([np.abs(v) for v in speed_of_run])
         omega_scale = order_of_magnitude(float(np.percentile(speeds, 95)) if speeds.size else 1.0)
         return cls(
             source=log.source, run_names=tuple(r.name for r in runs), times=times,
@@ -149,25 +155,27 @@ class DrivenData:
             output_step=getattr(log, "output_resolution", None), sample_period=dt,
             direction0=d0, omega0=om0, moving0=mov, run_of_window=np.array([p[0] for p in pieces]),
             step_source=step_source, omega_scale=omega_scale,
+            log_notes=tuple(getattr(log, "notes", ())),
             window_names=tuple(names),
             first_row=tuple(getattr(r, "first_row", 0) for r in runs),
         )
 
 
-def _noise_step(thetas, dt: float) -> float:
+def _noise_step(thetas, times) -> float:
     """An equivalent encoder step ``√12·σ`` for readings on no grid (interpolated or
-    analog): ``σ`` from the scatter about a 7-point cubic Savitzky–Golay fit, robustly
-    (median absolute deviation) and corrected for the fit's own share of the noise
-    (for white noise the residual variance is ``σ²·(1 − h₀)``, ``h₀`` the filter's
-    centre weight). A smooth trajectory sampled fast leaves almost nothing but noise
-    there, so this is an upper bound of the sensor's floor in the log's own units."""
-    from scipy.signal import savgol_coeffs, savgol_filter
+    analog): ``σ`` from the scatter about a 7-point local cubic (Savitzky–Golay at a
+    uniform period, least squares at the logged times otherwise), robustly (median
+    absolute deviation) and corrected for the fit's own share of the noise (for white
+    noise the residual variance is ``σ²·(1 − h₀)``, ``h₀`` the filter's centre weight).
+    A smooth trajectory sampled fast leaves almost nothing but noise there, so this is
+    an upper bound of the sensor's floor in the log's own units."""
+    from scipy.signal import savgol_coeffs
 
     res = []
-    for th in thetas:
+    for th, t in zip(thetas, times):
         th = np.asarray(th, dtype=float)
         if th.size >= 7:
-            res.append(th - savgol_filter(th, 7, 3))
+            res.append(th - local_cubic(np.asarray(t, dtype=float), th, 7)[0])
     if not res:
         return 1.0
     r = np.concatenate(res)
@@ -179,14 +187,36 @@ def _noise_step(thetas, dt: float) -> float:
     return sigma * math.sqrt(12.0)
 
 
-def _smooth_speed(theta: np.ndarray, dt: float) -> np.ndarray:
-    """Savitzky–Golay speed of a logged angle — for starting values and signs only."""
-    from scipy.signal import savgol_filter
-
+def _smooth_speed(theta: np.ndarray, time: np.ndarray) -> np.ndarray:
+    """Local-cubic speed of a logged angle at the logged times — for starting values and
+    signs only."""
     w = min(7, theta.size - (1 - theta.size % 2))
     if w < 5:
         return np.zeros_like(theta)
-    return savgol_filter(theta, w, 3, deriv=1, delta=dt)
+    return local_cubic(np.asarray(time, dtype=float), np.asarray(theta, dtype=float), w)[1]
+
+
+def local_cubic(t: np.ndarray, y: np.ndarray, window: int) -> tuple[np.ndarray, np.ndarray]:
+    """Value and first derivative of a cubic fitted by least squares to ``window``
+    (odd) samples about each sample (the first and last windows serve the edges).
+
+    At a uniform period this is the Savitzky–Golay filter (``mode="interp"``), and that is
+    what runs; at jittered or gapped times the same fit is made at the logged times.
+    """
+    from scipy.signal import savgol_filter
+
+    steps = np.diff(t)
+    h = float(np.median(steps))
+    if np.all(np.abs(steps - h) <= 1e-6 * h):
+        return (savgol_filter(y, window, 3),
+                savgol_filter(y, window, 3, deriv=1, delta=h))
+    n, half = y.size, window // 2
+    centre = np.clip(np.arange(n), half, n - 1 - half)
+    idx = centre[:, None] + np.arange(-half, half + 1)[None, :]
+    x = (t[idx] - t[:, None]) / h  # about each sample, in periods
+    V = x[..., None] ** np.arange(4)  # (n, window, 4)
+    coef = np.einsum("nkw,nw->nk", np.linalg.pinv(V), y[idx])
+    return coef[:, 0], coef[:, 1] / h
 
 
 class DrivenProblem(AbstractProblem):

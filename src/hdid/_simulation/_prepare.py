@@ -64,7 +64,20 @@ class Prepared:
         Largest speed the log shows [units/s] (chord between samples).
     omega_guess:
         Initial velocity of each run that starts moving (one-sided three-point
-        difference at its first sample; 0 for held runs): the start of its fit.
+        difference at its first sample, at the logged times; 0 for held runs): the
+        start of its fit.
+    still:
+        Runs that never move (a release inside the stick band): kept as data, "released"
+        at their first sample from their reading, where a model whose stick band holds
+        them stays stuck (residual zero) and one whose band is narrower slides off. Their
+        reading is a rest point, and it bounds the band from below.
+    log_notes:
+        The log's own notes (:attr:`hdid.Log.notes`: runs split at a break, runs that
+        never move), for the report's warnings.
+
+    Times are the logged ones: the steps may vary (jitter, dropped samples), and every
+    estimate here (speeds, the initial velocity, the still tail's duration) uses them;
+    ``sample_period`` (the median step) is only a scale.
     """
 
     source: str
@@ -91,6 +104,12 @@ class Prepared:
     frequency_hz: float = float("nan")
     speed: float = float("nan")
     omega_guess: np.ndarray = None
+    #: printing precision of the readings [log units] and why no step was found in them
+    #: (:attr:`hdid.Log.print_unit`, :attr:`hdid.Log.resolution_note`)
+    print_unit: float | None = None
+    resolution_note: str | None = None
+    still: np.ndarray = None
+    log_notes: tuple[str, ...] = ()
 
     @property
     def n_runs(self) -> int:
@@ -113,7 +132,8 @@ class Prepared:
     def direction(self) -> np.ndarray:
         """Initial direction of motion of each run (+1 / −1)."""
         moved = self.theta[np.arange(self.n_runs), self.first_moved]
-        return np.sign(moved - self.hold)
+        d = np.sign(moved - self.hold)
+        return d if self.still is None else np.where(self.still, 0.0, d)
 
 
 def noise_sigma(runs, step: float | None, still_only: bool = False) -> float:
@@ -221,6 +241,7 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
     guess = np.zeros(R)
     first_moved = np.zeros(R, dtype=int)
     moving = np.zeros(R, dtype=bool)
+    still_run = np.zeros(R, dtype=bool)
     omega_guess = np.zeros(R)
     ends_moving = np.zeros(R, dtype=bool)
     k0s = np.zeros(R, dtype=int)
@@ -245,42 +266,45 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
             away = np.abs(th - h) > thr
             # A release moves the gear away for good; a noise spike lasts one sample.
             moved = np.flatnonzero(away & np.append(away[1:], away[-1:]))
-            if moved.size == 0:
-                raise LogError(
-                    f"run {run.name!r} never moves more than "
-                    + (f"{thr / step:.3g} encoder steps" if quantized else f"{thr:.3g} (5 noise σ)")
-                    + " from its first reading; check that it contains the release or drop "
-                    "the run",
-                    path=log.source,
-                    row=run.first_row,
-                )
-            j = int(moved[0])
-            at_hold = np.flatnonzero(np.abs(th[:j] - h) <= (1.0 * step + 3.0 * noise if quantized
-                                                            else max(5.0 * sigma, 3.0 * noise)))
-            k0 = int(at_hold[-1]) if at_hold.size else 0
-            hold[i] = np.median(th[: k0 + 1])
+            if moved.size == 0:  # never moves: a rest point, held from its first sample
+                still_run[i] = True
+                k0 = n - 1
+                hold[i] = np.median(th)
+            else:
+                j = int(moved[0])
+                at_hold = np.flatnonzero(np.abs(th[:j] - h) <= (
+                    1.0 * step + 3.0 * noise if quantized else max(5.0 * sigma, 3.0 * noise)))
+                k0 = int(at_hold[-1]) if at_hold.size else 0
+                hold[i] = np.median(th[: k0 + 1])
         else:
             k0 = 0
             moving[i] = True
             hold[i] = th[0]
-            omega_guess[i] = ((-3.0 * th[0] + 4.0 * th[1] - th[2]) / (2.0 * dt) if n >= 3
-                              else (th[1] - th[0]) / dt)
+            omega_guess[i] = _first_slope(t, th)
         k0s[i] = k0
-        first_moved[i] = k0 + 1
+        first_moved[i] = min(k0 + 1, n - 1)
         # Rest: the final reading; the tail is the trailing stretch within the flicker of it.
         rest[i] = np.median(th[max(n - max(n // 10, 1), 0):]) if quantized else float(
             np.median(th[max(n - 5, 0):]))
         off = np.flatnonzero(np.abs(th - th[-1]) > still)
         tail_start = int(off[-1]) + 1 if off.size else n
-        tails[i] = (n - tail_start) * dt
+        # how long the reading has stayed put at the end, from the last sample that moved
+        # ((n − tail_start)·dt at a uniform period; the logged span in general)
+        tails[i] = float(t[-1] - t[off[-1]]) if off.size else 0.0
+        if still_run[i]:
+            tails[i] = float(t[-1] - t[0]) + dt
         w = np.ones(n)
-        if quantized:
+        if quantized and still_run[i]:  # one reading, one observation
+            w[:] = 1.0 / math.sqrt(n)
+        elif quantized:
             w[: k0 + 1] = 1.0 / math.sqrt(k0 + 1)
             free_tail = min(tail_start + FULL_WEIGHT_TAIL, n)
             n_tail = n - free_tail
             if n_tail > 0:
                 w[free_tail:] = 1.0 / math.sqrt(n_tail)
         weight[i, :n] = w
+        if still_run[i]:
+            continue
         # Half periods from the turning points of the moving part.
         seg = slice(k0, max(tail_start, k0 + 2))
         tp = turning_points(th[seg], max(2.0 * still, 1e-300))
@@ -304,11 +328,16 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
     # log ends before the motion does (a ring-down cut short).
     ends_moving = tails < max(3.0 * dt, 0.5 / frequency)
     rest = np.where(ends_moving, [r.theta[-1] for r in runs], rest)
+    if still_run.all():
+        raise LogError(
+            f"{log.source}: no run moves more than its readings' flicker from its first "
+            "reading — nothing to fit; check that the drive was twisted and released"
+        )
     for i, run in enumerate(runs):
         t = run.time
         n = len(t)
         k0 = k0s[i]
-        if moving[i]:
+        if moving[i] or still_run[i]:
             lo[i] = hi[i] = guess[i] = t[0]
         elif release_time is not None:
             lo[i] = hi[i] = guess[i] = release_time
@@ -316,7 +345,7 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
             lo[i] = t[k0] - silent
             hi[i] = t[min(k0 + 1, n - 1)]
             guess[i] = 0.5 * (t[k0] + t[min(k0 + 1, n - 1)])
-    speeds = [np.max(np.abs(np.diff(r.theta))) / dt for r in runs if len(r.theta) > 1]
+    speeds = [np.max(np.abs(np.diff(r.theta)) / np.diff(r.time)) for r in runs if len(r.theta) > 1]
     return Prepared(
         source=log.source,
         run_names=tuple(r.name for r in runs),
@@ -342,7 +371,22 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
         frequency_hz=float(frequency),
         speed=float(max(speeds)) if speeds else float("nan"),
         omega_guess=omega_guess,
+        print_unit=getattr(log, "print_unit", None),
+        resolution_note=getattr(log, "resolution_note", None),
+        still=still_run,
+        log_notes=tuple(getattr(log, "notes", ())),
     )
+
+
+def _first_slope(t: np.ndarray, th: np.ndarray) -> float:
+    """Slope at the first sample [units/s]: the derivative at ``t[0]`` of the parabola
+    through the first three samples at their logged times (the one-sided three-point
+    difference ``(−3θ₀ + 4θ₁ − θ₂)/2h`` when the steps are equal); a chord for two."""
+    if len(th) < 3:
+        return float((th[1] - th[0]) / (t[1] - t[0]))
+    h1, h2 = t[1] - t[0], t[2] - t[1]
+    return float(-(2 * h1 + h2) / (h1 * (h1 + h2)) * th[0] + (h1 + h2) / (h1 * h2) * th[1]
+                 - h1 / (h2 * (h1 + h2)) * th[2])
 
 
 def offset_guess(prep: Prepared) -> np.ndarray:
