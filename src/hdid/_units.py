@@ -75,3 +75,60 @@ def known(key: str) -> str:
         return "none (remove the unit from the header)"
     shown = [u for u in table if u.isascii() and u not in ("1", "-")]
     return ", ".join(shown)
+
+
+# ------------------------------------------------------------ plausible units
+
+#: Slowest sample rate [Hz] of a plausible encoder log of a swing: below it, time is
+#: probably in ms (or µs) read as seconds.
+MIN_SAMPLE_RATE_HZ = 5.0
+#: Largest swing at a gear's output [rad] plausible for a spring test of a strain-wave
+#: gear (it twists ~1e-3 rad at rated torque; a test reaches a few times that, so 0.05
+#: rad is an order of magnitude of headroom).
+MAX_GEAR_OUTPUT_SWING = 0.05
+
+
+def implausible_units(*, sample_period: float, swing: float, ratio: float,
+                      band_halfwidth: float, step: float | None, geared_spring: bool) -> str | None:
+    """One line naming the unit a log's numbers are implausible in, with the fix, or None.
+
+    ``sample_period`` [s as declared], ``swing`` the largest |start − rest| of a run at
+    the logged axis and ``band_halfwidth`` the fitted stick band's half-width [rad as
+    declared], ``ratio`` the gear ratio, ``step`` the encoder step, ``geared_spring``
+    whether the model is a gear's stiffness without gravity (where the output twists
+    little). A log whose numbers are consistent but scaled (ms read as s, degrees read as
+    rad) fits as well as the right one: only the absolute sizes tell.
+    """
+    fs = 1.0 / sample_period if sample_period > 0 else math.inf
+    if fs < MIN_SAMPLE_RATE_HZ:
+        for unit, f in (("ms", 1e3), ("us", 1e6)):
+            if fs * f >= MIN_SAMPLE_RATE_HZ:
+                break
+        return (
+            f"units: the sample rate is {fs:.3g} Hz if time is in seconds — implausibly "
+            f"slow; if time is in {unit}, write the header `time [{unit}]` (or convert "
+            "time to seconds)"
+        )
+    output_swing = swing / ratio if ratio > 0 else swing
+    too_wide = (geared_spring and ratio > 1 and output_swing > MAX_GEAR_OUTPUT_SWING
+                or swing > math.pi or band_halfwidth > math.pi)
+    if not too_wide:
+        return None
+    what = (f"the swing is {swing:.3g} rad at the logged axis ({output_swing:.3g} rad at "
+            f"the output, ratio {ratio:g})" if swing > 0 else "")
+    if band_halfwidth > math.pi or not what:
+        what = f"the stick band's half-width is {band_halfwidth:.3g} rad"
+    if step is not None and abs(step - round(step)) < 1e-6 * max(step, 1.0) and step >= 1:
+        fix = "theta holds raw counts: pass --counts-per-rev N"
+    else:
+        deg = math.pi / 180.0
+        plausible = (lambda s: (s / ratio if geared_spring and ratio > 1 else 0.0)
+                     <= MAX_GEAR_OUTPUT_SWING and s <= math.pi)
+        if plausible(swing * deg):
+            fix = "if theta is in degrees, write the header `theta [deg]`"
+        elif plausible(swing * 1e-3):
+            fix = "if theta is in mrad, write the header `theta [mrad]`"
+        else:
+            fix = "if theta holds raw counts, pass --counts-per-rev N"
+        fix += " (or check --ratio)"
+    return f"units: {what} — implausible if theta is in radians; {fix}"

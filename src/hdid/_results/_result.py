@@ -56,6 +56,10 @@ class FitResult:
     #: "given", "estimated" (an encoder grid found in the readings) or "noise" (readings
     #: on no grid: ``resolution_rad`` is ``σ·√12`` of the noise estimated from the log)
     resolution_source: str = "estimated"
+    #: printing precision of the readings [rad] (``None``: numbers never printed) and why
+    #: no encoder step was found in them (:attr:`hdid.Log.print_unit`, ``resolution_note``)
+    print_unit: float | None = None
+    resolution_note: str | None = None
 
     # -- accessors --------------------------------------------------------------------
     @property
@@ -65,6 +69,24 @@ class FitResult:
     @property
     def stick_band_halfwidth_rad(self) -> float:
         return self.derived["stick_band_halfwidth_rad"][0]
+
+    @property
+    def units_problem(self) -> str | None:
+        """One line when the log's numbers are implausible for their declared units (time
+        in s, angles in rad), with the fix (``time [ms]``, ``theta [deg]``,
+        ``--counts-per-rev``); ``None`` when they are plausible
+        (:func:`hdid._units.implausible_units`)."""
+        from .._units import implausible_units
+
+        swing = max((abs(r.theta0 - r.rest_logged) for r in self.runs), default=0.0)
+        band = self.derived.get("stick_band_halfwidth_rad", (0.0, 0.0))[0]
+        effects = {e.name for e in self.model.effects}
+        return implausible_units(
+            sample_period=self.sample_period, swing=swing, ratio=float(self.model.ratio),
+            band_halfwidth=band if math.isfinite(band) else 0.0,
+            step=self.resolution_rad if self.resolution_source != "noise" else None,
+            geared_spring="k1" in self.parameters and "gravity" not in effects,
+        )
 
     @property
     def quantization_floor_rad(self) -> float:
@@ -109,6 +131,7 @@ class FitResult:
         """Strict-JSON summary (the ``hdid fit --json`` schema): plain Python numbers, a
         NaN or infinite value (an undetermined std) as ``None``."""
         return finite({
+            "units_problem": self.units_problem,
             "source": self.source,
             "parameters": {n: p.to_dict() for n, p in self.parameters.items()},
             "nuisance": {
@@ -126,6 +149,8 @@ class FitResult:
                                     if self.resolution_source != "noise" else None),
             "resolution": self.resolution_rad,
             "resolution_source": self.resolution_source,
+            "print_unit": self.print_unit,
+            "resolution_note": self.resolution_note,
             "quantization_floor_rad": self.quantization_floor_rad,
             "stick_band_halfwidth_rad": self.stick_band_halfwidth_rad,
             "stick_band_halfwidth_std_rad": self.derived["stick_band_halfwidth_rad"][1],
@@ -144,7 +169,9 @@ class FitResult:
 
     def report(self) -> str:
         """A readable text report."""
-        lines = [f"hdid fit: {self.source}", ""]
+        problem = self.units_problem
+        lines = ([problem.upper()[:6] + problem[6:]] if problem else []) + [
+            f"hdid fit: {self.source}", ""]
         lines.append(f"{'parameter':<10} {'value':>12} {'std':>11} {'rel':>7}  unit")
         for p in self.parameters.values():
             if p.fixed:
@@ -171,19 +198,24 @@ class FitResult:
         floor = self.quantization_floor_rad
         if self.resolution_source == "noise":
             fit_sigma = floor * self.noise_scale if math.isfinite(self.noise_scale) else floor
+            why = f" ({self.resolution_note})" if self.resolution_note else ""
             lines.append(
                 f"RMS residual {self.rms_residual_rad:.3e} rad; the readings lie on no encoder "
-                f"grid, so the noise is estimated: σ ≈ {fit_sigma:.3e} rad from the fit's "
+                f"grid{why}, so the noise is estimated: σ ≈ {fit_sigma:.3e} rad from the fit's "
                 f"residuals ({floor:.3e} rad from the log alone); pass --resolution STEP if "
                 "you know the sensor's"
             )
         else:
             how = "given" if self.resolution_source == "given" else "found in the readings"
+            if self.print_unit and self.resolution_source == "estimated":
+                how += f" (printed to {self.print_unit:.3g} rad)"
+            lines.append(
+                f"encoder step {self.resolution_rad:.4g} rad {how}"
+            )
             lines.append(
                 f"RMS residual {self.rms_residual_rad:.3e} rad = "
                 f"{self.rms_residual_rad / self.resolution_rad:.3f} counts "
-                f"(quantization floor {floor:.3e} rad = 0.289 counts of the encoder step "
-                f"{self.resolution_rad:.4g} rad, {how})"
+                f"(quantization floor {floor:.3e} rad = 0.289 counts)"
             )
         lo = self.derived["stick_band_lower_rad"][0]
         hi = self.derived["stick_band_upper_rad"][0]
