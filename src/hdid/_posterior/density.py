@@ -66,6 +66,9 @@ SIGMA_BOUNDS = (0.05, 20.0)
 #: one of the box's floor (issue 17, ``post7``) — and samples ``k1``, ``k2``, ``tau_c``, ``c_v`` in value — the
 #: data fix ``k1·d + k2·d³`` and ``τ_c + c_v·v`` as straight lines, bananas in their logs;
 #: benchmarks/results/posterior_calibration.md, posterior_coordinates.md).
+#: Where the fit's RMS residual is beyond the noise bound in steps, σ_n is bounded by this
+#: many times the residual instead (a step that does not describe the readings' noise).
+NOISE_BOUND_OVER_RMS = 4.0
 #: Half-width of the start angle's flat prior around its least-squares value [encoder steps].
 START_ANGLE_HALF_WIDTH = 5.0
 
@@ -78,6 +81,8 @@ class LogPosterior(eqx.Module):
     temper: jax.Array
     sigma_bounds: tuple[float, float] = SIGMA_BOUNDS
     quant_var: float = 0.0
+    #: half-width of the start angles' flat prior [their unit, the encoder step]
+    start_half_width: float = START_ANGLE_HALF_WIDTH
     #: 1.0 at log-transformed parameters whose prior is flat in the value, not its log
     linear_prior: jax.Array | None = None
     #: 1.0 at log-transformed parameters *sampled* in their value relative to the
@@ -181,7 +186,7 @@ class LogPosterior(eqx.Module):
         # start angle: within a few encoder steps of its least-squares value (the hold
         # reads it to ±½ step; a slow start can sit a few steps off the reading)
         i = P + (R if p.release_free else 0)
-        outside |= jnp.any(jnp.abs(u[i : i + R] - self.centre[i : i + R]) > START_ANGLE_HALF_WIDTH)
+        outside |= jnp.any(jnp.abs(u[i : i + R] - self.centre[i : i + R]) > self.start_half_width)
         return jnp.where(outside, -jnp.inf, lp)
 
     def batch(self, X):
@@ -382,6 +387,23 @@ def posterior_density(fit, sigma_floor=None, linear_prior=None,
             f"tempered by the effective-sample-size factor {temper:.2f}"
         )
     bounds = (SIGMA_BOUNDS[0] if sigma_floor is None else float(sigma_floor), SIGMA_BOUNDS[1])
+    # The noise the fit's residual shows bounds σ_n from above, not the step alone: a step
+    # far finer than the readings' noise (a wrong --resolution, a grid read from a print
+    # unit) would put the residual outside the prior and every walker at zero density.
+    step = float(prob.step)
+    rms_steps = float(fit.rms_residual_rad) / step if step > 0 else math.inf
+    start_half_width = START_ANGLE_HALF_WIDTH
+    if math.isfinite(rms_steps) and NOISE_BOUND_OVER_RMS * rms_steps > bounds[1]:
+        bounds = (bounds[0], NOISE_BOUND_OVER_RMS * rms_steps)
+        if prob.theta0_scale is None:  # start angles in steps: read to the noise, not a step
+            start_half_width = START_ANGLE_HALF_WIDTH * max(rms_steps, 1.0)
+        warnings.append(
+            f"the fit's RMS residual {fit.rms_residual_rad:.3g} rad is {rms_steps:.3g} "
+            f"encoder steps of {step:.3g} rad, beyond the noise prior's {SIGMA_BOUNDS[1]:g} "
+            f"steps: σ_n is bounded by {NOISE_BOUND_OVER_RMS:g}× the residual instead (the "
+            "noise the log shows) — the step looks wrong for this log (pass --resolution "
+            "with the encoder's step) or the log is noisier than its encoder"
+        )
     u_fit = np.asarray(fit.u, dtype=float)
     specs = prob.base.parameter_specs()
     if linear_prior is None:
@@ -397,6 +419,7 @@ def posterior_density(fit, sigma_floor=None, linear_prior=None,
         lin = np.where(G[2] > 0, 0.0, lin)
     lp = LogPosterior(problem=prob, centre=jnp.asarray(u_fit), temper=jnp.asarray(temper),
                       sigma_bounds=bounds, quant_var=quant_var,
+                      start_half_width=float(start_half_width),
                       linear_prior=jnp.asarray(lin) if lin.any() else None,
                       sample_linear=jnp.asarray(samp) if samp.any() else None,
                       gauss_prior=None if G is None else jnp.asarray(G),
