@@ -80,3 +80,37 @@ def test_an_unknown_unit_is_a_one_line_error_naming_the_column(tmp_path):
     res = CliRunner().invoke(main, ["fit", str(p), "-q"])
     assert res.exit_code == 2
     assert "Traceback" not in res.output and "unknown unit 'furlong'" in res.output
+
+
+# ------------------------------------------------------------- implausible units
+
+
+def _problem(**kw):
+    from hdid._units import implausible_units
+
+    base = dict(sample_period=0.004, swing=0.157, ratio=100.0, band_halfwidth=0.047,
+                step=2 * math.pi / 4000, geared_spring=True)
+    return implausible_units(**{**base, **kw})
+
+
+def test_plausible_numbers_have_no_unit_problem():
+    assert _problem() is None
+    # a pendulum (gravity, no gear) swinging a radian, sampled at 100 Hz
+    assert _problem(sample_period=0.01, swing=1.0, ratio=1.0, band_halfwidth=0.03,
+                    geared_spring=False) is None
+
+
+@pytest.mark.parametrize("kw, fix", [
+    # a 250 Hz log with time in ms reads as 0.25 Hz; in µs as 2.5e-4 Hz
+    ({"sample_period": 4.0}, "`time [ms]`"),
+    ({"sample_period": 4000.0}, "`time [us]`"),
+    # the paper's ±0.157 rad in degrees: 9 "rad" at the input, 0.09 at the output
+    ({"swing": 9.0, "band_halfwidth": 2.1, "step": 0.09}, "`theta [deg]`"),
+    ({"swing": 157.0, "band_halfwidth": 47.0, "step": 1.571}, "`theta [mrad]`"),
+    # raw counts: a whole-number step
+    ({"swing": 100.0, "band_halfwidth": 30.0, "step": 1.0}, "--counts-per-rev"),
+])
+def test_implausible_units_name_the_fix(kw, fix):
+    problem = _problem(**kw)
+    assert problem is not None and problem.startswith("units:") and fix in problem
+    assert "\n" not in problem

@@ -124,11 +124,9 @@ def implausible_units(*, sample_period: float, swing: float, ratio: float,
         deg = math.pi / 180.0
         plausible = (lambda s: (s / ratio if geared_spring and ratio > 1 else 0.0)
                      <= MAX_GEAR_OUTPUT_SWING and s <= math.pi)
-        if plausible(swing * deg):
-            fix = "if theta is in degrees, write the header `theta [deg]`"
-        elif plausible(swing * 1e-3):
-            fix = "if theta is in mrad, write the header `theta [mrad]`"
-        else:
-            fix = "if theta holds raw counts, pass --counts-per-rev N"
+        fixes = [f"if theta is in {name}, write the header `theta [{unit}]`"
+                 for name, unit, f in (("degrees", "deg", deg), ("mrad", "mrad", 1e-3))
+                 if plausible(swing * f)]
+        fix = "; ".join(fixes or ["if theta holds raw counts, pass --counts-per-rev N"])
         fix += " (or check --ratio)"
     return f"units: {what} — implausible if theta is in radians; {fix}"
