@@ -158,7 +158,7 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
                 result, n_steps=steps, n_walkers=walkers, seed=seed, progress=not quiet,
                 method=sampler, prior=post_prior or None,
             )
-        except ValueError as exc:  # a --prior naming no free parameter, …
+        except (HdidError, ValueError) as exc:  # a --prior naming no free parameter, …
             msg = str(exc)
             raise _Fail(("--" + msg if msg.startswith("prior") else msg).replace("\n", " ")) from None
         summary.update(post.to_dict())
