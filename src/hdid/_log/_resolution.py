@@ -73,10 +73,20 @@ def print_precision(cells) -> PrintPrecision | None:
     is at ``10**m`` is rounded to ``10**(m − S + 1)``, but never finer than the finest
     digit any cell shows.
     """
-    raw = np.asarray(cells, dtype=object)
-    if raw.size == 0 or not all(isinstance(c, str) for c in raw[: min(raw.size, 50)]):
+    cells = np.asarray(cells, dtype=object)
+    if cells.size == 0 or not all(isinstance(c, str) for c in cells[: min(cells.size, 50)]):
         return None
-    parts = pd.Series(raw, dtype=object).astype(str).str.extract(_NUMBER)
+    # a log repeats its levels: parse each distinct text once
+    codes, raw = pd.factorize(pd.Series(cells, dtype=object).astype(str))
+    found = _precision_of(np.asarray(raw, dtype=object))
+    if found is None:
+        return None
+    return PrintPrecision(found.kind, found.value, found.unit, found.per_cell[codes])
+
+
+def _precision_of(raw: np.ndarray) -> PrintPrecision | None:
+    """:func:`print_precision` of distinct cells."""
+    parts = pd.Series(raw, dtype=object).str.extract(_NUMBER)
     if parts["int"].isna().any():
         return None
     ints = parts["int"].fillna("").to_numpy(dtype=str)
