@@ -244,3 +244,21 @@ def test_wrong_step_is_blamed_not_the_model(wrong_step_posterior):
     assert "the model does not describe this log" not in out
     # the posterior went on with the noise the log shows, and says so
     assert "σ_n is bounded by" in out
+
+
+def test_step_against_readings_rule():
+    from hdid._log._resolution import readings_spacing, step_against_readings
+
+    q = 2 * math.pi / 4000
+    rng = np.random.default_rng(1)
+    theta = np.cumsum(rng.integers(-1, 2, size=(2, 200)), axis=1) * q  # adjacent counts
+    lengths = [200, 150]
+    assert readings_spacing(theta, lengths) == pytest.approx(q)
+    # a residual of 0.25 q (a fit at the floor of q) against a step q/100: the step is wrong
+    msg = step_against_readings(theta, lengths, q / 100, 0.25 * q, 3.0)
+    assert msg is not None and "the step looks wrong" in msg
+    # against the right step the residual is the model's: no step warning (the model is
+    # blamed elsewhere when it is above the floor)
+    assert step_against_readings(theta, lengths, q, 5.0 * q, 3.0) is None
+    # a residual beyond the readings' own spacing's floor is the model's, whatever the step
+    assert step_against_readings(theta, lengths, q / 100, 5.0 * q, 3.0) is None

@@ -325,18 +325,8 @@ def step_against_readings(theta, lengths, step: float, rms: float,
     floor = step / math.sqrt(12.0)
     if not (math.isfinite(rms) and step > 0 and rms > floor_factor * floor):
         return None
-    theta = np.atleast_2d(np.asarray(theta, dtype=float))
-    gaps = []
-    for row, n in zip(theta, np.asarray(lengths, dtype=int)):
-        lv = np.unique(row[:n][np.isfinite(row[:n])])
-        g = np.diff(lv)
-        g = g[g > MERGE_REL * max(float(np.max(np.abs(lv))) if lv.size else 0.0, 1e-300)]
-        if g.size:
-            gaps.append(float(g.min()))
-    if not gaps:
-        return None
-    g = min(gaps)
-    if g < 4.0 * step or rms > floor_factor * g / math.sqrt(12.0):
+    g = readings_spacing(theta, lengths)
+    if g is None or g < 4.0 * step or rms > floor_factor * g / math.sqrt(12.0):
         return None
     return (
         f"the RMS residual is {rms / floor:.3g}× the quantization floor of the encoder step "
@@ -346,3 +336,18 @@ def step_against_readings(theta, lengths, step: float, rms: float,
         f"step (--resolution {g:.4g} if that spacing is it) and refit; until then the "
         "standard errors, which assume the step's noise, are too small"
     )
+
+
+def readings_spacing(theta, lengths) -> float | None:
+    """The smallest gap between two distinct reading levels of one run [readings' units]:
+    ``theta`` per run ``(R, T)`` (padded), ``lengths`` the runs' sample counts; ``None``
+    when no run has two levels."""
+    theta = np.atleast_2d(np.asarray(theta, dtype=float))
+    gaps = []
+    for row, n in zip(theta, np.asarray(lengths, dtype=int)):
+        lv = np.unique(row[:n][np.isfinite(row[:n])])
+        g = np.diff(lv)
+        g = g[g > MERGE_REL * max(float(np.max(np.abs(lv))) if lv.size else 0.0, 1e-300)]
+        if g.size:
+            gaps.append(float(g.min()))
+    return min(gaps) if gaps else None
