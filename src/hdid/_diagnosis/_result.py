@@ -97,6 +97,7 @@ class Diagnosis:
         from .._results._saved import finite
 
         return finite({
+            "units_problem": getattr(self.base, "units_problem", None),
             "source": self.source,
             "verdict": self.verdict,
             "summary": self.summary,
@@ -118,7 +119,9 @@ class Diagnosis:
     def report(self) -> str:
         fl = self.floor_rad
         w = self.whiteness_before
+        units = getattr(self.base, "units_problem", None)  # a wrong unit leads the report
         lines = [
+            *([units.upper()[:6] + units[6:]] if units else []),
             f"[[diagnosis]] {self.source}",
             f"    verdict: {self.verdict} — {self.summary}",
             f"    base model: {' + '.join(self.base.model.effect_names)}; RMS "
