@@ -267,9 +267,9 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
     if coarse and unit:
         return StepFinding(
             None, unit,
-            f"the closest reading levels are {g0:.3g} {unit_name} apart, within "
-            f"{MIN_STEP_PER_PRINT_UNIT:g} print units ({unit:.3g} {unit_name}): no encoder "
-            "grid can be told from the printing",
+            f"the closest reading levels are {g0:.3g} {unit_name} apart, {g0 / unit:.3g} "
+            f"print units of {unit:.3g} {unit_name} (fewer than {MIN_STEP_PER_PRINT_UNIT:g}): "
+            "no encoder grid can be told from the printing",
         )
     return StepFinding(None, unit, "the readings lie on no grid")
 
