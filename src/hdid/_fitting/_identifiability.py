@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._covariance import _covariance, _undetermined
+from .._log._resolution import step_against_readings
 from .._problems._evaluate import dense as _dense
 from .._problems._evaluate import jacobian as _jacobian
 from .._simulation._prepare import Prepared
@@ -288,6 +289,8 @@ def analyse(
         resolution_rad=prep.resolution,
         resolution_known=prep.resolution_known,
         resolution_source=prep.resolution_source,
+        print_unit=getattr(prep, "print_unit", None),
+        resolution_note=getattr(prep, "resolution_note", None),
         sample_period=prep.sample_period,
         n_effective=n_eff,
         n_unknowns=problem.n_unknowns,
@@ -398,7 +401,11 @@ def plausibility_warnings(prep: Prepared, model, values, rms: float) -> list[str
             "mrad or counts (convert to rad, or --counts-per-rev), or is the ratio wrong "
             "(--ratio)?"
         )
-    if prep.quantized and math.isfinite(rms) and rms > RESIDUAL_FLOOR_FACTOR * prep.resolution / math.sqrt(12):
+    wrong_step = (step_against_readings(prep.theta, prep.lengths, prep.resolution, rms,
+                                        RESIDUAL_FLOOR_FACTOR) if prep.quantized else None)
+    if wrong_step:
+        out.append(wrong_step)
+    elif prep.quantized and math.isfinite(rms) and rms > RESIDUAL_FLOOR_FACTOR * prep.resolution / math.sqrt(12):
         out.append(
             f"the RMS residual is {rms / (prep.resolution / math.sqrt(12)):.3g}× the "
             "quantization floor: the model does not describe this log, and the standard "
