@@ -490,6 +490,21 @@ def test_break_in_time_splits_the_run(tmp_path):
     assert [r.name for r in log.runs] == ["b"] and "dropped" in log.notes[0]
 
 
+def test_break_where_the_gear_rests_keeps_the_run_whole(tmp_path):
+    """A pause during the hold (or the stuck tail) is no break in the physics: the gear
+    rests on one side of it, so the run stays whole (no note) and the release is found
+    after the pause."""
+    t = np.arange(60) * DT
+    t[8:] += 10 * DT  # the logger paused for 10 periods after the 8th held sample
+    theta = np.full(60, 0.157)
+    theta[20:] = 0.157 * np.exp(-3.0 * (t[20:] - t[20])) * np.cos(60.0 * (t[20:] - t[20]))
+    theta = np.round(theta / Q) * Q
+    path = tmp_path / "hold_pause.csv"
+    pd.DataFrame({"time": t, "theta": theta}).to_csv(path, index=False)
+    log = read_log(path)
+    assert [r.n_samples for r in log.runs] == [60] and log.notes == ()
+
+
 def test_runs_with_different_rates_are_data(tmp_path):
     runs = (("a", "s", 0.0), ("b", "s", 0.0), ("c", "s", 0.0))
     lines = log_lines(runs, periods={"b": 0.005})

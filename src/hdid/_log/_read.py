@@ -212,7 +212,8 @@ def read_log(
     lengths = ends - starts
     check_lengths(lengths, starts, names, min_samples_per_run, _RUN in cols, fail)
     period = sample_period(time, within, fail)
-    starts, ends, names, notes = split_at_breaks(time, starts, ends, names, min_samples_per_run)
+    starts, ends, names, notes = split_at_breaks(time, theta, starts, ends, names,
+                                                 min_samples_per_run)
     lengths = ends - starts
     kept = np.concatenate([np.arange(a, b) for a, b in zip(starts, ends)])
     # the step from the readings' levels, within their printing precision (per run: any

@@ -92,14 +92,16 @@ def check_lengths(lengths, starts, names, min_samples: int, has_run_column: bool
         )
 
 
-#: A time step longer than this many of its run's median steps is a break in the log
-#: (the logger stopped), and the run is split there. Loggers jitter by up to about ±50 %
-#: of their period (raw servo logs: 3.4–5.9 ms around 4.5 ms) and drop one to three
-#: samples at a time (a late bus cycle: steps of 2–4 periods); the simulator integrates
-#: across any such step at the logged times (substeps of at most 0.5 ms), so they are
-#: data. A pause of five periods or more is no timing artefact: the test may have been
-#: touched meanwhile, so the samples after it start a run of their own (its own start
-#: angle and velocity) rather than being predicted across the pause.
+#: A time step longer than this many of its run's median steps is a break (the logger
+#: stopped). Loggers jitter by up to about ±50 % of their period (raw servo logs: 3.4–5.9
+#: ms around 4.5 ms) and drop one to three samples at a time (a late bus cycle: steps of
+#: 2–4 periods); the simulator integrates across any such step at the logged times
+#: (substeps of at most 0.5 ms), so they are data. A pause of five periods or more is no
+#: timing artefact: the test may have been touched meanwhile, so a run is split there
+#: when it moves on both sides (the samples after it start a run of their own, with its
+#: own start angle and velocity, rather than being predicted across the pause). Where
+#: the gear is at rest on one side (a hold that lasted through the pause, a stuck tail)
+#: nothing can have happened unseen that the run itself does not show: it stays whole.
 BREAK_PERIODS = 5.0
 
 
@@ -113,21 +115,42 @@ def sample_period(time, within, fail: Fail) -> float:
     return period
 
 
-def split_at_breaks(time, starts, ends, names, min_samples: int):
+def _at_rest(theta: np.ndarray, finest: float) -> bool:
+    """Whether a stretch of readings stays put: within one of the finest changes its run
+    shows (an encoder's flicker of one step; exact repeats for readings on no grid)."""
+    return bool(np.ptp(theta) <= 1.5 * finest) if theta.size else True
+
+
+def split_at_breaks(time, theta, starts, ends, names, min_samples: int):
     """Split runs at their breaks: steps longer than :data:`BREAK_PERIODS` of the run's
-    median step. Returns ``(starts, ends, names, notes)``: the pieces (the first keeps
-    the run's name, the next are ``name.2``, ``name.3``, …; a piece shorter than
-    ``min_samples`` is dropped) and one line per split run for the report."""
+    median step, where the gear moves on both sides. Returns ``(starts, ends, names,
+    notes)``: the pieces (the first keeps the run's name, the next are ``name.2``,
+    ``name.3``, …; a piece shorter than ``min_samples`` is dropped) and one line per
+    split run for the report."""
     out_s, out_e, out_n, notes = [], [], [], []
     taken = set(names)
     for a, b, name in zip(starts, ends, names):
         steps = np.diff(time[a:b])
         median = float(np.median(steps)) if steps.size else 0.0
-        cut = np.flatnonzero(steps > BREAK_PERIODS * median) + 1 if median > 0 else []
-        if len(cut) == 0:
+        cut = [int(c) + 1 for c in np.flatnonzero(steps > BREAK_PERIODS * median)] if median > 0 else []
+        if cut:
+            moves = np.abs(np.diff(theta[a:b]))
+            finest = float(np.min(moves[moves > 0])) if np.any(moves > 0) else 0.0
+            # keep a break only between two stretches that both move
+            edges = [0] + cut + [b - a]
+            keep = []
+            for k, c in enumerate(cut):
+                before = theta[a + edges[k] : a + c]
+                after = theta[a + c : a + edges[k + 2]]
+                if not (_at_rest(before, finest) or _at_rest(after, finest)):
+                    keep.append(c)
+                else:  # merged: the next stretch starts where this one did
+                    edges[k + 1] = edges[k]
+            cut = keep
+        if not cut:
             out_s.append(a), out_e.append(b), out_n.append(name)
             continue
-        edges = [a] + [a + int(c) for c in cut] + [b]
+        edges = [a] + [a + c for c in cut] + [b]
         kept, dropped = [], []
         for k in range(len(edges) - 1):
             piece = name
@@ -141,10 +164,11 @@ def split_at_breaks(time, starts, ends, names, min_samples: int):
                 kept.append(piece)
             else:
                 dropped.append(piece)
-        gaps = ", ".join(f"{steps[int(c) - 1]:.3g} s at t = {time[a + int(c)]:.6g} s" for c in cut)
+        gaps = ", ".join(f"{time[a + c] - time[a + c - 1]:.3g} s at t = {time[a + c]:.6g} s"
+                         for c in cut)
         note = (f"run {_show(name)} has {len(cut)} break(s) in its time column ({gaps}; more "
-                f"than {BREAK_PERIODS:g}× its median step {median:.3g} s): split into "
-                f"{', '.join(map(_show, kept)) or 'nothing'}, each with its own start")
+                f"than {BREAK_PERIODS:g}× its median step {median:.3g} s, in motion): split "
+                f"into {', '.join(map(_show, kept)) or 'nothing'}, each with its own start")
         if dropped:
             note += (f"; {', '.join(map(_show, dropped))} dropped (fewer than {min_samples} "
                      "samples)")
