@@ -485,9 +485,9 @@ def test_break_in_time_splits_the_run(tmp_path):
     assert log.runs[1].first_row == 22
     assert len(log.notes) == 1 and "'a'" in log.notes[0] and "'a.2'" in log.notes[0]
     assert "split" in log.notes[0]
-    # a piece shorter than min_samples_per_run is dropped, and the note says so
+    # a piece shorter than min_samples_per_run stays joined to its neighbour: no data lost
     log = read_log(path, min_samples_per_run=21)
-    assert [r.name for r in log.runs] == ["b"] and "dropped" in log.notes[0]
+    assert [r.n_samples for r in log.runs] == [40, 40] and log.notes == ()
 
 
 def test_break_where_the_gear_rests_keeps_the_run_whole(tmp_path):

@@ -121,18 +121,33 @@ def _at_rest(theta: np.ndarray, finest: float) -> bool:
     return bool(np.ptp(theta) <= 1.5 * finest) if theta.size else True
 
 
+def _long_pieces(cut: list[int], n: int, min_samples: int) -> list[int]:
+    """The cuts left when no piece of ``[0, n)`` is shorter than ``min_samples``: a short
+    piece joins the one before it (the first, the one after)."""
+    cut = list(cut)
+    while cut:
+        edges = [0] + cut + [n]
+        short = [k for k in range(len(edges) - 1) if edges[k + 1] - edges[k] < min_samples]
+        if not short:
+            break
+        k = short[0]
+        del cut[k - 1 if k > 0 else 0]
+    return cut
+
+
 def split_at_breaks(time, theta, starts, ends, names, min_samples: int):
     """Split runs at their breaks: steps longer than :data:`BREAK_PERIODS` of the run's
     median step, where the gear moves on both sides. Returns ``(starts, ends, names,
     notes)``: the pieces (the first keeps the run's name, the next are ``name.2``,
-    ``name.3``, …; a piece shorter than ``min_samples`` is dropped) and one line per
-    split run for the report."""
+    ``name.3``, …; none shorter than ``min_samples``: a short one stays joined to its
+    neighbour) and one line per split run for the report."""
     out_s, out_e, out_n, notes = [], [], [], []
     taken = set(names)
     for a, b, name in zip(starts, ends, names):
         steps = np.diff(time[a:b])
         median = float(np.median(steps)) if steps.size else 0.0
-        cut = [int(c) + 1 for c in np.flatnonzero(steps > BREAK_PERIODS * median)] if median > 0 else []
+        long_steps = np.flatnonzero(steps > BREAK_PERIODS * median) if median > 0 else []
+        cut = [int(c) + 1 for c in long_steps]
         if cut:
             moves = np.abs(np.diff(theta[a:b]))
             finest = float(np.min(moves[moves > 0])) if np.any(moves > 0) else 0.0
@@ -147,32 +162,28 @@ def split_at_breaks(time, theta, starts, ends, names, min_samples: int):
                 else:  # merged: the next stretch starts where this one did
                     edges[k + 1] = edges[k]
             cut = keep
+        # a piece too short to fit on its own stays with its neighbour (across the break)
+        cut = _long_pieces(cut, b - a, min_samples)
         if not cut:
             out_s.append(a), out_e.append(b), out_n.append(name)
             continue
         edges = [a] + [a + c for c in cut] + [b]
-        kept, dropped = [], []
-        for k in range(len(edges) - 1):
-            piece = name
-            if k:
-                piece = f"{name}.{k + 1}"
-                while piece in taken:
-                    piece += "'"
-                taken.add(piece)
-            if edges[k + 1] - edges[k] >= min_samples:
-                out_s.append(edges[k]), out_e.append(edges[k + 1]), out_n.append(piece)
-                kept.append(piece)
-            else:
-                dropped.append(piece)
+        pieces = [name]
+        for k in range(1, len(edges) - 1):
+            piece = f"{name}.{k + 1}"
+            while piece in taken:
+                piece += "'"
+            taken.add(piece)
+            pieces.append(piece)
+        out_s += edges[:-1]
+        out_e += edges[1:]
+        out_n += pieces
         gaps = ", ".join(f"{time[a + c] - time[a + c - 1]:.3g} s at t = {time[a + c]:.6g} s"
                          for c in cut)
-        note = (f"run {_show(name)} has {len(cut)} break(s) in its time column ({gaps}; more "
-                f"than {BREAK_PERIODS:g}× its median step {median:.3g} s, in motion): split "
-                f"into {', '.join(map(_show, kept)) or 'nothing'}, each with its own start")
-        if dropped:
-            note += (f"; {', '.join(map(_show, dropped))} dropped (fewer than {min_samples} "
-                     "samples)")
-        notes.append(note)
+        notes.append(
+            f"run {_show(name)} has {len(cut)} break(s) in its time column ({gaps}; more "
+            f"than {BREAK_PERIODS:g}× its median step {median:.3g} s, in motion): split "
+            f"into {', '.join(map(_show, pieces))}, each with its own start")
     return (np.asarray(out_s, dtype=np.int64), np.asarray(out_e, dtype=np.int64), out_n,
             notes)
 
