@@ -1,7 +1,8 @@
 """The checks of a log's rows once its cells are numbers: runs contiguous, labels constant
 within a run, time increasing, runs long enough, motion in some run; the sample period
-(median step) and the breaks at which a run is split. Each check raises the :class:`~hdid.LogError` that names the row and the fix
-(``fail(message, column_key, position)`` builds it)."""
+(median step) and the breaks at which a run is split. Each check raises the
+:class:`~hdid.LogError` that names the row and the fix (``fail(message, column_key,
+position)`` builds it)."""
 
 from __future__ import annotations
 
