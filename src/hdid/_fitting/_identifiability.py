@@ -422,11 +422,11 @@ def _release_std(problem: Problem, u, std_u, i: int) -> float:
         return 0.0
     j = problem.n_physical + i
     lo, hi = float(np.asarray(problem.release_lo)[i]), float(np.asarray(problem.release_hi)[i])
+    if hi == lo:  # a run released at its first sample (moving, or never moving): known
+        return 0.0
     s = 1.0 / (1.0 + math.exp(-float(u[j])))
     return float((hi - lo) * s * (1 - s) * std_u[j])
 
 
 def _pct(x: float) -> str:
     return f"{100 * (math.exp(x) - 1):.0f} %" if x < 3 else "orders of magnitude"
-    if hi == lo:  # a run released at its first sample (moving, or never moving): known
-        return 0.0
