@@ -26,6 +26,7 @@ from .._simulation._simulate import DEFAULT_MAX_SUBSTEP
 from .._models._transforms import interval_to_u, to_unconstrained
 from ..effects import order_of_magnitude
 from ._lm import _local_fits
+from ._pendulum import pendulum_prepared
 from ._starts import _grid_starts, log_scales
 
 
@@ -251,9 +252,10 @@ def _setup(
         mean, rel = inertia_prior
         priors["inertia"] = (math.log(mean), rel)
 
+    # a pendulum drop: release, zero and swing frequency from its swings (_pendulum.py)
+    prep, offset0 = pendulum_prepared(prep, model, offset_guess(prep), release_time is not None)
     n_data = int(np.sum(prep.weight > 0))
     sub = substep_for(prep.frequency_hz) if max_substep is None else float(max_substep)
-    offset0 = offset_guess(prep)
     scales = log_scales(prep, model, offset0)
     model = model.with_scales(scales)
     specs = model.parameter_specs()

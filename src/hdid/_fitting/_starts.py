@@ -12,6 +12,7 @@ import numpy as np
 
 from .._models._model import Model
 from .._simulation._prepare import Prepared
+from ._pendulum import pendulum_candidates
 from .._problems._problem import Problem
 from .._models._transforms import interval_to_u, to_unconstrained
 from ..effects import Scales
@@ -77,6 +78,12 @@ def _grid_starts(
     """
     U, keys = _grid_candidates(problem, prep, model, from_model)
     cost = np.asarray(_costs(problem, jnp.asarray(U)))
+    drop = pendulum_candidates(problem, prep, model, _packer(problem, model.parameter_specs()))
+    if drop:  # a pendulum drop's starts from its swings (_pendulum.py), each run; the grid's after
+        Ud = np.array(drop)
+        U0, c0 = _choose_starts(U, cost, keys, max(n_starts - len(drop), 1), from_model)
+        return (np.concatenate([Ud, U0]),
+                np.concatenate([np.asarray(_costs(problem, jnp.asarray(Ud))), c0]))
     return _choose_starts(U, cost, keys, n_starts, from_model)
 
 

@@ -285,7 +285,18 @@ def _band_edge(model: Model, side: float, theta_max: float) -> Array:
         inside = _excess(frozen, side, mid) <= 0
         return jnp.where(inside, mid, lo), jnp.where(inside, hi, mid)
 
-    lo, hi = jax.lax.fori_loop(0, 80, body, (jnp.zeros(()), jnp.asarray(theta_max, dtype=float)))
+    # The first crossing: a restoring torque that is not monotone (a pendulum's mgl·sin,
+    # which falls again past a quarter turn) is back inside the band beyond its peak, where
+    # a bisection over [0, theta_max] can land (a 3.4 rad "band" on a drop log); so bisect
+    # between the last of 64 points inside the band and the first outside.
+    top = jnp.asarray(theta_max, dtype=float)
+    xs = jnp.linspace(0.0, top, 65)[1:]
+    outside = jax.vmap(lambda x: _excess(frozen, side, x))(xs) > 0
+    first = jnp.argmax(outside)
+    found = jnp.any(outside)
+    hi0 = jnp.where(found, xs[first], top)
+    lo0 = jnp.where(found & (first > 0), xs[jnp.maximum(first - 1, 0)], 0.0)
+    lo, hi = jax.lax.fori_loop(0, 80, body, (lo0, hi0))
     x_star = stop(0.5 * (lo + hi))
     # One implicit-function Newton correction: value unchanged, derivative correct.
     slope = stop(jax.grad(lambda x: _excess(frozen, side, x))(x_star))

@@ -22,7 +22,13 @@ class Gravity(AbstractEffect):
     test (a pendulum released from a hold with the drive torque off), so a model may hold
     it and no ``stiffness`` (``--remove stiffness --add gravity``); with a flexible gear
     and a pendulum both act, in parallel. Log transform (``mgl > 0``: the zero is the
-    stable equilibrium); starts at the log's small-swing output stiffness. Unlike the
+    stable equilibrium); starts at the log's small-swing output stiffness. In a model with
+    no spring the log is read as a drop (``hdid._fitting._pendulum``): the release is
+    found from the swing (a servo's lift, creep or flicker before it is not the
+    pendulum's), ``mgl = N²·I·ω₀²`` from the half-swings between turning points (each
+    corrected for its amplitude, ``T/2 = 2K(sin²(A/2))/ω₀``), the zero from the energy
+    balance of half-swings in both directions, and the friction levels from how that
+    balance's loss grows with the swing (Coulomb: constant, viscous: ∝ amplitude). Unlike the
     other effects it is not free of the angle unit: ``sin`` needs θ in radians (a log in
     degrees or mrad must be converted first); time and torque units are free.
 
