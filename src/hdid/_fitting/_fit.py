@@ -17,7 +17,7 @@ from .._problems._evaluate import dense as _dense
 from ._identifiability import MOVED_COUNTS, analyse
 from .._log import Log, read_log
 from .._models._model import Model
-from ._nested import NESTED_STARTS, against_nested, needs_check, stribeck_pair
+from . import _limits
 from .._simulation._prepare import Prepared, offset_guess, prepare
 from .._problems._problem import OFFSET_SCALE_REL, Problem, build_problem
 from .._results._result import FitResult
@@ -26,8 +26,9 @@ from .._simulation._simulate import DEFAULT_MAX_SUBSTEP
 from .._models._transforms import interval_to_u, to_unconstrained
 from ..effects import order_of_magnitude
 from ._lm import _local_fits
+from ._one_lane import _local_fits as _one_lane
 from ._pendulum import pendulum_prepared
-from ._starts import _grid_starts, log_scales
+from ._starts import _choose_starts, _costs, _grid_candidates, _grid_starts, log_scales
 
 
 #: Natural frequency [Hz] at which the default substep (``DEFAULT_MAX_SUBSTEP``) was
@@ -95,13 +96,16 @@ def fit(
         Also start from the model's own values (a warm start, e.g. a fitted model with
         an effect added, as :func:`hdid.diagnose` does); that start is always run.
     nested:
-        With a free Stribeck law, also fit its nested Coulomb case (``tau_s = tau_c``)
-        and restart from that optimum when the general law ended worse
-        (:mod:`hdid._fitting._nested`); a warning says when it stays worse. ``"auto"`` (default)
-        checks only a fit that shows a symptom — a residual above twice the noise floor,
-        a non-finite standard error of the law, ``tau_s ≤ tau_c`` — since the check costs
-        a second model structure (~4 s of tracing on a cold start); ``True`` always,
-        ``False`` never.
+        Check the model's nested limits (:mod:`hdid._fitting._limits`: Coulomb friction
+        ``tau_s = tau_c``, no dry friction, the linear spring ``k2 = 0``): fit each, restart
+        the full model next to its optimum, keep the best; ``result.limits`` records each
+        limit's χ² and whether it fits as well (then a warning names it, e.g. "friction
+        not supported: the viscous-only model fits as well"). ``"auto"`` (default) checks
+        every limit when the residual is above the floor
+        (:func:`hdid._fitting._limits.above_floor`) and, at the floor, the limits whose
+        term may vanish (relative sd above ``VANISH_REL_SD``, or ``tau_s ≤ tau_c``); the
+        limits are prior rows on the fit's own problem (one-lane programs of its
+        structure, no model of their own). ``True`` always, ``False`` never.
     """
     t_start = time.perf_counter()
     if nested not in (True, False, "auto"):
@@ -130,42 +134,78 @@ def fit(
     result = _finish(setup, U, costs, ok, steps, t_start)
     result = nested_check(result, log, setup, nested=nested, fix=fix,
                           inertia_prior=inertia_prior, release_time=release_time,
-                          max_substep=max_substep, n_starts=n_starts, max_steps=max_steps)
+                          max_substep=max_substep, n_starts=n_starts, max_steps=max_steps,
+                          solutions=(U, costs, ok, steps))
     result.wall_time_s = time.perf_counter() - t_start
     return result
 
 
 def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", fix=None,
                  inertia_prior=None, release_time=None, max_substep=None, n_starts: int = 6,
-                 max_steps: int = 300) -> FitResult:
-    """:func:`hdid._fitting._nested.against_nested` for a fit of ``log`` (options as in :func:`fit`):
-    ``nested`` True always, ``"auto"`` on a symptom (:func:`hdid._fitting._nested.needs_check`)."""
+                 max_steps: int = 300, solutions=None) -> FitResult:
+    """The fit of ``log`` checked against its model's limits (:mod:`hdid._fitting._limits`:
+    Coulomb, no dry friction, linear spring): each wanted limit fitted, the full model
+    restarted next to its optimum, the best kept, every limit recorded in
+    ``result.limits``. ``nested`` True: every limit; ``"auto"``: every limit when the
+    residual has not reached the floor, else those whose term may vanish; False: none.
+    ``solutions`` ``(U, costs, ok, steps)``: the full model's local fits (default: the
+    result's optimum alone). Options as in :func:`fit`."""
     if nested not in (True, False, "auto"):
         raise ValueError(f"nested = {nested!r}: use True, False or 'auto'")
-    if not (nested is True and stribeck_pair(result.model, setup.fixed) is not None
-            or nested == "auto" and needs_check(result, setup.fixed)):
+    del n_starts  # (the limits' own grids are ``_limits.LIMIT_GRID_STARTS`` wide)
+    wanted = _limits.wanted(result, setup.fixed, nested)
+    if not hasattr(result, "limits"):
+        result.limits, result.restarted_from = [], None
+    if not wanted:
         return result
-    options = dict(free_inertia="inertia" not in setup.fixed, inertia_prior=inertia_prior,
-                   release_time=release_time, max_substep=max_substep)
+    problem = setup.problem
+    t_start = time.perf_counter() - (result.wall_time_s if math.isfinite(result.wall_time_s)
+                                     else 0.0)
+    if solutions is None:
+        u = np.asarray(result.u, dtype=float)[None, :]
+        c = np.asarray(_costs(problem, jnp.asarray(u)), dtype=float)
+        solutions = (u, c, np.ones(1, dtype=bool), np.zeros(1, dtype=int))
+    del log, fix, inertia_prior, release_time, max_substep  # the limits live in ``setup``
+    # One-lane programs from the program store (diagnose's: one compile per model
+    # structure whatever the number of starts, kept for later processes); the limits are
+    # prior rows on the fit's own problem, so they share it.
 
-    def fixed_in(m: Model):
-        names = set(m.parameter_specs())
-        if isinstance(fix, Mapping):
-            return {n: v for n, v in fix.items() if n in names} or None
-        return [n for n in (fix or ()) if n in names] or None
+    def local_fits(p, U0):
+        return _one_lane(p, U0, max_steps)[:4]
 
-    def optimum(m: Model):
-        s = _setup(log, m, fix=fixed_in(m), **options)
-        U0, _ = _grid_starts(s.problem, s.prep, s.model, NESTED_STARTS + 1, True)
-        Un, cn, _, _ = _local_fits(s.problem, U0, max_steps)
-        best = int(np.argmin(np.where(np.isfinite(cn), cn, np.inf)))
-        return _data_rms(s.problem, Un[best], cn[best]), s.problem.values_np(Un[best])
+    model, prep = setup.model, setup.prep
+    scales = log_scales(prep, model, np.asarray(problem.offset0))
+    u_fit = np.asarray(result.u, dtype=float)
+    grid_U, grid_keys = _grid_candidates(problem, prep, model, False)
 
-    def refit(m: Model) -> FitResult:
-        return fit(log, m, fix=fixed_in(m), n_starts=n_starts, max_steps=max_steps,
-                   start_from_model=True, nested=False, **options)
+    def fit_limit(limit):
+        pins = limit.pins(result.values, scales)
+        p = _limits.pinned(problem, model, pins)
+        # the limit's starts: the fit's optimum and the best of the grid, held at the limit
+        U = np.stack([_limits.with_values(problem, model, u,
+                                          {**limit.start(problem.values_np(u)), **pins})
+                      for u in np.concatenate([u_fit[None, :], grid_U])])
+        cost = np.asarray(_costs(p, jnp.asarray(U[1:])), dtype=float)
+        U0, _ = _choose_starts(U[1:], cost, grid_keys, _limits.LIMIT_GRID_STARTS, False)
+        U0 = np.concatenate([U[:1], np.asarray(U0)])
+        Un, cn, _, _ = local_fits(p, U0)
+        cn = np.where(np.isfinite(cn), cn, np.inf)
+        b = int(np.argmin(cn))
+        if not np.isfinite(cn[b]):
+            return None
+        values = {**model.float_values(), **problem.values_np(Un[b])}
+        return _limits.LimitOutcome(limit, _limits.data_chi2(p, Un[b], cn[b]), values,
+                                    np.asarray(Un[b]))
 
-    return against_nested(result, setup.fixed, optimum, refit)
+    def restart(limit, out):
+        rows = [_limits.with_values(problem, model, out.u, nudge)
+                for nudge in limit.restarts(out.values, scales)]
+        return local_fits(problem, np.asarray(rows))
+
+    def finish(U, costs, ok, steps):
+        return _finish(setup, U, costs, ok, steps, t_start)
+
+    return _limits.check(result, solutions, wanted, fit_limit, restart, finish)
 
 
 def _data_rms(problem: Problem, u, cost: float) -> float:

@@ -29,7 +29,10 @@ from .._problems import _programs
 from .._results import _residuals
 from ._fit import _finish, _setup, _Setup
 from ._identifiability import MOVED_COUNTS
-from ._lm import PHASE1_STEPS, LMState, _lm_lanes, _Schedule, lanes_vmap
+from ._lm import PHASE1_STEPS, LMState
+from ._one_lane import (  # noqa: F401  (also diagnose's names)
+    LANES, _call_args, _local_fits, _solve_lanes, _stored_solve,
+)
 from .._problems._problem import Problem
 from ._starts import _choose_starts, _grid_candidates
 from .._models._transforms import interval_to_u, to_unconstrained
@@ -57,14 +60,6 @@ def _costs(problem: Problem, U):
     return jax.lax.map(problem.cost, U)
 
 
-def _solve_lanes(problem: Problem, U0, active, max_steps, state: LMState):
-    """:func:`hdid._fitting._lm._solve_lanes` (the same program), run through the program store."""
-    return _lm_lanes(
-        lanes_vmap(problem.residuals), lanes_vmap(problem.residuals_and_jacobian), U0, active,
-        max_steps, state,
-    )
-
-
 def _analysis_parts(p: Problem, u, fine):
     """The JAX parts of :func:`hdid._fitting._identifiability.analyse` at ``u`` (as
     :func:`hdid._fitting._vfit._lane_analysis` computes them for one lane), and the simulation on
@@ -72,24 +67,6 @@ def _analysis_parts(p: Problem, u, fine):
     r, J = p.data_residuals_and_jacobian(u)
     dense = p.simulate(u, full_output=True)
     return ((J, r), dense, p.derived_and_jacobian(u), p.simulate(u, fine, full_output=True))
-
-
-def _stored_solve(problem: Problem, U, active, k, state):
-    return _programs.call("solve_lanes", _solve_lanes, problem, U, active, k, state)
-
-
-#: Lanes of every Levenberg–Marquardt program here: one. The stick-exact simulator takes
-#: its event branch (a ``lax.cond``) only in the substeps that need it; under ``vmap`` the
-#: branch becomes a select that runs every branch in every substep. Measured on the
-#: shipped 1 kHz log (base model, 6 grid starts, one core): 0.19 s for the whole
-#: multi-start fit one start at a time, 2.8 s as 3-lane programs. One lane also means
-#: one program per model structure whatever the number of starts.
-LANES = 1
-
-
-def _call_args(U, on, k, state: LMState):
-    """The arguments of one :func:`_stored_solve` call (their types decide the program's key)."""
-    return jnp.asarray(U), jnp.asarray(on), jnp.asarray(k), state
 
 
 def prefetch(s: _Setup) -> bool:
@@ -103,42 +80,6 @@ def prefetch(s: _Setup) -> bool:
     return _programs.prefetch("solve_lanes", _solve_lanes, p,
                               *_call_args(np.zeros((LANES, n)), np.ones(LANES, dtype=bool),
                                           PHASE1_STEPS, state))
-
-
-def _local_fits(problem: Problem, U0, max_steps: int, lanes: int = LANES, solve=None):
-    """:func:`hdid._fitting._lm._local_fits` (the same schedule, :class:`hdid._fitting._lm._Schedule`,
-    and, lanes not interacting, the same iterates for every start up to rounding: a
-    vmapped simulator selects where a one-lane one branches) run as calls of one
-    ``lanes``-wide program from :mod:`hdid._problems._programs`: the starts a call advances are
-    taken ``lanes`` at a time, a short group padded with inactive copies. (``solve``:
-    another program with :func:`_solve_lanes`'s signature, for tests.) Returns
-    ``(U, costs, ok, steps, residuals)``, the residuals at each row of ``U`` (NaN where
-    none were computed)."""
-    solve = _stored_solve if solve is None else solve
-    U = np.array(U0, dtype=float)
-    N, n = U.shape
-    sched = _Schedule(N, max_steps)
-    m = int(np.prod(problem.times.shape)) + problem.n_physical
-    state = [np.asarray(f) for f in LMState.empty(N, m, n)]
-    while (task := sched.next()) is not None:
-        active, k, fresh = task
-        costs, done, steps = np.full(N, np.inf), np.zeros(N, dtype=bool), np.zeros(N, dtype=int)
-        idx = np.flatnonzero(active)
-        for g in range(0, len(idx), lanes):
-            rows = idx[g:g + lanes]
-            take = np.concatenate([rows, np.repeat(rows[:1], lanes - len(rows))])
-            on = np.arange(lanes) < len(rows)
-            st = LMState(*(f[take] for f in state))
-            st = st._replace(fresh=np.where(on, fresh, st.fresh))
-            U2, c2, d2, s2, st2 = solve(problem, *_call_args(U[take], on, k, st))
-            h = len(rows)
-            U[rows] = np.asarray(U2)[:h]
-            costs[rows], done[rows], steps[rows] = (np.asarray(c2)[:h], np.asarray(d2)[:h],
-                                                    np.asarray(s2)[:h])
-            for f, new in zip(state, st2):
-                f[rows] = np.asarray(new)[:h]
-        sched.update(costs, done, steps)
-    return U, sched.costs, sched.ok, sched.steps, np.where(state[2][:, None], state[0], np.nan)
 
 
 def trapped_runs(problem: Problem, prep, r) -> np.ndarray:

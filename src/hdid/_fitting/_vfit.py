@@ -50,7 +50,8 @@ from .._errors import HdidError
 from ._fit import _finish, _setup, nested_check
 from .._log import Log, read_log
 from ._lm import LMState, _Schedule
-from ._nested import CHECK_ABOVE_FLOOR, needs_check
+from ._limits import needs_check
+from ._nested import CHECK_ABOVE_FLOOR
 from .._problems._problem import Problem
 from ._starts import _choose_starts, _grid_candidates
 from ._vfit_lanes import (
@@ -361,8 +362,10 @@ def _fit_wave(items, idx, outcomes, runner, timing, lanes, bracket, on_done, opt
 
 
 def _nested(res, item, setup, options: dict, n_starts: int, max_steps: int):
-    """fit()'s check against the nested Coulomb case, one log at a time: ``nested="auto"``
-    on a symptom, ``True`` always, ``False`` never. The batch's default (``None``) only
+    """fit()'s check against its model's limits (:mod:`hdid._fitting._limits`: the nested
+    Coulomb case, no friction, the linear spring), one log at a time: ``nested="auto"``
+    when the residual is above the floor or a term may vanish, ``True`` always,
+    ``False`` never. The batch's default (``None``) only
     warns on a residual above ``CHECK_ABOVE_FLOOR`` × the floor: 1000 paper logs took 538 s in one process with the check (6 % of
     them showed a symptom) against 228 s before it existed (load 2.4–3.9); in 200 it
     rescued 2 of the 5 logs above 2× the floor."""
@@ -373,7 +376,8 @@ def _nested(res, item, setup, options: dict, n_starts: int, max_steps: int):
             # (a degenerate law at the floor is named by the trust warnings already)
             res.warnings.append(
                 f"the RMS residual is {ratio:.3g}× the floor, a symptom of a poorer optimum; "
-                "the batch did not check it against its nested Coulomb case: refit this log "
+                "the batch did not check it against its limits (nested Coulomb case, no "
+                "friction, linear spring): refit this log "
                 "with hdid.fit, or the batch with nested='auto'")
         return res
     if nested is False or nested == "auto" and not needs_check(res, setup.fixed):

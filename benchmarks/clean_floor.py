@@ -1,0 +1,210 @@
+"""Clean logs from an independent simulator: how many fits end above 1.5× the floor?
+
+Issue 33 ("A clean log reaches the floor"): a noiseless log of an exact model, quantized to
+its encoder, leaves a residual at the quantization floor ``step/√12`` at the true
+parameters (0.4–1.0× measured: less where the gear sticks). A fit that ends above 1.5× the
+floor has stopped in a poorer optimum. This script counts them.
+
+Logs come from ``tests/independent.py`` — pure numpy/scipy, event-driven
+``solve_ivp`` (DOP853) with an exact set-valued stick decision at every zero of the
+velocity, nothing imported from hdid — with a broad plant per log (seeded):
+
+* ``k1`` 940 N m/rad ±40 % (uniform), ``k2`` 0–2× the catalog's 6.5e7 N m/rad³ (uniform),
+  ratio 100, inertia 7e-7 kg m² (the fit's default: free motion fixes torques relative to
+  it);
+* ``tau_s`` from a stick band half-width ``tau_s/k_wg`` uniform 0.012–0.040 rad (below the
+  smallest release, 0.05 rad, so every run moves), ``tau_s/tau_c`` uniform 1.1–2;
+* ``v_s`` log-uniform 2–20 rad/s, ``delta`` uniform 0.8–3, ``c_v`` log-uniform over a
+  decade around the paper's 1.8e-5 N m s/rad (0.57–5.7e-5);
+* a 4000-count encoder on the wave generator; set-up offsets uniform ±0.03 rad; each run's
+  release at a random phase of its sample interval.
+
+Designs: ``paper`` (±0.157 rad twice, 250 Hz, 0.5 s, two set-ups) and ``rich`` (±0.157,
+±0.12, ±0.08, ±0.05 rad, 1 kHz, 0.3 s, two set-ups). Each log is fitted with
+:func:`hdid.fit` (the encoder step given, the default model, ratio 100) and the
+residual ratio ``rms/floor`` recorded with the parameters, the wall time and the
+result's ``limits`` (when the code has them).
+
+    taskset -c 1 python benchmarks/clean_floor.py rich --seeds 0:200 [--append] [--label after]
+    PYTHONPATH=/tmp/wt_c/src taskset -c 1 python benchmarks/clean_floor.py rich --seeds 0:50 --label before --append
+    python benchmarks/clean_floor.py --report
+
+Results: ``benchmarks/results/clean_floor.json`` (one row per log and label) and ``.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+import independent as ind  # noqa: E402  (pure numpy/scipy, no hdid)
+
+RESULTS = ROOT / "benchmarks" / "results"
+NAME = "clean_floor"
+#: a fit above this multiple of the quantization floor has not reached the floor
+ABOVE = 1.5
+K2_CATALOG = 6.5e7
+DESIGNS = {
+    "paper": dict(amps=[0.157, -0.157, 0.157, -0.157], rate=250.0, duration=0.5,
+                  setups=["A", "A", "B", "B"]),
+    "rich": dict(amps=[0.157, -0.157, 0.12, -0.12, 0.08, -0.08, 0.05, -0.05], rate=1000.0,
+                 duration=0.3, setups=["A", "A", "A", "A", "B", "B", "B", "B"]),
+}
+SEED_BASE = {"paper": 330000, "rich": 331000}
+
+
+def draw_plant(rng: np.random.Generator) -> ind.Plant:
+    """One broad plant (module docstring)."""
+    N, inertia = 100.0, 7e-7
+    k1 = 940.0 * rng.uniform(0.6, 1.4)
+    k2 = K2_CATALOG * rng.uniform(0.0, 2.0)
+    k_wg = k1 / N**2
+    tau_s = k_wg * rng.uniform(0.012, 0.040)
+    tau_c = tau_s / rng.uniform(1.1, 2.0)
+    v_s = math.exp(rng.uniform(math.log(2.0), math.log(20.0)))
+    delta = rng.uniform(0.8, 3.0)
+    c_v = 1.8e-5 * math.exp(rng.uniform(-0.5, 0.5) * math.log(10.0))
+    return ind.Plant(inertia=inertia, ratio=N, k1=k1, k2=k2, tau_c=tau_c, tau_s=tau_s,
+                     v_s=v_s, delta=delta, c_v=c_v)
+
+
+def make(design: str, seed: int):
+    """``(DataFrame, truth)`` of log ``seed`` of ``design``."""
+    d = DESIGNS[design]
+    rng = np.random.default_rng(SEED_BASE[design] + seed)
+    plant = draw_plant(rng)
+    offsets = {s: float(rng.uniform(-0.03, 0.03)) for s in sorted(set(d["setups"]))}
+    phases = rng.uniform(0.0, 1.0, len(d["amps"]))
+    return ind.make_log(plant, d["amps"], rate=d["rate"], duration=d["duration"], hold=0.04,
+                        setups=d["setups"], offsets=offsets, counts_per_rev=4000,
+                        release_phase=list(phases), seed=seed)
+
+
+def fit_one(design: str, seed: int) -> dict:
+    import hdid
+
+    df, truth = make(design, seed)
+    t0 = time.perf_counter()
+    row = {"design": design, "seed": seed, "truth": truth["params"]}
+    try:
+        r = hdid.fit(df, resolution=truth["resolution"], ratio=100.0)
+    except Exception as exc:  # a failed fit is a row too
+        row.update(error=f"{type(exc).__name__}: {exc}"[:300], ratio=math.nan)
+        row["wall_s"] = time.perf_counter() - t0
+        return row
+    row["wall_s"] = time.perf_counter() - t0
+    row["ratio"] = r.rms_residual_rad / r.quantization_floor_rad
+    row["values"] = r.values
+    lim = getattr(r, "limits", None)
+    row["limits"] = lim
+    row["restarted_from"] = getattr(r, "restarted_from", None)
+    row["n_warnings"] = len(r.warnings)
+    return row
+
+
+OUT = RESULTS / f"{NAME}.json"
+
+
+def _load(path: Path) -> list[dict]:
+    return json.loads(path.read_text())["rows"] if path.exists() else []
+
+
+def _save(rows: list[dict], path: Path) -> None:
+    path.parent.mkdir(exist_ok=True)
+    path.write_text(json.dumps({"rows": rows}, indent=1, default=float) + "\n")
+    path.with_suffix(".md").write_text(render(rows))
+
+
+def render(rows: list[dict]) -> str:
+    out = ["# Clean logs from an independent simulator: fits above 1.5× the floor", "",
+           "See `benchmarks/clean_floor.py` for the plant ranges and designs. One row per "
+           "(label, design); a fit counts as *above* when its RMS residual exceeds "
+           f"{ABOVE}× the quantization floor (step/√12), *error* when it raised.", "",
+           "| label | design | logs | above 1.5× | rate | errors | median ratio | max ratio "
+           "| median wall [s] | load (1 min) | limit restarts that won |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
+    groups: dict = {}
+    for r in rows:
+        groups.setdefault((r.get("label", "?"), r["design"]), []).append(r)
+    for (label, design), g in sorted(groups.items()):
+        ratio = np.array([x["ratio"] for x in g], dtype=float)
+        err = sum("error" in x for x in g)
+        above = int(np.sum(ratio[np.isfinite(ratio)] > ABOVE))
+        won: dict = {}
+        for x in g:
+            k = x.get("restarted_from")
+            if k:
+                won[k] = won.get(k, 0) + 1
+        loads = [x.get("load1") for x in g if x.get("load1") is not None]
+        out.append(
+            f"| {label} | {design} | {len(g)} | {above} | {100 * above / len(g):.1f} % | {err} "
+            f"| {np.nanmedian(ratio):.3f} | {np.nanmax(ratio):.3f} "
+            f"| {np.median([x['wall_s'] for x in g]):.1f} "
+            f"| {np.median(loads) if loads else math.nan:.2f} "
+            f"| {', '.join(f'{k} {v}' for k, v in sorted(won.items())) or '—'} |")
+    out += ["", "Logs above 1.5× (label, design, seed: ratio):", ""]
+    for r in rows:
+        if not r["ratio"] <= ABOVE:
+            out.append(f"- {r.get('label')}, {r['design']}, {r['seed']}: "
+                       f"{r['ratio']:.3f} {r.get('error', '')}")
+    return "\n".join(out) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("designs", nargs="*", default=["paper", "rich"])
+    ap.add_argument("--seeds", default="0:200", help="first:stop (log indices)")
+    ap.add_argument("--label", default="after")
+    ap.add_argument("--append", action="store_true", help="keep the rows already stored")
+    ap.add_argument("--report", action="store_true", help="only rewrite the .md")
+    ap.add_argument("--out", default=str(OUT), help="results JSON (the .md beside it)")
+    ap.add_argument("--merge", nargs="*", default=[],
+                    help="rows of other results JSONs to add (e.g. a run of older code)")
+    a = ap.parse_args(argv)
+    out = Path(a.out)
+    rows = _load(out)
+    if a.report or a.merge:
+        for m in a.merge:
+            new = _load(Path(m))
+            keys = {(r.get("label"), r["design"], r["seed"]) for r in new}
+            rows = [r for r in rows if (r.get("label"), r["design"], r["seed"]) not in keys] + new
+        _save(rows, out)
+        return 0
+    if not a.append:
+        rows = [r for r in rows if r.get("label") != a.label]
+    import hdid
+
+    if hasattr(hdid, "configure"):
+        hdid.configure()
+    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=Path(hdid.__file__).parent,
+                          capture_output=True, text=True).stdout.strip()
+    lo, hi = (int(x) for x in a.seeds.split(":"))
+    for seed in range(lo, hi):
+        for design in a.designs:
+            if any(r.get("label") == a.label and r["design"] == design and r["seed"] == seed
+                   for r in rows):
+                continue
+            row = fit_one(design, seed)
+            row.update(label=a.label, hdid=str(Path(hdid.__file__).parent), commit=head,
+                       load1=os.getloadavg()[0])
+            rows.append(row)
+            print(f"{a.label} {design} {seed}: ratio {row['ratio']:.3f} "
+                  f"{row['wall_s']:.1f} s load {row['load1']:.2f} "
+                  f"{row.get('restarted_from') or ''} {row.get('error', '')}", flush=True)
+            _save(rows, out)
+    _save(rows, out)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,344 @@
+"""The limits a fit's model may reach: fitted, restarted from, and named in the result.
+
+A free-motion model nests simpler ones that the data may choose:
+
+- ``coulomb``: a Stribeck law with ``tau_s = tau_c`` is Coulomb friction (``v_s``,
+  ``delta`` then act on nothing);
+- ``no_friction``: with the dry friction law removed (``tau_c``, ``tau_s`` → 0) the
+  model is viscous-only (with gravity and no spring: the gravity-only pendulum);
+- ``no_cubic``: a cubic spring with ``k2 → 0`` is the linear spring.
+
+The full model's least-squares optimum can never be worse than a limit's, yet a
+multi-start fit can end worse: a clean 1 kHz log of an independent simulator ended at
+3.55× the quantization floor with ``tau_s < tau_c`` and ``c_v → 0``; the Silverbox
+ring-downs (a Duffing oscillator, no friction) put their exponential decay into Coulomb
+friction; on the shipped paper log the linear-spring limit has χ² 11.8 against the
+reported 24.0. :func:`check` fits each limit inside the full model — its parameters held
+by strong prior rows (:func:`pinned`: ``v_s`` → 1000× the peak speed for Coulomb
+friction at ``tau_s``; ``tau_c``, ``tau_s`` at ``NUDGE`` × the spring torque; ``k2`` at
+``NUDGE`` × its start), from the fit's optimum and ``LIMIT_GRID_STARTS`` grid starts,
+through the one-lane program of the fit's own structure (nothing new to compile beyond
+it) — then restarts the full model from each limit's optimum (released; from the
+Coulomb limit with a few Stribeck shapes), keeps the best optimum, and records every
+limit in ``result.limits`` (``limit``, ``chi2``, ``chi2_fit``, ``dchi2``, ``dof``,
+``fits_as_well``, ``fits_better``) and ``result.restarted_from``. A limit that fits as
+well by the likelihood-ratio rule (Δχ² below the ``LIMIT_LEVEL`` point of χ² with the
+limit's degrees of freedom) is named in a warning ("friction not supported: the
+viscous-only model fits as well"); a limit that still fits better than the reported fit
+is never silent.
+
+When (:func:`wanted`): a residual above :func:`above_floor` × the floor (the fit has not
+reached it: every limit), or a symptom that a term may vanish — the parameter a limit
+removes has a relative sd above ``VANISH_REL_SD`` or none finite, or ``tau_s ≤ tau_c``
+(that limit only). A fit at the floor with every term determined runs none.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from scipy.stats import chi2 as _chi2
+
+from .._models._transforms import to_unconstrained
+from ..effects import AbstractFriction, StribeckFriction
+from ..effects.stiffness import CubicStiffness
+
+#: Probability of the likelihood-ratio test by which a limit "fits as well": its χ² above
+#: the full model's is below the ``LIMIT_LEVEL`` point of χ² with as many degrees of
+#: freedom as the limit removes free parameters (3.84 for k2, 7.81 for the Coulomb
+#: limit's tau_s, v_s, delta, 9.49 for the four of a Stribeck law).
+LIMIT_LEVEL = 0.95
+#: A term "may vanish" when the linearised sd of its coefficient exceeds this fraction of
+#: its value: its vanishing end is then within 5 sd (Δχ² ≤ 25 linearised), where a curved
+#: cost may well reach it (the posterior's limit screen, ``LIMIT_SCREEN_REL_SD``: the
+#: shipped paper log's k2 is at 34 %, and its linear-spring limit has χ² 11.8 against the
+#: fit's 24.0 from another basin). Each limit costs a few runs of the fit's own compiled
+#: Levenberg–Marquardt program.
+VANISH_REL_SD = 0.2
+#: A limit holds a removed torque at ``NUDGE`` × the spring torque at the log's
+#: amplitude, ``k2`` at ``NUDGE`` × its start (17 % of the spring torque at the largest
+#: twist): Coulomb friction ``ε`` takes ``2ε/k`` of amplitude a half-swing, 2e-6 of it,
+#: under 0.2 of a count after a thousand half-swings of a paper-size release; the cubic
+#: shifts the frequency by ~1e-7 (at 1e-3 a frictionless 1 kHz log's limit was 4700 χ²
+#: above the fit that had friction at 3e-9 N m). The full model's restart from the limit
+#: starts there, i.e. at the limit's χ², and can only end lower.
+NUDGE = 1e-6
+#: ``tau_s`` above ``tau_c`` in a restart (the Stribeck rise has no gradient at equality).
+RESTART_RATIO = 1.02
+#: Relative χ² margin within which two optima are the same (LM stopping tolerance 1e-6 a
+#: step, starts that converge together agree to ~1e-4).
+SAME_MARGIN = 1e-3
+#: The Coulomb limit's Stribeck velocity, a multiple of the log's peak speed: the
+#: Stribeck factor ``exp(−|ω/v_s|^delta)`` is then 1 within 1e-3 at every logged speed.
+COULOMB_V_S = 1e3
+#: The full model's restarts from the Coulomb limit: Stribeck shapes (``v_s`` as a
+#: fraction of the log's peak speed, ``delta``) spanning the law's prior (5 % of the peak
+#: speed, sd 1 in log; delta 0.5–2.5) ...
+COULOMB_RESTART_SHAPES = ((0.05, 1.0), (0.15, 2.5), (0.4, 2.0))
+#: ... and ``(tau_c, tau_s)`` as multiples of the limit's level: just off the limit (the
+#: limit's ``c_v``), and a rise of 1.7 (the level lies between sliding and breakaway
+#: friction) with ``c_v`` at its start rule (5 % of critical): poorer basins of clean
+#: logs put ``c_v → 1e-9`` and the damping into the Stribeck shape.
+COULOMB_RESTART_LEVELS = ((1.0 / RESTART_RATIO, 1.0), (0.75, 1.3))
+#: sd (transformed units) of the prior rows that hold a limit's parameters.
+PIN_SD = 1e-4
+#: Grid starts of a limit's own fit, beside the warm start at the full fit.
+LIMIT_GRID_STARTS = 2
+#: Tail probability of the floor test (:func:`above_floor`).
+FLOOR_TAIL = 1e-3
+#: Smallest trigger multiple of the floor: exact models leave 0.4–1.0× the floor (less
+#: where the gear sticks); the simulator's own error is ≤ 0.04× of it.
+FLOOR_MIN = 1.2
+
+
+def above_floor(n_effective: float) -> float:
+    """Multiple of the floor above which a residual has not reached it: at the floor the
+    residuals are rounding errors, RMS² ≈ floor²·χ²_ν/ν for ν effective samples
+    (Gaussian errors: uniform rounding errors scatter less, kurtosis 1.8 against 3, so
+    this is conservative); the ``1 − FLOOR_TAIL`` point of √(χ²_ν/ν) (1.38 for ν = 35,
+    the shipped paper log; 1.14 for ν = 500), at least ``FLOOR_MIN``."""
+    nu = max(float(n_effective), 1.0)
+    return max(FLOOR_MIN, math.sqrt(_chi2.ppf(1.0 - FLOOR_TAIL, nu) / nu))
+
+
+@dataclass(frozen=True)
+class Limit:
+    """One nested limit of a model, reached inside the model itself: ``pins(values,
+    scales)`` gives the values at which the limit holds its parameters (strong prior rows
+    on the fit's own problem: the same compiled programs), ``restarts(values, scales)``
+    the full model's starts next to the limit's optimum ``values``."""
+
+    key: str
+    label: str
+    #: free parameters the limit removes (its degrees of freedom)
+    removed: tuple[str, ...]
+    #: the claim when the limit fits as well
+    claim: str
+    pins: Callable[[dict, object], dict]
+    restarts: Callable[[dict, object], list]
+    #: values a start of the limit's fit takes from its own (e.g. the Coulomb level)
+    start: Callable[[dict], dict] = lambda v: {}
+
+
+def limits_of(model, fixed) -> list[Limit]:
+    """The limits of ``model`` with ``fixed`` parameters held (only limits that remove a
+    free parameter)."""
+    out = []
+    law = model.friction
+    specs = model.parameter_specs()
+    viscous_start = (specs["c_v"].start if "c_v" in specs and "c_v" not in fixed
+                     and specs["c_v"].start is not None else None)
+    if type(law) is StribeckFriction and not {"tau_c", "tau_s", "v_s"} & set(fixed):
+        # v_s → ∞: the Stribeck factor is 1 at every speed, friction is tau_s sliding and
+        # holding, i.e. Coulomb friction at tau_s (tau_c and delta then act on nothing)
+        def coulomb_pins(v, scales):
+            return {"v_s": COULOMB_V_S * scales.speed}
+
+        def coulomb_restarts(v, scales):
+            level = v["tau_s"]
+            rows = []
+            for f, d in COULOMB_RESTART_SHAPES:
+                for (lo, hi), c_v in zip(COULOMB_RESTART_LEVELS, (None, viscous_start)):
+                    row = {"tau_c": level * lo, "tau_s": level * hi,
+                           "v_s": f * scales.speed, "delta": d}
+                    if c_v is not None and "c_v" in v:
+                        row["c_v"] = c_v(scales)  # out of a c_v → 0 corner
+                    rows.append(row)
+            return rows
+
+        out.append(Limit("coulomb", "Coulomb friction (tau_s = tau_c)",
+                         tuple(n for n in ("tau_s", "v_s", "delta") if n not in fixed),
+                         "no Stribeck rise supported: Coulomb friction (tau_s = tau_c) fits "
+                         "as well", coulomb_pins, coulomb_restarts,
+                         # the limit's level is tau_s: a start's Coulomb level
+                         lambda v: {"tau_s": v["tau_c"]}))
+    if isinstance(law, AbstractFriction):
+        torques = tuple(p.name for p in law.parameters if p.unit == "N m"
+                        and p.name not in fixed)
+        if torques and all(n in ("tau_c", "tau_s") for n in torques):
+            gravity = "gravity" in model.effect_names and model.spring is None
+            viscous = "viscous" in model.effect_names
+            what = ("the gravity-only pendulum" if gravity
+                    else "the viscous-only model" if viscous else "the model without friction")
+
+            def off_pins(v, scales, torques=torques):
+                eps = NUDGE * scales.k_wg * scales.amplitude
+                return {n: eps * (RESTART_RATIO if n == "tau_s" else 1.0) for n in torques}
+
+            out.append(Limit("no_friction", what.removeprefix("the "),
+                             tuple(p.name for p in law.parameters if p.name not in fixed),
+                             f"friction not supported: {what} fits as well", off_pins,
+                             lambda v, scales: [{}]))
+    if type(model.spring) is CubicStiffness and "k2" not in fixed:
+        def k2_pins(v, scales, spec=model.parameter_specs()["k2"]):
+            return {"k2": NUDGE * spec.start(scales)}
+
+        out.append(Limit("no_cubic", "linear spring (k2 = 0)", ("k2",),
+                         "no cubic stiffness supported: the linear spring (k2 = 0) fits as "
+                         "well", k2_pins, lambda v, scales: [{}]))
+    return out
+
+
+def vanishing(result, limit: Limit) -> bool:
+    """Whether ``result`` shows a symptom that ``limit``'s term may vanish (module doc)."""
+    if limit.key == "coulomb":
+        tc, ts = result.values["tau_c"], result.values["tau_s"]
+        est = result.parameters["tau_s"]
+        if not (ts > RESTART_RATIO * tc and est.std <= VANISH_REL_SD * (ts - tc)):
+            return True
+        names = ("v_s", "delta")
+        return any(not math.isfinite(result.parameters[n].std) for n in names
+                   if n in result.parameters and not result.parameters[n].fixed)
+    elif limit.key == "no_friction":
+        names = tuple(n for n in ("tau_c", "tau_s") if n in limit.removed) or limit.removed
+    else:
+        names = limit.removed
+    for n in names:
+        est = result.parameters.get(n)
+        if est is None or est.fixed:
+            continue
+        if not (math.isfinite(est.std) and est.std <= VANISH_REL_SD * abs(est.value)):
+            return True
+    return False
+
+
+def wanted(result, fixed, nested) -> list[Limit]:
+    """The limits :func:`check` fits for ``result``: ``nested`` True all, False none,
+    ``"auto"`` all above the floor (:func:`above_floor`), else those with a symptom."""
+    if nested is False:
+        return []
+    limits = limits_of(result.model, fixed)
+    if nested is True or not reached_floor(result):
+        return limits
+    return [lim for lim in limits if vanishing(result, lim)]
+
+
+def needs_check(result, fixed) -> bool:
+    """Whether ``nested="auto"`` fits any limit for ``result`` (:func:`wanted`)."""
+    return bool(wanted(result, fixed, "auto"))
+
+
+def reached_floor(result) -> bool:
+    floor = result.quantization_floor_rad
+    rms = result.rms_residual_rad
+    if not (math.isfinite(rms) and floor > 0):
+        return False
+    return rms <= above_floor(result.n_effective) * floor
+
+
+def data_chi2(problem, u, cost: float) -> float:
+    """The data χ² at ``u`` from its cost (data χ² plus the prior rows)."""
+    P = problem.n_physical
+    z = (np.asarray(u)[:P] - np.asarray(problem.prior_mean)) / np.asarray(problem.prior_sd)
+    return float(cost) - float(np.sum(np.where(np.asarray(problem.prior_on), z, 0.0) ** 2))
+
+
+def with_values(problem, model, u, values: dict) -> np.ndarray:
+    """``u`` with the physical parameters named in ``values`` set to them."""
+    specs = model.parameter_specs()
+    v = np.array(u, dtype=float)
+    for n, x in values.items():
+        if n in problem.free:
+            v[list(problem.free).index(n)] = float(to_unconstrained(specs[n], x))
+    return v
+
+
+def pinned(problem, model, pins: dict):
+    """``problem`` with strong prior rows (sd ``PIN_SD``) holding ``pins`` (values of free
+    parameters): the same compiled programs (the rows are array leaves)."""
+    import equinox as eqx
+    import jax.numpy as jnp
+
+    specs = model.parameter_specs()
+    free = list(problem.free)
+    mean = np.asarray(problem.prior_mean, dtype=float).copy()
+    sd = np.asarray(problem.prior_sd, dtype=float).copy()
+    on = np.asarray(problem.prior_on, dtype=bool).copy()
+    for n, x in pins.items():
+        i = free.index(n)
+        mean[i], sd[i], on[i] = float(to_unconstrained(specs[n], x)), PIN_SD, True
+    return eqx.tree_at(lambda p: (p.prior_mean, p.prior_sd, p.prior_on), problem,
+                       (jnp.asarray(mean), jnp.asarray(sd), jnp.asarray(on)))
+
+
+@dataclass
+class LimitOutcome:
+    """A limit fitted on the log: its best optimum's data χ² and values."""
+
+    limit: Limit
+    chi2: float
+    values: dict
+    #: its unknowns (the full model's, the limit's parameters held)
+    u: np.ndarray
+
+    def to_dict(self, chi2_fit: float) -> dict:
+        q = len(self.limit.removed)
+        d = self.chi2 - chi2_fit
+        bound = float(_chi2.ppf(LIMIT_LEVEL, q))
+        return {"limit": self.limit.key, "label": self.limit.label,
+                "removed": list(self.limit.removed), "chi2": self.chi2,
+                "chi2_fit": chi2_fit, "dchi2": d, "dof": q, "dchi2_bound": bound,
+                "fits_as_well": bool(d < bound),
+                "fits_better": bool(d < -SAME_MARGIN * max(abs(chi2_fit), 1.0))}
+
+
+def check(result, solutions, limits, fit_limit, restart, finish) -> object:
+    """Fit ``limits`` for ``result``, restart the full model from each, keep the best.
+
+    ``solutions`` ``(U, costs, ok, steps)``: the full model's local fits so far;
+    ``fit_limit(limit)`` → :class:`LimitOutcome` (or ``None``); ``restart(limit,
+    outcome)`` → ``(U, costs, ok, steps)`` of the full model's local fits started next to
+    the limit's optimum (``limit.nudges``); ``finish(U, costs, ok, steps)`` analyses the
+    best. Returns the
+    result (a new one when a restart won) with ``limits`` (list of dicts) and
+    ``restarted_from`` (the limit key, or ``None``) set, and the warnings."""
+    U, costs, ok, steps = (np.asarray(a) for a in solutions)
+    outcomes, won = [], None
+    for lim in limits:
+        out = fit_limit(lim)
+        if out is None:
+            continue
+        outcomes.append(out)
+        U1, c1, ok1, s1 = restart(lim, out)
+        if len(U1):
+            U, costs = np.concatenate([U, U1]), np.concatenate([costs, c1])
+            ok, steps = np.concatenate([ok, ok1]), np.concatenate([steps, s1])
+            c = float(np.nanmin(np.where(np.isfinite(c1), c1, np.inf)))
+            cur = float(np.nanmin(np.where(np.isfinite(costs[:-len(c1)]),
+                                           costs[:-len(c1)], np.inf)))
+            if c < cur * (1 - SAME_MARGIN):
+                won = lim.key
+    if won is not None:
+        result = finish(U, costs, ok, steps)
+    chi2_fit = data_chi2(result.problem, result.u, _cost_of(result, U, costs))
+    rows = [o.to_dict(chi2_fit) for o in outcomes]
+    result.limits = rows
+    result.restarted_from = won
+    # (Coulomb friction "fits as well" says nothing more when no friction does)
+    no_friction = any(r["fits_as_well"] for r in rows if r["limit"] == "no_friction")
+    for r, o in zip(rows, outcomes):
+        if r["fits_better"]:
+            result.warnings.append(
+                f"the {r['label']} limit fits better (χ² {r['chi2']:.4g}) than the reported "
+                f"fit (χ² {chi2_fit:.4g}), even with the full model restarted from it: "
+                f"{', '.join(o.limit.removed)} are not determined by this log; fit the "
+                "limit's model instead")
+        elif r["fits_as_well"] and not (no_friction and r["limit"] == "coulomb"):
+            result.warnings.append(
+                f"{o.limit.claim} (χ² {r['chi2']:.4g} against {chi2_fit:.4g}: Δχ² "
+                f"{r['dchi2']:.3g} < {r['dchi2_bound']:.3g}, the {100 * LIMIT_LEVEL:.0f} % "
+                f"point of χ² with {r['dof']} degree(s) of freedom); "
+                f"the log does not require {', '.join(o.limit.removed)}")
+    return result
+
+
+def _cost_of(result, U, costs) -> float:
+    """The cost of ``result.u`` among the solutions (its row), else the lowest."""
+    u = np.asarray(result.u, dtype=float)
+    for row, c in zip(np.asarray(U), np.asarray(costs)):
+        if row.shape == u.shape and np.array_equal(row, u):
+            return float(c)
+    return float(np.nanmin(np.where(np.isfinite(costs), costs, np.inf)))
