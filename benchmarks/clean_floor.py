@@ -164,6 +164,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("designs", nargs="*", default=["paper", "rich"])
     ap.add_argument("--seeds", default="0:200", help="first:stop (log indices)")
+    ap.add_argument("--only", default="",
+                    help="comma-separated log indices instead of --seeds (e.g. the misses "
+                         "of an earlier run)")
     ap.add_argument("--label", default="after")
     ap.add_argument("--append", action="store_true", help="keep the rows already stored")
     ap.add_argument("--report", action="store_true", help="only rewrite the .md")
@@ -189,7 +192,8 @@ def main(argv=None) -> int:
     head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=Path(hdid.__file__).parent,
                           capture_output=True, text=True).stdout.strip()
     lo, hi = (int(x) for x in a.seeds.split(":"))
-    for seed in range(lo, hi):
+    seeds = [int(x) for x in a.only.split(",")] if a.only else range(lo, hi)
+    for seed in seeds:
         for design in a.designs:
             if any(r.get("label") == a.label and r["design"] == design and r["seed"] == seed
                    for r in rows):

@@ -135,21 +135,23 @@ def fit(
     result = nested_check(result, log, setup, nested=nested, fix=fix,
                           inertia_prior=inertia_prior, release_time=release_time,
                           max_substep=max_substep, n_starts=n_starts, max_steps=max_steps,
-                          solutions=(U, costs, ok, steps))
+                          solutions=(U, costs, ok, steps), lanes=len(U0))
     result.wall_time_s = time.perf_counter() - t_start
     return result
 
 
 def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", fix=None,
                  inertia_prior=None, release_time=None, max_substep=None, n_starts: int = 6,
-                 max_steps: int = 300, solutions=None) -> FitResult:
+                 max_steps: int = 300, solutions=None, lanes: int | None = None) -> FitResult:
     """The fit of ``log`` checked against its model's limits (:mod:`hdid._fitting._limits`:
     Coulomb, no dry friction, linear spring): each wanted limit fitted, the full model
     restarted next to its optimum, the best kept, every limit recorded in
     ``result.limits``. ``nested`` True: every limit; ``"auto"``: every limit when the
     residual has not reached the floor, else those whose term may vanish; False: none.
     ``solutions`` ``(U, costs, ok, steps)``: the full model's local fits (default: the
-    result's optimum alone). Options as in :func:`fit`."""
+    result's optimum alone); ``lanes``: the number of starts of the fit's own
+    Levenberg–Marquardt program (the limits then run as calls of it, no compile of their
+    own), else the one-lane program of diagnose's store. Options as in :func:`fit`."""
     if nested not in (True, False, "auto"):
         raise ValueError(f"nested = {nested!r}: use True, False or 'auto'")
     del n_starts  # (the limits' own grids are ``_limits.LIMIT_GRID_STARTS`` wide)
@@ -166,12 +168,22 @@ def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", f
         c = np.asarray(_costs(problem, jnp.asarray(u)), dtype=float)
         solutions = (u, c, np.ones(1, dtype=bool), np.zeros(1, dtype=int))
     del log, fix, inertia_prior, release_time, max_substep  # the limits live in ``setup``
-    # One-lane programs from the program store (diagnose's: one compile per model
-    # structure whatever the number of starts, kept for later processes); the limits are
-    # prior rows on the fit's own problem, so they share it.
+    # The limits are prior rows on the fit's own problem: they share its programs (the
+    # fit's ``lanes``-start LM program; without it diagnose's one-lane program, one
+    # compile per model structure, kept in the program store).
 
     def local_fits(p, U0):
-        return _one_lane(p, U0, max_steps)[:4]
+        U0 = np.asarray(U0, dtype=float)
+        if not lanes:
+            return _one_lane(p, U0, max_steps)[:4]
+        # as calls of the fit's own program: ``lanes`` rows a call, a short one padded
+        # with copies of its first row (their results dropped)
+        outs = []
+        for i in range(0, len(U0), lanes):
+            rows = U0[i:i + lanes]
+            pad = np.concatenate([rows, np.repeat(rows[:1], lanes - len(rows), axis=0)])
+            outs.append([np.asarray(x)[:len(rows)] for x in _local_fits(p, pad, max_steps)])
+        return tuple(np.concatenate(parts) for parts in zip(*outs))
 
     model, prep = setup.model, setup.prep
     scales = log_scales(prep, model, np.asarray(problem.offset0))
@@ -186,7 +198,8 @@ def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", f
                                           {**limit.start(problem.values_np(u)), **pins})
                       for u in np.concatenate([u_fit[None, :], grid_U])])
         cost = np.asarray(_costs(p, jnp.asarray(U[1:])), dtype=float)
-        U0, _ = _choose_starts(U[1:], cost, grid_keys, _limits.LIMIT_GRID_STARTS, False)
+        n_grid = max(lanes - 1, 1) if lanes else _limits.LIMIT_GRID_STARTS
+        U0, _ = _choose_starts(U[1:], cost, grid_keys, n_grid, False)
         U0 = np.concatenate([U[:1], np.asarray(U0)])
         Un, cn, _, _ = local_fits(p, U0)
         cn = np.where(np.isfinite(cn), cn, np.inf)
