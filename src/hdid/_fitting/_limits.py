@@ -76,8 +76,8 @@ SAME_MARGIN = 1e-3
 COULOMB_V_S = 1e3
 #: The full model's restarts from the Coulomb limit: Stribeck shapes (``v_s`` as a
 #: fraction of the log's peak speed, ``delta``) spanning the law's prior (5 % of the peak
-#: speed, sd 1 in log; delta 0.5–2.5) ...
-COULOMB_RESTART_SHAPES = ((0.05, 1.0), (0.15, 2.5), (0.4, 2.0))
+#: speed, sd 1 in log; delta 0.5–2.5): a 3 × 2 grid ...
+COULOMB_RESTART_SHAPES = tuple((f, d) for f in (0.05, 0.15, 0.4) for d in (1.0, 2.5))
 #: ... and ``(tau_c, tau_s)`` as multiples of the limit's level: just off the limit (the
 #: limit's ``c_v``), and a rise of 1.7 (the level lies between sliding and breakaway
 #: friction) with ``c_v`` at its start rule (5 % of critical): poorer basins of clean
