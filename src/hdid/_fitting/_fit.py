@@ -218,7 +218,8 @@ def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", f
     def finish(U, costs, ok, steps):
         return _finish(setup, U, costs, ok, steps, t_start)
 
-    return _limits.check(result, solutions, wanted, fit_limit, restart, finish)
+    switch = _limits.KEEP_BETTER_AT_FLOOR or not _limits.reached_floor(result)
+    return _limits.check(result, solutions, wanted, fit_limit, restart, finish, switch)
 
 
 def _data_rms(problem: Problem, u, cost: float) -> float:
