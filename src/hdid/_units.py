@@ -86,18 +86,25 @@ MIN_SAMPLE_RATE_HZ = 5.0
 #: gear (it twists ~1e-3 rad at rated torque; a test reaches a few times that, so 0.05
 #: rad is an order of magnitude of headroom).
 MAX_GEAR_OUTPUT_SWING = 0.05
+#: Fastest plausible speed [rad/s] at the logged axis of a driven log: 20 000 rpm, above
+#: the highest rated input speed of strain-wave gears (14 000 rpm, the smallest sizes)
+#: and of servo motors. A motor log in degrees read as rad passes it above ~350 rpm.
+MAX_SPEED = 2100.0
 
 
 def implausible_units(*, sample_period: float, swing: float, ratio: float,
-                      band_halfwidth: float, step: float | None, geared_spring: bool) -> str | None:
+                      band_halfwidth: float, step: float | None, geared_spring: bool,
+                      speed: float = 0.0) -> str | None:
     """One line naming the unit a log's numbers are implausible in, with the fix, or None.
 
     ``sample_period`` [s as declared], ``swing`` the largest |start − rest| of a run at
     the logged axis and ``band_halfwidth`` the fitted stick band's half-width [rad as
     declared], ``ratio`` the gear ratio, ``step`` the encoder step, ``geared_spring``
     whether the model is a gear's stiffness without gravity (where the output twists
-    little). A log whose numbers are consistent but scaled (ms read as s, degrees read as
-    rad) fits as well as the right one: only the absolute sizes tell.
+    little), ``speed`` the largest speed at the logged axis [rad/s as declared] — the
+    measure of a driven log, whose motor turns freely (give it ``swing = 0``). A log whose
+    numbers are consistent but scaled (ms read as s, degrees read as rad) fits as well as
+    the right one: only the absolute sizes tell.
     """
     fs = 1.0 / sample_period if sample_period > 0 else math.inf
     if fs < MIN_SAMPLE_RATE_HZ:
@@ -112,12 +119,16 @@ def implausible_units(*, sample_period: float, swing: float, ratio: float,
     output_swing = swing / ratio if ratio > 0 else swing
     too_wide = (geared_spring and ratio > 1 and output_swing > MAX_GEAR_OUTPUT_SWING
                 or swing > math.pi or band_halfwidth > math.pi)
-    if not too_wide:
+    too_fast = speed > MAX_SPEED
+    if not (too_wide or too_fast):
         return None
     what = (f"the swing is {swing:.3g} rad at the logged axis ({output_swing:.3g} rad at "
             f"the output, ratio {ratio:g})" if swing > 0 else "")
     if band_halfwidth > math.pi or not what:
         what = f"the stick band's half-width is {band_halfwidth:.3g} rad"
+    if too_fast and not too_wide:
+        what = (f"the speed reaches {speed:.3g} rad/s ({speed * 30 / math.pi:.3g} rpm) at "
+                "the logged axis")
     if step is not None and abs(step - round(step)) < 1e-6 * max(step, 1.0) and step >= 1:
         fix = "theta holds raw counts: pass --counts-per-rev N"
     else:
@@ -126,7 +137,7 @@ def implausible_units(*, sample_period: float, swing: float, ratio: float,
                      <= MAX_GEAR_OUTPUT_SWING and s <= math.pi)
         fixes = [f"if theta is in {name}, write the header `theta [{unit}]`"
                  for name, unit, f in (("degrees", "deg", deg), ("mrad", "mrad", 1e-3))
-                 if plausible(swing * f)]
+                 if plausible(swing * f) and speed * f <= MAX_SPEED]
         fix = "; ".join(fixes or ["if theta holds raw counts, pass --counts-per-rev N"])
         fix += " (or check --ratio)"
     return f"units: {what} — implausible if theta is in radians; {fix}"

@@ -262,6 +262,7 @@ def _row(name: str, res, band_bracket: bool) -> dict[str, Any]:
     row["rms_residual_rad"] = res.rms_residual_rad
     row["rms_residual_counts"] = res.rms_residual_rad / res.resolution_rad
     row["n_runs"] = len(res.runs)
+    row["units_problem"] = res.units_problem  # a wrong unit: the one line that matters
     row["n_warnings"] = len(res.warnings)
     row["warnings"] = " | ".join(res.warnings)
     row["result"] = res

@@ -12,14 +12,18 @@ from .._problems._driven_problem import DrivenData
 from ..effects import Scales, StribeckFriction
 
 
-def _smooth_derivatives(theta, dt):
-    from scipy.signal import savgol_filter
+def _smooth_derivatives(theta, time):
+    """Speed and acceleration of a logged angle at its logged times: a 7-point local
+    cubic (:func:`~hdid._problems._driven_problem.local_cubic` — Savitzky–Golay at a
+    uniform period, the same least-squares cubic at jittered or gapped times, so that
+    a log's irregular timestamps are not read as speed changes)."""
+    from .._problems._driven_problem import local_cubic
 
+    theta = np.asarray(theta, dtype=float)
     w = min(7, theta.size - (1 - theta.size % 2))
     if w < 5:
         return np.zeros_like(theta), np.zeros_like(theta)
-    omega = savgol_filter(theta, w, 3, deriv=1, delta=dt)
-    alpha = savgol_filter(theta, w, 3, deriv=2, delta=dt)
+    _, omega, alpha = local_cubic(np.asarray(time, dtype=float), theta, w, second=True)
     return omega, alpha
 
 
@@ -56,7 +60,7 @@ def log_scales(data: DrivenData, joint: DrivenJoint, inertia: float | None = Non
     speeds, torques, spans = [], [], []
     for i in range(data.n_runs):
         n = int(data.weight[i].sum())
-        omega, _ = _smooth_derivatives(data.theta[i, :n], data.sample_period)
+        omega, _ = _smooth_derivatives(data.theta[i, :n], data.times[i, :n])
         speeds.append(np.abs(omega))
         torques.append(np.abs(data.motor_torque[i, :n]))
         spans.append(np.ptp(data.theta[i, :n]))
@@ -93,9 +97,15 @@ def _start_values(data: DrivenData, joint: DrivenJoint, free) -> DrivenJoint:
     for i in range(data.n_runs):
         n = int(data.weight[i].sum())
         th = data.theta[i, :n]
-        omega, alpha = _smooth_derivatives(th, dt)
+        omega, alpha = _smooth_derivatives(th, data.times[i, :n])
         td = data.motor_torque[i, :n]
-        td_mid = 0.5 * (td + np.concatenate([[td[0]], td[:-1]]))
+        # the held torque about each sample: the intervals before and after it, weighted
+        # by their logged lengths (the plain mean at a uniform period)
+        t = data.times[i, :n]
+        before, after = np.diff(t, prepend=t[0]), np.diff(t, append=t[-1])
+        td_prev = np.concatenate([[td[0]], td[:-1]])
+        span = before + after
+        td_mid = np.where(span > 0, (td_prev * before + td * after) / np.where(span > 0, span, 1.0), td)
         tl = data.load_torque[i, :n]
         moving = np.abs(omega) > threshold
         moving[[0, -1]] = False
@@ -105,7 +115,12 @@ def _start_values(data: DrivenData, joint: DrivenJoint, free) -> DrivenJoint:
         target.append((td_mid - tl / N)[moving])
         if data.has_output:
             held = s.copy()
-            for k in range(1, n):  # the output friction keeps its sign while at rest
+            # the output friction keeps its sign while at rest: a window that starts
+            # at rest starts with the sign of the encoder's last change before it
+            # (``direction0``), not with the sign of a speed that is only noise there
+            if abs(omega[0]) <= threshold:
+                held[0] = data.direction0[i]
+            for k in range(1, n):
                 if not moving[k]:
                     held[k] = held[k - 1]
             harm = np.arange(1, K + 1)

@@ -196,9 +196,11 @@ def _smooth_speed(theta: np.ndarray, time: np.ndarray) -> np.ndarray:
     return local_cubic(np.asarray(time, dtype=float), np.asarray(theta, dtype=float), w)[1]
 
 
-def local_cubic(t: np.ndarray, y: np.ndarray, window: int) -> tuple[np.ndarray, np.ndarray]:
-    """Value and first derivative of a cubic fitted by least squares to ``window``
-    (odd) samples about each sample (the first and last windows serve the edges).
+def local_cubic(t: np.ndarray, y: np.ndarray, window: int,
+                second: bool = False) -> tuple[np.ndarray, ...]:
+    """Value and first derivative (and with ``second`` the second derivative) of a cubic
+    fitted by least squares to ``window`` (odd) samples about each sample (the first and
+    last windows serve the edges).
 
     At a uniform period this is the Savitzky–Golay filter (``mode="interp"``), and that is
     what runs; at jittered or gapped times the same fit is made at the logged times.
@@ -208,15 +210,16 @@ def local_cubic(t: np.ndarray, y: np.ndarray, window: int) -> tuple[np.ndarray, 
     steps = np.diff(t)
     h = float(np.median(steps))
     if np.all(np.abs(steps - h) <= 1e-6 * h):
-        return (savgol_filter(y, window, 3),
-                savgol_filter(y, window, 3, deriv=1, delta=h))
+        out = (savgol_filter(y, window, 3), savgol_filter(y, window, 3, deriv=1, delta=h))
+        return out + (savgol_filter(y, window, 3, deriv=2, delta=h),) if second else out
     n, half = y.size, window // 2
     centre = np.clip(np.arange(n), half, n - 1 - half)
     idx = centre[:, None] + np.arange(-half, half + 1)[None, :]
     x = (t[idx] - t[:, None]) / h  # about each sample, in periods
     V = x[..., None] ** np.arange(4)  # (n, window, 4)
     coef = np.einsum("nkw,nw->nk", np.linalg.pinv(V), y[idx])
-    return coef[:, 0], coef[:, 1] / h
+    out = (coef[:, 0], coef[:, 1] / h)
+    return out + (2.0 * coef[:, 2] / h**2,) if second else out
 
 
 class DrivenProblem(AbstractProblem):

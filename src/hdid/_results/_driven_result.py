@@ -63,6 +63,21 @@ class DrivenFitResult:
     def model(self):
         return self.joint.model
 
+    @property
+    def units_problem(self) -> str | None:
+        """One line when the driven log's numbers are implausible for their declared units
+        (time in s, angles in rad), with the fix (``time [ms]``, ``theta [deg]``,
+        ``--counts-per-rev``); ``None`` when they are plausible
+        (:func:`hdid._units.implausible_units`: its sample rate, and its largest motor
+        speed — a driven motor turns freely, so its angle range tells nothing)."""
+        from .._units import implausible_units
+
+        data = self.data
+        return implausible_units(
+            sample_period=float(data.sample_period), swing=0.0,
+            ratio=float(self.joint.ratio), band_halfwidth=0.0,
+            step=float(data.step), geared_spring=False, speed=_top_speed(data))
+
     # -- curves ---------------------------------------------------------------------
     def _driven_problem(self):
         p = self.problem
@@ -107,7 +122,9 @@ class DrivenFitResult:
 
     # -- text -----------------------------------------------------------------------
     def report(self) -> str:
-        lines = [f"hdid {self.kind} fit: {self.source}", ""]
+        problem = self.units_problem  # a wrong unit is the first thing a user reads
+        lines = ([problem.upper()[:6] + problem[6:]] if problem else []) + [
+            f"hdid {self.kind} fit: {self.source}", ""]
         lines.append(f"{'parameter':<11} {'value':>12} {'std':>10}  unit")
         for p in self.parameters.values():
             if p.fixed:
@@ -171,6 +188,7 @@ class DrivenFitResult:
         """Strict-JSON summary (the ``--json`` schema of a driven or joint fit): a NaN or
         infinite value as ``None``."""
         return finite({
+            "units_problem": self.units_problem,
             "source": self.source,
             "kind": self.kind,
             "parameters": {n: p.to_dict() for n, p in self.parameters.items()},
@@ -281,3 +299,17 @@ class DrivenFitResult:
         ax.set_title(f"run {self.data.run_names[run]}: kinematic error = positional + flexibility")
         ax.legend(fontsize=7)
         return ax
+
+
+def _top_speed(data) -> float:
+    """The 99th percentile of the driven log's motor speed [rad/s as declared], from a
+    local cubic at the logged times (a percentile, so that one reading's glitch does not
+    decide the log's units)."""
+    from .._problems._driven_problem import _smooth_speed
+
+    weight = np.asarray(data.weight)
+    speeds = [np.abs(_smooth_speed(np.asarray(data.theta)[i, : int(weight[i].sum())],
+                                   np.asarray(data.times)[i, : int(weight[i].sum())]))
+              for i in range(weight.shape[0])]
+    speeds = np.concatenate(speeds) if speeds else np.zeros(0)
+    return float(np.percentile(speeds, 99)) if speeds.size else 0.0
