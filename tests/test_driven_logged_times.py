@@ -195,3 +195,22 @@ def test_ur10e_joint1_start_is_near_the_published_friction_and_inertia():
     got = _start_values(data, joint, free).float_values()
     for ours, theirs in (("inertia", "M_jj_kgm2"), ("c_v", "Fv_Nms_per_rad"), ("tau_c", "Fc_Nm")):
         assert 0.5 < got[ours] / published[theirs] < 2.0, (ours, got[ours], published[theirs])
+
+
+@pytest.mark.parametrize("kw, fix", [
+    # the shipped driven log's 72 rad/s WG in degrees: 4100 "rad/s"; in mrad: 72 000
+    ({"speed": 4100.0, "step": 0.09}, "`theta [deg]`"),
+    ({"speed": 72000.0, "step": 1.571}, "`theta [mrad]`"),
+    # raw 4000-count readings: 46 000 counts/s, a whole-number step
+    ({"speed": 46000.0, "step": 1.0}, "--counts-per-rev"),
+])
+def test_a_driven_motor_too_fast_for_radians_names_the_unit(kw, fix):
+    from hdid._units import implausible_units
+
+    base = dict(sample_period=0.004, swing=0.0, ratio=100.0, band_halfwidth=0.0,
+                step=2 * math.pi / 4000, geared_spring=False)
+    # 72 rad/s (690 rpm) and a 14 000 rpm (1466 rad/s) strain-wave input are plausible
+    assert implausible_units(**base, speed=72.0) is None
+    assert implausible_units(**base, speed=1466.0) is None
+    problem = implausible_units(**{**base, **kw})
+    assert problem is not None and fix in problem and "rad/s" in problem, problem
