@@ -262,3 +262,110 @@ def test_step_against_readings_rule():
     assert step_against_readings(theta, lengths, q, 5.0 * q, 3.0) is None
     # a residual beyond the readings' own spacing's floor is the model's, whatever the step
     assert step_against_readings(theta, lengths, q / 100, 5.0 * q, 3.0) is None
+
+
+# ------------------------------------------------ a few readings off the grid
+
+
+def _walk(q, runs=3, n=400, seed=0):
+    """Readings of ``runs`` runs on the grid ``q`` (each with its own offset): a swing that
+    crosses levels at no fixed stride, then creeps to rest over neighbouring levels."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for r in range(runs):
+        t = np.arange(n) / 100.0
+        x = 0.3 * np.exp(-t) * np.cos(2 * math.pi * 0.8 * t + rng.uniform(0, 6))
+        out.append(np.round(x / q) * q + rng.uniform(-1, 1))
+    return out
+
+
+def test_a_few_readings_off_the_grid_do_not_halve_the_step():
+    # a logger's filled-in reading (the mean of the last two: half a step off) in 3 of
+    # 1200 readings: the step is the grid all the others lie on, and the three are named
+    q = 2 * math.pi / 4096
+    runs = _walk(q)
+    for r, k in ((0, 50), (1, 120), (2, 30)):
+        runs[r][k] = runs[r][k - 1] + 0.5 * q  # e.g. the mean of -723 and -718 counts
+    x = np.concatenate(runs)
+    found = find_step(x, 1e-10, [0, 400, 800])
+    assert found.step == pytest.approx(q, rel=1e-6)
+    assert sorted(found.off_grid) == [50, 520, 830]
+    assert all(abs(b - 0.5) < 1e-6 for b in found.off_by)
+
+
+def test_a_finer_encoder_is_not_made_coarser():
+    # readings on a genuinely finer grid (8192 counts) keep it: their levels fall on both
+    # residues of the 4096 grid about equally (false acceptance bounded by 1e-6)
+    q = 2 * math.pi / 8192
+    x = np.concatenate(_walk(q, seed=1))
+    found = find_step(x, 1e-10, [0, 400, 800])
+    assert found.step == pytest.approx(q, rel=1e-6) and not found.off_grid
+
+
+def test_more_than_a_percent_off_the_grid_is_the_finer_grid():
+    # 2 % of the readings half a step off: not a handful of glitches (more than 1 %),
+    # the grid that explains every level is kept
+    q = 2 * math.pi / 4096
+    runs = _walk(q, seed=2)
+    for run in runs:
+        run[10::50] += 0.5 * q
+    x = np.concatenate(runs)
+    found = find_step(x, 1e-10, [0, 400, 800])
+    assert found.step == pytest.approx(q / 2, rel=1e-6) and not found.off_grid
+
+
+REAL = ROOT.parent / "shared" / "data" / "real"
+STS = REAL / "sts3215_drop"
+BAM = REAL / "bam_xl330"
+
+
+def _need(path: Path) -> None:
+    if not path.exists():
+        pytest.skip(f"{path.name} not in {path.parent} (real logs stay outside the "
+                    "repository: ../shared/data/real/README.md says where they come from)")
+
+
+@pytest.mark.parametrize("mass_length", ["m0.535_l0.10", "m0.535_l0.15", "m0.741_l0.10",
+                                         "m0.741_l0.15", "m0.969_l0.10", "m0.969_l0.15",
+                                         "m1.168_l0.10", "m1.168_l0.15"])
+def test_sts3215_logs_find_the_4096_count_step(mass_length):
+    """The STS3215 output encoder has 4096 counts per revolution (README). In
+    m0.535_l0.10 run kp4_2 the reading before the −π dropout is the mean of the two
+    before it (−723, −718 counts → −720.5): half a count off, it alone forced a half-count
+    grid; it is named as off the grid, not taken for a finer encoder."""
+    path = STS / f"sts3215_{mass_length}.csv"
+    _need(path)
+    log = read_log(path)
+    # the least-squares grid over hundreds of levels printed to 10 significant digits
+    assert log.resolution == pytest.approx(2 * math.pi / 4096, rel=1e-6)
+    off = [n for n in log.notes if "off the encoder grid" in n]
+    if mass_length == "m0.535_l0.10":
+        assert len(off) == 1 and "'kp4_2'" in off[0] and "0.50 step off" in off[0], off
+    else:
+        assert not off, off
+
+
+def test_bam_xl330_processed_is_on_no_grid_and_raw_is_on_4096(tmp_path):
+    """BAM's processed log is its own linear interpolation onto a 5 ms grid: most readings
+    lie between encoder levels, so no step is found (the fit estimates the noise), and the
+    note says why. The raw logs (the servo's readings at their own times) are on the
+    XL330's 4096-count grid."""
+    path = BAM / "bam_xl330_drop_processed.csv"
+    _need(path)
+    log = read_log(path)
+    assert log.resolution is None and log.resolution_note
+    raw = sorted((BAM / "raw").glob("*.json"))
+    if not raw:
+        pytest.skip(f"no raw logs in {BAM / 'raw'}")
+    rows = []
+    for f in raw:
+        d = json.loads(f.read_text())
+        if d.get("trajectory") != "lift_and_drop":
+            continue
+        for e in d["entries"]:
+            rows.append((e["timestamp"], e["position"], f.stem))
+    assert rows
+    frame = pd.DataFrame(rows, columns=["time", "theta", "run"])
+    frame.to_csv(tmp_path / "bam_raw.csv", index=False, float_format="%.10g")
+    log = read_log(tmp_path / "bam_raw.csv")
+    assert log.resolution == pytest.approx(2 * math.pi / 4096, rel=1e-6)

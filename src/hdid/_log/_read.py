@@ -4,6 +4,7 @@ is read by :mod:`._table`, its columns found by :mod:`._columns`, its rows check
 
 from __future__ import annotations
 
+import math
 import os
 
 import numpy as np
@@ -14,6 +15,7 @@ from ._names import (
     _COUNTS_HINT, _INERTIA, _LOAD_TORQUE, _MOTOR, _OUTPUT_COUNTS_HINT, _RUN, _SETUP, _THETA,
     _THETA_OUT, _TIME,
 )
+from ._dropouts import find_dropouts
 from ._types import Log, Run
 from ._resolution import column_print_units, find_step
 from ._table import _Cells, _Table, _load_csv, _load_frame, _show
@@ -96,7 +98,11 @@ def read_log(
     kept, a rest point inside the stick band, and named in ``Log.notes``). The
     sample period is the median time step; the steps may vary (jitter, dropped
     samples) and a run is split at a break (a step over 5 of its median steps),
-    named in ``Log.notes``. Fully blank lines are skipped.
+    named in ``Log.notes``. A one-sample read dropout (a reading ten times farther from
+    both neighbours than any change the run shows, while they agree) is dropped before
+    the step is sought and named in ``Log.notes`` (more than 1 % of a run's rows is an
+    error); a few readings off the encoder grid that all others lie on are kept and
+    named. Fully blank lines are skipped.
 
     Driven logs (a ``motor_torque`` or ``motor_current`` column) are checked
     further: the torque / counts arguments match the columns; no run lacks the
@@ -214,8 +220,14 @@ def read_log(
     period = sample_period(time, within, fail)
     starts, ends, names, notes = split_at_breaks(time, theta, starts, ends, names,
                                                  min_samples_per_run)
-    lengths = ends - starts
-    kept = np.concatenate([np.arange(a, b) for a, b in zip(starts, ends)])
+    # one-sample read dropouts (a bus servo's -pi) leave before the step is sought
+    # (hdid._log._dropouts)
+    dropped, dropout_notes = find_dropouts(time, theta, starts, ends, names, table.lines, fail)
+    notes += dropout_notes
+    rows = [np.setdiff1d(np.arange(a, b), dropped, assume_unique=True)
+            for a, b in zip(starts, ends)]
+    lengths = np.array([r.size for r in rows], dtype=np.int64)
+    kept = np.concatenate(rows)
     # the step from the readings' levels, within their printing precision (per run: any
     # offset); hdid._log._resolution
     run_starts = np.concatenate(([0], np.cumsum(lengths)[:-1]))
@@ -226,6 +238,9 @@ def read_log(
         found = find_step(theta[kept], None if printed is None else printed[kept], run_starts)
         resolution, resolution_note = found.step, found.note
         resolution_source = "estimated" if resolution is not None else None
+        if found.off_grid:
+            notes.append(_off_grid_note(found, kept, time, theta, table.lines, names,
+                                        run_starts))
     if theta_out is not None and output_resolution is None:
         printed_out = column_print_units(table.columns[cols[_THETA_OUT]],
                                          unit_scale[_THETA_OUT], None)
@@ -233,16 +248,18 @@ def read_log(
             theta_out[kept], None if printed_out is None else printed_out[kept], run_starts
         ).step
     if not driven:  # a driven run may stay stuck
-        notes += check_motion(theta, starts, ends, names, resolution, fail)
+        notes += check_motion(theta[kept], run_starts, run_starts + lengths, names,
+                              resolution, lambda m, key=None, pos=None: fail(
+                                  m, key, None if pos is None else int(kept[pos])))
 
     def part(values: np.ndarray | None, k: int) -> np.ndarray | None:
-        return None if values is None else values[starts[k] : ends[k]]
+        return None if values is None else values[rows[k]]
 
     runs = tuple(
         Run(
             name=names[k],
-            time=time[starts[k] : ends[k]],
-            theta=theta[starts[k] : ends[k]],
+            time=time[rows[k]],
+            theta=theta[rows[k]],
             setup="1" if setups is None else str(setups[starts[k]]),
             added_inertia=0.0 if inertia is None else float(inertia[starts[k]]),
             first_row=int(table.lines[starts[k]]),
@@ -287,3 +304,22 @@ def _check_not_mixed(table: _Table, col: int, run_labels: np.ndarray) -> None:
             column=table.names[col],
             row=int(table.lines[starts[b]]),
         )
+
+
+def _off_grid_note(found, kept, time, theta, lines, names, run_starts) -> str:
+    """One line naming the readings off the encoder grid that every other reading lies
+    on (:mod:`._grid_outliers`): kept as read."""
+    shown = []
+    for i, by in list(zip(found.off_grid, found.off_by))[:5]:
+        row = int(kept[i])
+        run = names[int(np.searchsorted(run_starts, i, side="right")) - 1]
+        shown.append(f"run {_show(run)} row {int(lines[row])} (t = {time[row]:.6g} s, "
+                     f"{theta[row]:.6f} rad, {by:.2f} step off)")
+    more = len(found.off_grid) - len(shown)
+    return (
+        f"{len(found.off_grid)} reading(s) lie off the encoder grid of {found.step:.4g} rad "
+        f"that all the others lie on: {'; '.join(shown)}{f'; and {more} more' if more else ''}"
+        f" — a logger's glitch, not a finer encoder (a finer grid would put this many "
+        f"levels on one coarse grid with chance < 1e{math.ceil(found.off_grid_log10_chance)}); "
+        "kept as read"
+    )

@@ -28,6 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from ._grid_outliers import coarser_grid
+
 
 # ------------------------------------------------------------------ print precision
 
@@ -136,6 +138,12 @@ class StepFinding:
     step: float | None
     print_unit: float | None
     note: str | None = None
+    #: Readings (positions in the array searched) off the step's grid, which nearly all
+    #: others lie on (:mod:`._grid_outliers`), how far off [steps], and the bound on the
+    #: chance that a log on a finer grid looks like that.
+    off_grid: tuple[int, ...] = ()
+    off_by: tuple[float, ...] = ()
+    off_grid_log10_chance: float | None = None
 
 
 def _levels(x: np.ndarray, p: np.ndarray, merge: float) -> tuple[np.ndarray, np.ndarray]:
@@ -211,7 +219,7 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
         return StepFinding(None, None, "too few readings to find a grid")
     merge = MERGE_REL * max(float(np.max(np.abs(x[ok]))), np.finfo(float).tiny)
     unit = float(np.max(p[ok])) if print_unit is not None else None
-    d_all, t_all, gaps = [], [], []
+    d_all, t_all, gaps, run_levels = [], [], [], []
     n_levels = 0
     for a, b in bounds:
         keep = ok[a:b]
@@ -219,6 +227,7 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
             continue
         lv, tl = _levels(x[a:b][keep], p[a:b][keep], merge)
         n_levels += lv.size
+        run_levels.append((int(a), int(b), lv))
         if lv.size < 2:
             continue
         g = np.diff(lv)
@@ -257,7 +266,15 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
         log_chance = float(np.sum(np.log10(per))) if per.size else 0.0
         trials = MAX_STEP_DIVISOR * max(float(m.max()), 1.0)
         if log_chance + math.log10(trials) < math.log10(FALSE_GRID_CHANCE):
-            return StepFinding(q, unit, None)
+            # a few readings off a coarser grid that all others lie on (._grid_outliers)
+            coarse_grid = coarser_grid(q, x, run_levels, merge, MAX_STEP_DIVISOR,
+                                       FALSE_GRID_CHANCE)
+            if coarse_grid is None:
+                return StepFinding(q, unit, None)
+            return StepFinding(q * coarse_grid.factor, unit, None,
+                               tuple(int(i) for i in coarse_grid.off),
+                               tuple(float(v) for v in coarse_grid.off_by),
+                               coarse_grid.log10_chance)
         return StepFinding(
             None, unit,
             f"the readings' {n_levels} levels fit a grid of {q:.4g} {unit_name} but do not "

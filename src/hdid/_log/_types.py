@@ -139,7 +139,10 @@ class Log:
         readings' grid) or ``None`` (no resolution: readings on no grid).
     notes : tuple of str
         What reading did to the log that the report must say, one line each: runs split
-        at a break in their time column, runs that never move (kept as rest points).
+        at a break in their time column, one-sample read dropouts dropped (a bus servo's
+        −π; :mod:`hdid._log._dropouts`), readings off the encoder grid that all others lie
+        on (kept; :mod:`hdid._log._grid_outliers`), runs that never move (kept as rest
+        points).
     print_unit : float or None
         Printing precision of ``theta`` [rad]: the largest rounding unit of its cells as the
         file prints them (``1e-4`` for four decimals); ``None`` for numbers never printed.
