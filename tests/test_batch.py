@@ -102,7 +102,11 @@ def test_vectorized_matches_single_fits(batch_logs, tmp_path):
             assert abs(vec.parameters[name].value - ref.value) <= 1e-3 * ref.std, name
             assert getattr(row, name) == vec.parameters[name].value
         assert vec.rms_residual_rad == pytest.approx(single.rms_residual_rad, rel=1e-9)
-        assert vec.warnings == [w for w in single.warnings if not w.startswith("stick band:")]
+        # the batch does not run the limit checks of hdid.fit (one log at a time, on a
+        # symptom only: README "Batch"), so their warnings are single-fit only
+        limit_words = ("limit fits better", "fits as well")
+        assert vec.warnings == [w for w in single.warnings if not w.startswith("stick band:")
+                                and not any(x in w for x in limit_words)]
         assert len(vec.runs) == len(single.runs) and vec.runs[0].n_samples == single.runs[0].n_samples
 
 

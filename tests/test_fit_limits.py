@@ -66,21 +66,25 @@ def paper_fits():
     return full, linear
 
 
-def test_the_paper_log_reports_no_fit_worse_than_its_linear_spring_limit(paper_fits):
-    # The linear spring is the cubic spring at k2 = 0: the full model's optimum can never
-    # be worse. Before the limits were checked the shipped log reported χ² 24.0 (0.83×
-    # the floor) while the linear-spring model reaches 11.8 from another basin.
+def test_the_paper_log_never_hides_a_better_limit(paper_fits):
+    # The linear spring is the cubic spring at k2 = 0. Before the limits were checked the
+    # shipped log reported χ² 24.0 (0.83× the floor) while the linear-spring model reaches
+    # 11.8 from another basin, and nothing said so. That basin's χ² lies below the 0.1 %
+    # point of χ²_35 (14.7): it fits the rounding itself, and its physics is far from the
+    # truth (k1 +13 %, tau_s 2.2×), so a fit at the floor keeps its optimum
+    # (_limits.KEEP_BETTER_AT_FLOOR) — but the better limit is never silent.
     full, linear = paper_fits
 
     def chi2(r):
         w2 = float(np.sum(np.asarray(r.problem.weight) ** 2))
         return (r.rms_residual_rad / float(r.problem.sigma)) ** 2 * w2
 
-    # 1e-3 relative: the LM's stopping tolerance (starts that converge together agree to
-    # ~1e-4 in χ²)
-    assert chi2(full) <= chi2(linear) * (1 + 1e-3) + 1e-6, (chi2(full), chi2(linear))
     no_cubic = next(d for d in full.limits if d["limit"] == "no_cubic")
-    assert not no_cubic["fits_better"]
-    # and the report says which limit the data do not exclude
-    if no_cubic["fits_as_well"]:
-        assert any("no cubic stiffness supported" in w for w in full.warnings)
+    # the limit fit found the linear-spring basin (1e-3 relative: the LM's stopping
+    # tolerance; starts that converge together agree to ~1e-4 in χ²)
+    assert no_cubic["chi2"] <= chi2(linear) * (1 + 1e-3) + 1e-6, (no_cubic, chi2(linear))
+    if no_cubic["chi2"] < chi2(full) * (1 - 1e-3):
+        assert no_cubic["fits_better"]
+        assert any("limit fits better" in w for w in full.warnings), full.warnings
+    # the reported fit is at the floor (the rule of _limits.reached_floor)
+    assert full.rms_residual_rad <= 1.2 * full.quantization_floor_rad

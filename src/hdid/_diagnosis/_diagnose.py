@@ -123,6 +123,7 @@ from ._verdict import (  # noqa: F401
 from ._ladder import _chi2, _ladder_step, bic, bic_value, model_ladder  # noqa: F401
 from ._excess import floor_check
 from ._rival import rank_within_families
+from ._wrong_step import readings_step
 
 #: A current fit with RMS above this many quantization floors is a poor warm start ...
 FAR_FROM_FLOOR = 3.0
@@ -240,38 +241,6 @@ def _record(cand, sf, current_fit, base_bic_k):
     )
 
 
-def _readings_step(log, model, fit_options, base_setup, base_grid, current, say):
-    """A base fit whose residual is far above its step's floor but within the floor of the
-    readings' own spacing (:func:`hdid._log._resolution.step_against_readings`) was given a
-    wrong step: judged against it, a clean log would be "unexplained". The base is refitted
-    with the readings' spacing as the step, and a warning says so. Returns the (new) set-up,
-    grid, fit and the warning (``None`` when the step is consistent)."""
-    import dataclasses
-
-    from .._fitting import _refit
-    from .._fitting._identifiability import RESIDUAL_FLOOR_FACTOR
-    from .._log._resolution import readings_spacing, step_against_readings
-
-    prep = base_setup.prep
-    if not prep.quantized:
-        return base_setup, base_grid, current, None
-    wrong = step_against_readings(prep.theta, prep.lengths, prep.resolution,
-                                  current.rms_rad(), RESIDUAL_FLOOR_FACTOR)
-    if wrong is None:
-        return base_setup, base_grid, current, None
-    g = readings_spacing(prep.theta, prep.lengths)
-    say(f"refitting the base model with the readings' spacing {g:.4g} as the step")
-    log = dataclasses.replace(log, resolution=g, resolution_source="estimated")
-    base_setup = _refit.setup(log, model, fit_options)
-    base_grid = _refit.grid(base_setup, FULL_GRID_STARTS)
-    current = _refit.run("base", base_setup, [("grid", u) for u in base_grid])
-    return base_setup, base_grid, current, (
-        f"{wrong.split(': the step looks wrong')[0]}: the step {prep.resolution:.4g} looks "
-        f"wrong, so this diagnosis takes the readings' spacing {g:.4g} as the step (pass "
-        "the encoder's step with --resolution)"
-    )
-
-
 def diagnose(
     log,
     model=None,
@@ -348,8 +317,8 @@ def diagnose(
             f"{base_setup.prep.source}: every start diverged (non-finite residuals); check "
             "units (rad vs counts) and --inertia, or fix some parameters"
         )
-    base_setup, base_grid, current, step_warning = _readings_step(
-        log, model, fit_options, base_setup, base_grid, current, say)
+    base_setup, base_grid, current, step_warning = readings_step(
+        log, model, fit_options, base_setup, base_grid, current, say, FULL_GRID_STARTS)
     notes: list[str] = []
     local_base: list[tuple[float, float, str]] = []
     ladder: list[dict[str, Any]] = []

@@ -144,6 +144,8 @@ class FitResult:
                 }
                 for r in self.runs
             },
+            "limits": list(getattr(self, "limits", None) or []),
+            "restarted_from": getattr(self, "restarted_from", None),
             "rms_residual_rad": self.rms_residual_rad,
             "rms_residual_counts": (self.rms_residual_rad / self.resolution_rad
                                     if self.resolution_source != "noise" else None),
