@@ -1,6 +1,6 @@
 """The rounding floor measured on the log in hand (``hdid._diagnosis._floor``, from branch
-``diag6``) and the report and warning built on it (``hdid._diagnosis._excess``, branch
-``diag7``): the floor against brute force, the threshold's statistics, the generated
+section "the measured rounding floor") and the report and warning built on it (``hdid._diagnosis._excess``,
+section "the measured rounding floor reported"): the floor against brute force, the threshold's statistics, the generated
 thresholds against the committed calibration, the warning's rule."""
 
 from __future__ import annotations

@@ -147,7 +147,7 @@ def test_below_the_floor_a_penalty_gap_the_chi2_difference_contradicts_is_a_riva
         evidence=lambda a, b: R.Evidence(b.fit.cost - a.fit.cost, -1.9, 1.9, -4.3, 1.9,
                                          lr[b.key]))
     # the two D distributions (−1.9 ± 1.9, −4.3 ± 1.9) overlap: power 1.6 < SEPARABLE, so
-    # the penalties' gap is dropped and 2·ln LR alone is the evidence (diag9)
+    # the penalties' gap is dropped and 2·ln LR alone is the evidence (benchmarks/README.md, "the rival test calibrated by simulation")
     assert [round(c.floor_gap, 1) for c in results[1:3]] == [-5.5, -7.0]
     assert math.isnan(results[3].floor_gap)  # not strong, not compared
     assert sum("a rival" in n for n in notes) == 2
@@ -231,7 +231,7 @@ def _blind(a, b):
 
 def test_below_the_floor_a_log_that_cannot_tell_two_families_apart_names_neither():
     """Asymmetric friction 12.7 and 14.6 ahead of the kinematic error and the ripple by the
-    penalties alone, the log giving no evidence either way: ambiguous (before diag9 it
+    penalties alone, the log giving no evidence either way: ambiguous (before the rival test was calibrated by simulation it
     was named with confidence, floor gaps 13.2 and 15.1), and the note says why."""
     results = _paper_9905()
     notes = R.rank_within_families(results, CANDS, D.STRONG_DBIC, D.AMBIGUOUS_DBIC,

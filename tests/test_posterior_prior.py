@@ -177,7 +177,7 @@ def test_sampling_coordinates_and_orders_are_declared_by_the_effects(fit):
     """The posterior reads its coordinates from the parameters' declarations (issue 20:
     no list of names in the posterior): the library's ``k1, k2, tau_c, c_v`` are sampled
     in value and ``k2, tau_c, c_v`` get a value-flat prior (coefficients of terms that may
-    vanish; tau_c since issue 17 ``post7``), and a user's effect that declares
+    vanish; tau_c since it became flat in value, issue 17), and a user's effect that declares
     ``sample_in_value`` / ``flat_in_value`` and an order is treated the same way."""
     from hdid._posterior.density import declared, ordered_pairs
     from hdid.effects import parameter

@@ -17,14 +17,12 @@ from __future__ import annotations
 import importlib.util
 import json
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pandas as pd
 import pytest
 
-from synthetic import ROOT
+from synthetic import ROOT, cli_fit_json
 
 EMPS = ROOT / "data" / "real" / "emps"
 DATA = ROOT.parent / "shared" / "data" / "real" / "emps"
@@ -49,13 +47,7 @@ def _need(*paths):
 def emps_fit(tmp_path_factory):
     _need(TRAIN)
     out = tmp_path_factory.mktemp("emps") / "fit.json"
-    proc = subprocess.run(
-        [sys.executable, "-m", "hdid.cli", "fit", str(TRAIN), "--ratio", "1",
-         "--add", "torque_offset", "--json", str(out)],
-        capture_output=True, text=True, cwd=ROOT,
-    )
-    assert proc.returncode == 0, proc.stderr
-    return json.loads(out.read_text()), proc.stdout
+    return cli_fit_json(TRAIN, out, "--ratio", "1", "--add", "torque_offset")
 
 
 def test_emps_csv_is_si_and_uniform():

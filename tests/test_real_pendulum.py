@@ -21,15 +21,13 @@ The logs stay outside the repository; the tests skip, naming the folder, when it
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import pytest
 
 import hdid
 from hdid.effects import library
 
-from synthetic import ROOT
+from synthetic import ROOT, cli_fit_json
 
 REAL = ROOT.parent / "shared" / "data" / "real"
 BAM = REAL / "bam_xl330" / "bam_xl330_drop_processed.csv"
@@ -52,14 +50,8 @@ def _released(runs, warnings):
 def bam_fit(tmp_path_factory):
     _need(BAM)
     out = tmp_path_factory.mktemp("bam") / "fit.json"
-    proc = subprocess.run(
-        [sys.executable, "-m", "hdid.cli", "fit", str(BAM), "--ratio", "1",
-         "--remove", "stiffness", "--add", "gravity", "--inertia", "0.006714",
-         "--json", str(out)],
-        capture_output=True, text=True, cwd=ROOT,
-    )
-    assert proc.returncode == 0, proc.stderr
-    return json.loads(out.read_text())
+    return cli_fit_json(BAM, out, "--ratio", "1", "--remove", "stiffness", "--add", "gravity",
+                        "--inertia", "0.006714")[0]
 
 
 def test_bam_xl330_every_run_released(bam_fit):

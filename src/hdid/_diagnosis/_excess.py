@@ -1,6 +1,6 @@
 """The base fit against the rounding floor a correct model leaves on *this* log, reported
 by :func:`hdid.diagnose`, and a warning calibrated on clean logs (issue 19, branch
-``diag7``). The verdict rules and the BIC are not touched.
+section "the measured rounding floor reported"). The verdict rules and the BIC are not touched.
 
 The BIC floors every model at the white-noise floor ``n − k``
 (:func:`hdid._diagnosis._ladder.bic_value`). An encoder's rounding errors are correlated

@@ -277,7 +277,7 @@ def residual_rows(problem, u) -> int:
     shape evaluation traces the simulation (0.24–0.30 s on the shipped paper log, against
     17 ms for a 6-lane LM call; the driven fit and the posterior's mode search and limit
     fits call :func:`solve_fresh` tens to hundreds of times, benchmarks/README.md, issue
-    17 ``post8``)."""
+    17, section "the limit fits cheap")."""
     leaves, treedef = jax.tree_util.tree_flatten(problem)
     try:
         key = (treedef, tuple(u.shape), str(u.dtype), tuple((tuple(np.shape(x)), str(getattr(x, "dtype", type(x))))

@@ -63,7 +63,7 @@ SIGMA_BOUNDS = (0.05, 20.0)
 #: declares ``k2``, ``c_v`` and ``tau_c`` flat in value — coefficients of terms that may
 #: vanish, whose "absent" end a log-flat prior gives an unbounded volume that pulled the
 #: paper design to k2 → 0 and a 92 mrad band, and made the shipped log's tau_c interval
-#: one of the box's floor (issue 17, ``post7``) — and samples ``k1``, ``k2``, ``tau_c``, ``c_v`` in value — the
+#: one of the box's floor (issue 17, section "tau_c flat in value") — and samples ``k1``, ``k2``, ``tau_c``, ``c_v`` in value — the
 #: data fix ``k1·d + k2·d³`` and ``τ_c + c_v·v`` as straight lines, bananas in their logs;
 #: benchmarks/results/posterior_calibration.md, posterior_coordinates.md).
 #: Where the fit's RMS residual is beyond the noise bound in steps, σ_n is bounded by this

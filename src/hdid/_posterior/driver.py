@@ -90,7 +90,7 @@ def sample_posterior(
     started from the optima's Laplace approximations, differential-evolution moves plus an
     independence Metropolis–Hastings move from a t-mixture over the optima (below); the
     verdict is arviz's on its chain. Measured side by side on the same logs
-    (benchmarks/README.md, issue 17, branch ``post3``) it mixed better than emcee started
+    (benchmarks/README.md, issue 17, section "emcee back as the engine") it mixed better than emcee started
     from a tempered-SMC pilot with a proposal fitted to the SMC particles (retired).
 
     ``method="smc"``: tempered sequential Monte Carlo alone from the optima's Laplace
@@ -118,7 +118,7 @@ def sample_posterior(
     fixed. (A normalizing flow fitted to the burn-in draws in its place was measured and
     lost: benchmarks/results/posterior_flow.md; so did emcee in the latent space of a flow
     fitted to an SMC pilot, and that flow as the independence move, under the physical
-    priors: benchmarks/README.md, branch ``post5``.)
+    priors: benchmarks/README.md, section "normalizing-flow preconditioning".)
 
     The kept chain grows (checked after ``chunk`` steps, then at every growth by
     ``CHECK_GROWTH``) until it converges — every sampled quantity and the stick-band

@@ -4,7 +4,7 @@ A parameter whose default prior is flat in its value (``flat_in_value``: ``k2``,
 ``tau_c``, ``c_v``) is the coefficient of a term that may vanish. Where the data cannot
 exclude that end — the shipped paper log's Coulomb limit of the Stribeck law: along laws
 with v_s ≈ 17–24 rad/s, −2 log p rises by only 3 from the best optimum down to tau_c
-0.5 mN m and by 4.4 at 6 µN m (benchmarks/README.md, issue 17, ``post6``/``post7``) — an
+0.5 mN m and by 4.4 at 6 µN m (benchmarks/README.md, issue 17, sections "the friction law in data coordinates" and "tau_c flat in value") — an
 ensemble started at the least-squares optimum may never go down the curved ridge.
 
 The *limit fit* of such a parameter is the least-squares fit with it held at
@@ -44,7 +44,7 @@ LIMIT_FRACTION = math.exp(-6.0)
 #: No limit fit for a parameter the least-squares fit measures to better than this
 #: (relative standard error, the sd of its log): its vanishing end is then ≥ 5 linearised
 #: sd away (Δχ² ≥ 25), far beyond ``LIMIT_DCHI2``; each limit fit costs five LM
-#: calls (0.3–1 s on a paper log since ``post8``, ~5 s before). The shipped log's tau_c, c_v and k2 are at 106 %, 236 %, 34 %.
+#: calls (0.3–1 s on a paper log since the limit fits became cheap, ~5 s before). The shipped log's tau_c, c_v and k2 are at 106 %, 236 %, 34 %.
 LIMIT_SCREEN_REL_SD = 0.2
 #: The continuation that reaches it: held at ``exp(−s)`` of the least-squares value for
 #: each ``s`` (``LIMIT_FRACTION`` is the last). The first step is short: in steps of 1.5
