@@ -10,17 +10,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING
 
-
-def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("hdid")
-    except PackageNotFoundError:  # a source tree on sys.path, not installed
-        return "0+unknown"
-
-
-__version__ = _version()
+from ._version import __version__
 
 _LAZY = {
     "fit": "._fitting._fit",

@@ -73,7 +73,7 @@ def sha256(path) -> str | None:
 
 
 def hdid_version() -> str:
-    from .. import __version__
+    from .._version import __version__
 
     return __version__
 
@@ -118,9 +118,9 @@ def model_from_structure(d: dict, classes: dict | None = None):
                     f"{e['class']}}})"
                 )
             try:  # a library class by its public name (its file may have moved)
-                import hdid.effects
+                from .. import effects as library
 
-                cls = getattr(hdid.effects, e["class"], None) or getattr(
+                cls = getattr(library, e["class"], None) or getattr(
                     importlib.import_module(e["module"]), e["class"])
             except (ImportError, AttributeError):
                 raise HdidError(

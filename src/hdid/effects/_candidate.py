@@ -114,7 +114,9 @@ class Candidate:
     def variants(self, model, values: dict[str, float], hints: dict[str, Any]):
         """``[(label, model), ...]``: the models to fit — one per starting value, or one
         per scanned order."""
-        from . import library
+        from ._registry import registry  # not the package's namespace: no cycle
+
+        start = registry()[self.key].start_from  # what library(values)[key] is
 
         if self.orders:
             orders = list(self.orders)
@@ -123,12 +125,12 @@ class Candidate:
                     if all(abs(n - o) > 0.5 for o in orders):
                         orders.append(float(n))
             return [(f"{self.key} (order {n:g})",
-                     model.with_effect(library({**values, "order": float(n)})[self.key]))
+                     model.with_effect(start({**values, "order": float(n)})))
                     for n in orders]
         values = {**values, "_k_wg": model_k_wg(model, values, hints),
                   "_swing": hints.get("swing_rad", math.nan)}
         overrides = self.starts(values) if self.starts is not None else [{}]
-        return [(self.key, model.with_effect(library({**values, **o})[self.key]))
+        return [(self.key, model.with_effect(start({**values, **o})))
                 for o in overrides]
 
 
