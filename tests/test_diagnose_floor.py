@@ -98,10 +98,10 @@ def test_a_new_clean_log_exceeds_the_threshold_at_most_at_the_stated_rate():
 
 
 def test_the_thresholds_are_the_committed_clean_log_results():
-    """``_excess.ROWS`` is generated from ``benchmarks/results/diagnose_floor.json`` by
-    ``diagnose_floor.py --threshold``, never typed by hand: every design of the file with
+    """``_excess.ROWS`` is generated from ``calibration/results/floor_thresholds.json`` by
+    ``calibration/floor_thresholds.py --threshold``, never typed by hand: every design of the file with
     enough clean logs is there, with its logs, exceedances and threshold."""
-    doc = json.loads((ROOT / "benchmarks" / "results" / "diagnose_floor.json").read_text())
+    doc = json.loads((ROOT / "calibration" / "results" / "floor_thresholds.json").read_text())
     designs = {r["design"] for r in doc["rows"]}
     assert {t.design for t in _excess.THRESHOLDS} == designs
     for t in _excess.THRESHOLDS:

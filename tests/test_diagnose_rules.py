@@ -199,13 +199,13 @@ def test_the_target_is_met_when_the_one_sided_bound_is_below_it():
 
 
 def test_measured_rates_are_the_committed_calibration_results():
-    """``MEASURED`` is generated from ``benchmarks/results/diagnose_calibration.json``,
+    """``MEASURED`` is generated from ``calibration/results/diagnose_rates.json``,
     never typed by hand: its counts are the file's, design by design."""
     import json
 
     from hdid._diagnosis._rates import MEASURED, clopper_pearson
 
-    doc = json.loads((ROOT / "benchmarks" / "results" / "diagnose_calibration.json").read_text())
+    doc = json.loads((ROOT / "calibration" / "results" / "diagnose_rates.json").read_text())
     for d in MEASURED:
         rows = [r for r in doc["records"] if r["design"] == d.design and "error" not in r]
         k = sum(r["verdict"] != "adequate" for r in rows)
