@@ -83,6 +83,7 @@ def sample_posterior(
     method: str = "emcee",
     n_particles: int | None = None,
     prior: dict | None = None,
+    log=None,
 ) -> PosteriorResult:
     """Sample the posterior of ``fit``'s parameters with emcee, until converged.
 
@@ -156,7 +157,19 @@ def sample_posterior(
         Log-transformed parameters the walkers move in the *value* of (default: those
         whose declaration says ``sample_in_value``); the density carries the Jacobian, so
         only the mixing changes.
+    log:
+        The fit's log (a path or :class:`~hdid.Log`), for the basin check below when the
+        fit did not run its limit checks (default: ``fit.source`` when it is a file).
+
+    Never around a poorer basin (:mod:`~hdid._posterior.basin`): before any sampling, a
+    fit whose residual is above ``BASIN_FACTOR`` (1.5) × the quantization floor goes
+    through the fit's limit and restart checks (reused when the fit ran them); if it is
+    still above, one line saying that the intervals would describe the wrong basin is
+    printed to standard error at once and leads the result's warnings and report
+    (``basin`` in the JSON).
     """
+    from .basin import basin_check
+
     if method == "smc":
         from .smc import N_PARTICLES, sample_smc
 
@@ -167,19 +180,22 @@ def sample_posterior(
                              "with them (the default sampler is method='emcee')")
 
         progress = (sys.stderr.isatty() if progress is None else bool(progress)) and sys.stderr.isatty()
-        return sample_smc(fit, n_particles=n_particles or N_PARTICLES, seed=seed,
-                          progress=progress, sigma_floor=sigma_floor, modes=modes, prior=prior)
+        fit, basin = basin_check(fit, log)
+        return _with_basin(sample_smc(fit, n_particles=n_particles or N_PARTICLES, seed=seed,
+                                      progress=progress, sigma_floor=sigma_floor, modes=modes,
+                                      prior=prior), basin)
     if method != "emcee":
         raise ValueError(f"method must be 'smc' or 'emcee', not {method!r}")
-    import emcee
-
-    t0 = time.perf_counter()
-    progress = (sys.stderr.isatty() if progress is None else bool(progress)) and sys.stderr.isatty()
-    prob: Problem = fit.problem
-    warnings: list[str] = []
     if likelihood not in ("auto", "gaussian"):
         raise ValueError(f"likelihood must be 'auto' or 'gaussian', not {likelihood!r} (the "
                          "interval likelihood was retired: benchmarks/README.md)")
+    import emcee
+
+    t0 = time.perf_counter()
+    fit, basin = basin_check(fit, log)
+    progress = (sys.stderr.isatty() if progress is None else bool(progress)) and sys.stderr.isatty()
+    prob: Problem = fit.problem
+    warnings: list[str] = []
     dens = posterior_density(fit, sigma_floor, linear_prior, sample_linear, prior)
     lp, temper, rho1, lin, bounds, u_fit = (dens.lp, dens.temper, dens.rho1, dens.lin,
                                             dens.bounds, dens.u_fit)
@@ -353,7 +369,7 @@ def sample_posterior(
     der["noise_sigma_rad"] = np.exp(draws[:, -1])
     widths = width_ratios(prob, chain.reshape(-1, D), u_fit, PRIOR_HALF_WIDTH, lin,
                           lp.gauss_prior)
-    return PosteriorResult(
+    return _with_basin(PosteriorResult(
         samples=phys,
         derived=der,
         chain=chain,
@@ -382,7 +398,15 @@ def sample_posterior(
         compile_s=t_compile,
         stage_s={"mode_search": t_modes, "compile": t_compile, "burn_in": t_burn,
                  "kept_chain": t_kept, "diagnostics": t_diag},
-    )
+    ), basin)
+
+
+def _with_basin(result: PosteriorResult, basin) -> PosteriorResult:
+    """``result`` with the basin check's record, its statement first in the warnings."""
+    result.basin = basin.to_dict()
+    if basin.statement:
+        result.warnings.insert(0, basin.statement)
+    return result
 
 
 def _tune(counted, burn_draws, D):

@@ -56,6 +56,7 @@ class PosteriorResult:
     stage_s: dict = field(default_factory=dict)  # wall time of each stage
     method: str = "emcee"                    # "smc" (tempered SMC) or "emcee"
     smc: dict = field(default_factory=dict)  # SMC: runs, particles, temperatures, evidence
+    basin: dict = field(default_factory=dict)  # basin.BasinCheck.to_dict(): residual vs floor
 
     @property
     def converged(self) -> bool:
@@ -108,6 +109,7 @@ class PosteriorResult:
                     for i, m in enumerate(self.modes)
                 ],
                 "limits": list(self.limits),
+                "basin": dict(self.basin) if self.basin else None,
                 "acceptance_mean": float(np.mean(self.acceptance)),
                 "acceptance_min": float(np.min(self.acceptance)),
                 "residual_lag1_autocorrelation": self.residual_rho1,
@@ -122,7 +124,10 @@ class PosteriorResult:
         })
 
     def report(self) -> str:
-        lines = ["posterior (median, 68 % and 95 % intervals; posterior/prior width):"]
+        lines = []
+        if self.basin and self.basin.get("statement"):
+            lines.append(self.basin["statement"])
+        lines.append("posterior (median, 68 % and 95 % intervals; posterior/prior width):")
         for name, s in self.summary().items():
             w = self.widths.get(name)
             tail = f"  {w['posterior_over_prior_width']:.2g} {w['verdict']}" if w else ""

@@ -1,0 +1,129 @@
+"""Never sample around a poorer basin: the fit's residual against the quantization floor.
+
+A posterior is a statement about the neighbourhood of an optimum. When the least-squares
+fit has not reached the quantization floor, its optimum may be a poorer basin of the
+cost (a clean 1 kHz log of an independent simulator ended at 3.55× the floor, and the
+posterior around it put the true ``tau_c`` 20 % outside its interval), or the model may
+lack an effect the log shows; either way the intervals would describe the wrong place.
+
+Before any sampling (:func:`basin_check`), a fit whose RMS residual is above
+``BASIN_FACTOR`` × the floor (``step/√12``) goes through the fit's own limit and restart
+checks (:mod:`hdid._fitting._limits`: Coulomb friction, no dry friction, the linear
+spring; each limit fitted, the full model restarted next to its optimum, the best kept).
+A fit that already went through them (``fit.limits`` names every limit of its model) is
+at its best known optimum and is reused as it is. If the residual is still above
+``BASIN_FACTOR`` × the floor, :func:`basin_check` returns one line saying that the
+intervals would describe the wrong basin; the sampler then prints it before sampling and
+carries it first in the result's warnings and at the top of its report.
+
+Why sample anyway rather than refuse: above the floor for lack of an effect the
+posterior is still the model's (conditional on it), and a step that does not describe the
+readings (a wrong ``--resolution``) puts every fit above the floor; a refusal would leave
+the user with nothing, the statement keeps the intervals from being read as the data's.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+#: Residual, as a multiple of the quantization floor, above which the fit has not reached
+#: its best basin: exact models on clean logs leave 0.4–1.0× the floor (less where the gear
+#: sticks); the fit's own floor test (``_limits.above_floor``) is 1.2–1.4× for 35–500
+#: effective samples; 1.5× leaves room for the χ² scatter of short logs.
+BASIN_FACTOR = 1.5
+
+
+@dataclass
+class BasinCheck:
+    """What :func:`basin_check` found: ``rms_over_floor`` before and after the checks,
+    which checks ran (``checks``), the limit the fit was restarted from, and the statement
+    (``None``: the fit is at the floor)."""
+
+    rms_over_floor_before: float
+    rms_over_floor: float
+    checks: str
+    restarted_from: str | None
+    statement: str | None
+
+    def to_dict(self) -> dict:
+        return {"rms_over_floor_before": _num(self.rms_over_floor_before),
+                "rms_over_floor": _num(self.rms_over_floor),
+                "factor": BASIN_FACTOR, "checks": self.checks,
+                "restarted_from": self.restarted_from, "statement": self.statement}
+
+
+def _num(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def rms_over_floor(fit) -> float:
+    """The fit's RMS residual as a multiple of the quantization floor (``step/√12``)."""
+    floor = float(fit.quantization_floor_rad)
+    rms = float(fit.rms_residual_rad)
+    return rms / floor if floor > 0 and math.isfinite(rms) else math.inf
+
+
+def _fixed(fit) -> set[str]:
+    return {n for n, p in fit.parameters.items() if p.fixed}
+
+
+def basin_check(fit, log=None, *, echo: bool = True):
+    """``(fit, BasinCheck)``: ``fit`` or, when it is above ``BASIN_FACTOR`` × the floor and
+    its limits were not all checked, the fit after its limit and restart checks (run on
+    ``log``, else on ``fit.source`` when that is a file); the statement when it is still
+    above. ``echo``: print the statement to standard error at once (before sampling)."""
+    from .._fitting import _limits
+
+    before = rms_over_floor(fit)
+    if before <= BASIN_FACTOR:
+        return fit, BasinCheck(before, before, "none needed (at the floor)",
+                               getattr(fit, "restarted_from", None), None)
+    limits = _limits.limits_of(fit.model, _fixed(fit))
+    done = {r.get("limit") for r in (getattr(fit, "limits", None) or [])}
+    if not limits:
+        checks = "no limit of this model to restart from"
+    elif {lim.key for lim in limits} <= done:
+        checks = "the fit's own limit and restart checks (its best known optimum, reused)"
+    else:
+        fit, checks = _rerun_limits(fit, log)
+    after = rms_over_floor(fit)
+    statement = None
+    if after > BASIN_FACTOR:
+        statement = (
+            f"WRONG BASIN: the fit's residual is {after:.2f}× the quantization floor (above "
+            f"{BASIN_FACTOR:g}×) after {checks}, so the intervals below would describe the "
+            "wrong basin (a poorer optimum, or a model that lacks an effect the log shows), "
+            "not the data's best fit — run `hdid diagnose` on the log (hdid.diagnose), add "
+            "the effect it names (--add / model=) or refit from other starts (--start / "
+            "start_from_model=True), then sample again")
+        if echo:
+            print(f"hdid: {statement}", file=sys.stderr, flush=True)
+    return fit, BasinCheck(before, after, checks, getattr(fit, "restarted_from", None),
+                           statement)
+
+
+def _rerun_limits(fit, log):
+    """The fit's limit and restart checks, run now on ``log`` (or the file ``fit.source``)
+    with every limit of its model (``nested=True``); ``(fit, what ran)``."""
+    from .._errors import HdidError
+    from .._fitting import _fit
+
+    prob = fit.problem
+    if log is None and isinstance(fit.source, str) and Path(fit.source).is_file():
+        log = fit.source
+    if log is None or not prob.release_free:
+        return fit, ("no limit checks (the log is not at hand: pass log= to "
+                     "sample_posterior, or fit with nested=True)")
+    try:
+        setup = _fit._setup(log, fit.model, fix=sorted(_fixed(fit)),
+                            free_inertia="inertia" in prob.free,
+                            max_substep=float(prob.max_substep))
+        if setup.problem.n_unknowns != len(fit.u) or setup.problem.free != prob.free:
+            return fit, "no limit checks (the log does not rebuild the fit's problem)"
+        new = _fit.nested_check(fit, log, setup, nested=True)
+    except (HdidError, ValueError, KeyError, OSError) as exc:
+        return fit, f"no limit checks ({str(exc).splitlines()[0]})"
+    return new, "the limit and restart checks run now"
