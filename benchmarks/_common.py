@@ -128,13 +128,6 @@ def parse_or_render(ap, argv, name, render):
     return args
 
 
-def add_log_args(ap, steps: int = 3000) -> None:
-    """``--log`` (default: the shipped paper log), ``--steps`` and ``--seed`` of the
-    one-log posterior scripts."""
-    ap.add_argument("--log", default=str(DATA / "csf8_paper.csv"))
-    ap.add_argument("--steps", type=int, default=steps)
-    ap.add_argument("--seed", type=int, default=0)
-
 
 def load_text() -> str:
     """The 1/5/15-min load averages, as the results tables print them."""
@@ -160,30 +153,3 @@ def run_designs(designs, run, write, records: list, meta: dict) -> None:
         write(records, meta)
     meta["load_end"] = load_text()
     write(records, meta)
-
-
-def chain_cells(r: dict, share_digits: int = 2) -> dict:
-    """Table cells of one posterior-benchmark record (``posterior_coulomb_limit``,
-    ``posterior_ridge_post8``): tau_c's 95 % interval in mN m, the band's in mrad, R-hat,
-    ESS, τ, the share of draws below 1 mN m, wall seconds and the load."""
-    lo, hi = r["tau_c_ci95"]
-    blo, bhi = r["band_ci95"]
-    return {"tau_c": f"[{lo * 1e3:.3g}, {hi * 1e3:.3g}]", "band": f"[{blo * 1e3:.1f}, {bhi * 1e3:.1f}]",
-            "share": f"{r['share_tau_c_below_1mNm']:.{share_digits}f}", "rhat": f"{r['rhat_max']:.3f}",
-            "ess": f"{r['ess_bulk_min']:.0f} / {r['ess_tail_min']:.0f}",
-            "tau": f"{r['tau_max']:.0f} ({r['tau_max_of']})", "wall": f"{r['wall_s']:.0f}",
-            "load": f"{r['load_start'][0]}→{r['load_end'][0]}"}
-
-
-def md_head(columns: list[str]) -> str:
-    """A markdown table's header and separator lines for ``columns``."""
-    return "| " + " | ".join(columns) + " |\n|" + "---|" * len(columns) + "\n"
-
-
-def run_head(rec: dict, title: str, setup: str, columns: list[str]) -> list[str]:
-    """A posterior benchmark's markdown for one logged run: its heading (``title`` after
-    the log's name), the fit's and the optima's time with ``setup`` after them, and the
-    table's header for ``columns``."""
-    return [f"\n## log {rec['log']}{title} ({rec['date_utc']}, src {rec['src']})\n",
-            f"fit {rec['fit_s']:.1f} s, optima + limit fits {rec['mode_search_s']:.1f} s{setup}\n",
-            "| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]

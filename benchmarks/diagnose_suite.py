@@ -195,5 +195,7 @@ def main(argv: list[str]) -> None:
     run_designs(designs, run, write, records, meta)
 
 if __name__ == "__main__":
+    if {"-h", "--help"} & set(sys.argv[1:]):
+        sys.exit(print(__doc__))
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     main(sys.argv[1:])

@@ -387,4 +387,6 @@ if __name__ == "__main__":
     import sys
 
     default = Path(__file__).resolve().parent.parent / "data" / "synthetic" / "csf8_paper.csv"
+    if {"-h", "--help"} & set(sys.argv[1:]):
+        sys.exit(print(__doc__))
     _demo(Path(sys.argv[1]) if len(sys.argv) > 1 else default)
