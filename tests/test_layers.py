@@ -33,8 +33,8 @@ LAYERS = [
     {"_results"},
     # fitting and the analysis at the optimum
     {"_fitting"},
-    # posterior and diagnosis
-    {"_posterior", "_diagnosis"},
+    # posterior, diagnosis, and the design of experiments (information of a planned log)
+    {"_posterior", "_diagnosis", "_design"},
     # the command line; the package's lazy public namespace
     {"cli", "__init__"},
 ]

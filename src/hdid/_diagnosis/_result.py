@@ -1,6 +1,11 @@
 """What :func:`hdid.diagnose` returns: :class:`Diagnosis` (verdict, ranked candidates,
-model ladder, warnings, the measured false-alarm rate; its report and ladder plot) and
-:class:`CandidateResult`."""
+model ladder, warnings, the measured false-alarm rate; its report, JSON, file and plots)
+and :class:`CandidateResult`.
+
+A diagnosis saved (:meth:`Diagnosis.save`, or ``hdid diagnose --json``) and read back
+(:meth:`Diagnosis.load`) has the same report and JSON; what needs the refits themselves
+(``CandidateResult.fit``/``result``, the base fit's residuals) stays behind: the base fit
+comes back as :class:`SavedBase` (its model, RMS and units check)."""
 
 from __future__ import annotations
 
@@ -59,6 +64,32 @@ class CandidateResult:
             **({"error": self.error} if self.error else {}),
         })
 
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> CandidateResult:
+        """The candidate :meth:`to_dict` wrote (without its refit; ``floor_gap`` NaN)."""
+        return cls(
+            key=d["effect"], label=d["variant"], rms_before_rad=_num(d["rms_before_rad"]),
+            rms_after_rad=_num(d["rms_after_rad"]), delta_bic=_num(d["delta_bic"]),
+            n_added=int(d["parameters_added"]), adequate_after=d["residual_adequate_after"],
+            reason=d["reason"], values={k: _num(v) for k, v in d["fitted"].items()},
+            error=d.get("error"), white_after=d.get("residual_white_after"),
+            moving_ratio_after=_num(d.get("moving_rms_after_floors")),
+            chi2_over_floor=_num(d.get("chi2_over_floor")),
+            floor_evidence=d.get("floor_evidence"),
+        )
+
+
+@dataclass
+class SavedBase:
+    """The base fit of a loaded :class:`Diagnosis`: what its report and JSON name (the
+    model, the RMS residual, the units check), and the provenance fields the file had."""
+
+    source: str
+    model: Any
+    rms_residual_rad: float
+    units_problem: str | None
+    provenance: dict[str, Any] = field(default_factory=dict, repr=False)
+
 
 @dataclass
 class Diagnosis:
@@ -92,6 +123,42 @@ class Diagnosis:
     @property
     def best(self) -> CandidateResult | None:
         return self.candidates[0] if self.candidates else None
+
+    def _provenance(self) -> dict[str, Any]:
+        """The fit JSON's reuse fields of the base fit (version, input and its SHA-256,
+        options, model, correlation, covariance): as loaded, or from the base fit."""
+        if isinstance(self.base, SavedBase):
+            return dict(self.base.provenance)
+        from .._results._saved import provenance
+
+        return provenance(self.base)
+
+    def save(self, path) -> None:
+        """Write the diagnosis as JSON (what ``hdid diagnose --json`` writes; schema in
+        ``hdid/schema/diagnose.schema.json``). :meth:`load` reads it back."""
+        import json
+        from pathlib import Path
+
+        from .._results._saved import finite
+
+        d = {**self._provenance(), **self.to_dict()}
+        Path(path).write_text(json.dumps(finite(d), indent=2) + "\n")
+
+    @classmethod
+    def load(cls, path, *, effects: dict | None = None) -> Diagnosis:
+        """Read a diagnosis written by :meth:`save` or ``hdid diagnose --json``: the same
+        :meth:`report`, :meth:`to_dict` and :meth:`plot`. The refits do not come back (the
+        base fit is a :class:`SavedBase`). ``effects`` maps class names to your own effect
+        classes (those not in hdid), as for :meth:`hdid.FitResult.load`."""
+        from .._errors import HdidError
+
+        try:
+            return _load(path, effects, cls)
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise HdidError(
+                f"{path}: not a complete hdid diagnosis JSON ({type(exc).__name__}: {exc}); "
+                "write it with hdid diagnose LOG.csv --json or Diagnosis.save"
+            ) from None
 
     def to_dict(self) -> dict[str, Any]:
         from .._results._saved import finite
@@ -174,6 +241,35 @@ class Diagnosis:
     def __str__(self) -> str:
         return self.report()
 
+    def plot(self, *, ax=None):
+        """The candidates at one glance: each one's residual RMS after its refit, in
+        quantization floors (``step/√12``), with its ΔBIC against the base model written
+        beside it; the base model's RMS and the floor as lines. Draws into ``ax`` (a new
+        figure without it) and returns the Axes; never saves or picks a backend."""
+        from .._results._plot import new_figure
+
+        if ax is None:
+            ax = new_figure(figsize=(6, 0.5 * len(self.candidates) + 2),
+                            constrained_layout=True).subplots()
+        fl = self.floor_rad
+        shown = [c for c in self.candidates if not c.error]
+        y = np.arange(len(shown))[::-1]  # best first, at the top
+        rms = np.array([c.rms_after_rad / fl for c in shown], dtype=float)
+        colors = ["C2" if c.adequate_after else "C0" for c in shown]
+        ax.barh(y, rms, color=colors, alpha=0.8)
+        for yi, r, c in zip(y, rms, shown):
+            ax.annotate(f" ΔBIC {c.delta_bic:.1f}", (r, yi), va="center", fontsize=8)
+        base = self.base.rms_residual_rad / fl
+        ax.axvline(base, color="C3", lw=1.2, label=f"base model ({base:.2f}× floor)")
+        ax.axvline(1.0, color="0.3", ls="--", lw=1, label="quantization floor")
+        ax.set_yticks(y, [c.label for c in shown], fontsize=8)
+        ax.set_xlabel("RMS residual after the refit / quantization floor")
+        ax.set_xlim(0, 1.3 * max([base, 1.0, *rms[np.isfinite(rms)]]))
+        ax.legend(loc="lower right", fontsize=8)
+        ax.set_title(f"{self.verdict}: candidates, best first (green: fixes the residual)",
+                     fontsize=9)
+        return ax
+
     def plot_ladder(self, *, ax=None):
         """RMS (in quantization floors) and BIC along the model ladder: the error falling.
         Draws into ``ax`` (a new figure without it) and returns the Axes."""
@@ -202,3 +298,51 @@ def _false_alarm_text(fa: dict[str, Any]) -> str:
     return (f"false alarms on clean logs of the {fa['design']} design ({fa['rate_hz']:g} Hz, "
             f"{fa['runs']} runs): {fa['false_alarms']} of {fa['clean_logs']} (95 % interval "
             f"{100 * lo:.1f}–{100 * hi:.1f} %)")
+
+
+def _num(x) -> float:
+    """A JSON number back to float: ``null`` (a NaN or infinity written) as NaN."""
+    return math.nan if x is None else float(x)
+
+
+def _load(path, effects, cls) -> Diagnosis:
+    import json
+    from pathlib import Path
+
+    from .._errors import HdidError
+    from .._results._saved import SCHEMA_VERSION, model_from_structure
+    from .._results._whiteness import Whiteness
+
+    try:
+        d = json.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise HdidError(f"{path}: cannot read it as hdid diagnosis JSON ({exc})") from None
+    if not isinstance(d, dict) or "verdict" not in d:
+        raise HdidError(f"{path}: not the JSON of an hdid diagnosis (written by `hdid diagnose "
+                        "--json` or Diagnosis.save)")
+    if d.get("schema_version", 0) > SCHEMA_VERSION:
+        raise HdidError(f"{path}: written by a newer hdid ({d.get('hdid_version')}); upgrade hdid")
+    model = model_from_structure(d["model"], effects)
+    if list(model.effect_names) != list(d["base_model"]):
+        raise HdidError(f"{path}: its model {list(model.effect_names)} is not its base model "
+                        f"{d['base_model']}; the file was edited")
+    keys = {"schema_version", "hdid_version", "input", "options", "model", "correlation",
+            "covariance"}
+    base = SavedBase(source=d["source"], model=model, rms_residual_rad=_num(d["base_rms_rad"]),
+                     units_problem=d.get("units_problem"),
+                     provenance={k: v for k, v in d.items() if k in keys})
+    w = dict(d["whiteness_before"])
+    floats = {f for f, t in Whiteness.__annotations__.items() if t == "float"}
+    w = {k: (_num(v) if k in floats else v) for k, v in w.items()}
+    w["lags"] = np.asarray(w["lags"], dtype=int)
+    for k in ("acf", "acf_null"):
+        w[k] = None if w.get(k) is None else np.array([_num(x) for x in w[k]])
+    return cls(
+        source=d["source"], verdict=d["verdict"], summary=d["summary"], base=base,
+        candidates=[CandidateResult.from_dict(c) for c in d["candidates"]],
+        whiteness_before=Whiteness(**w), notes=list(d["notes"]), ladder=list(d["ladder"]),
+        floor_rad=_num(d["quantization_floor_rad"]), timing=dict(d.get("timing") or {}),
+        scanned=dict(d.get("scanned") or {}), refitted=dict(d.get("refitted") or {}),
+        warnings=list(d.get("warnings") or []), false_alarm=d.get("false_alarm"),
+        rounding_floor=d.get("rounding_floor"),
+    )

@@ -13,7 +13,7 @@ from .._config import float64_methods
 from ._summaries import ParameterEstimate
 from .._problems._driven_evaluate import _simulate
 from ._plot import new_figure
-from ._saved import SCHEMA_VERSION, finite, hdid_version, model_structure, sha256
+from ._saved import SCHEMA_VERSION, finite, hdid_version, model_structure, save, sha256
 
 
 @float64_methods
@@ -24,7 +24,8 @@ class DrivenFitResult:
     ``joint`` is the fitted :class:`~hdid.DrivenJoint` (its ``model`` the WG-side
     :class:`~hdid.Model`). :meth:`report` gives text, :meth:`to_dict` JSON,
     :meth:`plot` measured-vs-model WG angles and :meth:`plot_kinematic_error` the
-    paper's Fig. 3 (output kinematic error split into positional and flexibility parts).
+    paper's Fig. 3 (output kinematic error split into positional and flexibility parts);
+    :meth:`save` writes the JSON and :meth:`load` reads it back.
     """
 
     source: str
@@ -54,6 +55,11 @@ class DrivenFitResult:
     input_sha256: dict[str, str | None] | None = None
     #: options of the fit (the CLI's, as given), written to the JSON
     options: dict | None = None
+    #: hdid version that made the fit (None: this one; set for a loaded result)
+    hdid_version: str | None = None
+    #: a loaded result's values that were computed from the log (``units_problem``,
+    #: ``kinematic_split``, ``input_hold``), as its file gives them; None for a fit
+    saved: dict[str, Any] | None = field(default=None, repr=False)
 
     @property
     def values(self) -> dict[str, float]:
@@ -72,6 +78,8 @@ class DrivenFitResult:
         speed — a driven motor turns freely, so its angle range tells nothing)."""
         from .._units import implausible_units
 
+        if self.data is None and self.saved is not None:
+            return self.saved["units_problem"]
         data = self.data
         return implausible_units(
             sample_period=float(data.sample_period), swing=0.0,
@@ -102,6 +110,7 @@ class DrivenFitResult:
     def curves(self) -> dict[str, np.ndarray]:
         """Per-window arrays ``(W, T)``: measured and simulated WG angle, measured kinematic
         error and its modelled positional and flexibility parts, and the weight mask."""
+        self._need_log("curves()")
         problem, u = self._driven_problem()
         joint, sim = _simulate(problem, jnp.asarray(u))
         N = joint.ratio
@@ -171,6 +180,8 @@ class DrivenFitResult:
         the positional error ``θ̃_p(θ)`` and the flexibility-induced ``T_k⁻¹(τ_l+τ_fout)``."""
         if not self.positional:
             return {}
+        if self.data is None and self.saved is not None:
+            return dict(self.saved["kinematic_split"])
         c = self.curves()
         w = c["weight"] > 0
         pos = c["positional"][w] - np.mean(c["positional"][w])
@@ -226,7 +237,7 @@ class DrivenFitResult:
         model["input_hold"] = self.input_hold
         return {
             "schema_version": SCHEMA_VERSION,
-            "hdid_version": hdid_version(),
+            "hdid_version": self.hdid_version or hdid_version(),
             "input": inputs[0],
             "inputs": inputs,
             "options": dict(self.options or {}),
@@ -238,8 +249,34 @@ class DrivenFitResult:
     @property
     def input_hold(self) -> str:
         """How the motor torque was taken between samples: "zoh" (held) or "foh" (linear)."""
+        if self.data is None and self.saved is not None:
+            return str(self.saved["input_hold"])
         problem, _ = self._driven_problem()
         return str(getattr(problem, "input_hold", "zoh"))
+
+    # -- file -----------------------------------------------------------------------
+    def save(self, path) -> None:
+        """Write the result as JSON (what ``hdid fit DRIVEN.csv --json`` writes; schema in
+        ``hdid/schema/driven.schema.json``). :meth:`load` reads it back."""
+        save(self, path)
+
+    @classmethod
+    def load(cls, path, *, effects: dict | None = None) -> DrivenFitResult:
+        """Read a result written by :meth:`save` or ``hdid fit DRIVEN.csv --json``: the
+        same :meth:`report` and :meth:`to_dict`, and the fitted ``joint`` (its WG model,
+        output friction and positional error). The log does not come back: :meth:`plot`
+        draws the positional error only, and :meth:`curves` needs a refit. ``effects``
+        maps class names to your own effect classes (those not in hdid)."""
+        from ._driven_saved import load
+
+        return load(path, effects, cls)
+
+    def _need_log(self, what: str) -> None:
+        if self.data is None:
+            from .._errors import HdidError
+
+            raise HdidError(f"{what} needs the log, and this result was loaded from a file: "
+                            "refit with hdid.fit_driven(log, model=result.model)")
 
     # -- plots ----------------------------------------------------------------------
     def plot(self, *, ax=None):
@@ -247,7 +284,10 @@ class DrivenFitResult:
         run, and below it the residual ``logged − model`` (the sign of the free-motion
         figure) with the quantization floor ±σ shaded. ``ax``: one Axes (the top panel
         only) or two (top, residual); without it a two-panel figure is made. Returns the
-        axes drawn into."""
+        axes drawn into. A result read by :meth:`load` has no log: it draws the fitted
+        positional error over one WG turn (one Axes)."""
+        if self.data is None:
+            return self._plot_positional(ax)
         given = ax
         if ax is None:
             given = new_figure(figsize=(8, 6)).subplots(
@@ -280,10 +320,26 @@ class DrivenFitResult:
             ax.set_xlabel("time [s]")
         return given
 
+    def _plot_positional(self, ax):
+        """The fitted positional error ``θ̃_p(θ)`` (paper eq. 3) over one WG turn."""
+        if ax is None:
+            ax = new_figure(figsize=(6, 3.5), constrained_layout=True).subplots()
+        elif not hasattr(ax, "plot"):
+            ax = np.asarray(ax, dtype=object).ravel()[0]
+        theta = np.linspace(0.0, 2 * np.pi, 721)
+        ax.plot(theta, np.asarray(self.joint.positional(theta)), "-", lw=1.2,
+                label=f"positional error θ̃_p, order {self.joint.positional.order}")
+        ax.set_xlabel("WG angle θ [rad, motor encoder frame]")
+        ax.set_ylabel("output error [rad]")
+        ax.set_title(f"{self.source} (loaded: refit with the log to see the runs)", fontsize=9)
+        ax.legend(fontsize=7)
+        return ax
+
     def plot_kinematic_error(self, *, ax=None, run: int = 0):
         """Paper Fig. 3: the output kinematic error ``θ_out + θ/N`` of one run, split into
         the positional error ``θ̃_p(θ)`` and the flexibility-induced error
         ``T_k⁻¹(τ_l + τ_fout)``. Returns the Axes."""
+        self._need_log("plot_kinematic_error()")
         if not self.data.has_output:
             raise ValueError(f"{self.source}: the log has no output angle, so no kinematic error")
         c = self.curves_by_run()[run]

@@ -119,6 +119,36 @@ def _overlay(result, ax, times, meas, model_s, fine, model_fine, sd_fine):
     return ax
 
 
+def plot_saved_fit(result, *, ax=None):
+    """A fit read from its file, without the log: each run's RMS residual in quantization
+    floors (``step/√12``; the estimated noise σ for readings on no grid), the floor as a
+    line, and the rest angle logged against the model's written on each bar. ``ax``: one
+    Axes (a new figure otherwise); returns it. Refit to see the runs themselves."""
+    if ax is None:
+        ax = new_figure(figsize=(max(4.0, 0.8 * len(result.runs) + 2), 3.5),
+                        constrained_layout=True).subplots()
+    elif not hasattr(ax, "plot"):
+        from .._errors import HdidError
+
+        raise HdidError("ax: a fit loaded from its file draws one Axes (its runs' RMS); "
+                        "refit with the log for the (2, R) run panels")
+    floor = result.quantization_floor_rad
+    x = np.arange(len(result.runs))
+    rms = np.array([r.rms_rad / floor for r in result.runs], dtype=float)
+    bars = ax.bar(x, rms, color="C0", alpha=0.8, label="RMS residual")
+    for b, r in zip(bars, result.runs):
+        ax.annotate(f"rest {r.rest_logged:+.4f}\nmodel {r.rest_model:+.4f}",
+                    (b.get_x() + b.get_width() / 2, b.get_height()), ha="center",
+                    va="bottom", fontsize=7)
+    ax.axhline(1.0, color="0.3", ls="--", lw=1, label="quantization floor")
+    ax.set_xticks(x, [f"run {r.name}" for r in result.runs], fontsize=8)
+    ax.set_ylabel("RMS residual / quantization floor")
+    ax.set_ylim(0, 1.3 * max([1.0, *rms[np.isfinite(rms)]]))
+    ax.set_title(f"{result.source} (loaded: refit with the log to see the runs)", fontsize=9)
+    ax.legend(loc="upper right", fontsize=8)
+    return ax
+
+
 def plot_fit(result, *, ax=None, fine_rate: float = 20000.0):
     """Measured vs model per run (angle from the fitted spring zero, so the stick band is
     centred on 0) with the model's ±2σ confidence band (:meth:`FitResult.predict_std`),
@@ -127,7 +157,8 @@ def plot_fit(result, *, ax=None, fine_rate: float = 20000.0):
     ``ax``: a ``(2, R)`` array of axes, or one Axes (all runs overlaid, no residuals); a
     new figure otherwise. Returns the axes drawn into (the ``(2, R)`` array, or the one Axes).
     """
-    result._need_log("plot()")
+    if result.problem is None:  # loaded from a file: the log is not there
+        return plot_saved_fit(result, ax=ax)
     axes = ax
     prob = result.problem
     times = np.asarray(prob.times)

@@ -287,8 +287,8 @@ class FitResult:
         The report, parameters, derived values, runs and the fitted ``model`` come back
         (``hdid.simulate(result.model, …)``, or a warm start with
         ``hdid.fit(log, model=result.model, start_from_model=True)``); the log does not,
-        so :meth:`predict` and :meth:`plot` need a refit. ``effects`` maps class names to
-        your own effect classes (those not in hdid).
+        so :meth:`predict` needs a refit and :meth:`plot` draws the runs' RMS only.
+        ``effects`` maps class names to your own effect classes (those not in hdid).
         """
         return load(path, effects, cls)
 
@@ -304,7 +304,9 @@ class FitResult:
     def plot(self, *, ax=None, fine_rate: float = 20000.0):
         """Measured vs model for every run (top) with residuals in counts (bottom); the
         model carries its ±2σ confidence band (:meth:`predict_std`). Returns the axes drawn
-        into; never saves (``hdid.save_figure(ax, "fit.png")``) or chooses a backend.
+        into; never saves (``hdid.save_figure(ax, "fit.png")``) or chooses a backend. A
+        result read by :meth:`load` has no log: it draws its runs' RMS residual against
+        the quantization floor (one Axes).
 
         Parameters
         ----------
