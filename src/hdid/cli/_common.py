@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import click
+import cloup
 
 
 #: Exit status of a batch (``hdid fit a.csv b.csv …``) in which some logs failed and the
@@ -25,8 +26,12 @@ class _Fail(click.ClickException):
     exit_code = 2
 
     def show(self, file=None):
-        # One line whatever the message quotes (a file name with a newline, …).
-        msg = "".join(c if c.isprintable() else repr(c)[1:-1] for c in self.format_message())
+        from ._flags import to_flags
+
+        # One line whatever the message quotes (a file name with a newline, …), naming
+        # flags where the library's message names its Python arguments.
+        msg = "".join(c if c.isprintable() else repr(c)[1:-1]
+                      for c in to_flags(self.format_message()))
         click.echo(f"hdid: error: {msg}", err=True, file=file)
 
     @classmethod
@@ -164,8 +169,6 @@ def _check_output(path: str | None, inputs: list[Path], option: str, *, figure: 
     folder, a missing or read-only folder, a figure format matplotlib cannot write."""
     if path is None:
         return
-    import os
-
     if not str(path).strip():
         raise _Fail(f"{option}: empty file name; give one such as fit.json")
     try:
@@ -181,8 +184,6 @@ def _check_output(path: str | None, inputs: list[Path], option: str, *, figure: 
         raise _Fail(f"{option} {path}: folder {p.parent} does not exist")
     if not p.parent.is_dir():
         raise _Fail(f"{option} {path}: {p.parent} is not a folder")
-    if not os.access(p.parent, os.W_OK) or (exists and not os.access(p, os.W_OK)):
-        raise _Fail(f"{option} {path}: cannot write there (permission denied)")
     if figure:
         from matplotlib.backend_bases import FigureCanvasBase
 
@@ -193,6 +194,37 @@ def _check_output(path: str | None, inputs: list[Path], option: str, *, figure: 
         if ext not in formats:
             raise _Fail(f"{option} {path}: cannot write a .{ext} figure; use one of "
                         + ", ".join("." + f for f in formats))
+    _probe_write(str(path), option)
+
+
+def _probe_write(path: str, option: str) -> None:
+    """Open ``path`` for writing, as the command will after its work, and close it: a file
+    system that refuses (``/proc``, read-only, full of inodes, a name the OS rejects)
+    answers now, not after the fit. An existing regular file is opened to append
+    (nothing truncated, nothing written, its time stamps kept); a new one is created and
+    removed. Devices and pipes (``/dev/null``, ``/dev/stdout``) are not opened: opening a
+    pipe may wait for its reader."""
+    import os
+    import stat
+
+    try:
+        if os.path.exists(path):
+            if not stat.S_ISREG(os.stat(path).st_mode):
+                if not os.access(path, os.W_OK):
+                    raise PermissionError(13, "permission denied")
+                return
+            os.close(os.open(path, os.O_WRONLY | os.O_APPEND))
+        elif os.path.islink(path):  # a link to a file not yet there: its folder decides
+            if not os.access(Path(path).resolve().parent, os.W_OK):
+                raise PermissionError(13, "permission denied")
+        else:
+            os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+            try:
+                os.unlink(path)
+            except OSError:
+                pass
+    except OSError as exc:
+        raise _Fail(f"{option} {path}: cannot write there ({exc.strerror or exc})") from None
 
 
 def _write_text(path: str, text: str, option: str) -> None:
@@ -211,29 +243,92 @@ _RESOLUTION = click.option("--resolution", type=float, metavar="STEP", help="Enc
 _QUIET = click.option("--quiet", "-q", is_flag=True, help="No report on stdout.")
 
 
-def _effect_keys() -> list[str]:
-    """The ``--add`` names — hdid/effects' file stems and the installed plugins' entry
-    points — read without importing the effects (``hdid --help`` stays fast)."""
-    import importlib.util
-    import pkgutil
-    from importlib.metadata import entry_points
+class _AddOption(click.Option):
+    """``--add``: its help lists the effects that can be added, worked out only when the
+    help is shown (it imports the effects, and with them JAX: ``hdid --help`` stays fast)."""
 
-    spec = importlib.util.find_spec("hdid.effects")
-    files = [m.name for m in pkgutil.iter_modules(spec.submodule_search_locations)
-             if not m.name.startswith("_")]
-    return sorted(set(files) | {ep.name for ep in entry_points(group="hdid.effects")})
+    def get_help_record(self, ctx):
+        self.help = _add_help()
+        return super().get_help_record(ctx)
+
+
+def _addable() -> tuple[dict[str, list[str]], list[str]]:
+    """``({slot: [keys]}, base keys)``: the registry's effects that ``--add`` offers, by
+    the base-model effect each replaces (``""``: none, it adds a term), and the keys of
+    the base model's own effects, which are in already and not offered."""
+    from .._models._model import Model
+    from ..effects import registry
+
+    base = Model.default()
+    base_keys = [type(e).key for e in base.effects]
+    base_classes = {type(e) for e in base.effects}
+    values = base.float_values()
+    slots: dict[str, list[str]] = {}
+    for cls in dict.fromkeys(registry().values()):  # an alias key maps to its class once
+        if cls in base_classes:
+            continue
+        try:
+            name = cls.start_from(values).name
+        except Exception:  # a plugin that cannot start from the base values: offer it plain
+            name = ""
+        slot = name if name in base.effect_names else ""
+        slots.setdefault(slot, []).append(cls.key)
+    return {k: sorted(v) for k, v in slots.items()}, base_keys
+
+
+def _add_help() -> str:
+    slots, base_keys = _addable()
+    parts = [f"replacing {slot}: {', '.join(keys)}" for slot, keys in sorted(slots.items()) if slot]
+    new = slots.get("", [])
+    text = ("Add an effect to the model (repeatable; ripple:ORDER sets the order). "
+            f"The base model's {', '.join(base_keys)} are in already (--remove takes one "
+            "out). New terms: " + ", ".join(new) + ". ")
+    return text + ("Alternative laws, " + "; ".join(parts) + "." if parts else "")
+
+
+def _effect_to_add(model, item: str):
+    """The effect ``--add ITEM`` adds to ``model`` (``EFFECT`` or ``EFFECT:ORDER``)."""
+    from ..effects import library
+
+    name, _, order = item.partition(":")  # ripple:24, kinematic_error:2 (cycles per WG rev)
+    values = model.float_values()
+    if order:
+        try:
+            values["order"] = float(order)
+        except ValueError:
+            raise _Fail(f"--add {item}: expected EFFECT or EFFECT:ORDER, e.g. ripple:24") from None
+    lib = library(values)  # every key of the registry, aliases of renamed effects included
+    slots, base_keys = _addable()
+    offered = sorted(k for keys in slots.values() for k in keys)
+    if name not in lib:
+        raise _Fail(f"--add {name}: unknown effect; choose from {', '.join(offered)}")
+    effect = lib[name]
+    if any(type(e) is type(effect) for e in model.effects):
+        raise _Fail(f"--add {name}: the model has it already (the base model is "
+                    f"{', '.join(base_keys)}); --add takes {', '.join(offered)}")
+    return effect
+
+
+_ADD = click.option("--add", "add_effects", multiple=True, metavar="EFFECT", cls=_AddOption,
+                    help="Add an effect to the model (repeatable).")
+_REMOVE = click.option("--remove", "remove_effects", multiple=True, metavar="EFFECT", help="Remove an effect of the base model (repeatable), e.g. viscous.")
+_EFFECT_FILE = click.option("--effect-file", "effect_files", multiple=True, metavar="FILE.py", help="Your own effect: a Python file defining AbstractEffect instances (repeatable).")
+_RATIO = click.option("--ratio", type=click.FloatRange(min=0, min_open=True), help="Gear ratio N between the logged axis and the output (default 100; 1: the logged angle is the output's, no gear).")
+
+#: --add / --remove / --effect-file / --ratio: the model to start from, in help order.
+MODEL_OPTIONS = (_ADD, _REMOVE, _EFFECT_FILE, _RATIO)
 
 
 def _MODEL_OPTIONS(fn):
-    """--add / --remove / --effect-file: the model to start from."""
-    for opt in reversed((
-        click.option("--add", "add_effects", multiple=True, metavar="EFFECT", help="Add a library effect (repeatable; ripple:ORDER sets the order): " + ", ".join(_effect_keys()) + "."),
-        click.option("--remove", "remove_effects", multiple=True, metavar="EFFECT", help="Remove an effect of the base model (repeatable), e.g. viscous."),
-        click.option("--effect-file", "effect_files", multiple=True, metavar="FILE.py", help="Your own effect: a Python file defining AbstractEffect instances (repeatable)."),
-        click.option("--ratio", type=click.FloatRange(min=0, min_open=True), help="Gear ratio N between the logged axis and the output (default 100; 1: the logged angle is the output's, no gear)."),
-    )):
+    """--add / --remove / --effect-file / --ratio as one decorator."""
+    for opt in reversed(MODEL_OPTIONS):
         fn = opt(fn)
     return fn
+
+
+class _Command(cloup.Command):
+    """A command whose ``--help`` lists its options under headings (cloup's option groups,
+    in the order input, model, fit, output, then the optional parts)."""
 
 
 class _Group(click.Group):
@@ -258,9 +353,12 @@ def _usage_fail(exc: click.UsageError) -> _Fail:
 
 
 def _emit(report: str, summary: dict, json_out: str | None, quiet: bool) -> None:
-    """Print the report (unless quiet) and write the JSON summary (if asked)."""
+    """Print the report (unless quiet; the library's argument names as flags) and write
+    the JSON summary (if asked)."""
+    from ._flags import to_flags
+
     if not quiet:
-        click.echo(report)
+        click.echo(to_flags(report))
     if json_out:
         _write_text(json_out, json.dumps(_finite(summary), indent=2) + "\n", "--json")
         if not quiet:
@@ -282,7 +380,7 @@ def _build_model(add, remove, files, ratio=None):
     if not (add or remove or files or ratio):
         return None
     from .._models._model import Model
-    from ..effects import AbstractEffect, library
+    from ..effects import AbstractEffect
 
     model = Model.default() if ratio is None else Model.default().with_ratio(ratio)
     for name in remove:
@@ -290,17 +388,7 @@ def _build_model(add, remove, files, ratio=None):
             raise _Fail(f"--remove {name}: the model has {', '.join(model.effect_names)}")
         model = model.without(name)
     for item in add:
-        name, _, order = item.partition(":")  # ripple:24, kinematic_error:2 (cycles per WG rev)
-        values = model.float_values()
-        if order:
-            try:
-                values["order"] = float(order)
-            except ValueError:
-                raise _Fail(f"--add {item}: expected EFFECT or EFFECT:ORDER, e.g. ripple:24") from None
-        lib = library(values)
-        if name not in lib:
-            raise _Fail(f"--add {name}: unknown effect; choose from {', '.join(sorted(lib))}")
-        model = model.with_effect(lib[name])
+        model = model.with_effect(_effect_to_add(model, item))
     for path in files:
         effects = _load_effect_file(Path(path), AbstractEffect)
         for effect in effects:

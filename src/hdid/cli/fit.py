@@ -6,53 +6,75 @@ import json
 from pathlib import Path
 
 import click
+import cloup
 
 from . import _common
+from ._flags import to_flags
 from ._common import (
-    EXIT_PARTIAL, _COUNTS_PER_REV, _FIX, _Fail, _MODEL_OPTIONS, _Phases, _QUIET,
+    EXIT_PARTIAL, MODEL_OPTIONS, _COUNTS_PER_REV, _FIX, _Command, _Fail, _Phases, _QUIET,
     _RELEASE_TIME, _RESOLUTION, _build_model, _check_output, _check_size, _emit, _finite,
     _options_used, _parse_fix, _parse_floats, _with_start_values,
     _write_text,
 )
 
 
-@click.command("fit")
+@cloup.command("fit", cls=_Command)
 @click.argument("logs", nargs=-1, required=True, type=click.Path(dir_okay=False))
-@click.option("--summary", "summary_out", metavar="OUT.csv", help="Several logs: one row per log (parameters, std, band, RMS, warnings, error).")
-@click.option("--band-bracket/--no-band-bracket", default=None, help="Several logs: also compute the model-free stick-band bracket (an event-driven SciPy simulation per run; off by default in batch mode).")
-@click.option("--workers", type=click.IntRange(1, 256), help="Several logs: fit in this many local worker processes (one core each; pip install 'hdid[dask]'). Worth it from a few hundred logs; default 1.")
-@click.option("--dask", "dask_address", metavar="ADDRESS", help="Several logs: fit on a dask.distributed scheduler at ADDRESS (pip install 'hdid[dask]').")
-@click.option("--json", "json_out", metavar="OUT.json", help="Write the results as JSON.")
-@click.option("--plot", "plot_out", metavar="OUT.png", help="Measured vs model, residuals below.")
-@click.option("--inertia", type=float, help="Total WG inertia [kg m^2] (default 7e-7, CSF-8 + small Maxon rotor).")
-@click.option("--added-inertia", metavar="I1,I2,...", help="Known inertia added per run [kg m^2], in run order (or an added_inertia column).")
-@click.option("--free-inertia", is_flag=True, help="Fit the inertia (needs --added-inertia runs or --inertia-prior).")
-@click.option("--inertia-prior", metavar="MEAN,REL", help="Log-normal prior on the inertia, e.g. 7e-7,0.3.")
-@_FIX
-@_MODEL_OPTIONS
-@_RELEASE_TIME
-@_COUNTS_PER_REV
-@_RESOLUTION
-@click.option("--starts", type=click.IntRange(1, 32), help="Multi-starts (default: the library's, 6).")
-@click.option("--start", "start_values", multiple=True, metavar="NAME=VALUE", help="Initial guess for a parameter, e.g. --start k1=1200 (repeatable): one more start from these values, run beside the multi-start grid.")
-@click.option("--posterior", is_flag=True, help="Also sample the posterior with emcee (slow; see README).")
-@click.option("--steps", type=click.IntRange(100, 10**6), help="Posterior chain length (default: until 50 autocorrelation times, at most 20000).")
-@click.option("--walkers", type=click.IntRange(4, 4096), help="emcee walkers (default max(32, 2·dim)).")
-@click.option("--sampler", type=click.Choice(["emcee", "smc"]), default="emcee", show_default=True, help="Posterior sampler: emcee (ensemble MCMC from the fit's optima, differential-evolution + independence moves; --steps/--walkers) or smc (tempered SMC alone; gives the log-evidence; its intervals were narrower than emcee's on the same logs). Calibration: benchmarks/README.md, Posterior.")
-@click.option("--seed", type=int, default=0, show_default=True, help="Posterior seed.")
-@click.option("--prior", "priors", multiple=True, metavar="NAME=VALUE,SD", help="Posterior: a Gaussian prior of your own (a datasheet's) on a fitted parameter, replacing the default, e.g. --prior tau_c=2.5e-3,0.3 (median 2.5 mN m, sd 0.3 in log: about ±30 %; delta's sd is in its logit). Repeatable. With the default priors (flat in value for k2, tau_c, c_v) a 4-run paper log's posterior does not converge in 20 000 steps; with priors on k1, k2, tau_c, tau_s, c_v it converged on 40 of 40 calibration logs (benchmarks/README.md).")
-@click.option("--chains", "chains_out", metavar="OUT.nc", help="Save the posterior chains (arviz NetCDF).")
-@click.option("--corner", "corner_out", metavar="OUT.png", help="Corner plot of the posterior.")
-@click.option("--torque-constant", type=float, help="Driven log with a motor_current column: motor torque constant [N m/A].")
-@click.option("--output-counts-per-rev", type=float, help="Driven log: theta_out/output_counts holds raw output-encoder counts with this many per revolution.")
-@click.option("--order", type=click.IntRange(0, 32), help="Driven log: positional-error order (default: chosen by BIC up to 6).")
-@click.option("--input-hold", type=click.Choice(["zoh", "foh"]), help="Driven log: the motor torque between samples. zoh: held from each sample to the next (a drive's command; the default for a motor_torque column); foh: linear between samples (a sampled analog signal; the default for a motor_current column).")
-@click.option("--joint", is_flag=True, help="Several logs of ONE gear (a driven log and free-motion logs): one set of physical parameters for all.")
-@_QUIET
+@cloup.option_group(
+    "Input: the log",
+    _COUNTS_PER_REV, _RESOLUTION, _RELEASE_TIME,
+    click.option("--added-inertia", metavar="I1,I2,...", help="Known inertia added per run [kg m^2], in run order (or an added_inertia column)."),
+)
+@cloup.option_group(
+    "Model",
+    *MODEL_OPTIONS,
+    click.option("--inertia", type=float, help="Total WG inertia [kg m^2] (default 7e-7, CSF-8 + small Maxon rotor)."),
+    click.option("--free-inertia", is_flag=True, help="Fit the inertia (needs --added-inertia runs or --inertia-prior)."),
+    click.option("--inertia-prior", metavar="MEAN,REL", help="Log-normal prior on the inertia, e.g. 7e-7,0.3."),
+    _FIX,
+)
+@cloup.option_group(
+    "Fit",
+    click.option("--starts", type=click.IntRange(1, 32), metavar="N", help="Multi-starts (default: the library's, 6)."),
+    click.option("--start", "start_values", multiple=True, metavar="NAME=VALUE", help="Initial guess for a parameter, e.g. --start k1=1200 (repeatable): one more start from these values, run beside the multi-start grid."),
+)
+@cloup.option_group(
+    "Output",
+    click.option("--json", "json_out", metavar="OUT.json", help="Write the results as JSON."),
+    click.option("--plot", "plot_out", metavar="OUT.png", help="Measured vs model, residuals below."),
+    _QUIET,
+)
+@cloup.option_group(
+    "Posterior (one free-motion log)",
+    click.option("--posterior", is_flag=True, help="Also sample the posterior (slow; see README)."),
+    click.option("--sampler", type=click.Choice(["emcee", "smc"]), default="emcee", show_default=True, help="Posterior sampler: emcee (ensemble MCMC from the fit's optima, differential-evolution + independence moves; --steps/--walkers) or smc (tempered SMC alone; --particles; gives the log-evidence; its intervals were narrower than emcee's on the same logs). Calibration: benchmarks/README.md, Posterior."),
+    click.option("--steps", type=click.IntRange(100, 10**6), metavar="N", help="emcee chain length (default: until 50 autocorrelation times, at most 20000)."),
+    click.option("--walkers", type=click.IntRange(4, 4096), metavar="N", help="emcee walkers (default max(32, 2·dim))."),
+    click.option("--particles", type=click.IntRange(50, 10**5), metavar="N", help="smc particles per run (default 300)."),
+    click.option("--seed", type=int, default=0, show_default=True, help="Posterior seed."),
+    click.option("--prior", "priors", multiple=True, metavar="NAME=VALUE,SD", help="A Gaussian prior of your own (a datasheet's) on a fitted parameter, replacing the default, e.g. --prior tau_c=2.5e-3,0.3 (median 2.5 mN m, sd 0.3 in log: about ±30 %; delta's sd is in its logit). Repeatable. With the default priors (flat in value for k2, tau_c, c_v) a 4-run paper log's posterior does not converge in 20 000 steps; with priors on k1, k2, tau_c, tau_s, c_v it converged on 40 of 40 calibration logs (benchmarks/README.md)."),
+    click.option("--chains", "chains_out", metavar="OUT.nc", help="Save the posterior chains (arviz NetCDF)."),
+    click.option("--corner", "corner_out", metavar="OUT.png", help="Corner plot of the posterior."),
+)
+@cloup.option_group(
+    "Batch (several logs, each fitted on its own)",
+    click.option("--summary", "summary_out", metavar="OUT.csv", help="One row per log (parameters, std, band, RMS, warnings, error)."),
+    click.option("--band-bracket/--no-band-bracket", default=None, help="Also compute the model-free stick-band bracket (an event-driven SciPy simulation per run; off by default in batch mode)."),
+    click.option("--workers", type=click.IntRange(1, 256), metavar="N", help="Fit in this many local worker processes (one core each; pip install 'hdid[dask]'). Worth it from a few hundred logs; default 1."),
+    click.option("--dask", "dask_address", metavar="ADDRESS", help="Fit on a dask.distributed scheduler at ADDRESS (pip install 'hdid[dask]')."),
+)
+@cloup.option_group(
+    "Driven logs (a motor_torque or motor_current column)",
+    click.option("--torque-constant", type=float, help="Motor torque constant [N m/A] of a motor_current column."),
+    click.option("--output-counts-per-rev", type=float, help="theta_out/output_counts holds raw output-encoder counts with this many per revolution."),
+    click.option("--order", type=click.IntRange(0, 32), metavar="N", help="Positional-error order (default: chosen by BIC up to 6)."),
+    click.option("--input-hold", type=click.Choice(["zoh", "foh"]), help="The motor torque between samples. zoh: held from each sample to the next (a drive's command; the default for a motor_torque column); foh: linear between samples (a sampled analog signal; the default for a motor_current column)."),
+    click.option("--joint", is_flag=True, help="Several logs of ONE gear (a driven log and free-motion logs): one set of physical parameters for all."),
+)
 def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_inertia,
             inertia_prior, fix, add_effects, remove_effects, effect_files, release_time,
-            counts_per_rev, starts, posterior, steps, walkers, sampler, seed, priors, chains_out, corner_out,
-            quiet, band_bracket, workers, dask_address, torque_constant,
+            counts_per_rev, starts, posterior, steps, walkers, particles, sampler, seed, priors,
+            chains_out, corner_out, quiet, band_bracket, workers, dask_address, torque_constant,
             output_counts_per_rev, order, joint, ratio, resolution, start_values, input_hold):
     """Fit stiffness, friction (and inertia) jointly to all runs of LOG.csv.
 
@@ -66,6 +88,8 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
     """
     if sampler == "smc" and (steps or walkers):
         raise _Fail("--steps/--walkers are emcee's options; leave them out with --sampler smc")
+    if particles and sampler != "smc":
+        raise _Fail("--particles is smc's option; add --sampler smc, or leave it out")
     post_prior = _common._parse_priors(priors)
     if post_prior and not (posterior or chains_out or corner_out):
         raise _Fail("--prior is the posterior's: add --posterior (or --chains/--corner)")
@@ -148,7 +172,7 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
     phases.stop()
     result.input_sha256, result.options = digest, options
     if not quiet:
-        click.echo(result.report())
+        click.echo(to_flags(result.report()))
     summary = result.to_dict()
     if posterior or chains_out or corner_out:
         from .._posterior import sample_posterior
@@ -156,7 +180,7 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
         try:
             post = sample_posterior(
                 result, n_steps=steps, n_walkers=walkers, seed=seed, progress=not quiet,
-                method=sampler, prior=post_prior or None,
+                method=sampler, prior=post_prior or None, n_particles=particles,
             )
         except (HdidError, ValueError) as exc:  # a --prior naming no free parameter, …
             msg = str(exc)
@@ -164,7 +188,7 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
         summary.update(post.to_dict())
         if not quiet:
             click.echo("")
-            click.echo(post.report())
+            click.echo(to_flags(post.report()))
         if chains_out:
             post.save(chains_out)
         if corner_out:
@@ -283,6 +307,9 @@ def _fit_batch(logs, summary_out, json_out, plot_out, inertia, fix, release_time
         **({"resolution": resolution} if resolution else {}),
     )
     flat = table.drop(columns=["result"])
+    for col in ("error", "warnings", "band_bracket"):  # the library's words as flags
+        if col in flat:
+            flat[col] = flat[col].map(lambda v: to_flags(v) if isinstance(v, str) else v)
     timing = table.attrs.get("timing", {})
     if not quiet and "total_s" in timing:
         compile_s = timing.get("compile_s")
