@@ -144,8 +144,8 @@ PHYSICAL_GIVEN = ("k1", "k2", "tau_c", "tau_s", "c_v")
 def _default_prior_of(df, truth, name):
     """``(mean, sd)`` in the transformed space of the *posterior's* default prior of
     ``name`` on log ``df`` (relative to the log's own scales, as ``hdid.fit`` builds them;
-    the effects' declared ``posterior_prior``, not the least-squares fit's weak rows: since
-    post4 those differ — v_s: sd 1 in the posterior, sd 2 in the fit — and reading the fit's
+    the effects' declared ``posterior_prior``, not the least-squares fit's weak rows: these
+    differ — v_s: sd 1 in the posterior, sd 2 in the fit — and reading the fit's
     drew v_s twice as wide as the sampler's prior, so the calibration was not exact; found
     on seeds 9500–9513, e.g. 9500's v_s 280 rad/s at z = 2.3)."""
     from hdid._fitting._fit import _setup
