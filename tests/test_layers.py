@@ -100,12 +100,13 @@ def _targets(name: str, path: Path, node, mods) -> list[tuple[str, bool]]:
     return out
 
 
-def _imports(mods: dict[str, Path]) -> set[tuple[str, str]]:
+def _imports(mods: dict[str, Path], root: Path = ROOT) -> dict[tuple[str, str], str]:
     """``(importer, imported)`` for every import in the modules, at any depth of the code
-    (inside functions too), except under ``if TYPE_CHECKING:``. A package's ``__init__``
-    that an importer lies inside of runs anyway and counts only when a name is read from
-    it; the package root (``"__init__"``) the same."""
-    edges = set()
+    (inside functions too), except under ``if TYPE_CHECKING:``, each with where it is
+    (``file:line: statement``, the first one). A package's ``__init__`` that an importer
+    lies inside of runs anyway and counts only when a name is read from it; the package
+    root (``"__init__"``) the same."""
+    edges: dict[tuple[str, str], str] = {}
     for name, path in mods.items():
         tree = ast.parse(path.read_text())
         skip = {id(n) for node in ast.walk(tree) if isinstance(node, ast.If)
@@ -117,7 +118,8 @@ def _imports(mods: dict[str, Path]) -> set[tuple[str, str]]:
                 t = t or "__init__"
                 inside = t == "__init__" or name.startswith(t + ".")
                 if t in mods and t != name and (explicit or not inside):
-                    edges.add((name, t))
+                    edges.setdefault((name, t), f"{path.relative_to(root.parent)}:"
+                                                f"{node.lineno}: {ast.unparse(node)}")
     return edges
 
 
@@ -125,11 +127,14 @@ def check(root: Path = ROOT) -> tuple[list[str], set[tuple[str, str]]]:
     """The layer rules on the tree at ``root``: the problems found (upward imports not in
     ``DEBT``, cycles, ``DEBT`` entries no longer needed) and the import edges."""
     mods = _modules(root)
-    edges = _imports(mods)
+    where = _imports(mods, root)
+    edges = set(where)
     upward = {(a, b) for a, b in edges if _layer(b) > _layer(a)}
     problems = [f"upward import (a lower layer imports a higher one): {a} → {b} (layer "
-                f"{_layer(a)} → {_layer(b)})" for a, b in sorted(upward - DEBT)]
-    problems += ["import cycle: " + " ⇄ ".join(sorted(c)) for c in _cycles(edges - DEBT)]
+                f"{_layer(a)} → {_layer(b)}) at {where[a, b]}" for a, b in sorted(upward - DEBT)]
+    problems += ["import cycle: " + " ⇄ ".join(sorted(c)) + " (" + "; ".join(
+        where[e] for e in sorted(edges - DEBT) if e[0] in c and e[1] in c) + ")"
+        for c in _cycles(edges - DEBT)]
     problems += [f"fixed, remove from DEBT: {e}" for e in sorted(DEBT - edges)]
     return problems, edges
 
