@@ -321,143 +321,6 @@ def _machine():
 
 # ----------------------------------------------------------------------------- report
 
-NOTES = """## Before → after (issue 6, third pass)
-
-| | second pass (07:28, load 6.7→5.6) | third pass (this file) |
-|---|---|---|
-| 1000 logs on 2 cores | 187 s (2 threads; ≈ one core's worth) | **55–56 s** (`workers=2`, two runs) |
-| 1000 logs in one process | 187 s | 112 s (pinned to one core) |
-| CPU per log, one process | 174 ms | 112 ms (1000 logs) |
-| vectorised / scipy, CPU per log | 56× | 104× |
-| same fits | — | old vs new code, 100 logs: k1 equal to 2.6e-11 relative |
-
-**What changed:**
-
-- **Simulator** (`hdid._simulation._simulate.simulate_runs`): every run of a log in one loop, the
-  zero-velocity crossing and stick/slip split (three more RK4 steps) behind a `lax.cond`
-  on "any run has an event in this substep" — it used to run at every substep of every run
-  under `vmap`. Results equal the old scheme's to 1e-15 (7 log × model cases, Jacobians
-  included); residuals + Jacobian 443 → 243 µs.
-- **One-lane programs are not vmapped** (`hdid._fitting._lm.lanes_vmap`): a length-1 `vmap` would
-  still turn the `cond` into a select. Batch CPU per log 167 → 99 ms (100 logs, back to
-  back on one core).
-- **Processes, not threads**: two threads issuing JAX CPU calls measured CPU time = wall
-  time (real r+J, a pure XLA loop, and two host devices alike): one program at a time per
-  process. The thread default is now 1 (3 interleaved A/B pairs: 1 thread 91–111 ms per
-  log, 2 threads 96–124), and `workers=N` runs N single-threaded processes on a dask
-  `LocalCluster` (about 8 chunks per worker; results travel with a NumPy problem, 0.4 ms
-  instead of 2.7 ms to unpickle per log).
-- **Python side per log**: grid candidates packed as arrays, start values unpacked in one
-  NumPy pass (grid_candidates 8 → 3 ms, _finish 15 → 6 ms per log).
-- The one-process rows were measured pinned to core 0 (`taskset -c 0 … --skip workers`)
-  while another engineer's job held core 1; the workers rows with both cores free
-  (`--only 'workers 2'`). The "2 threads" row (90 vs 111 ms per log) is within the
-  run-to-run spread of one core at load 2–3 (91–124 ms for the same 100 logs).
-
-## Before → after (issue 6, second pass)
-
-| | before (2026-11-22 04:27, load 7.7→5.8) | after (2026-11-22 07:28, load 6.7→5.6) |
-|---|---|---|
-| 1000 logs, wall (measured, shared cores) | 521 s (1.92 logs/s) | 187 s (5.34 logs/s) |
-| CPU per log, vectorised | 305–369 ms | 174 ms (1000 logs), 187 ms (100) |
-| vectorised / scipy, CPU per log | 26× | 56× |
-| vectorised / scipy, wall | 25.5× | 54× |
-| 1000 logs on 2 free cores, CPU/2 | 184 s | 87 s |
-| vectorised / loop over `hdid.fit`, CPU | 1.9× (683 vs 369 ms) | 3.5× (601 vs 174 ms) |
-| LM lane-steps per log | 187 | 186 (same schedule, same fits) |
-| cold / warm-cache first call | 40 s / 15 s | 56 s / 21 s |
-
-**What changed** (every log gets exactly the fit it got before — same starts, same
-Levenberg–Marquardt path, same stopping; `hdid.fit` and `fit_many` agree):
-
-- **Levenberg–Marquardt stepped by hand** (`hdid._fitting._lm._lm_lanes`). It reproduces
-  optimistix's `LevenbergMarquardt` (normal-equations Cholesky, `ClassicalTrustRegion`
-  damping update, re-initialised at every call as before), so every lane follows the same
-  path (40 logs, old vs new code, same settings: max |Δχ²| 2e-8, k1 equal to 1e-11; the
-  "same fits" section compares with `hdid.fit` in this run: one log of 100 differs by
-  0.017 — rounding of differently batched programs carried along one path). What differs is
-  the cost: optimistix evaluates every trial point with its forward-mode Jacobian (10
-  tangents, ≈ 3× a forward pass), but a third of the trials are rejected (56 % in phase 1,
-  22 % in phase 2). The hand-stepped loop evaluates a trial after a rejection with a
-  forward pass only and computes the Jacobian only if it is accepted; after an accepted
-  trial the next is evaluated with its Jacobian at once (it is usually accepted too).
-- **One lane per compiled call** (`DEFAULT_LANES = 1`): the LM's control flow is per
-  call, so only in a one-lane program is a skipped Jacobian really skipped (a wider call
-  computes it when any lane needs it, and runs as long as its slowest lane).
-  Alternating in-process runs, 60 logs, load ≈ 5: 1 lane 158–166 ms CPU per log,
-  3 lanes 187, 6 lanes 176–205. (The benchmark's single 6-lane row above was taken at a
-  lower load than the 1-lane row; wall times at load 5–7 are not comparable across rows.)
-- **Residuals and Jacobian carried between calls**: a phase-2 chunk starts from the
-  Jacobian its lane ended the previous call with, instead of recomputing it (≈ 5 %).
-- **Grid candidates ordered by how long they ring** (time to stop ∝ √k1 / tau_c): a wide
-  forward-only call then holds candidates that stop at similar times; the grid's CPU per
-  log fell from ≈ 47 ms to ≈ 17 ms.
-- **`hdid.fit` uses the same loop and the same `_Schedule`**, so single fits are faster as
-  well (loop over `hdid.fit` above) and the two paths cannot drift apart.
-- CPU (process) time is now recorded per part of the batch (table above).
-
-**Goals.** ≥ 50× the scipy way is met (by wall and by CPU time, measured in the same run;
-the scipy rate rests on 3 logs that took 4.5–14 s each, so the ratio is uncertain by
-±30 %). 1000 logs in ≤ 60 s on 2 cores is **not** met: ≈ 175 ms CPU per log gives
-≈ 87 s if two threads scaled perfectly on two free cores (CPU time / 2), ≈ 97 s with
-the 1.8 cores' worth of scaling seen in the one check at load 0.4 (06:46, 40 logs:
-CPU 12.3 s, wall 6.8 s, older code). In this run hdid got about one core (CPU ≈ wall).
-
-**Tried and not kept** (40–80 paper logs each, best χ² per log compared with the
-unchanged fit; χ² in units of the quantization variance):
-
-- The fit is *multimodal*: starts end in different minima tens of χ² apart, and which
-  start wins is often the 2nd or 3rd after phase 1 (16/13/11 of 40). Any change of the LM
-  path re-draws the basins on ~20 % of logs, so every path-changing idea below made some
-  logs worse by more than the Δχ² ≈ 0.1 guard, even where as many got better:
-  - Nielsen's damping update (identity scaling): 13 % fewer iterations; 11 of 80 logs
-    worse (up to +130), 7 better.
-  - Marquardt scaling (λ·diag JᵀJ, running max): stalls far from the minima, 19 of 40 worse.
-  - Phase 1 of 8 iterations instead of 12: 14 % fewer; 13 of 80 worse, 9 better.
-  - Stall threshold 0.03 instead of 0.01: 11 % fewer; 22 of 80 worse by 0.1–0.6 (the last
-    iterations still lower χ² by tenths).
-  - The Δχ² > 50 drop checked every 5 phase-2 iterations instead of 25: 20 % fewer; 7 of
-    40 worse (a lane 50 behind early often wins later).
-  - Stopping phase-1 starts early whose χ² is over 3× the 3rd best after 4 iterations:
-    7 % fewer, 1 of 80 worse (+0.2); at 30× nothing is saved.
-  - Dropping a phase-2 lane that has reached another lane's point (Δuᵀ JᵀJ Δu < D at a
-    chunk end): saves 1 % of iterations harmlessly (D = 0.1), 3–10 % with 1–4 logs worse.
-  - Continuing 4 starts instead of 3 does not recover the logs a changed LM path loses.
-- `--xla_cpu_use_thunk_runtime=false`: no longer supported by this jaxlib.
-
-**Next**, in order of expected gain: (1) Broyden rank-one updates of the Jacobian on some
-accepted steps (an accepted trial would cost one forward pass) — changes the path, so it
-needs the basin study above on ≥ 200 logs; (2) the simulator: the forward-mode pass is
-≈ 0.9 ms per lane-step of CPU, i.e. the stick-exact RK4 with its three RK4 evaluations per
-substep (re-integration to the crossing and the slide-on are computed every substep, used
-only at crossings) — a cheaper substep is the largest single lever left; (3) a GPU run
-(not tried; the device tool was not used in this pass).
-
-## What limits it (read with the tables)
-
-- **The Levenberg–Marquardt lanes are the cost** (≈ 94 % of the CPU time for 1000 logs,
-  ≈ 186 lane-steps per log: 6 starts × 12 iterations, then the best 3 to convergence).
-  Each accepted lane-step is a forward-mode (10 tangents) stick-exact RK4 simulation of
-  every run; each rejected one a forward pass.
-- **Cost vs design** (CPU per log, 20 logs each, relative to the paper design): it follows
-  the simulated time per run more than the number of samples: 1 kHz ≈ 1.25×, a 1.0 s
-  record ≈ 1.2×, a 0.25 s one ≈ 0.7×; 2 runs ≈ 0.55×, 8 runs ≈ 0.8× — in the 8-run design
-  the ±0.05 rad releases of some truths lie inside the stick band (no motion at all), so 8
-  of 20 logs fail in their rows at once, which makes that row look cheaper than it is.
-- **Memory**: peak RSS ≈ 0.55 GB for 1 log (mostly JAX/XLA) to ≈ 1.3 GB for 1000 (was
-  0.95 GB): logs are set up, fitted and analysed in waves of 256, and each live lane now
-  keeps its residuals and Jacobian between calls (521 × 17 doubles per lane).
-- **Compile**: the LM program now holds the forward pass and the forward-mode Jacobian in
-  separate branches (three traced simulations instead of one), so a cold first call
-  compiles longer than before (compile table; before: 40 s cold, 15 s with the cache).
-  The persistent cache removes the XLA part; tracing remains.
-- Threads: superseded by the third pass — a second thread does not add a core (measured);
-  several cores need several processes (`workers`).
-- Not measured: dask beyond one machine (the `LocalCluster` rows and tests only), and a GPU
-  (none was lent to these sessions).
-"""
-
-
 def _find(res, label):
     for r in res["runs"]:
         if r["config"]["label"] == label:
@@ -666,7 +529,8 @@ def write_report(res: dict, out_dir: Path) -> str:
                  f"{r['first_call_s']:.1f} s | {r['maxrss_mb']:.0f} MB | "
                  f"{_ld(r)} |")
     L.append("")
-    L.append(NOTES)
+    L.append("Where the time goes and why the batch is built this way (one lane per program, "
+             "processes not threads, what was tried): `docs/decisions/batch-lanes.md`.\n")
     fails = [(r["config"]["label"], r.get("n_failed", 0), r.get("errors")) for r in res["runs"]
              if r.get("n_failed")]
     if fails:

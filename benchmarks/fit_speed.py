@@ -9,10 +9,8 @@ Measures, in one run:
 1. **Cold CLI** — ``hdid fit data/synthetic/csf8_paper.csv -q --json OUT`` as a subprocess
    (a) with an empty, fresh persistent compilation cache (``HDID_CACHE_DIR=<tmp>``): true cold;
    (b) again with that now-populated cache: the "cold CLI with persistent cache" of the goal;
-   (c) ``hdid --help``.  (b) is broken down by subprocess timings of ``python -c pass``,
-   ``import hdid, jax`` and ``import hdid._fitting._fit`` (all heavy imports), and by one instrumented
-   in-process CLI call (JAX monitoring events: tracing, lowering, XLA compile / cache reads, and
-   the phases of :func:`hdid.fit`).
+   (c) ``hdid --help``; and the subprocess timings of ``python -c pass``, ``import hdid, jax``
+   and ``import hdid._fitting._fit`` (all heavy imports): what of (b) is Python and imports.
 2. **Warm fit** — in-process ``hdid.fit(path)`` after one warm-up (same process, same shapes) on
    ``csf8_paper.csv`` and on 3 more 4-run 250 Hz logs made with
    ``data/synthetic/generate.py::make_log`` (paper design, other seeds); also ``n_starts=1``.
@@ -37,7 +35,6 @@ import argparse
 import datetime as _dt
 import importlib.util
 import json
-import math
 import os
 import platform
 import resource
@@ -47,7 +44,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections import defaultdict
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -136,163 +132,6 @@ def _import_scipy_way():
     return mod
 
 
-def _union(spans):
-    """Total length of the union of (start, end) intervals (nested jit traces overlap)."""
-    try:
-        from hdid._compile_clock import union_length
-    except ImportError:  # code from before issue 20 (--code NAME=SRC)
-        from hdid._fitting._vfit import union_length
-
-    return union_length(spans)
-
-
-class _FitPhases:
-    """Wrap the phases of ``hdid._fitting._fit.fit`` with timers (device work is waited for)."""
-
-    NAMES = ("read_log", "prepare", "build_problem", "_grid_starts", "_solve_many", "analyse")
-
-    def __init__(self):
-        import jax
-
-        from hdid._fitting import _fit
-
-        self.times = defaultdict(list)
-        self._orig = {}
-        for name in self.NAMES:
-            if not hasattr(_fit, name):
-                continue
-            f = getattr(_fit, name)
-            self._orig[name] = f
-
-            def g(*a, _f=f, _n=name, **k):
-                t = time.perf_counter()
-                r = _f(*a, **k)
-                jax.block_until_ready(r) if _n == "_solve_many" else None
-                self.times[_n].append(time.perf_counter() - t)
-                return r
-
-            setattr(_fit, name, g)
-        self._fit = _fit
-
-    def restore(self):
-        for name, f in self._orig.items():
-            setattr(self._fit, name, f)
-
-    def summary(self):
-        out = {}
-        for name, ts in self.times.items():
-            if name == "_solve_many" and len(ts) == 2:
-                out["lm_phase1 (all starts)"] = ts[0]
-                out["lm_phase2 (best starts)"] = ts[1]
-            else:
-                out[name.lstrip("_")] = sum(ts)
-        return out
-
-
-class _JaxEvents:
-    """Collect JAX compile-pipeline time spans and cache hit/miss events."""
-
-    KEYS = {
-        "/jax/core/compile/jaxpr_trace_duration": "trace (jaxpr)",
-        "/jax/core/compile/jaxpr_to_mlir_module_duration": "lower (jaxpr→MLIR)",
-        "/jax/core/compile/backend_compile_duration": "XLA compile or cache read",
-    }
-
-    def __init__(self):
-        from jax import monitoring
-
-        self.spans = defaultdict(list)
-        self.counts = defaultdict(int)
-        self.durations = defaultdict(float)
-        monitoring.register_event_time_span_listener(self._span)
-        monitoring.register_event_listener(self._event)
-        monitoring.register_event_duration_secs_listener(self._duration)
-
-    def _span(self, event, start, end, **_):
-        if event in self.KEYS:
-            self.spans[event].append((start, end))
-
-    def _event(self, event, **_):
-        if event.startswith("/jax/compilation_cache/"):
-            self.counts[event.rsplit("/", 1)[-1]] += 1
-
-    def _duration(self, event, secs, **_):
-        if event == "/jax/compilation_cache/cache_retrieval_time_sec":
-            self.durations["cache_read"] += secs
-
-    def summary(self):
-        out = {label: _union(self.spans[key]) for key, label in self.KEYS.items()}
-        out["  of which cache reads"] = self.durations.get("cache_read", 0.0)
-        all_spans = [s for key in self.KEYS for s in self.spans[key]]
-        out["compile pipeline (union)"] = _union(all_spans)
-        return out, dict(self.counts)
-
-
-class _CacheLog:
-    """Which jitted functions hit the persistent cache, which were written, which too small."""
-
-    def __init__(self):
-        import logging
-        import re
-
-        self.hits, self.written, self.small = [], [], []
-        outer = self
-
-        class H(logging.Handler):
-            def emit(self, record):
-                msg = record.getMessage()
-                m = re.match(r"Persistent compilation cache hit for '([^']+)'", msg)
-                if m:
-                    outer.hits.append(m.group(1))
-                m = re.match(r"Writing (\S+) to persistent compilation cache", msg)
-                if m:
-                    outer.written.append(m.group(1))
-                m = re.match(r"Not writing persistent cache entry for '([^']+)' because it "
-                             r"took < [0-9.]+ seconds to compile \(([0-9.]+)s\)", msg)
-                if m:
-                    outer.small.append((m.group(1), float(m.group(2))))
-
-        for name in ("jax._src.compiler", "jax._src.compilation_cache"):
-            lg = logging.getLogger(name)
-            lg.setLevel(logging.DEBUG)
-            lg.addHandler(H(level=logging.DEBUG))
-            lg.propagate = False
-
-    def summary(self):
-        return {"hits": self.hits, "written (missed)": self.written,
-                "small_not_cached": len(self.small),
-                "small_compile_s": sum(t for _, t in self.small)}
-
-
-# ----------------------------------------------------------------------------- probe
-
-
-def _probe_cli(log: str, json_out: str) -> None:
-    """Run in a subprocess: one instrumented ``hdid fit LOG -q --json OUT``, JSON on stdout."""
-    t0 = time.perf_counter()
-    import hdid.cli
-    from hdid._fitting import _fit  # noqa: F401  (the CLI imports these inside the command)
-    from hdid import _log as _io  # noqa: F401  (the CLI imports these inside the command)
-    t_import = time.perf_counter() - t0
-    ev = _JaxEvents()
-    ph = _FitPhases()
-    clog = _CacheLog()
-    t1 = time.perf_counter()
-    hdid.cli.main(["fit", log, "-q", "--json", json_out], standalone_mode=False)
-    t_fit = time.perf_counter() - t1
-    spans, counts = ev.summary()
-    phases = ph.summary()
-    cache_log = clog.summary()
-    ph.times.clear()
-    t2 = time.perf_counter()
-    hdid.cli.main(["fit", log, "-q", "--json", json_out], standalone_mode=False)
-    t_again = time.perf_counter() - t2
-    print(json.dumps({"import_s": t_import, "cli_fit_s": t_fit, "compile": spans,
-                      "cache_events": counts, "cache_log": cache_log, "phases_first": phases,
-                      "cli_fit_again_same_process_s": t_again,
-                      "phases_again": ph.summary()}))
-
-
 # ----------------------------------------------------------------------------- sections
 
 
@@ -336,13 +175,6 @@ def bench_cli(cache_dir: Path, reps: dict) -> dict:
         _timed([py, "-c", "import hdid.cli, hdid._fitting._fit, hdid._log"], env, "import _fit")[0]
         for _ in range(reps["small"])])
 
-    print("instrumented CLI call (populated cache) ...", flush=True)
-    probes = []
-    for _ in range(reps["probe"]):
-        _, out = _timed([py, str(Path(__file__).resolve()), "--_probe", str(LOG), out_json], env,
-                        "probe")
-        probes.append(json.loads(out.strip().splitlines()[-1]))
-    res["probe"] = probes
     res["load_after"] = _load("cli end")
     return res
 
@@ -415,15 +247,6 @@ def bench_warm(logs, reps: dict) -> dict:
                    "result": _hdid_summary(r)})
     res["n_starts_1"] = n1
 
-    # one instrumented warm fit (after the timed ones, so that they are undisturbed)
-    ph = _FitPhases()
-    try:
-        t = time.perf_counter()
-        hdid.fit(str(logs[0]["path"]))
-        total = time.perf_counter() - t
-        res["warm_phases"] = {"total_s": total, **ph.summary()}
-    finally:
-        ph.restore()
     res["load_after"] = _load("warm end")
     return res
 
@@ -590,40 +413,6 @@ def write_report(res: dict, out_dir: Path) -> str:
              f"{cli['cache_after_runs']['files']} files, "
              f"{cli['cache_after_runs']['bytes'] / 1e6:.1f} MB.\n")
 
-    # cold breakdown
-    L.append("## Where a cold CLI call (populated cache) spends its time\n")
-    pr = cli["probe"]
-    imp = statistics.median([p["import_s"] for p in pr])
-    fit_first = statistics.median([p["cli_fit_s"] for p in pr])
-    again = statistics.median([p["cli_fit_again_same_process_s"] for p in pr])
-    py0 = cli["python_startup_s"]["median"]
-    L.append(f"Subprocess timings: interpreter start {_ms(py0)}, `import hdid, jax` "
-             f"{_ms(cli['import_hdid_jax_s']['median'])}, all imports of `hdid fit` "
-             f"{_ms(cli['import_hdid_fit_s']['median'])} — so of the "
-             f"{_ms(cb['median'])} cold-with-cache call about "
-             f"{_ms(cli['import_hdid_fit_s']['median'])} is Python + imports and "
-             f"{_ms(max(cb['median'] - cli['import_hdid_fit_s']['median'], 0))} the rest.\n")
-    L.append(f"Instrumented in-process CLI call (median of {len(pr)}; JAX monitoring events; "
-             "spans of nested jits merged):\n")
-    L.append("| part | time |\n|---|---|")
-    L.append(f"| imports (`hdid.cli`, `hdid._fitting._fit`, `hdid._log`) | {_ms(imp)} |")
-    L.append(f"| first `hdid fit` call in the process | {_ms(fit_first)} |")
-    keys = list(pr[0]["compile"])
-    for k in keys:
-        L.append(f"| &nbsp;&nbsp;{k} | {_ms(statistics.median(p['compile'][k] for p in pr))} |")
-    pkeys = list(pr[0]["phases_first"])
-    for k in pkeys:
-        L.append(f"| &nbsp;&nbsp;phase `{k}` (compile + run) | "
-                 f"{_ms(statistics.median(p['phases_first'].get(k, 0.0) for p in pr))} |")
-    L.append(f"| same CLI call again in the same process | {_ms(again)} |")
-    cl = pr[0]["cache_log"]
-    L.append(f"\nPersistent cache in that call: hits {', '.join(cl['hits']) or 'none'}; missed "
-             f"and written {', '.join(cl['written (missed)']) or 'none'}; "
-             f"{cl['small_not_cached']} small jits compiled in < 0.2 s each and never cached "
-             f"(together {_ms(cl['small_compile_s'])}). Cache files: "
-             f"{cli['cache_after_cold']['files']} after the true-cold call, "
-             f"{res['cache_at_end']['files']} at the end of the script.\n")
-
     # warm
     L.append("## Warm fit, per log (in-process, after one warm-up)\n")
     L.append("| log | hdid.fit median | min | n | n_starts=1 median | min |\n"
@@ -631,9 +420,7 @@ def write_report(res: dict, out_dir: Path) -> str:
     for a, b in zip(warm["per_log"], warm["n_starts_1"]):
         L.append(f"| {a['name']} | {_ms(a['fit_s']['median'])} | {_ms(a['fit_s']['min'])} | "
                  f"{a['fit_s']['n']} | {_ms(b['fit_s']['median'])} | {_ms(b['fit_s']['min'])} |")
-    wp = warm["warm_phases"]
-    L.append("\nOne instrumented warm fit (csf8_paper.csv): " + ", ".join(
-        f"{k} {_ms(v)}" for k, v in wp.items()) + ".\n")
+    L.append("")
 
     # scipy & accuracy
     L.append("## The scipy way vs hdid, per log: speed and accuracy\n")
@@ -687,16 +474,6 @@ def _notes(res) -> list[str]:
                      "mix code versions and the persistent cache may have missed after an edit "
                      f"(fingerprint {res['src_fingerprint_start']} → "
                      f"{res['src_fingerprint_end']}).")
-    pr = cli["probe"][0]
-    c = pr["compile"]
-    first = pr["cli_fit_s"]
-    notes.append(
-        f"Cold CLI with a populated cache: of the first in-process fit ({first:.1f} s), "
-        f"tracing Python to jaxprs takes {c['trace (jaxpr)']:.1f} s and lowering to MLIR "
-        f"{c['lower (jaxpr→MLIR)']:.1f} s — JAX's persistent cache stores only compiled XLA "
-        f"executables, so both are paid in every new process; reading the cache costs "
-        f"{c['  of which cache reads']:.1f} s, imports {pr['import_s']:.1f} s. The same call "
-        f"again in the same process takes {pr['cli_fit_again_same_process_s']:.2f} s.")
     cb = cli["cold_with_cache_s"]
     grew = cli["cache_after_runs"]["files"] - cli["cache_after_cold"]["files"]
     if grew > 0:
@@ -711,10 +488,6 @@ def _notes(res) -> list[str]:
     notes.append(f"n_starts=1 is {w / n1:.1f}× faster than the default n_starts=4 on "
                  "csf8_paper.csv, but its first call compiles again (the starts are vmapped, "
                  "so the batch size is part of the compiled shape).")
-    wp = warm["warm_phases"]
-    notes.append("Warm-fit phases (one instrumented fit): " + ", ".join(
-        f"{k} {v * 1e3:.0f} ms" for k, v in wp.items() if k != "total_s")
-        + f" (total {wp['total_s'] * 1e3:.0f} ms).")
     return notes
 
 
@@ -744,11 +517,7 @@ def main(argv=None) -> None:
     ap.add_argument("--out-dir", type=Path, default=RESULTS)
     ap.add_argument("--render", type=Path, metavar="JSON",
                     help="only re-write the markdown from an earlier fit_speed.json")
-    ap.add_argument("--_probe", nargs=2, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    if args._probe:
-        _probe_cli(*args._probe)
-        return
     if args.render:
         res = json.loads(args.render.read_text())
         res["notes"] = _notes(res)
@@ -756,9 +525,9 @@ def main(argv=None) -> None:
         return
 
     t_script = time.perf_counter()
-    reps = (dict(cold=1, cli=2, small=3, probe=1, warm=5, warm_n1=5, scipy=1, scipy_logs=1)
+    reps = (dict(cold=1, cli=2, small=3, warm=5, warm_n1=5, scipy=1, scipy_logs=1)
             if args.quick else
-            dict(cold=1, cli=5, small=5, probe=1, warm=7, warm_n1=7, scipy=3, scipy_logs=4))
+            dict(cold=1, cli=5, small=5, warm=7, warm_n1=7, scipy=3, scipy_logs=4))
     res = {"quick": args.quick, "reps": reps, "load_start": _load("script start"),
            "src_fingerprint_start": _src_fingerprint(),
            "goals": {"warm_s": GOAL_WARM_S, "ratio": GOAL_RATIO, "cold_cli_s": GOAL_COLD_CLI_S}}
