@@ -36,6 +36,24 @@ def import_generate():
     return mod
 
 
+def import_scipy_way():
+    """benchmarks/scipy_way.py as a module (``fit_scipy``, the fit without hdid)."""
+    spec = importlib.util.spec_from_file_location("_hdid_scipy_way", ROOT / "benchmarks" / "scipy_way.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def load(tag: str = "") -> dict:
+    """The 1/5/15-min load averages and the time, tagged, as the speed results record them."""
+    import datetime
+    import os
+
+    la = os.getloadavg()
+    return {"tag": tag, "load1": la[0], "load5": la[1], "load15": la[2],
+            "time": datetime.datetime.now().isoformat(timespec="seconds")}
+
+
 def cpu_model() -> str:
     cpu = platform.processor() or "?"
     try:

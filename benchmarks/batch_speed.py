@@ -35,7 +35,6 @@ from __future__ import annotations
 import _common  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
 import argparse
 import datetime as _dt
-import importlib.util
 import json
 import os
 import platform
@@ -55,10 +54,7 @@ GOAL_RATIO = 50.0
 WARMUP = 2
 
 
-def _load(tag=""):
-    la = os.getloadavg()
-    return {"tag": tag, "load1": la[0], "load5": la[1], "load15": la[2],
-            "time": _dt.datetime.now().isoformat(timespec="seconds")}
+_load = _common.load
 
 
 # ----------------------------------------------------------------------------- logs
@@ -129,9 +125,7 @@ def worker(cfg: dict) -> dict:
 
         from hdid._models._model import CATALOG_CSF8
 
-        spec = importlib.util.spec_from_file_location("_sw", ROOT / "benchmarks" / "scipy_way.py")
-        sw = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(sw)
+        sw = _common.import_scipy_way()
         per = []
         c0 = _cpu()
         t0 = time.perf_counter()
@@ -146,10 +140,6 @@ def worker(cfg: dict) -> dict:
         out.update(_workers_run(cfg, warm, timed, t_imp))
     else:
         opts = dict(vectorize=cfg["mode"] == "vectorized", band_bracket=cfg.get("bracket"))
-        if cfg.get("lanes"):
-            opts["lanes"] = cfg["lanes"]
-        if cfg.get("threads"):
-            opts["threads"] = cfg["threads"]
         out["import_s"] = time.perf_counter() - t_imp
         t = time.perf_counter()
         first = hdid.fit_many(warm, **opts)
@@ -299,8 +289,6 @@ def measure(args) -> dict:
     # several cores: worker processes (threads in one process do not add cores)
     for n in ns[-2:]:
         go(f"workers 2, {n}", "workers", n, paths=paper, workers=2)
-    go("vectorized 100, 2 threads", "vectorized", min(100, max(ns)), paths=paper, threads=2)
-    go("vectorized 100, 6 lanes", "vectorized", min(100, max(ns)), paths=paper, lanes=6)
     for design in ("short 0.25 s", "long 1.0 s", "1 kHz", "2 runs", "8 runs"):
         go(f"design {design}, 20 logs", "vectorized", 20, design=design)
     go("design paper, 20 logs", "vectorized", 20, paths=paper)
@@ -448,19 +436,6 @@ def write_report(res: dict, out_dir: Path) -> str:
                  + (f", {(_cpu_per_log(br) - _cpu_per_log(v100)) * 1e3:+.0f} ms of CPU"
                     if _cpu_per_log(br) and _cpu_per_log(v100) else "")
                  + "). `hdid.fit` always computes the bracket, so the loop's rate includes it.")
-    th = _find(res, "vectorized 100, 2 threads")
-    if th and v100:
-        L.append(f"- vectorised, 2 threads issuing calls instead of 1, {th['n']} logs: "
-                 f"{th['total_s']:.1f} s (CPU {_cpu_per_log(th) * 1e3:.0f} ms per log) vs "
-                 f"{v100['total_s']:.1f} s (CPU {_cpu_per_log(v100) * 1e3:.0f} ms per log) "
-                 f"(load {_ld(th)}): a second thread does not add a core.")
-
-    lanes6 = _find(res, "vectorized 100, 6 lanes")
-    if lanes6 and v100:
-        L.append(f"- vectorised, 6 lanes per call instead of 1, {lanes6['n']} logs: "
-                 f"{lanes6['total_s']:.1f} s (CPU {_cpu_per_log(lanes6) * 1e3:.0f} ms per log) vs "
-                 f"{v100['total_s']:.1f} s (CPU {_cpu_per_log(v100) * 1e3:.0f} ms per log) "
-                 f"(load {_ld(lanes6)}).")
     L.append("")
 
     L.append("## Same fits: vectorised vs `hdid.fit`, and against the truth\n")

@@ -27,7 +27,7 @@ warnings; the confusion matrix (hidden effect × verdict's effect) per design.
 
     taskset -c 0 python benchmarks/diagnose_independent.py [rich|paper ...] [--per N]
     python benchmarks/diagnose_independent.py --report
-    ... [--out diagnose_independent_diag8]   (another results file; copy the old one first
+    ... [--out diagnose_independent_rerun]   (another results file; copy the old one first
                                               to keep its other rows)
 """
 

@@ -33,7 +33,6 @@ from __future__ import annotations
 import _common  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
 import argparse
 import datetime as _dt
-import importlib.util
 import json
 import os
 import platform
@@ -70,10 +69,7 @@ def _stats(xs):
             "all": xs}
 
 
-def _load(tag=""):
-    la = os.getloadavg()
-    return {"tag": tag, "load1": la[0], "load5": la[1], "load15": la[2],
-            "time": _dt.datetime.now().isoformat(timespec="seconds")}
+_load = _common.load
 
 
 def _hdid_exe() -> str:
@@ -116,20 +112,9 @@ def _cache_stats(path: Path):
     return {"files": len(files), "bytes": sum(f.stat().st_size for f in files)}
 
 
-def _src_fingerprint() -> str:
-    return _common.src_fingerprint()
-
-
-def _import_generate():
-    return _common.import_generate()
-
-
-def _import_scipy_way():
-    spec = importlib.util.spec_from_file_location("_hdid_scipy_way",
-                                                  ROOT / "benchmarks" / "scipy_way.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+_src_fingerprint = _common.src_fingerprint
+_import_generate = _common.import_generate
+_import_scipy_way = _common.import_scipy_way
 
 
 # ----------------------------------------------------------------------------- sections
