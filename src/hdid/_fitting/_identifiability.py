@@ -16,7 +16,7 @@ from .._problems._problem import Problem
 from .._results._result import FitResult
 from .._results._summaries import ParameterEstimate, RunSummary, StartSummary
 from .._models._transforms import derivative
-from .._problems._derived import _derived, band_bracket
+from .._problems._derived import BracketTooCostly, _derived, band_bracket
 from ..effects import StribeckFriction
 # re-exported while the posterior and diagnose branches still import them from here
 
@@ -232,7 +232,15 @@ def analyse(
                    else np.asarray(prep.ends_moving))
     stopped = [r for i, r in enumerate(runs) if not ends_moving[i] and not moving_start[i]]
     duration = float(np.max(prep.lengths)) * prep.sample_period
-    bracket = band_bracket(model, stopped, duration) if bracket else None
+    try:
+        bracket = band_bracket(model, stopped, duration) if bracket else None
+    except BracketTooCostly as exc:
+        bracket = None
+        warnings.append(
+            "stick band: no data bracket — the event-driven reference simulation at the "
+            f"fitted parameters was stopped ({exc}: a stiff friction law, tau_s "
+            f"{values.get('tau_s', math.nan):.3g}, tau_c {values.get('tau_c', math.nan):.3g}, "
+            f"v_s {values.get('v_s', math.nan):.3g} rad/s)")
     if bracket is not None and bracket[0] > bracket[1]:
         warnings.append(
             f"stick band: the largest logged |rest point| {bracket[0]:.4g} exceeds the smallest "

@@ -46,11 +46,28 @@ def _is_base(model) -> bool:
     return len(model.effects) == 3 and all(type(e) is c for e, c in zip(model.effects, classes))
 
 
-def band_bracket(model, runs, duration: float = 0.5) -> tuple[float, float] | None:
+#: Right-hand-side evaluations the bracket's reference simulations may take, all runs
+#: together: DOP853 takes 12 a step, and a run of a clean log takes 100–400 steps
+#: (1–5 thousand evaluations; 6–15 thousand for a whole paper or rich log), so this is
+#: 20× a whole log's need. A friction law that creeps (``tau_s < tau_c`` with a tiny
+#: ``v_s``: a speed-stiffness ``∂τ/∂ω`` of ~40 N m s/rad against an inertia of 7e-7
+#: kg m², a time constant of 2e-8 s) needs ~1e7 explicit steps a run instead (a clean rich
+#: log's fit took > 10 min in it).
+BRACKET_MAX_EVALUATIONS = 300_000
+
+
+class BracketTooCostly(Exception):
+    """The bracket's reference simulations needed more than their evaluation budget."""
+
+
+def band_bracket(model, runs, duration: float = 0.5,
+                 max_evaluations: int = BRACKET_MAX_EVALUATIONS) -> tuple[float, float] | None:
     """What the data say about the stick-band half-width without any smoothness: at
     least the largest |rest point| logged, less than the smallest |angle| at which the
     gear reversed and slid on (located with the event-driven reference simulator at the
-    fitted parameters). Base model only; ``None`` otherwise."""
+    fitted parameters). Base model only; ``None`` otherwise. Raises
+    :class:`BracketTooCostly` when the simulations need more than ``max_evaluations``
+    right-hand-side evaluations (a stiff friction law at the fitted parameters)."""
     if not _is_base(model) or not runs:
         return None
     from ..reference import reference_trajectory
@@ -58,10 +75,19 @@ def band_bracket(model, runs, duration: float = 0.5) -> tuple[float, float] | No
     v = model.float_values()
     lower = max(abs(r.rest_logged) for r in runs)
     upper = math.inf
+    spent = [0]
+
+    def count(_theta, _omega):  # a zero extra torque that counts the evaluations
+        spent[0] += 1
+        if spent[0] > max_evaluations:
+            raise BracketTooCostly(f"more than {max_evaluations} evaluations")
+        return 0.0
+
     for r in runs:
         try:
             traj = reference_trajectory(
                 duration, theta0=r.theta0, t_release=0.0, ratio=model.ratio,
+                extra_torque=count,
                 **{k: v[k] for k in ("k1", "k2", "tau_c", "tau_s", "v_s", "delta", "c_v", "inertia")},
             )
         except (ValueError, RuntimeError):
