@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
 
 import pytest
@@ -69,3 +70,26 @@ def test_notebook_executes(path, monkeypatch):
     assert not errors
     missing = [i for i in _figure_cells(nb) if not _has_image(nb.cells[i])]
     assert not missing, f"cells {missing} draw a figure but show no image"
+
+
+#: Statements a notebook's text (markdown or code comments) makes about what its stored
+#: outputs print: (what the text says, what the output prints), each a pattern whose
+#: groups must agree. The SMC size is the one stated today ("4 runs × 300 particles").
+STATED = [
+    (r"(\d+) runs × (\d+) particles", r"(\d+) independent runs × (\d+) particles"),
+]
+
+
+@pytest.mark.parametrize("name", STORED_EXECUTED)
+def test_notebook_text_agrees_with_its_outputs(name):
+    nb = nbformat.read(NOTEBOOKS[0].parent / name, as_version=4)
+    said = "\n".join(c.source if c.cell_type == "markdown" else
+                     "\n".join(line.partition("#")[2] for line in c.source.splitlines())
+                     for c in nb.cells)
+    printed = "\n".join(o.get("text", "") for c in nb.cells if c.cell_type == "code"
+                        for o in c.get("outputs", []) if o.get("output_type") == "stream")
+    for claim, output in STATED:
+        shown = set(re.findall(output, printed))
+        for stated in re.findall(claim, said):
+            assert not shown or stated in shown, (
+                f"{name}: the text says {stated} ({claim}), the stored output prints {sorted(shown)}")

@@ -161,6 +161,8 @@ def sample_posterior(
         The fit's log (a path or :class:`~hdid.Log`), for the basin check below when the
         fit did not run its limit checks (default: ``fit.source`` when it is a file).
 
+    Notes
+    -----
     Never around a poorer basin (:mod:`~hdid._posterior.basin`): before any sampling, a
     fit whose residual is above ``BASIN_FACTOR`` (1.5) × the quantization floor goes
     through the fit's limit and restart checks (reused when the fit ran them); if it is
