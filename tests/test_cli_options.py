@@ -239,12 +239,62 @@ def test_particles_is_a_flag_for_smc(monkeypatch):
     assert seen["method"] == "smc" and seen["n_particles"] == 600
 
 
+#: The library's Python names that have a flag (hdid/cli/_flags.py maps them).
+_PYTHON_NAMES = re.compile(r"(?<![-.\w])(max_steps|n_steps|n_walkers|n_particles|max_rounds|"
+                           r"torque_constant|output_counts_per_rev|band_bracket|workers=|"
+                           r"method=|prior=\{)")
+
+
+def _library_messages():
+    """Every string the library builds outside docstrings (an f-string with X for each
+    value), with its place: where a message the command line prints is written."""
+    import ast
+
+    for path in sorted((ROOT / "src" / "hdid").rglob("*.py")):
+        if "cli" in path.relative_to(ROOT / "src" / "hdid").parts:
+            continue
+        tree = ast.parse(path.read_text())
+        skip = set()
+        for node in ast.walk(tree):
+            body = getattr(node, "body", None)
+            if (isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+                    and body and isinstance(body[0], ast.Expr)
+                    and isinstance(body[0].value, ast.Constant)):
+                skip.add(id(body[0].value))
+            if isinstance(node, ast.JoinedStr):
+                skip |= {id(v) for v in node.values}
+        for node in ast.walk(tree):
+            if id(node) in skip:
+                continue
+            if isinstance(node, ast.JoinedStr):
+                text = "".join(v.value if isinstance(v, ast.Constant) else "X" for v in node.values)
+            elif isinstance(node, ast.Constant) and isinstance(node.value, str):
+                text = node.value
+            else:
+                continue
+            if " " in text:  # a message, not a dict key
+                yield f"{path.relative_to(ROOT)}:{node.lineno}", text
+
+
+def test_every_library_message_naming_a_python_argument_is_mapped_to_its_flag():
+    from hdid.cli._flags import to_flags
+
+    found = [(where, text) for where, text in _library_messages() if _PYTHON_NAMES.search(text)]
+    assert found  # the library does speak Python: the posterior's advice, read_log's errors
+    left = [(where, to_flags(text, "fit")) for where, text in found
+            if _PYTHON_NAMES.search(to_flags(text, "fit"))]
+    assert not left, f"add a rule to hdid/cli/_flags.py for: {left}"
+
+
 def test_diagnose_advice_names_its_own_flag():
     from hdid.cli._flags import to_flags
 
     # hdid._diagnosis._verdict's advice, as diagnose prints it
     text = "probably not in the library (or several effects are missing: try --steps 2)"
     assert to_flags(text, "diagnose").endswith("try --selection-steps 2)")
+    for where, text in _library_messages():  # and wherever the diagnosis says it
+        if "_diagnosis" in where and "--steps" in text:
+            assert not re.search(r"--steps\b", to_flags(text, "diagnose")), where
 
 
 # --- 5. output paths are opened up front -------------------------------------------------

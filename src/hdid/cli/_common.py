@@ -224,7 +224,8 @@ def _probe_write(path: str, option: str) -> None:
             except OSError:
                 pass
     except OSError as exc:
-        raise _Fail(f"{option} {path}: cannot write there ({exc.strerror or exc})") from None
+        raise _Fail(f"{option} {path}: cannot write there ({exc.strerror or exc}); choose "
+                    "a file in a folder you can write to") from None
 
 
 def _write_text(path: str, text: str, option: str) -> None:

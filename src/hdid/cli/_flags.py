@@ -31,6 +31,7 @@ _EVERY_COMMAND: tuple[tuple[str, str], ...] = (
     (r"\(fix=/--fix\)", "(--fix)"),
     (r"band_bracket=False", "no --band-bracket"),
     (r"run with workers=1", "leave --workers out"),
+    (r"\bworkers=(\S+) needs", r"--workers \1 needs"),
     # driven logs (hdid._log._columns)
     (r"\btorque_constant=KT\b", "--torque-constant KT"),
     (r"\btorque_constant\b", "--torque-constant"),

@@ -104,4 +104,7 @@ def _selection_steps(selection_steps: int, old_steps: int | None) -> int:
     click.echo(f"hdid: warning: diagnose's --steps is now --selection-steps (--steps is the "
                f"posterior's chain length in `hdid fit`); use --selection-steps {old_steps}",
                err=True)
+    # the JSON's options record it by its name
+    ctx.params["selection_steps"] = ctx.params.pop("old_steps")
+    ctx.set_parameter_source("selection_steps", click.core.ParameterSource.COMMANDLINE)
     return old_steps
