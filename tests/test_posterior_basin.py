@@ -88,3 +88,21 @@ def test_at_the_floor_there_is_nothing_to_say():
                           quantization_floor_rad=1e-3 / math.sqrt(12), restarted_from=None)
     same, check = basin_check(fit, echo=False)
     assert same is fit and check.statement is None and check.rms_over_floor == pytest.approx(1.4)
+
+
+def test_cli_posterior_errors_are_one_line_naming_flag_and_argument(tmp_path):
+    """No traceback from `--posterior` (issue 34, item 2): the paper log printed with 8
+    decimals and a wrong --resolution (1e-7 rad, 15 700× finer than its step), asked for
+    fewer walkers than emcee needs — exit 2, one line that names the flag and the Python
+    argument, refused before anything is sampled (no basin statement before it)."""
+    df = pd.read_csv(PAPER)
+    log = tmp_path / "eight.csv"
+    df.to_csv(log, index=False, float_format="%.8f")
+    for args, needles in ((["--walkers", "4"], ("n_walkers (--walkers) = 4", "at least")),
+                          (["--prior", "foo=1,0.3"], ("prior= / --prior", "'foo'"))):
+        res = CliRunner().invoke(main, ["fit", str(log), "-q", "--resolution", "1e-7",
+                                        "--posterior", "--steps", "100", *args])
+        assert res.exit_code == 2, (args, res.output)
+        line = res.output.strip()
+        assert "\n" not in line and "Traceback" not in line, line
+        assert all(n in line for n in needles), line

@@ -34,6 +34,10 @@ from pathlib import Path
 #: sticks); the fit's own floor test (``_limits.above_floor``) is 1.2–1.4× for 35–500
 #: effective samples; 1.5× leaves room for the χ² scatter of short logs.
 BASIN_FACTOR = 1.5
+#: Residual (multiple of the floor) beyond which the statement also suspects the step: 5
+#: steps RMS, where the posterior's noise prior stops trusting the step
+#: (``density.SIGMA_BOUNDS[1] / NOISE_BOUND_OVER_RMS``).
+STEP_SUSPECT = 5.0 * math.sqrt(12.0)
 
 
 @dataclass
@@ -98,7 +102,10 @@ def basin_check(fit, log=None, *, echo: bool = True):
             "wrong basin (a poorer optimum, or a model that lacks an effect the log shows), "
             "not the data's best fit — run `hdid diagnose` on the log (hdid.diagnose), add "
             "the effect it names (--add / model=) or refit from other starts (--start / "
-            "start_from_model=True), then sample again")
+            "start_from_model=True), then sample again"
+            + (f"; at {after / math.sqrt(12):.3g} encoder steps RMS the step itself may be "
+               "wrong: pass the encoder's step (--resolution / resolution=)"
+               if after > STEP_SUSPECT else ""))
         if echo:
             print(f"hdid: {statement}", file=sys.stderr, flush=True)
     return fit, BasinCheck(before, after, checks, getattr(fit, "restarted_from", None),

@@ -314,13 +314,18 @@ def gaussian_prior(problem: Problem, prior: dict | None):
     free = list(problem.free)
     unknown = [n for n in prior if n not in free]
     if unknown:
-        raise ValueError(f"prior: {unknown} are not free physical parameters of this fit "
-                         f"(free: {free})")
+        from .errors import PosteriorError
+
+        raise PosteriorError(f"the prior (prior= / --prior NAME=VALUE,SD) names {unknown}, "
+                             f"not free physical parameters of this fit (free: {free})")
     G = np.zeros((3, len(free)))
     G[1] = 1.0
     for n, (centre, sd) in prior.items():
         if not (np.isfinite(centre) and np.isfinite(sd) and sd > 0):
-            raise ValueError(f"prior[{n!r}] = {(centre, sd)}: the centre must be finite and the sd > 0")
+            from .errors import PosteriorError
+
+            raise PosteriorError(f"the prior of {n} (prior= / --prior {n}=VALUE,SD) is "
+                                 f"{(centre, sd)}: give a finite centre and an sd > 0")
         i = free.index(n)
         G[:, i] = float(to_unconstrained(specs[n], centre)), float(sd), 1.0
     return G, ordered_pairs(problem)

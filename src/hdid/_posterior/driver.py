@@ -14,6 +14,7 @@ from .._fitting._identifiability import unknown_labels
 from .._problems._problem import Problem
 from .density import (
     PRIOR_HALF_WIDTH,
+    gaussian_prior,
     derived_np,
     posterior_density,
     to_physical,
@@ -39,6 +40,7 @@ from .moves import (
     _reset_outliers,
     default_moves,
 )
+from .errors import PosteriorError
 from .result import BAND, PosteriorResult, _RunNames
 
 #: The burn-in is run in this many stages, the proposal adapted after each.
@@ -54,16 +56,36 @@ CHECK_GROWTH = 1.4
 
 
 def _no_start(fit):
-    from .._errors import FitError
-
-    return FitError(
+    return PosteriorError(
         f"{fit.source}: could not place the posterior's walkers where the density is "
         "positive — every start around the least-squares optimum has zero posterior "
-        "density, so the fit itself is likely bad: read its warnings, refit (other starts, "
-        "fixed parameters) or check the log"
+        "density, so the fit itself is likely bad: read its warnings, refit (other starts: "
+        "--start / start_from_model=True; fixed parameters: --fix / fix=) or check the log "
+        "(--resolution / resolution= if its encoder step is not the readings')"
     )
 
 
+def _one_line_failures(sampler):
+    """``sampler`` with its numerical failures (a singular covariance of a mode or of the
+    adapted proposal, a floating-point error) raised as one-line :class:`PosteriorError`
+    naming the log and what to try; every other error passes unchanged."""
+    import functools
+
+    @functools.wraps(sampler)
+    def wrapped(fit, *args, **kwargs):
+        try:
+            return sampler(fit, *args, **kwargs)
+        except (np.linalg.LinAlgError, FloatingPointError, OverflowError) as exc:
+            raise PosteriorError(
+                f"{getattr(fit, 'source', '<fit>')}: the posterior sampler failed numerically "
+                f"({type(exc).__name__}: {exc}); read the fit's warnings (a parameter the log "
+                "does not determine: fix it, --fix / fix=), or try method='smc' (--sampler smc) "
+                "or another seed (--seed / seed=)") from exc
+
+    return wrapped
+
+
+@_one_line_failures
 def sample_posterior(
     fit,
     *,
@@ -178,8 +200,9 @@ def sample_posterior(
         given = [k for k, v in (("n_walkers", n_walkers), ("n_steps", n_steps), ("moves", moves))
                  if v is not None]
         if given:
-            raise ValueError(f"{', '.join(given)}: emcee's options; leave method='smc' out "
-                             "with them (the default sampler is method='emcee')")
+            raise PosteriorError(
+                f"{', '.join(given)} (--steps/--walkers): emcee's options; leave them out with "
+                "method='smc' (--sampler smc), or sample with method='emcee' (the default)")
 
         progress = (sys.stderr.isatty() if progress is None else bool(progress)) and sys.stderr.isatty()
         fit, basin = basin_check(fit, log)
@@ -187,13 +210,16 @@ def sample_posterior(
                                       progress=progress, sigma_floor=sigma_floor, modes=modes,
                                       prior=prior), basin)
     if method != "emcee":
-        raise ValueError(f"method must be 'smc' or 'emcee', not {method!r}")
+        raise PosteriorError(f"method (--sampler) must be 'smc' or 'emcee', not {method!r}")
     if likelihood not in ("auto", "gaussian"):
-        raise ValueError(f"likelihood must be 'auto' or 'gaussian', not {likelihood!r} (the "
-                         "interval likelihood was retired: benchmarks/README.md)")
+        raise PosteriorError(f"likelihood must be 'auto' or 'gaussian', not {likelihood!r} (the "
+                             "interval likelihood was retired: benchmarks/README.md)")
     import emcee
 
     t0 = time.perf_counter()
+    # options that cannot work are refused before anything runs (one line, exit 2)
+    _walkers_enough(n_walkers, fit.problem.n_unknowns + 1)
+    gaussian_prior(fit.problem, prior)
     fit, basin = basin_check(fit, log)
     progress = (sys.stderr.isatty() if progress is None else bool(progress)) and sys.stderr.isatty()
     prob: Problem = fit.problem
@@ -204,8 +230,7 @@ def sample_posterior(
     warnings += dens.warnings
     D = lp.ndim
     W = n_walkers or max(32, 2 * D)
-    if W < 2 * D:
-        raise ValueError(f"n_walkers = {W}: emcee needs at least 2 × {D} walkers; raise n_walkers")
+    _walkers_enough(W, D)
 
     def log_prob(X):
         return np.asarray(lp.batch(X))
@@ -310,7 +335,8 @@ def sample_posterior(
             f"NOT CONVERGED: after {done} steps ({burn_in} burn-in before) the worst quantity "
             f"is {name} ({what}), the chain {conv.chain_in_tau:.1f} τ long; the criterion is "
             f"bulk/tail ESS ≥ {ESS_MIN} and R-hat ≤ {RHAT_MAX} or a chain ≥ {TAU_MULTIPLE} τ, on "
-            f"every sampled quantity and the band. Run longer (max_steps ≥ {2 * done}); if "
+            f"every sampled quantity and the band. Run longer (max_steps ≥ {2 * done}, on the "
+            f"command line --steps {2 * done}); if "
             "R-hat stays high the walkers sit in optima they do not leave — check the "
             "modes and the trace plot"
         )
@@ -401,6 +427,14 @@ def sample_posterior(
         stage_s={"mode_search": t_modes, "compile": t_compile, "burn_in": t_burn,
                  "kept_chain": t_kept, "diagnostics": t_diag},
     ), basin)
+
+
+def _walkers_enough(W: int | None, D: int) -> None:
+    """Refuse fewer than ``2·D`` walkers (emcee's red-blue moves need them)."""
+    if W is not None and W < 2 * D:
+        raise PosteriorError(f"n_walkers (--walkers) = {W}: emcee needs at least 2 × {D} = "
+                             f"{2 * D} walkers for this fit; raise n_walkers (--walkers) to "
+                             f"{2 * D} or more, or leave it out (default max(32, 2·D))")
 
 
 def _with_basin(result: PosteriorResult, basin) -> PosteriorResult:

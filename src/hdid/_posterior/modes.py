@@ -294,7 +294,9 @@ def sampled_modes(fit, modes, seed: int, u_fit: np.ndarray, lin: np.ndarray,
 
     if isinstance(modes, str):
         if modes not in ("auto", "fit"):
-            raise ValueError(f"modes must be 'auto', 'fit' or a list of Mode, not {modes!r}")
+            from .errors import PosteriorError
+
+            raise PosteriorError(f"modes must be 'auto', 'fit' or a list of Mode, not {modes!r}")
         # with a prior of the user's the optima sought are the posterior's: the fit's
         # optima sit where the default weak priors put them (paper log 7203 with the
         # catalog prior: delta 1.6–2.4 against the prior's 1 ± 10 %, and the draws never

@@ -388,12 +388,12 @@ def sample_smc(fit, *, n_particles: int = N_PARTICLES, n_runs: int = N_RUNS,
             f"({n_temps} temperatures, then {len(steps) - n_temps} rounds of {n_mcmc} moves at beta = 1); the worst "
             f"quantity is {name} ({what}); the criterion is R-hat <= 1.01 between runs and "
             "bulk/tail ESS >= 400 (particles sorted by ancestor) on every sampled quantity "
-            f"and the band. Raise n_particles (to {2 * n_particles}): the runs disagree by more than their particles' spread")
+            f"and the band. Raise n_particles (--particles) to {2 * n_particles}: the runs disagree by more than their particles' spread")
     sd_z = float(np.std(log_z, ddof=1)) if n_runs > 1 else float("nan")
     if n_runs > 1 and sd_z > 1.0:
         warnings.append(
             f"the runs' log-evidence estimates disagree (sd {sd_z:.2f} > 1): a mode may be "
-            "found by some runs only; raise n_particles")
+            "found by some runs only; raise n_particles (--particles)")
     U = lp.from_sampled_np(C.reshape(-1, D))
     chain = U.reshape(C.shape)
     phys = to_physical(prob, U)
