@@ -168,3 +168,24 @@ def test_every_option_named_in_the_docs_exists():
         named = set(re.findall(r"(?<![\w-])--[a-z][a-z0-9-]*", page.read_text(encoding="utf-8")))
         wrong += [f"{page.relative_to(ROOT)}: {o}" for o in sorted(named - known)]
     assert not wrong, "options the docs name that hdid does not have:\n" + "\n".join(wrong)
+
+
+def test_effects_the_docs_name_are_the_library_s():
+    # `--add NAME` / `--remove NAME` anywhere, and the effect table of the effects page
+    # (`key` | `Class`), use the effects' current keys and class names (an old name still
+    # works as an alias, but the docs teach the current one)
+    from hdid.effects import registry
+
+    reg = registry()
+    current = {key for key, cls in reg.items() if cls.key == key}
+    examples = {"cogging"}  # the effect a user writes in the effects page's example
+    wrong = []
+    for page in (p for p in PAGES if "decisions" not in p.parts):
+        text = page.read_text(encoding="utf-8")
+        for key in re.findall(r"--(?:add|remove) ([a-z_]+)", text):
+            if key not in current | examples:
+                wrong.append(f"{page.relative_to(ROOT)}: --add/--remove {key}")
+        for key, cls in re.findall(r"^\| `([a-z_]+)` \| `([A-Z]\w+)` \|", text, re.M):
+            if key not in current or reg[key].__name__ != cls:
+                wrong.append(f"{page.relative_to(ROOT)}: table row {key} | {cls}")
+    assert not wrong, "effect names that are not the library's current ones:\n" + "\n".join(wrong)
