@@ -189,3 +189,32 @@ def test_effects_the_docs_name_are_the_library_s():
             if key not in current or reg[key].__name__ != cls:
                 wrong.append(f"{page.relative_to(ROOT)}: table row {key} | {cls}")
     assert not wrong, "effect names that are not the library's current ones:\n" + "\n".join(wrong)
+
+
+def test_python_the_docs_show_names_what_hdid_has():
+    # every `hdid.NAME…` the pages write (prose and code) resolves, and every python block
+    # compiles: a renamed or retired API leaves the docs with it
+    import importlib
+
+    import hdid
+
+    wrong = []
+    for page in (p for p in PAGES if "decisions" not in p.parts):
+        text = page.read_text(encoding="utf-8")
+        for dotted in sorted(set(re.findall(r"\bhdid((?:\.[A-Za-z_]\w*)+)", text))):
+            parts, obj = dotted.lstrip(".").split("."), hdid
+            for i, part in enumerate(parts):
+                try:
+                    obj = getattr(obj, part)
+                except AttributeError:
+                    try:
+                        obj = importlib.import_module("hdid." + ".".join(parts[: i + 1]))
+                    except ImportError:
+                        wrong.append(f"{page.relative_to(ROOT)}: hdid{dotted}")
+                        break
+        for code in re.findall(r"^```python\n(.*?)^```", text, re.S | re.M):
+            try:
+                compile(code, str(page), "exec")
+            except SyntaxError as exc:
+                wrong.append(f"{page.relative_to(ROOT)}: python block does not compile: {exc}")
+    assert not wrong, "\n".join(wrong)
