@@ -16,12 +16,12 @@ import hdid
 PUBLIC = [
     "AbstractEffect", "AbstractFriction", "AbstractSpring", "AsymmetricStribeckFriction", "AsymmetricViscousFriction",
     "CoulombFriction", "CubicStiffness", "DEFAULT_INERTIA", "DEFAULT_RATIO", "DahlHysteresis",
-    "Diagnosis", "DrivenFitResult", "DrivenJoint", "FitError", "FitResult",
+    "DesignResult", "Diagnosis", "DrivenFitResult", "DrivenJoint", "FitError", "FitResult",
     "FreePlayStiffness", "Gravity", "HdidError", "KinematicErrorStiffness",
     "LinearStiffness", "LoadDependentFriction", "Log", "LogError", "Model", "Motion",
     "Parameter", "PositionRipple", "PositionalError", "Run", "Scales", "StribeckFriction",
     "ThreeSegmentStiffness", "TorqueOffset", "ViscousFriction", "__version__", "bare_figures",
-    "configure", "diagnose", "effects", "fit", "fit_driven", "fit_joint", "fit_many", "model_ladder", "read_log",
+    "configure", "design", "diagnose", "effects", "fit", "fit_driven", "fit_joint", "fit_many", "model_ladder", "read_log",
     "sample_posterior", "save_figure", "simulate", "simulate_driven", "write_log",
 ]
 
@@ -39,6 +39,7 @@ CALLS = {
     "simulate": ["model", "times", "theta0", "t_release"],
     "simulate_driven": ["joint", "times", "motor_torque", "load_torque"],
     "sample_posterior": ["fit"],
+    "design": ["fit", "candidates"],
 }
 KEYWORDS = {
     "fit": {"inertia", "fix", "free_inertia", "inertia_prior", "release_time",
@@ -47,6 +48,7 @@ KEYWORDS = {
     "fit_driven": {"order", "max_order", "fix", "counts_per_rev", "torque_constant",
                    "output_counts_per_rev", "max_substep", "max_steps", "input_hold"},
     "sample_posterior": {"seed", "progress", "prior"},
+    "design": {"targets", "criterion", "check", "check_candidate", "seed"},
     "fit_many": {"progress", "vectorize", "band_bracket", "workers", "client", "executor",
                  "chunk_size"},
 }
@@ -73,7 +75,7 @@ def test_every_figure_is_drawn_into_ax_and_never_saved():
     from hdid._posterior import PosteriorResult
 
     methods = [getattr(cls, m) for cls in (hdid.FitResult, hdid.DrivenFitResult,
-                                           hdid.Diagnosis, PosteriorResult)
+                                           hdid.Diagnosis, PosteriorResult, hdid.DesignResult)
                for m in dir(cls) if m.startswith("plot")]
     assert len(methods) >= 8
     for f in methods:

@@ -51,6 +51,8 @@ _LAZY = {
     "CoulombFriction": ".effects",
     "effects": ".effects",
     "diagnose": "._diagnosis._diagnose",
+    "design": "._design._design",
+    "DesignResult": "._design._result",
     "Diagnosis": "._diagnosis._diagnose",
     "model_ladder": "._diagnosis._ladder",
     "fit_driven": "._fitting._driven_fit",
@@ -99,6 +101,8 @@ if TYPE_CHECKING:  # pragma: no cover
     from ._posterior import sample_posterior
     from ._diagnosis._diagnose import Diagnosis, diagnose
     from ._diagnosis._ladder import model_ladder
+    from ._design._design import design
+    from ._design._result import DesignResult
     from ._simulation._driven import DrivenJoint, simulate_driven
     from ._fitting._driven_fit import fit_driven, fit_joint
     from ._results._driven_result import DrivenFitResult

@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from ._common import _Group
+from .design import design_cmd
 from .diagnose import diagnose_cmd
 from .fit import fit_cmd
 from .simulate import simulate_cmd
@@ -25,3 +26,4 @@ def main():
 main.add_command(fit_cmd)
 main.add_command(diagnose_cmd)
 main.add_command(simulate_cmd)
+main.add_command(design_cmd)

@@ -1,0 +1,61 @@
+"""``hdid design``: rank candidate experiments by what they would determine."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+import cloup
+
+from ._common import _Command, _Fail, _QUIET, _check_output, _emit
+
+
+@cloup.command("design", cls=_Command)
+@click.argument("source", metavar="FIT.json|LOG.csv", type=click.Path(dir_okay=False))
+@cloup.option_group(
+    "Candidates and ranking",
+    click.option("--target", "targets", metavar="NAMES", help="Rank by the std of these (comma-separated parameters or derived quantities; 'band' = stick-band half-width, 'frequency' = natural frequency), e.g. --target tau_c,band. Default: D-optimality."),
+    click.option("--criterion", type=click.Choice(["targets", "d"]), help="'targets' (default with --target) or 'd' (D-optimality on the free parameters)."),
+    click.option("--candidates", "candidates_file", metavar="FILE", type=click.Path(dir_okay=False), help="Your own candidates (TOML [[candidate]] tables or JSON list): each names what differs from the log (rate, amplitudes, counts_per_rev, repeats, added_inertia, duration, hold)."),
+)
+@cloup.option_group(
+    "Check",
+    click.option("--check", "check_n", type=click.IntRange(min=0), default=0, metavar="N", help="Simulate N logs of the top candidate at the current fit, fit them and print their spread beside the prediction."),
+    click.option("--check-candidate", metavar="NAME", help="Check this candidate instead of the top one."),
+    click.option("--seed", type=int, default=0, show_default=True, help="Seed of the check's simulated logs."),
+)
+@cloup.option_group(
+    "Output",
+    click.option("--json", "json_out", metavar="OUT.json", type=click.Path(dir_okay=False), help="Write the result as JSON (schema hdid/schema/design.schema.json)."),
+    _QUIET,
+)
+def design_cmd(source, targets, criterion, candidates_file, check_n, check_candidate, seed,
+               json_out, quiet):
+    """Which experiment would determine what this log cannot: predicted standard errors of
+    every parameter and derived quantity for candidate release tests (amplitudes and their
+    number, repeats, sample rate, encoder, added inertia), from the linearised Fisher
+    information of the exact simulator at the current fit, ranked.
+
+    \b
+    Examples:
+      hdid fit log.csv --json fit.json && hdid design fit.json --target tau_c,band
+      hdid design log.csv --candidates mine.toml --check 30 --json design.json
+    """
+    path = Path(source)
+    if not path.is_file():
+        raise _Fail(f"{source}: no such file (give a fit JSON from hdid fit --json, or a log CSV)")
+    if candidates_file and not Path(candidates_file).is_file():
+        raise _Fail(f"--candidates {candidates_file}: no such file (TOML or JSON)")
+    if check_candidate and not check_n:
+        raise _Fail("--check-candidate needs --check N (how many logs to simulate)")
+    if json_out:
+        _check_output(json_out, [path], "--json")
+    from .._design._design import design
+    from .._errors import HdidError
+
+    try:
+        result = design(str(path), candidates_file, targets=targets, criterion=criterion,
+                        check=check_n, check_candidate=check_candidate, seed=seed)
+    except (HdidError, ValueError, KeyError) as exc:
+        raise _Fail.from_error(exc) from None
+    _emit(result.report(), result.to_dict(), json_out, quiet)
