@@ -201,6 +201,21 @@ def test_an_old_effect_name_stays_an_alias(no_fit, monkeypatch):
 
 # --- 4. messages name flags, not Python arguments ----------------------------------------
 
+@pytest.mark.parametrize("library, shown", [
+    # the posterior's messages name the Python argument and the flag: the flag stays
+    ("n_walkers (--walkers) = 4: raise n_walkers (--walkers) to 16",
+     "--walkers = 4: raise --walkers to 16"),
+    ("the prior (prior= / --prior NAME=VALUE,SD) names ['foo']",
+     "the prior (--prior NAME=VALUE,SD) names ['foo']"),
+    ("try method='smc' (--sampler smc) or fix it, --fix / fix=", "try --sampler smc or fix it, --fix"),
+    ("Raise n_particles (--particles) to 600", "Raise --particles to 600"),
+])
+def test_a_message_naming_argument_and_flag_shows_the_flag(library, shown):
+    from hdid.cli._flags import to_flags
+
+    assert to_flags(library, "fit") == shown
+
+
 def test_a_library_error_reaches_the_user_as_flags():
     # read_log's message names its keyword argument torque_constant
     res = CliRunner().invoke(main, ["fit", str(DRIVEN), "--torque-constant", "0.05"])
@@ -284,6 +299,10 @@ def test_every_library_message_naming_a_python_argument_is_mapped_to_its_flag():
     left = [(where, to_flags(text, "fit")) for where, text in found
             if _PYTHON_NAMES.search(to_flags(text, "fit"))]
     assert not left, f"add a rule to hdid/cli/_flags.py for: {left}"
+    # a message naming both ("n_walkers (--walkers)", "prior= / --prior") shows the flag once
+    doubled = [(where, to_flags(text, "fit")) for where, text in found
+               if re.search(r"(--[\w-]+)\W+\1\b", to_flags(text, "fit"))]
+    assert not doubled, doubled
 
 
 def test_diagnose_advice_names_its_own_flag():

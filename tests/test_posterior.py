@@ -223,7 +223,7 @@ def test_cli_prior_reaches_the_posterior_and_bad_ones_exit_2(tmp_path):
                          (["--posterior", "--prior", "tau_c=1,-1"], "SD > 0"),
                          (["--prior", "tau_c=1,0.3"], "add --posterior"),
                          (["--posterior", "--steps", "100", "--prior", "foo=1,0.3"],
-                          "prior= / --prior NAME=VALUE,SD) names ['foo']")):
+                          "(--prior NAME=VALUE,SD) names ['foo']")):
         res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "-q", *args])
         assert res.exit_code == 2, (args, res.output)
         line = res.output.strip()

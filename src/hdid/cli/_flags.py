@@ -13,8 +13,21 @@ import re
 
 import click
 
+#: The Python arguments a flag sets (and ``moves``, which none does but which the posterior
+#: names beside them).
+_PY = (r"(?:max_steps|n_steps|n_walkers|n_particles|moves|method|prior|fix|seed|"
+       r"torque_constant|output_counts_per_rev|workers|band_bracket|resolution|counts_per_rev|"
+       r"release_time|inertia_prior|free_inertia|n_starts|start_from_model|inertia|ratio)")
+_VALUE = r"(?:=(?:'[^']*'|\"[^\"]*\"))?"
+_FLAG = r"--[a-z][\w/-]*"
+
 # (pattern, replacement), applied in order; the specific forms before the bare names.
 _EVERY_COMMAND: tuple[tuple[str, str], ...] = (
+    # a message that names both keeps the flag: "n_walkers (--walkers) = 4",
+    # "method='smc' (--sampler smc)", "prior= / --prior K=VALUE,SD", "--fix / fix="
+    (rf"\b{_PY}{_VALUE}(?:, {_PY}{_VALUE})* \(({_FLAG}(?: [^()]*?)?)\)", r"\1"),
+    (rf"\b{_PY}=\s*/\s*({_FLAG})", r"\1"),
+    (rf"({_FLAG})\s*/\s*{_PY}=", r"\1"),
     # posterior (hdid._posterior): chain length, walkers, particles, sampler, priors
     (r"\bmax_steps\s*(≥|>=)\s*", r"--steps \1 "),
     (r"run longer: max_steps\b", "run longer: --steps"),
@@ -28,7 +41,6 @@ _EVERY_COMMAND: tuple[tuple[str, str], ...] = (
      "more --particles"),
     (r"prior=\{'([^']+)': \(value, sd\)\}", r"--prior \1=VALUE,SD"),
     # fitting and batches
-    (r"\(fix=/--fix\)", "(--fix)"),
     (r"band_bracket=False", "no --band-bracket"),
     (r"run with workers=1", "leave --workers out"),
     (r"\bworkers=(\S+) needs", r"--workers \1 needs"),
