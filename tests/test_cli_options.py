@@ -394,3 +394,9 @@ def test_simulate_never_replaces_a_parameter_file_unasked(tmp_path):
     res = CliRunner().invoke(main, ["simulate", str(tmp_path / "x.csv")])
     _one_line_exit_2(res, "x.truth.json exists")
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_simulate_set_of_an_unknown_parameter_names_the_flag(tmp_path, no_fit):
+    res = CliRunner().invoke(main, ["simulate", str(tmp_path / "x.csv"), "--set", "k9=1"])
+    _one_line_exit_2(res, "--set k9")
+    assert not list(tmp_path.iterdir())  # nothing written

@@ -120,6 +120,10 @@ def simulate_cmd(out, amplitudes, rate, duration, hold, offset, counts_per_rev, 
     try:
         if model is None:
             model = Model.default().replace(**EXAMPLE_TRUTH)
+        unknown = [n for n in params if n not in model.parameter_specs()]
+        if unknown:
+            raise _Fail(f"--set {unknown[0]}: the model has no such parameter; it has "
+                        + ", ".join(model.parameter_specs()))
         model = model.replace(**params)
         synthesize(
             out, amplitudes=amps, rate=rate, duration=duration, hold=hold, offset=offset,
