@@ -293,7 +293,8 @@ def _read_file(path: Path) -> list:
         else:
             data = json.loads(text)
     except ValueError as exc:  # tomllib.TOMLDecodeError and JSONDecodeError are ValueErrors
-        raise HdidError(f"{path}: not valid {path.suffix.lstrip('.').upper() or 'JSON'}: "
+        kind = "TOML" if path.suffix.lower() == ".toml" else "JSON"
+        raise HdidError(f"{path}: not valid {kind}: "
                         f"{str(exc).splitlines()[0]}") from None
     if isinstance(data, Mapping):
         data = data.get("candidate", data.get("candidates"))

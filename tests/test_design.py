@@ -1,0 +1,187 @@
+"""hdid design: predicted standard errors of candidate experiments, their check, API/CLI/JSON.
+
+One cheap case shared by every test (module fixture): a simulated 250 Hz log of four
+releases at a known truth, fitted with k1 and tau_c free (the rest fixed at the truth),
+so that each fit takes a fraction of a second and the check's fits stay inside the
+suite's budget.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import hdid
+from hdid._errors import HdidError
+
+FIXED = ("k2", "tau_s", "v_s", "delta", "c_v")
+TRUTH = {"k1": 940.0, "k2": 6.5e7, "tau_c": 2.5e-3, "tau_s": 4.5e-3, "v_s": 5.0,
+         "delta": 1.0, "c_v": 1.8e-5, "inertia": 7e-7}
+AMPLITUDES = (0.157, -0.157, 0.12, -0.12)
+#: Simulated logs of the check: the spread of N values is itself uncertain.
+N_CHECK = 16
+
+
+@pytest.fixture(scope="module")
+def case(tmp_path_factory):
+    from hdid._simulation._synthetic import synthesize
+
+    path = tmp_path_factory.mktemp("design") / "log.csv"
+    synthesize(path, amplitudes=list(AMPLITUDES), rate=250.0, duration=0.4, hold=0.04,
+               offset=0.01, counts_per_rev=4000, seed=3,
+               model=hdid.Model.default().replace(**TRUTH))
+    fit = hdid.fit(path, fix={k: TRUTH[k] for k in FIXED}, inertia=TRUTH["inertia"])
+    return path, fit
+
+
+@pytest.fixture(scope="module")
+def designed(case):
+    _, fit = case
+    # 16 runs in all (this log's 4 + 12): one compiled program of the design's shape
+    # (runs padded to 16) serves every test here
+    cands = [{"name": "repeats x2", "repeats": 2},
+             {"name": "bigger", "amplitudes": [0.2, -0.2, 0.157, -0.157]}]
+    return hdid.design(fit, cands, targets="tau_c,band", check=N_CHECK,
+                       check_candidate="this log", seed=7)
+
+
+def test_this_logs_prediction_is_the_fits_own_fisher_information(case, designed):
+    """At the log's own design the prediction is the fit's Fisher information (its
+    Jacobian, weights and prior rows at the optimum): same std to rounding. Fails if the
+    nuisances, the weights or the noise were assembled differently from the fit."""
+    import jax.numpy as jnp
+
+    from hdid._config import float64
+    from hdid._covariance import _covariance
+    from hdid._problems._evaluate import jacobian
+
+    _, fit = case
+    with float64():
+        J, _ = jacobian(fit.problem, jnp.asarray(fit.u))
+    J = np.asarray(J)
+    prior = np.zeros(J.shape[1])
+    P = fit.problem.n_physical
+    on, sd = np.asarray(fit.problem.prior_on), np.asarray(fit.problem.prior_sd)
+    prior[:P] = np.where(on, 1 / sd**2, 0.0)
+    cov, _ = _covariance(J.T @ J + np.diag(prior))
+    pred = designed.current
+    for i, name in enumerate(fit.problem.free):
+        expect = fit.model.float_values()[name] * math.sqrt(cov[i, i])  # log transform
+        # same arithmetic on the same numbers: agreement to 1e-6 (not a tolerance on physics)
+        assert pred.std[name] == pytest.approx(expect, rel=1e-6), name
+
+
+def test_repeats_at_least_double_the_information(designed):
+    """Two identical copies of every run (each with its own release and start angle, the
+    set-up's offset shared by more runs) give at least twice the data's information on
+    the physical parameters: the data-only std falls at least by √2."""
+    rep = next(p for p in designed.predictions if p.experiment.name == "repeats x2")
+    for name, s in designed.current.std_data.items():
+        assert rep.std_data[name] <= s / math.sqrt(2) * (1 + 1e-9), name
+        assert rep.std_data[name] > 0.5 * s / math.sqrt(2), name  # not wildly more
+    # with the weak prior rows the std can only fall (more data)
+    assert all(rep.std[n] <= designed.current.std[n] * (1 + 1e-9) for n in rep.std)
+
+
+def test_prediction_agrees_with_the_spread_of_fits(designed):
+    """The check: N_CHECK simulated logs of the log's design at the fit, each fitted; the
+    predicted std against the sample std of the fitted values."""
+    c = designed.check
+    assert c.n_fitted == N_CHECK and not c.failures
+    # The sample std s of N Gaussian values has sd(ln s) ≈ 1/√(2(N−1)) (0.18 for N = 16);
+    # 3 of those (a factor 1.73 either way) is the 0.3 % two-sided tolerance.
+    tol = 3.0 / math.sqrt(2 * (N_CHECK - 1))
+    for name in ("k1", "tau_c"):
+        assert name not in " ".join(designed.current.honesty), designed.current.honesty
+        assert abs(math.log(c.ratio(name))) < tol, (name, c.predicted[name], c.spread[name])
+    # the fits are unbiased at this size: the mean within 4 standard errors of the truth
+    for name in ("k1", "tau_c"):
+        se = c.spread[name] / math.sqrt(c.n_fitted)
+        assert abs(c.mean[name] - c.truth[name]) < 4 * se, name
+
+
+def test_ranking_json_and_plot(designed):
+    import jsonschema
+    from importlib.resources import files
+
+    d = designed.to_dict()
+    text = json.dumps(d, allow_nan=False)  # strict JSON: no NaN / inf
+    schema = json.loads(files("hdid").joinpath("schema/design.schema.json").read_text())
+    jsonschema.validate(json.loads(text), schema)
+    assert [r["candidate"] for r in d["ranking"]][0] != "this log"
+    scores = [s for _, s in designed.ranking]
+    assert scores == sorted(scores)
+    assert d["candidates"][0]["experiment"]["name"] == "this log"
+    assert d["check"]["n_fitted"] == N_CHECK
+    report = designed.report()
+    assert "top candidate" in report and "check:" in report
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots()
+    out = designed.plot(ax=ax)
+    assert out is ax and len(ax.patches) == 3 * len(designed.shown())
+    plt.close(fig)
+
+
+def test_d_optimality_prefers_more_runs(case):
+    _, fit = case
+    d = hdid.design(fit, [{"name": "repeats x2", "repeats": 2}], criterion="d")
+    assert d.criterion == "d" and d.best.experiment.name == "repeats x2"
+    # twice the data (the weak prior rows unchanged): the covariance's det of 2 parameters
+    # at most (1/2)^2 of this log's with no prior, a little more with it → score < ln(0.8)
+    assert d.ranking[0][1] < math.log(0.8)
+
+
+def test_bad_candidates_and_targets(case, tmp_path):
+    _, fit = case
+    with pytest.raises(HdidError, match="unknown key 'speed'"):
+        hdid.design(fit, [{"name": "x", "speed": 3}])
+    with pytest.raises(HdidError, match="target 'nope'"):
+        hdid.design(fit, [{"name": "x", "repeats": 2}], targets="nope")
+    bad = tmp_path / "c.toml"
+    bad.write_text("[[candidate]]\nname = 'fast'\nrate = -5\n")
+    with pytest.raises(HdidError, match="rate = -5"):
+        hdid.design(fit, bad)
+    good = tmp_path / "g.toml"
+    good.write_text("[[candidate]]\nname = 'fine encoder'\ncounts_per_rev = 16000\n")
+    d = hdid.design(fit, good, targets="k1")
+    finer = d.predictions[1]
+    assert finer.experiment.counts_per_rev == pytest.approx(16000)
+    assert finer.std["k1"] < d.current.std["k1"]
+
+
+def test_cli(case, tmp_path):
+    from hdid.cli._main import main
+
+    path, fit = case
+    fit_json = tmp_path / "fit.json"
+    fit.save(fit_json)
+    cands = tmp_path / "c.json"
+    cands.write_text(json.dumps({"candidates": [{"name": "far", "amplitudes": [0.2, -0.2]}]}))
+    out = tmp_path / "d.json"
+    runner = CliRunner()
+    r = runner.invoke(main, ["design", str(fit_json), "--candidates", str(cands), "--target",
+                             "k1,band", "--json", str(out), "-q"])
+    assert r.exit_code == 0, r.output
+    d = json.loads(out.read_text())
+    assert [c["experiment"]["name"] for c in d["candidates"]] == ["this log", "far"]
+    assert d["targets"] == ["k1", "stick_band_halfwidth_rad"]
+    for args, words in [
+        (["design", str(tmp_path / "missing.json")], "no such file"),
+        (["design", str(fit_json), "--target", "nope"], "target 'nope'"),
+        (["design", str(fit_json), "--candidates", str(tmp_path / "none.toml")], "no such file"),
+        (["design", str(fit_json), "--check-candidate", "far"], "needs --check"),
+        (["design", str(path), "--candidates", str(path)], "not valid JSON"),
+    ]:
+        r = runner.invoke(main, args)
+        assert r.exit_code == 2, (args, r.output)
+        lines = [x for x in r.output.splitlines() if x.strip()]
+        assert len(lines) == 1 and words in lines[0], (args, r.output)
+        assert "Traceback" not in r.output
