@@ -1,40 +1,19 @@
 """Batch speed: ``hdid.fit_many`` (vectorised) vs a Python loop over ``hdid.fit`` vs the scipy way.
 
-Run (≈ 15–25 min on 2 busy cores; ``--quick`` ≈ 6 min)::
+    python benchmarks/batch_speed.py [--quick] [--only LABEL…] [--skip LABEL…]   # 15–25 min
+    python benchmarks/batch_speed.py --render    # results/batch_speed.md from its JSON
 
-    python benchmarks/batch_speed.py [--quick]
-
-Measures, in one run (every configuration in its own subprocess, so that its peak memory —
-``resource.getrusage(RUSAGE_SELF).ru_maxrss`` — is its own; tracemalloc cannot see XLA's
-buffers):
-
-1. **logs/s for 1, 10, 100, 1000 synthetic 4-run logs** (paper design: ±0.157 rad, 250 Hz,
-   0.5 s per run, two set-ups; truths drawn around the CSF-8 values — k1, tau_c, tau_s, c_v
-   log-normal with 15 % sd — made once with ``data/synthetic/generate.py::make_log`` and
-   cached as CSV in ``--log-dir``):
-   (v) ``hdid.fit_many(paths)`` — vectorised, band bracket off (its default);
-   (a) a Python loop over ``hdid.fit`` (``fit_many(..., vectorize=False)``), measured on up to
-       100 logs and extrapolated (per-log rate) to 1000 — ``hdid.fit`` also computes the
-       band bracket, so (v) with ``band_bracket=True`` is measured on 100 logs too;
-   (b) the scipy way (``benchmarks/scipy_way.py::fit_scipy``: LSODA + least_squares, same
-       model, catalog start — see ``fit_speed.py``), measured on a few logs, per-log rate
-       extrapolated.
-   Every subprocess first fits 2 other logs (compiles, or reads the persistent cache), then
-   times the N logs; the compile time of that first call is reported separately.
-2. **Cost vs design** (20 logs each, vectorised): run length 0.25/0.5/1.0 s, 250 Hz vs 1 kHz,
-   2/4/8 runs.
-3. **Compile time**: the first vectorised call with an empty persistent cache and with the
-   populated cache (fresh processes).
-
-Writes ``benchmarks/results/batch_speed.md`` and ``.json``. ``--render JSON`` re-writes the
-markdown only.
+Each configuration runs in its own subprocess (its peak RSS its own), fits 2 other logs
+first (compile or cache read: *first call*), then times N paper-design logs (truths
+log-normal around the CSF-8 values, cached in ``--log-dir``): vectorised ``fit_many`` for
+1–1000 logs (band bracket off, its default; on 100 also on), ``workers=2``, a loop over
+``hdid.fit`` and ``scipy_way.fit_scipy`` (rates extrapolated where not measured); cost vs
+design (20 logs each); compile time with an empty and a populated cache.
 """
 
 from __future__ import annotations
 
-import _common  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
 import argparse
-import datetime as _dt
 import json
 import os
 import platform
@@ -46,18 +25,14 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-RESULTS = ROOT / "benchmarks" / "results"
+import _common
+from _common import ROOT, Clock, load
+
+NAME = "batch_speed"
 GOAL_1000_S = 60.0
 GOAL_RATIO = 50.0
 #: Seed offsets: warm-up logs never overlap the timed ones.
 WARMUP = 2
-
-
-_load = _common.load
-
-
-# ----------------------------------------------------------------------------- logs
 
 DESIGNS = {
     # name: (amplitudes, fs, duration)
@@ -103,13 +78,10 @@ def make_logs(design: str, n: int, log_dir: Path) -> list[str]:
     return paths
 
 
-# ----------------------------------------------------------------------------- worker
-
-
-def _cpu() -> float:
-    """CPU seconds (user + sys, all threads) of this process."""
+def _usage():
+    """CPU seconds (user + sys, all threads) and peak RSS [MB] of this process."""
     ru = resource.getrusage(resource.RUSAGE_SELF)
-    return ru.ru_utime + ru.ru_stime
+    return ru.ru_utime + ru.ru_stime, ru.ru_maxrss / 1024
 
 
 def worker(cfg: dict) -> dict:
@@ -117,46 +89,33 @@ def worker(cfg: dict) -> dict:
     t_imp = time.perf_counter()
     import hdid
 
-    out = {"config": cfg, "load_before": _load("start")}
+    out = {"config": cfg, "load_before": load("start")}
     paths = cfg["paths"]
     warm, timed = paths[:WARMUP], paths[WARMUP:]
     if cfg["mode"] == "scipy":
         import pandas as pd
+        import scipy_way as sw
 
         from hdid._models._model import CATALOG_CSF8
 
-        sw = _common.import_scipy_way()
-        per = []
-        c0 = _cpu()
-        t0 = time.perf_counter()
-        for p in timed:
-            runs = sw.runs_from_dataframe(pd.read_csv(p))
-            fit = sw.fit_scipy(runs, dict(CATALOG_CSF8), inertia=7e-7, ratio=100.0)
-            per.append(fit["wall_s"])
-        out["total_s"] = time.perf_counter() - t0
-        out["cpu_s"] = _cpu() - c0
-        out["per_log_s"] = per
+        with Clock() as c:
+            per = [sw.fit_scipy(sw.runs_from_dataframe(pd.read_csv(p)), dict(CATALOG_CSF8),
+                                inertia=7e-7, ratio=100.0)["wall_s"] for p in timed]
+        out.update(total_s=c.wall, cpu_s=c.cpu, per_log_s=per)
     elif cfg["mode"] == "workers":
         out.update(_workers_run(cfg, warm, timed, t_imp))
     else:
         opts = dict(vectorize=cfg["mode"] == "vectorized", band_bracket=cfg.get("bracket"))
         out["import_s"] = time.perf_counter() - t_imp
-        t = time.perf_counter()
-        first = hdid.fit_many(warm, **opts)
-        out["first_call_s"] = time.perf_counter() - t
-        out["first_call_timing"] = first.attrs["timing"]
-        c0 = _cpu()
-        t = time.perf_counter()
-        table = hdid.fit_many(timed, **opts)
-        out["total_s"] = time.perf_counter() - t
-        out["cpu_s"] = _cpu() - c0
-        out["timing"] = table.attrs["timing"]
+        with Clock() as first:
+            timing = hdid.fit_many(warm, **opts).attrs["timing"]
+        out.update(first_call_s=first.wall, first_call_timing=timing)
+        with Clock() as c:
+            table = hdid.fit_many(timed, **opts)
+        out.update(total_s=c.wall, cpu_s=c.cpu, timing=table.attrs["timing"])
         out.update(_quality(cfg, timed, table))
-    out["n"] = len(timed)
-    out["maxrss_mb"] = max(out.get("maxrss_mb", 0.0),
-                           resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)
-    out["load_after"] = _load("end")
-    return out
+    return out | {"n": len(timed), "maxrss_mb": max(out.get("maxrss_mb", 0.0), _usage()[1]),
+                  "load_after": load("end")}
 
 
 def _quality(cfg: dict, timed: list, table) -> dict:
@@ -186,11 +145,6 @@ def _quality(cfg: dict, timed: list, table) -> dict:
     return out
 
 
-def _worker_usage():
-    ru = resource.getrusage(resource.RUSAGE_SELF)
-    return ru.ru_utime + ru.ru_stime, ru.ru_maxrss / 1024
-
-
 def _workers_run(cfg: dict, warm: list, timed: list, t_imp: float) -> dict:
     """``fit_many`` on a warm LocalCluster of ``cfg['workers']`` single-threaded processes.
 
@@ -211,16 +165,16 @@ def _workers_run(cfg: dict, warm: list, timed: list, t_imp: float) -> dict:
         client.run(lambda: hdid.fit_many(warm) is not None)
         out["first_call_s"] = time.perf_counter() - t
         out["first_call_timing"] = {"compile_s": float("nan")}
-        before = client.run(_worker_usage)
-        c0 = _cpu()
+        before = client.run(_usage)
+        c0 = _usage()[0]
         t = time.perf_counter()
         from hdid._fitting._batch import CHUNKS_PER_WORKER
 
         chunk = max(1, -(-len(timed) // (CHUNKS_PER_WORKER * W)))  # as fit_many(workers=W)
         table = hdid.fit_many(timed, client=client, chunk_size=chunk)
         out["total_s"] = time.perf_counter() - t
-        after = client.run(_worker_usage)
-        out["cpu_s"] = (_cpu() - c0) + sum(after[k][0] - before[k][0] for k in after)
+        after = client.run(_usage)
+        out["cpu_s"] = (_usage()[0] - c0) + sum(after[k][0] - before[k][0] for k in after)
         out["maxrss_mb"] = max(v[1] for v in after.values())
         out["timing"] = table.attrs["timing"]
         out.update(_quality(cfg, timed, table))
@@ -243,13 +197,10 @@ def run_worker(cfg: dict, cache_dir: Path, timeout: float = 3600) -> dict:
     return res
 
 
-# ----------------------------------------------------------------------------- main
-
-
 def measure(args) -> dict:
     log_dir = Path(args.log_dir)
     cache = Path(tempfile.mkdtemp(prefix="hdid_batch_cache_"))
-    res = {"load_start": _load("script start"), "machine": _machine(), "quick": args.quick,
+    res = {"load_start": load("script start"), "machine": _machine(), "quick": args.quick,
            "runs": []}
     t_script = time.perf_counter()
     ns = [1, 10, 100] if args.quick else [1, 10, 100, 1000]
@@ -293,7 +244,7 @@ def measure(args) -> dict:
         go(f"design {design}, 20 logs", "vectorized", 20, design=design)
     go("design paper, 20 logs", "vectorized", 20, paths=paper)
     res["script_s"] = time.perf_counter() - t_script
-    res["load_end"] = _load("script end")
+    res["load_end"] = load("script end")
     shutil.rmtree(cache, ignore_errors=True)
     return res
 
@@ -301,19 +252,14 @@ def measure(args) -> dict:
 def _machine():
     import jax
 
-    return {"date": _dt.datetime.now().isoformat(timespec="seconds"), "nproc": os.cpu_count(),
+    return {"date": time.strftime("%Y-%m-%dT%H:%M:%S"), "nproc": os.cpu_count(),
             "cpu": _common.cpu_model(), "python": platform.python_version(),
             "jax": jax.__version__, "jax_backend": jax.default_backend(),
             "src_fingerprint": _common.src_fingerprint()}
 
 
-# ----------------------------------------------------------------------------- report
-
 def _find(res, label):
-    for r in res["runs"]:
-        if r["config"]["label"] == label:
-            return r
-    return None
+    return next((r for r in res["runs"] if r["config"]["label"] == label), None)
 
 
 def _rate(r):
@@ -328,16 +274,16 @@ def _ld(r):
     return f"{r['load_before']['load1']:.1f}→{r['load_after']['load1']:.1f}"
 
 
-def write_report(res: dict, out_dir: Path) -> str:
-    L = ["# Batch speed: vectorised `fit_many` vs a loop over `fit` vs the scipy way\n"]
+def render(res: dict) -> str:
     m = res["machine"]
-    L.append(f"Generated by `python benchmarks/batch_speed.py{' --quick' if res['quick'] else ''}`"
+    L = ["# Batch speed: vectorised `fit_many` vs a loop over `fit` vs the scipy way\n",
+         f"Generated by `python benchmarks/batch_speed.py{' --quick' if res['quick'] else ''}`"
              f" on {m['date']} (script {res['script_s']:.0f} s; src {m['src_fingerprint']}). "
              f"Machine: {m['nproc']} cores ({m['cpu']}), python {m['python']}, jax {m['jax']} "
              f"({m['jax_backend']}). Load average at start "
              f"{res['load_start']['load1']:.1f}, at end {res['load_end']['load1']:.1f}: the 2 "
              "cores are shared with other engineers' jobs, so every row gives the 1-min load "
-             "before→after it; a load above 2 means hdid got less than the 2 cores.\n")
+             "before→after it; a load above 2 means hdid got less than the 2 cores.\n"]
     for rr in res.get("reruns", []):
         L.append(f"Re-measured with `--only {' '.join(repr(o) for o in rr['only'])}` on "
                  f"{rr['machine']['date']} (src {rr['machine']['src_fingerprint']}, load "
@@ -356,13 +302,11 @@ def write_report(res: dict, out_dir: Path) -> str:
     vec = [r for r in res["runs"] if r["config"]["label"].startswith("vectorized ")
            and r["config"]["label"].split()[1].isdigit() and "," not in r["config"]["label"]]
 
-    # goals
     v1000 = _find(res, "vectorized 1000")
     big = v1000 or max(vec, key=lambda r: r["n"])
     wk = [r for r in res["runs"] if r["config"]["mode"] == "workers"]
     wbig = max(wk, key=lambda r: r["n"]) if wk else None
-    L.append("## Goals\n")
-    L.append("| goal | measured | met? |\n|---|---|---|")
+    L += ["## Goals\n", "| goal | measured | met? |\n|---|---|---|"]
     if wbig:
         tw = wbig["total_s"] * 1000 / wbig["n"]
         how = "measured" if wbig["n"] == 1000 else f"extrapolated from {wbig['n']} logs"
@@ -388,12 +332,12 @@ def write_report(res: dict, out_dir: Path) -> str:
                  f"({cs:.2f} s vs {cb * 1e3:.0f} ms) | {'✓' if cs / cb >= GOAL_RATIO else '✗'} |")
     L.append("")
     if wk:
-        L.append("Several cores (`fit_many(workers=2)` / `hdid fit --workers 2`): logs are split "
-                 "into about 8 chunks per worker process (as `workers=2` does); the timed call runs on a cluster whose "
-                 "workers have each fitted 2 logs already (*first call*: cluster start plus every "
-                 "worker's trace/compile or cache read).\n")
-        L.append("| N logs | wall | logs/s | CPU per log (all processes) | speed-up vs one "
-                 "process | first call | peak RSS (a worker) | load |\n|---|---|---|---|---|---|---|---|")
+        L += ["Several cores (`fit_many(workers=2)` / `hdid fit --workers 2`): logs are split "
+              "into about 8 chunks per worker process (as `workers=2` does); the timed call runs on a cluster whose "
+              "workers have each fitted 2 logs already (*first call*: cluster start plus every "
+              "worker's trace/compile or cache read).\n",
+              "| N logs | wall | logs/s | CPU per log (all processes) | speed-up vs one "
+              "process | first call | peak RSS (a worker) | load |\n|---|---|---|---|---|---|---|---|"]
         for r in sorted(wk, key=lambda r: r["n"]):
             one = _find(res, f"vectorized {r['n']}")
             up = f"{_rate(r) / _rate(one):.2f}×" if one else "—"
@@ -402,10 +346,10 @@ def write_report(res: dict, out_dir: Path) -> str:
                      f"{r['first_call_s']:.1f} s | {r['maxrss_mb']:.0f} MB | {_ld(r)} |")
         L.append("")
 
-    L.append("## logs/s (4-run paper-design logs)\n")
-    L.append("| N logs | vectorised `fit_many` | loop over `hdid.fit` | scipy way | vectorised / "
+    L += ["## logs/s (4-run paper-design logs)\n",
+          "| N logs | vectorised `fit_many` | loop over `hdid.fit` | scipy way | vectorised / "
              "loop | vectorised / scipy | CPU per log (vectorised) | peak RSS (vectorised) | "
-             "first call (compile) | load |\n|---|---|---|---|---|---|---|---|---|---|")
+          "first call (compile) | load |\n|---|---|---|---|---|---|---|---|---|---|"]
     for r in vec:
         n = r["n"]
         lp = next((x for x in loops if x["n"] == n), None)
@@ -436,9 +380,7 @@ def write_report(res: dict, out_dir: Path) -> str:
                  + (f", {(_cpu_per_log(br) - _cpu_per_log(v100)) * 1e3:+.0f} ms of CPU"
                     if _cpu_per_log(br) and _cpu_per_log(v100) else "")
                  + "). `hdid.fit` always computes the bracket, so the loop's rate includes it.")
-    L.append("")
-
-    L.append("## Same fits: vectorised vs `hdid.fit`, and against the truth\n")
+    L += ["", "## Same fits: vectorised vs `hdid.fit`, and against the truth\n"]
     lp100 = max(loops, key=lambda r: r["n"])
     vq = _find(res, f"vectorized {lp100['n']}")
     if vq and vq.get("per_log") and lp100.get("per_log"):
@@ -451,21 +393,17 @@ def write_report(res: dict, out_dir: Path) -> str:
                  f"{sum(x > 0.1 for x in d)} (χ² in units of the quantization variance).")
     if big.get("per_log"):
         rows = [x for x in big["per_log"] if x]
-        L.append(f"- vectorised, {big['n']} logs, error against the truth in standard errors "
-                 "(z = (fit − truth)/std):\n")
-        L.append("| parameter | median abs(z) | share abs(z) < 2 | share abs(z) < 3 |\n|---|---|---|---|")
+        L += [f"- vectorised, {big['n']} logs, error against the truth in standard errors "
+              "(z = (fit − truth)/std):\n",
+              "| parameter | median abs(z) | share abs(z) < 2 | share abs(z) < 3 |\n|---|---|---|---|"]
         for k in ("k1", "tau_c", "tau_s", "c_v"):
-            z = [abs(x[f"z_{k}"]) for x in rows if f"z_{k}" in x]
-            if z:
-                z.sort()
+            if z := sorted(abs(x[f"z_{k}"]) for x in rows if f"z_{k}" in x):
                 L.append(f"| {k} | {z[len(z) // 2]:.2f} | {sum(v < 2 for v in z) / len(z):.0%} | "
                          f"{sum(v < 3 for v in z) / len(z):.0%} |")
-    L.append("")
-
-    L.append("## Where the vectorised time goes\n")
-    L.append("Wall seconds, and CPU seconds (process time, both threads) in brackets.\n")
-    L.append("| N | total | compile | setup (read, prepare) | grid | LM (phases 1+2) | "
-             "analysis | LM lane-steps | CPU µs per lane-step |\n|---|---|---|---|---|---|---|---|---|")
+    L += ["", "## Where the vectorised time goes\n",
+          "Wall seconds, and CPU seconds (process time, both threads) in brackets.\n",
+          "| N | total | compile | setup (read, prepare) | grid | LM (phases 1+2) | "
+          "analysis | LM lane-steps | CPU µs per lane-step |\n|---|---|---|---|---|---|---|---|---|"]
     for r in vec:
         t = r["timing"]
 
@@ -477,11 +415,9 @@ def write_report(res: dict, out_dir: Path) -> str:
                  f"{both('setup')} | {both('grid')} | {both('solve')} | "
                  f"{both('analyse')} | {t['lane_steps']} | "
                  f"{1e6 * t.get('solve_cpu_s', t['solve_s']) / max(t['lane_steps'], 1):.0f} |")
-    L.append("")
-
-    L.append("## Compile time (first call in a fresh process, 2 logs)\n")
-    L.append("| persistent cache | first call | of which compile (trace + lower + XLA / cache "
-             "read) |\n|---|---|---|")
+    L += ["", "## Compile time (first call in a fresh process, 2 logs)\n",
+          "| persistent cache | first call | of which compile (trace + lower + XLA / cache "
+          "read) |\n|---|---|---|"]
     for label, what in (("vectorized, cold cache, 1 log", "empty"),
                         ("vectorized, warm cache, 1 log", "populated")):
         r = _find(res, label)
@@ -490,10 +426,9 @@ def write_report(res: dict, out_dir: Path) -> str:
                      f"{r['first_call_timing']['compile_s']:.1f} s |")
     L.append("\nIn a warm process (the timed calls above) `compile_s` is 0: one compiled "
              "program per bucket shape is reused for every log.\n")
-
-    L.append("## Cost vs design (20 logs each, vectorised)\n")
-    L.append("| design | samples per run | runs | logs/s | ms per log (wall) | CPU ms per log | "
-             "first call | peak RSS | load |\n|---|---|---|---|---|---|---|---|---|")
+    L += ["## Cost vs design (20 logs each, vectorised)\n",
+          "| design | samples per run | runs | logs/s | ms per log (wall) | CPU ms per log | "
+          "first call | peak RSS | load |\n|---|---|---|---|---|---|---|---|---|"]
     for design in ("paper", "short 0.25 s", "long 1.0 s", "1 kHz", "2 runs", "8 runs"):
         r = _find(res, f"design {design}, 20 logs")
         if not r:
@@ -503,52 +438,43 @@ def write_report(res: dict, out_dir: Path) -> str:
                  f"{1e3 / _rate(r):.0f} | {(_cpu_per_log(r) or float('nan')) * 1e3:.0f} | "
                  f"{r['first_call_s']:.1f} s | {r['maxrss_mb']:.0f} MB | "
                  f"{_ld(r)} |")
-    L.append("")
-    L.append("Where the time goes and why the batch is built this way (one lane per program, "
-             "processes not threads, what was tried): `docs/decisions/batch-lanes.md`.\n")
+    L += ["", "Where the time goes and why the batch is built this way (one lane per program, "
+          "processes not threads, what was tried): `docs/decisions/batch-lanes.md`.\n"]
     fails = [(r["config"]["label"], r.get("n_failed", 0), r.get("errors")) for r in res["runs"]
              if r.get("n_failed")]
     if fails:
         L.append("Failed logs: " + "; ".join(f"{a}: {b} ({c})" for a, b, c in fails) + "\n")
-    text = "\n".join(L) + "\n"
-    out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "batch_speed.md").write_text(text)
-    return text
+    return "\n".join(L) + "\n"
 
 
-def main():
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--log-dir", default=str(Path(tempfile.gettempdir()) / "hdid_batch_logs"))
-    ap.add_argument("--out-dir", type=Path, default=RESULTS)
-    ap.add_argument("--render", type=Path)
-    ap.add_argument("--worker")
+    ap.add_argument("--quick", action="store_true", help="fewer and smaller runs (≈ 6 min)")
+    ap.add_argument("--log-dir", default=str(Path(tempfile.gettempdir()) / "hdid_batch_logs"),
+                    help="where the generated logs are cached")
+    ap.add_argument("--worker", help=argparse.SUPPRESS)  # one configuration, in a subprocess
     ap.add_argument("--only", nargs="+", metavar="LABEL",
                     help="measure only the configurations whose label starts with one of "
-                         "these (e.g. 'workers 2'), replacing them in --out-dir's JSON")
+                         "these (e.g. 'workers 2'), replacing those rows of the stored JSON")
     ap.add_argument("--skip", nargs="+", metavar="LABEL",
                     help="leave out the configurations whose label starts with one of these "
                          "(to be measured later with --only, e.g. on free cores)")
-    args = ap.parse_args()
+    args = _common.parse_or_render(ap, argv, NAME, render)
+    if args is None:
+        return
     if args.worker:
         print(json.dumps(worker(json.loads(args.worker))))
         return
-    if args.render:
-        res = json.loads(args.render.read_text())
-    else:
-        res = measure(args)
-        if args.only:  # merge into the previous full run, replacing rows by label
-            prev = json.loads((args.out_dir / "batch_speed.json").read_text())
-            new = {r["config"]["label"]: r for r in res["runs"]}
-            prev["runs"] = [new.pop(r["config"]["label"], r) for r in prev["runs"]]
-            prev["runs"] += list(new.values())
-            prev.setdefault("reruns", []).append(
-                {"only": args.only, "load_start": res["load_start"], "load_end": res["load_end"],
-                 "machine": res["machine"], "script_s": res["script_s"]})
-            res = prev
-        args.out_dir.mkdir(parents=True, exist_ok=True)
-        (args.out_dir / "batch_speed.json").write_text(json.dumps(res, indent=2, default=str) + "\n")
-    print(write_report(res, args.out_dir))
+    res = measure(args)
+    if args.only:  # merge into the previous full run, replacing rows by label
+        prev = json.loads((_common.RESULTS / f"{NAME}.json").read_text())
+        new = {r["config"]["label"]: r for r in res["runs"]}
+        prev["runs"] = [new.pop(r["config"]["label"], r) for r in prev["runs"]] + list(new.values())
+        prev.setdefault("reruns", []).append({"only": args.only, **{k: res[k] for k in (
+            "load_start", "load_end", "machine", "script_s")}})
+        res = prev
+    _common.write_result(NAME, res, render)
+    print(render(res))
 
 
 if __name__ == "__main__":

@@ -1,64 +1,46 @@
-"""Hidden-effect suite on parameters and designs ``diagnose`` was never tuned on (issue 19).
+"""Hidden-effect suite on parameters and designs ``diagnose`` was never tuned on.
 
-Every log draws its own plant and design from ranges, with new seeds (8800 + i):
+    taskset -c 1 python benchmarks/diagnose_independent.py [rich|paper ...] [--per N]
+    python benchmarks/diagnose_independent.py --render
 
-* plant: a gear size factor ``g`` log-uniform over a decade (0.3–3) scaling stiffness,
-  friction, damping and inertia, each with its own spread (so the natural frequency and
-  the friction/stiffness ratio move too); ``v_s`` uniform 2–10 rad/s, ``δ`` uniform
-  0.5–2.5; ``tau_s/tau_c`` 1.3–2.0, capped so the smallest release still swings
-  (``tau_s ≤ 0.4·k_wg·a_min``);
-* rich design: four release amplitudes (smallest 0.05–0.08 rad, largest 0.2–0.3, two in
-  between; each released + and −), one set-up, rate drawn from 500/1000/2000 Hz with 340
-  samples per run (0.6/0.3/0.15 s; the shape is fixed so one compile serves the design);
-* paper design: ±0.157 rad twice at 250 Hz, two set-ups (``generate.PAPER_DESIGN``'s
-  lengths), offsets drawn;
-* hidden effect magnitudes drawn relative to the drawn plant (see :func:`hidden_params`):
-  backlash 0.01–0.025 rad, hysteresis ``f_h`` 0.3–0.6 ``tau_c``, asymmetry ±0.2–0.4,
-  load friction 0.05–0.15 ``k_wg``, ripple 0.15–0.35 ``tau_c`` of order 8/12/16/24/36,
-  soft wind-up ``K1`` 0.55–0.7 ``k1``, kinematic error 1.5–2.5e-4 of order 2, and an
-  effect outside the library (``c_2·ω|ω|`` drag).
+Every log draws its own plant, design and effect size (seeds 8800+ rich, 9800+ paper):
 
-The logs are made by the reference simulator (``data/synthetic/generate.py``, event-driven,
-exact stick/slip) with the effects written in numpy (``data/synthetic/hidden.py``): the
-same generator as ``diagnose_suite.py`` — what is new is every parameter, design and seed.
-``diagnose`` runs with all candidates. Writes ``results/diagnose_independent.{json,md}``:
-per log the verdict, the first candidate, RMS before/after in quantization floors, ΔBIC,
-warnings; the confusion matrix (hidden effect × verdict's effect) per design.
+* plant: a gear size factor ``g`` log-uniform over 0.3–3 scaling stiffness, friction,
+  damping and inertia, each with its own spread; ``v_s`` 2–10 rad/s, ``δ`` 0.5–2.5,
+  ``tau_s/tau_c`` 1.3–2.0, capped so the smallest release still swings;
+* rich design: four release amplitudes (0.05–0.08 to 0.2–0.3 rad, each + and −), one
+  set-up, 500/1000/2000 Hz, 300 samples a run (one compile serves the design); paper
+  design: ±0.157 rad twice at 250 Hz, two set-ups, offsets drawn;
+* the hidden effect's size relative to the plant (:func:`hidden_params`), or an effect
+  outside the library (``c_2·ω|ω|`` drag).
 
-    taskset -c 0 python benchmarks/diagnose_independent.py [rich|paper ...] [--per N]
-    python benchmarks/diagnose_independent.py --report
-    ... [--out diagnose_independent_rerun]   (another results file; copy the old one first
-                                              to keep its other rows)
+Logs of the reference simulator (``data/synthetic/generate.py``, exact stick/slip) with
+the effects in numpy (``data/synthetic/hidden.py``), diagnosed with every candidate.
+Per log: the verdict, the first candidate, RMS before/after in quantization floors, ΔBIC,
+warnings; per design the confusion matrix (hidden effect × what the verdict names).
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import os
 import sys
-import time
-from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import DATA, RESULTS, import_generate, load_text, run_meta  # noqa: E402
+from _common import RESULTS, Clock, import_generate, import_synthetic, load_text, parse_or_render, run_meta, write_result
 
 NAME = "diagnose_independent"
 HIDDEN = ("none", "backlash", "hysteresis", "asymmetric_friction", "load_friction", "ripple",
           "soft_windup", "kinematic_error", "quadratic_drag")
 N = 100.0
 SAMPLES = 300  # per run, rich design (hold 40 samples): the calibration's rich shape
+SEED0 = {"rich": 8800, "paper": 9800}
 
 
 def _hidden_module():
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("_hdid_hidden", DATA / "hidden.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return import_synthetic("hidden")
 
 
 def draw(design: str, seed: int) -> tuple[dict, dict]:
@@ -124,59 +106,48 @@ def run_design(design: str, records: list, meta: dict, per: int, seed0: int,
     import hdid
 
     gen, hid = import_generate(), _hidden_module()
-    i = 0
-    for rep in range(per):
-        for name in HIDDEN:
-            seed = seed0 + i
-            i += 1
-            if only and name not in only:
-                continue
-            truth, des = draw(design, seed)
-            rng = np.random.default_rng(seed + 10_000)
-            hp = hidden_params(name, truth, des, rng) if name != "none" else {}
-            kw = hid.reference_kwargs(name, truth, **hp) if name != "none" else None
-            mk = {k: v for k, v in des.items() if k != "gear_factor"}
-            rec = {"design": design, "hidden": name, "seed": seed,
-                   "expected": None if name == "quadratic_drag" else name,
-                   "truth": truth, "hidden_params": hp,
-                   "design_params": {k: v for k, v in des.items()},
-                   "load1_before": os.getloadavg()[0],
-                   # which code ran it (rows of several runs share the results file)
-                   "code": os.environ.get("HDID_BENCH_CODE", meta.get("src", ""))}
-            try:
-                df = gen.make_log(truth, **mk, seed=seed, hidden=kw)
-                moved = [np.ptp(g["theta"].to_numpy()) for _, g in df.groupby("run")]
-                rec["min_run_span_rad"] = float(min(moved))
-                t0, c0 = time.perf_counter(), time.process_time()
+    for i in range(per * len(HIDDEN)):
+        name, seed = HIDDEN[i % len(HIDDEN)], seed0 + i
+        if only and name not in only:
+            continue
+        truth, des = draw(design, seed)
+        hp = hidden_params(name, truth, des, np.random.default_rng(seed + 10_000)) if name != "none" else {}
+        kw = hid.reference_kwargs(name, truth, **hp) if name != "none" else None
+        rec = {"design": design, "hidden": name, "seed": seed,
+               "expected": None if name == "quadratic_drag" else name,
+               "truth": truth, "hidden_params": hp, "design_params": dict(des),
+               "load1_before": os.getloadavg()[0],
+               # which code ran it (rows of several runs share the results file)
+               "code": os.environ.get("HDID_BENCH_CODE", meta.get("src", ""))}
+        records.append(rec)
+        try:
+            df = gen.make_log(truth, **{k: v for k, v in des.items() if k != "gear_factor"},
+                              seed=seed, hidden=kw)
+            rec["min_run_span_rad"] = float(min(np.ptp(g["theta"].to_numpy()) for _, g in df.groupby("run")))
+            with Clock() as clock:
                 d = hdid.diagnose(df)
-            except Exception as exc:  # a failure is a result too
-                rec["error"] = repr(exc)
-                records.append(rec)
-                print(f"{design} {name:20s} FAILED {exc!r}", flush=True)
-                write(records, meta)
-                continue
-            cands = [c for c in d.candidates if c.error is None]
-            rec.update({
-                "verdict": d.verdict, "summary": d.summary,
-                "named": _named(d),
-                "top": cands[0].key if cands else None,
-                "top_dbic": cands[0].delta_bic if cands else None,
-                "rms_before_floor": d.base.rms_residual_rad / d.floor_rad,
-                "candidates": [{"effect": c.key, "variant": c.label, "delta_bic": c.delta_bic,
-                                "rms_after_floor": c.rms_after_rad / d.floor_rad,
-                                "adequate_after": c.adequate_after,
-                                "moving_after_floor": c.moving_ratio_after}
-                               for c in cands],
-                "warnings": d.warnings, "notes": d.notes, "scanned": d.scanned,
-                "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
-                "compile_s": d.timing.get("compile_s"), "load1_after": os.getloadavg()[0],
-            })
-            records.append(rec)
+        except Exception as exc:  # a failure is a result too
+            rec["error"] = repr(exc)
+            print(f"{design} {name:20s} FAILED {exc!r}", flush=True)
             write(records, meta)
-            c0s = ", ".join(f"{c['effect']} {c['delta_bic']:.0f}" for c in rec["candidates"][:3])
-            print(f"{design} {name:20s} {d.verdict:15s} named {rec['named']} "
-                  f"RMS {rec['rms_before_floor']:.2f} [{c0s}] {rec['wall_s']:.0f}s "
-                  f"(load {rec['load1_after']:.1f})", flush=True)
+            continue
+        cands = [c for c in d.candidates if c.error is None]
+        rec.update({
+            "verdict": d.verdict, "summary": d.summary, "named": _named(d),
+            "top": cands[0].key if cands else None, "top_dbic": cands[0].delta_bic if cands else None,
+            "rms_before_floor": d.base.rms_residual_rad / d.floor_rad,
+            "candidates": [{"effect": c.key, "variant": c.label, "delta_bic": c.delta_bic,
+                            "rms_after_floor": c.rms_after_rad / d.floor_rad,
+                            "adequate_after": c.adequate_after, "moving_after_floor": c.moving_ratio_after}
+                           for c in cands],
+            "warnings": d.warnings, "notes": d.notes, "scanned": d.scanned,
+            "wall_s": clock.wall, "cpu_s": clock.cpu,
+            "compile_s": d.timing.get("compile_s"), "load1_after": os.getloadavg()[0],
+        })
+        write(records, meta)
+        c0s = ", ".join(f"{c['effect']} {c['delta_bic']:.0f}" for c in rec["candidates"][:3])
+        print(f"{design} {name:20s} {d.verdict:15s} named {rec['named']} RMS {rec['rms_before_floor']:.2f} "
+              f"[{c0s}] {rec['wall_s']:.0f}s (load {rec['load1_after']:.1f})", flush=True)
 
 
 def _named(d) -> str:
@@ -223,14 +194,12 @@ def _grade(r) -> str:
     return "wrong"
 
 
-def _right(r) -> bool:
-    return _grade(r) == "right"
-
-
 def write(records: list, meta: dict) -> None:
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / f"{NAME}.json").write_text(json.dumps({"meta": meta, "records": records},
-                                                     indent=2, default=float) + "\n")
+    write_result(NAME, {"meta": meta, "records": records}, render)
+
+
+def render(res: dict) -> str:
+    records, meta = res["records"], res["meta"]
     lines = [f"# `diagnose` on an independent-parameter hidden-effect suite", "",
              f"Run {meta['date']} on {meta['cpu']} ({meta['cores']} cores, shared), pinned to "
              f"core 0; load at start {meta['load']}" + (f", at end {meta['load_end']}"
@@ -274,12 +243,12 @@ def write(records: list, meta: dict) -> None:
         first = [r for r in lib if r["top"] == r["expected"]]
         floor = [r for r in first if r["candidates"][0]["rms_after_floor"] <= 1.3]
         lines += ["",
-                  f"- verdict follows the truth: {sum(_right(r) for r in ok)}/{len(ok)} right, "
+                  f"- verdict follows the truth: {sum(_grade(r) == 'right' for r in ok)}/{len(ok)} right, "
                   f"{sum(_grade(r) == 'honest' for r in ok)} honest, "
                   f"{sum(_grade(r) == 'wrong' for r in ok)} wrong",
                   f"- detectable (base RMS > 1.3× floor) library effects: "
                   f"{sum(r['rms_before_floor'] > 1.3 for r in lib)}/{len(lib)}, of which named "
-                  f"alone {sum(r['rms_before_floor'] > 1.3 and _right(r) for r in lib)}",
+                  f"alone {sum(r['rms_before_floor'] > 1.3 and _grade(r) == 'right' for r in lib)}",
                   f"- hidden library effect ranked first: {len(first)}/{len(lib)}; first and "
                   f"brought to ≤ 1.3× the floor: {len(floor)}/{len(lib)}; named alone by the "
                   f"verdict: {sum(r['verdict'] == 'missing_effect' and r['named'] == r['expected'] for r in lib)}/{len(lib)}",
@@ -302,32 +271,34 @@ def write(records: list, meta: dict) -> None:
                 cnt[key] = cnt.get(key, 0) + 1
             lines.append(f"| {h} | " + " | ".join(str(cnt[c] or "") for c in cnt) + " |")
         lines.append("")
-    (RESULTS / f"{NAME}.md").write_text("\n".join(lines) + "\n")
+    return "\n".join(lines) + "\n"
 
 
-def main(argv: list[str]) -> None:
-    global NAME
-    if "--out" in argv:  # --out NAME: results/NAME.{json,md} (a branch's copy)
-        NAME = argv[argv.index("--out") + 1]
-    if "--report" in argv:
-        doc = json.loads((RESULTS / f"{NAME}.json").read_text())
-        write(doc["records"], doc["meta"])
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("designs", nargs="*", metavar="rich|paper",
+                    help="designs to run (default both); their earlier records are replaced")
+    ap.add_argument("--per", type=int, default=1, help="logs per hidden effect and design")
+    ap.add_argument("--seed0", type=int,
+                    help="a further batch (seeds S, S+1, …) added to the earlier records")
+    ap.add_argument("--only", help="EFFECT,…: rerun those logs, every other record kept")
+    ap.add_argument("--fresh", action="store_true", help="drop the earlier records")
+    args = parse_or_render(ap, argv, NAME, render)
+    if args is None:
         return
-    per = int(argv[argv.index("--per") + 1]) if "--per" in argv else 1
-    designs = [a for a in argv if a in ("rich", "paper")] or ["rich", "paper"]
+    designs, seed0 = args.designs or ["rich", "paper"], args.seed0
+    if set(designs) - set(SEED0):
+        ap.error(f"designs are rich and paper, not {' '.join(set(designs) - set(SEED0))}")
+    only = set(args.only.split(",")) if args.only else None
     cores = ",".join(map(str, sorted(os.sched_getaffinity(0))))  # the cores it ran on
     meta = run_meta(cmd=f"taskset -c {cores} python benchmarks/diagnose_independent.py "
-                        + " ".join(argv))
-    # --seed0 S: a further batch (seeds S, S+1, …) added to the earlier records
-    seed0 = int(argv[argv.index("--seed0") + 1]) if "--seed0" in argv else None
-    only = set(argv[argv.index("--only") + 1].split(",")) if "--only" in argv else None
+                        + " ".join(argv if argv is not None else sys.argv[1:]))
     records: list = []
-    if (RESULTS / f"{NAME}.json").exists() and "--fresh" not in argv:
+    if (RESULTS / f"{NAME}.json").exists() and not args.fresh:
         prev = json.loads((RESULTS / f"{NAME}.json").read_text())
-        if only:  # --only EFFECT,…: those logs rerun, every other record kept
-            rerun = {(d, (seed0 or {"rich": 8800, "paper": 9800}[d]) + p * len(HIDDEN) + j)
-                     for d in designs for p in range(per)
-                     for j, name in enumerate(HIDDEN) if name in only}
+        if only:
+            rerun = {(d, (seed0 or SEED0[d]) + p * len(HIDDEN) + j) for d in designs
+                     for p in range(args.per) for j, name in enumerate(HIDDEN) if name in only}
             records = [r for r in prev["records"] if (r["design"], r["seed"]) not in rerun]
         else:
             records = [r for r in prev["records"] if r["design"] not in designs
@@ -336,13 +307,11 @@ def main(argv: list[str]) -> None:
         if prev["meta"].get("note"):
             meta["note"] = prev["meta"]["note"]
     for design in designs:
-        s0 = seed0 if seed0 is not None else {"rich": 8800, "paper": 9800}[design]
-        run_design(design, records, meta, per, seed0=s0, only=only)
+        run_design(design, records, meta, args.per, seed0=SEED0[design] if seed0 is None else seed0,
+                   only=only)
     meta["load_end"] = load_text()
     write(records, meta)
 
 
 if __name__ == "__main__":
-    if {"-h", "--help"} & set(sys.argv[1:]):
-        sys.exit(print(__doc__))
-    main(sys.argv[1:])
+    main()

@@ -1,22 +1,13 @@
 """`hdid diagnose` of the shipped 1 kHz hidden-effect log: cold and warm time, per code.
 
-Each measured call is a fresh process that runs the CLI's diagnose command in-process
-(``hdid.cli.main(["diagnose", LOG, "--json", …])``, what a user's ``hdid diagnose`` runs)
-pinned to one core (``taskset -c CORE``) with its own cache folder (``HDID_CACHE_DIR``):
-"cold" = an empty cache, "warm" = a second process with the cache the first one left.
-Each code is given as a source folder (``--code LABEL=SRC``, e.g. a ``git worktree`` of
-an older commit); all codes are measured in one run, one after the other, each row with
-the load average before and after it (the machine is shared: wall time moves with the
-load, CPU seconds less so).
-
-Where the time goes: diagnose's own ``timing`` (JAX tracing, lowering and compiling, or
-reading JAX's cache, against fitting) and, where the code has one, the program store's
-record (:data:`hdid._problems._programs.STATS`: per program, read from the store or traced, and
-the compile or cache read).
-
-    python benchmarks/diagnose_speed.py --code before=/tmp/wt_before/src \
-        --code after=src [--core 1] [--out diagnose_speed]
+    python benchmarks/diagnose_speed.py [--code before=/tmp/wt_before/src --code after=src] [--core 1]
     python benchmarks/diagnose_speed.py --render
+
+Each call is a fresh process running the CLI's diagnose in-process, pinned to ``--core``
+with its own cache folder: "cold" = empty, "warm" = the cache the cold run left. Each
+``--code`` is a source folder (e.g. a ``git worktree`` of an older commit), measured one
+after the other in one run, each row with its load average. Where the time goes:
+diagnose's own ``timing`` and the program store's record (``hdid._problems._programs.STATS``).
 """
 
 from __future__ import annotations
@@ -30,8 +21,7 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import DATA, interpretation_section, load_text, parse_or_render, result_writer, run_meta  # noqa: E402
+from _common import DATA, ROOT, interpretation_section, load_text, parse_or_render, run_meta, write_result
 
 LOG = DATA / "hidden_hysteresis_1khz.csv"
 
@@ -83,9 +73,7 @@ def summarize_programs(progs: list[dict]) -> dict:
     out: dict[str, dict] = {}
     for p in progs:
         o = out.setdefault(p["how"], {"n": 0, "prepare_s": 0.0, "compile_s": 0.0})
-        o["n"] += 1
-        o["prepare_s"] += p["prepare_s"]
-        o["compile_s"] += p["compile_s"]
+        o.update(n=o["n"] + 1, prepare_s=o["prepare_s"] + p["prepare_s"], compile_s=o["compile_s"] + p["compile_s"])
     return out
 
 
@@ -127,8 +115,8 @@ def render(res: dict) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--code", action="append", required=False, default=[],
-                    metavar="LABEL=SRC", help="a label and a source folder (holding hdid/)")
+    ap.add_argument("--code", action="append", metavar="LABEL=SRC",
+                    help="a label and a source folder holding hdid/ (repeat; default: this tree)")
     ap.add_argument("--core", type=int, default=1)
     ap.add_argument("--log", default=str(LOG))
     ap.add_argument("--runs", default="cold,warm", help="cache states, in order")
@@ -137,17 +125,17 @@ def main(argv=None) -> int:
     if args is None:
         return 0
     res = {"meta": run_meta(), "log": args.log, "core": args.core, "rows": []}
-    write = result_writer(args.out, render)
-
-    for spec in args.code:
+    for spec in args.code or [f"this={ROOT / 'src'}"]:
         label, src = spec.split("=", 1)
         with tempfile.TemporaryDirectory(prefix=f"diag_speed_{label}_") as cache:
             for state in args.runs.split(","):
                 rec = measure(src, Path(cache), args.core, Path(args.log))
-                rec.update(code=label, cache=state, src=src)
-                write(res, row=rec, label=f"{label} {state}",
-                      tail=rec.get("verdict", rec.get("error", "")[-300:]))
-    write(res, end=True)
+                res["rows"].append({**rec, "code": label, "cache": state, "src": src})
+                print(f"{label} {state}: {rec['process_wall_s']:.1f} s (load {rec['load_start']} "
+                      f"→ {rec['load_end']}) {rec.get('verdict', rec.get('error', '')[-300:])}")
+                write_result(args.out, res, render)
+    res["meta"]["load_end"] = load_text()
+    write_result(args.out, res, render)
     return 0
 
 

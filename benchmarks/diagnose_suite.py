@@ -1,43 +1,30 @@
 """Diagnosis suite: hide each library effect in turn and see what ``diagnose`` ranks first.
 
-Two designs (``data/synthetic/generate.py``): the paper's (±0.157 rad, 250 Hz, two set-ups)
-and a richer one (±0.157/0.13/0.10/0.07 rad, 1 kHz). Per design: a log with nothing hidden,
-one per library effect (``data/synthetic/hidden.py``, written for the independent reference
-simulator) and one with an effect outside the library (quadratic drag). Every log is
-diagnosed with all candidates. Writes ``results/diagnose_suite.{json,md}``: the confusion
-matrix (hidden effect × top-ranked candidate), verdicts, RMS before/after in quantization
-floors and ΔBIC.
+    python benchmarks/diagnose_suite.py [rich|paper ...]   # about 20–40 min on 2 cores
+    python benchmarks/diagnose_suite.py --removed          # then: the base pieces' rows
+    python benchmarks/diagnose_suite.py --render
 
-Run: ``python benchmarks/diagnose_suite.py [rich|paper ...]`` (about 20–40 min on 2 cores),
-then ``python benchmarks/diagnose_suite.py --removed`` to add the rows where a base piece
-(viscous, Stribeck, the cubic term) is switched off in the *model* of a log with nothing
-hidden: its absence must be diagnosable too.
+The paper design (±0.157 rad, 250 Hz, two set-ups) and a richer one (four amplitudes,
+1 kHz): a log with nothing hidden, one per library effect (``data/synthetic/hidden.py``
+through the reference simulator) and one outside the library (quadratic drag), diagnosed
+with all candidates. ``--removed``: a base piece (viscous, Stribeck, the cubic term)
+switched off in the *model* of a clean log, which must be diagnosable too.
 """
 
 from __future__ import annotations
 
-import importlib.util
+import argparse
 import json
-import sys
-import time
-from pathlib import Path
 
-from _common import DATA, ROOT, import_generate, run_designs, run_meta
+from _common import RESULTS, Clock, import_generate, import_synthetic, parse_or_render, run_designs, run_meta, write_result
 
-OUT = ROOT / "benchmarks" / "results"
+NAME = "diagnose_suite"
 #: The richer design: four release amplitudes at 1 kHz, one set-up. Smallest amplitude
 #: 0.07 rad, not the committed rich log's 0.05: with a hidden 0.02 rad dead zone (or
 #: load-dependent friction) a 0.05 rad release cannot overcome static friction and the
 #: run shows no motion at all.
 RICH = dict(amplitudes=[0.157, -0.157, 0.13, -0.13, 0.10, -0.10, 0.07, -0.07], fs=1000.0,
             duration=0.3, hold=0.04, offsets_by_setup={"A": 0.005})
-
-
-def _hidden_module():
-    spec = importlib.util.spec_from_file_location("_hdid_hidden", DATA / "hidden.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 #: Base pieces switched off: the log has nothing hidden, the *model* lacks the piece.
@@ -64,49 +51,42 @@ def run_design(design_name: str, gen, hid, records: list, seed0: int, removed: b
         design["seed"] = seed0 + i
         hidden = hid.reference_kwargs(name, truth) if name in hid.HIDDEN else None
         df = gen.make_log(truth, **design, hidden=hidden)
-        model = _model_without(name.split(":")[1]) if removed else None
-        t0 = time.perf_counter()
         try:
-            d = diagnose(df, model)
+            with Clock() as clock:
+                d = diagnose(df, _model_without(name.split(":")[1]) if removed else None)
         except Exception as exc:  # record and go on: the suite reports failures too
             records.append({"design": design_name, "hidden": name, "error": repr(exc)})
             print(f"{design_name:5s} {name:20s} FAILED {exc!r}", flush=True)
             continue
-        dt = time.perf_counter() - t0
         top = d.best
         rec = {
-            "design": design_name,
-            "hidden": name,
+            "design": design_name, "hidden": name,
             "expected": ("none" if name == "none" else name.split(":")[1] if removed
                          else hid.HIDDEN[name]["library"]),
             "verdict": d.verdict,
             "top": top.key if top is not None and top.delta_bic < -10 else "none",
             "top_any": top.key if top is not None else None,
-            "floor_rad": d.floor_rad,
-            "rms_before_floor": d.base.rms_residual_rad / d.floor_rad,
+            "floor_rad": d.floor_rad, "rms_before_floor": d.base.rms_residual_rad / d.floor_rad,
             "whiteness_before": {k: v for k, v in d.whiteness_before.to_dict().items()
                                  if k in ("p_value", "rms_ratio", "white", "at_floor", "adequate")},
-            "candidates": [
-                {"effect": c.key, "variant": c.label,
-                 "rms_after_floor": c.rms_after_rad / d.floor_rad,
-                 "delta_bic": c.delta_bic, "adequate_after": c.adequate_after,
-                 "error": c.error}
-                for c in d.candidates
-            ],
-            "notes": d.notes,
-            "seconds": dt,
+            "candidates": [{"effect": c.key, "variant": c.label, "rms_after_floor": c.rms_after_rad / d.floor_rad,
+                            "delta_bic": c.delta_bic, "adequate_after": c.adequate_after, "error": c.error}
+                           for c in d.candidates],
+            "notes": d.notes, "seconds": clock.wall,
         }
         records.append(rec)
         cands = ", ".join(f"{c['effect']} {c['delta_bic']:.0f}" for c in rec["candidates"][:3])
-        print(f"{design_name:5s} {name:20s} verdict {d.verdict:15s} top {rec['top']:20s} "
-              f"RMS {rec['rms_before_floor']:.2f}→"
-              f"{rec['candidates'][0]['rms_after_floor'] if rec['candidates'] else float('nan'):.2f} "
-              f"[{cands}] {dt:.0f}s", flush=True)
+        after = rec["candidates"][0]["rms_after_floor"] if rec["candidates"] else float("nan")
+        print(f"{design_name:5s} {name:20s} verdict {d.verdict:15s} top {rec['top']:20s} RMS "
+              f"{rec['rms_before_floor']:.2f}→{after:.2f} [{cands}] {clock.wall:.0f}s", flush=True)
 
 
 def write(records: list, meta: dict) -> None:
-    OUT.mkdir(exist_ok=True)
-    (OUT / "diagnose_suite.json").write_text(json.dumps({"meta": meta, "records": records}, indent=2) + "\n")
+    write_result(NAME, {"meta": meta, "records": records}, render)
+
+
+def render(res: dict) -> str:
+    records, meta = res["records"], res["meta"]
     lines = [
         "# Diagnosis suite: hidden effect × top-ranked candidate",
         "",
@@ -164,24 +144,24 @@ def write(records: list, meta: dict) -> None:
             lines.append(f"- base piece switched off in the model, found again: "
                          f"{sum(r['top'] == r['expected'] for r in removed)}/{len(removed)}")
         lines.append("")
-    (OUT / "diagnose_suite.md").write_text("\n".join(lines) + "\n")
+    return "\n".join(lines) + "\n"
 
 
-def main(argv: list[str]) -> None:
-    if "--report" in argv:  # rewrite the markdown from the JSON
-        doc = json.loads((OUT / "diagnose_suite.json").read_text())
-        write(doc["records"], doc["meta"])
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("designs", nargs="*", metavar="rich|paper", help="default: both")
+    ap.add_argument("--removed", action="store_true",
+                    help="the base-piece rows, added to the suite's records")
+    args = parse_or_render(ap, argv, NAME, render)
+    if args is None:
         return
-    removed = "--removed" in argv
-    designs = [a for a in argv if not a.startswith("--")] or ["rich", "paper"]
-    gen = import_generate()
-    hid = _hidden_module()
+    designs = args.designs or ["rich", "paper"]
+    gen, hid = import_generate(), import_synthetic("hidden")
     records: list = []
-    if removed and (OUT / "diagnose_suite.json").exists():  # add to the main suite's records
-        old = json.loads((OUT / "diagnose_suite.json").read_text())["records"]
+    if args.removed and (RESULTS / f"{NAME}.json").exists():
+        old = json.loads((RESULTS / f"{NAME}.json").read_text())["records"]
         records = [r for r in old if not (str(r.get("hidden", "")).startswith("removed:")
                                           and r["design"] in designs)]
-    meta = run_meta()
 
     def run(k, design):
         # Compiled programs of the previous design are not needed again; a long process
@@ -189,13 +169,11 @@ def main(argv: list[str]) -> None:
         import jax
 
         jax.clear_caches()
-        run_design(design, gen, hid, records, seed0=(7500 if removed else 7100) + 100 * k,
-                   removed=removed)
+        run_design(design, gen, hid, records, seed0=(7500 if args.removed else 7100) + 100 * k,
+                   removed=args.removed)
 
-    run_designs(designs, run, write, records, meta)
+    run_designs(designs, run, write, records, run_meta())
+
 
 if __name__ == "__main__":
-    if {"-h", "--help"} & set(sys.argv[1:]):
-        sys.exit(print(__doc__))
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    main(sys.argv[1:])
+    main()

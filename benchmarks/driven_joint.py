@@ -1,24 +1,18 @@
-"""Driven joint (issue 5): recovery from independent-reference logs, and how much a joint
+"""Driven joint: recovery from independent-reference logs, and how much a joint
 free-motion + driven fit narrows the uncertainty compared with either log alone.
 
-Run by hand: ``python benchmarks/driven_joint.py [--seeds 4]``; writes
-``benchmarks/results/driven_joint.{md,json}``.
+    python benchmarks/driven_joint.py [--seeds 4]    # 5–8 min
+    python benchmarks/driven_joint.py --render       # results/driven_joint.md from its JSON
 
-* Recovery: the shipped ``driven_csf8.csv`` plus logs of other seeds (initial angles and
-  load phases) made by ``data/synthetic/driven.py`` — numpy/scipy, event-driven, no hdid
-  code — fitted with ``hdid.fit_driven`` (order chosen by BIC).
-* Narrowing: relative standard errors of every physical parameter for
-  (A) the free-motion log alone, inertia free (the scale is then not identifiable);
-  (A′) the same with the inertia fixed at the datasheet value (a conditional error:
-  it assumes the datasheet inertia exactly);
-  (B) the driven log alone; (C) the driven log without its output encoder;
-  (D) joint free-motion + driven; (E) joint free-motion + driven without output encoder.
+Recovery: ``hdid.fit_driven`` (order by BIC) on ``driven_csf8.csv`` and logs of other seeds
+of ``data/synthetic/driven.py`` (no hdid code). Narrowing: relative standard errors of
+(A) free motion alone, inertia free; (A′) inertia fixed at the datasheet (conditional);
+(B) driven alone; (C) without its output encoder; (D) joint; (E) joint without it.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import math
 import os
@@ -26,21 +20,12 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
-
-from _common import DATA, ROOT, cpu_model, src_fingerprint
+from _common import DATA, cpu_model, import_synthetic, interpretation_section, parse_or_render, src_fingerprint, write_result
 
 import hdid
 
 PHYSICAL = ("k1", "k2", "tau_c", "tau_s", "v_s", "delta", "c_v", "inertia", "tau_fout")
-
-
-def _reference():
-    spec = importlib.util.spec_from_file_location("_hdid_driven", DATA / "driven.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def _pos_truth(p):
@@ -51,7 +36,7 @@ def _pos_truth(p):
 
 
 def recovery(seeds: int) -> list[dict]:
-    drv = _reference()
+    drv = import_synthetic("driven")
     truth = json.loads((DATA / "truth.json").read_text())["driven_csf8.csv"]
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -136,10 +121,8 @@ def _fmt(x):
     return f"{100 * x:.2g} %"
 
 
-def write(rec, nar, meta):
-    out = ROOT / "benchmarks" / "results"
-    (out / "driven_joint.json").write_text(json.dumps(
-        {"meta": meta, "recovery": rec, "narrowing": nar}, indent=2, default=float) + "\n")
+def render(res: dict) -> str:
+    rec, nar, meta = res["recovery"], res["narrowing"], res["meta"]
     lines = ["# Driven joint: recovery and joint narrowing", "",
              f"CPU {meta['cpu']}, load {meta['load']}, src {meta['src']}, {meta['date']}", "",
              "## Recovery from logs of the independent reference (`data/synthetic/driven.py`)", "",
@@ -177,20 +160,21 @@ def write(rec, nar, meta):
     lines += ["", "∞: not identifiable from that log (a null direction of its Fisher matrix); "
               "fixed: held at the model's value because the log cannot see it; —: not in that "
               "model. A′ is conditional on the datasheet inertia being exact.", ""]
-    (out / "driven_joint.md").write_text("\n".join(lines))
+    return "\n".join(lines + interpretation_section(res))
 
 
-def main():
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=4, help="logs in the recovery study (1 = shipped only)")
-    args = ap.parse_args()
+    args = parse_or_render(ap, argv, "driven_joint", render)
+    if args is None:
+        return
     meta = {"cpu": cpu_model(), "load": [round(x, 2) for x in os.getloadavg()],
             "src": src_fingerprint(), "date": time.strftime("%Y-%m-%d %H:%M")}
-    rec = recovery(args.seeds)
-    nar = narrowing()
+    res = {"meta": meta, "recovery": recovery(args.seeds), "narrowing": narrowing()}
     meta["load_end"] = [round(x, 2) for x in os.getloadavg()]
-    write(rec, nar, meta)
-    print((ROOT / "benchmarks" / "results" / "driven_joint.md").read_text())
+    write_result("driven_joint", res, render)
+    print(render(res))
 
 
 if __name__ == "__main__":

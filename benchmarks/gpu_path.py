@@ -1,33 +1,27 @@
 """The JAX GPU path: the same fit, log-posterior, sampler and batch fit on CPU and on a GPU.
 
-Run once per backend (JAX picks its default device; ``JAX_PLATFORMS=cpu`` forces the CPU)::
-
-    python benchmarks/gpu_path.py --tag cpu                 # here: 2 cores, no GPU
+    python benchmarks/gpu_path.py --tag cpu                 # JAX_PLATFORMS=cpu forces the CPU
     python benchmarks/gpu_path.py --tag gpu --reference benchmarks/results/gpu_path_cpu.json
     python benchmarks/gpu_path.py --render                  # gpu_path.md from both JSONs
 
-Each run writes ``results/gpu_path_<tag>.json`` (``--out-dir`` elsewhere). It measures:
-
-1. the fit of the shipped paper log (first call = compile, then warm) and its parameters;
-2. one call of the vectorised log-posterior (``LogPosterior.batch``, what emcee calls) for
-   W = 1 … 8192 walkers, at walker positions stored by the CPU run (``--reference``), so
-   the GPU's log p can be compared with the CPU's number for number;
-3. ``sample_posterior`` (2000 steps) with the default 36 walkers and with 8× as many;
-4. ``fit_many`` over 100 and 1000 paper-design logs (``batch_speed.py``'s logs, cached in
-   ``benchmarks/_cache``).
+Writes ``results/gpu_path_<tag>.json``: (1) the fit of the shipped paper log, first call and
+warm; (2) one call of ``LogPosterior.batch`` for 1 … 8192 walkers at the CPU run's walker
+positions (so log p compares number for number); (3) ``sample_posterior`` (2000 steps) with
+36 and 288 walkers; (4) ``fit_many`` over 100 and 1000 of ``batch_speed.py``'s logs.
 """
 
 from __future__ import annotations
 
-import _common  # noqa: E402  (benchmarks/ is on sys.path when run as a script)
 import argparse
-import datetime as _dt
 import json
 import os
 import platform
 import sys
 import time
 from pathlib import Path
+
+import _common
+from _common import RESULTS, Clock
 
 LOG = _common.DATA / "csf8_paper.csv"
 WALKERS = (1, 18, 36, 144, 1024, 8192)
@@ -36,15 +30,12 @@ POST_STEPS = 2000
 PARAMS = ("k1", "k2", "tau_c", "tau_s", "v_s", "delta", "c_v")
 
 
-_Clock = _common.Clock
-
-
 def _per_call(fn, reps=20, min_time=1.0):
     fn()
     walls = []
     t0 = time.perf_counter()
     while len(walls) < reps or (time.perf_counter() - t0 < min_time and len(walls) < 2000):
-        with _Clock() as c:
+        with Clock() as c:
             fn()
         walls.append(c.wall)
     walls.sort()
@@ -74,60 +65,50 @@ def measure(args, save) -> dict:
     import hdid
     from hdid._posterior import LogPosterior, sample_posterior
 
-    res: dict = {"generated": _dt.datetime.now().isoformat(timespec="seconds"), "tag": args.tag}
-    res["machine"] = _machine()
+    res: dict = {"generated": time.strftime("%Y-%m-%dT%H:%M:%S"), "tag": args.tag, "machine": _machine()}
     print(res["machine"], flush=True)
     ref = json.loads(Path(args.reference).read_text()) if args.reference else None
 
-    # 1. fit ---------------------------------------------------------------------------
-    with _Clock() as c1:
-        fit = hdid.fit(LOG)
-    with _Clock() as c2:
+    # 1. fit: first call (compile), then warm
+    with Clock() as c1:
+        hdid.fit(LOG)
+    with Clock() as c2:
         fit = hdid.fit(LOG)
     params = {k: float(fit.values[k]) for k in PARAMS if k in fit.values}
     res["fit"] = {"first_s": c1.wall, "warm_s": c2.wall, "params": params,
                   "cost": float(fit.starts.costs[fit.starts.best])}
     if ref:
         rp = ref["fit"]["params"]
-        res["fit"]["max_rel_diff_vs_reference"] = max(
-            abs(params[k] - rp[k]) / abs(rp[k]) for k in rp)
+        res["fit"]["max_rel_diff_vs_reference"] = max(abs(params[k] - rp[k]) / abs(rp[k]) for k in rp)
     print("fit", res["fit"], flush=True)
     save(res)
 
-    # 2. log-posterior batch -----------------------------------------------------------
-    prob = fit.problem
-    lp = LogPosterior(problem=prob, centre=jnp.asarray(fit.u), temper=jnp.asarray(1.0),
-                      quantized=False, quant_var=float(prob.step) ** 2 / 12.0)
-    if ref:
-        pos = np.asarray(ref["positions"])
-    else:
-        short = sample_posterior(fit, method="emcee", n_steps=300, seed=0, progress=False)
-        pos = np.asarray(short.chain[-1])[:N_POSITIONS]
-    res["positions"] = pos.tolist()
+    # 2. log-posterior batch, at the reference's walker positions where given
+    lp = LogPosterior(problem=fit.problem, centre=jnp.asarray(fit.u), temper=jnp.asarray(1.0),
+                      quant_var=float(fit.problem.step) ** 2 / 12.0)
+    pos = np.asarray(ref["positions"] if ref else sample_posterior(
+        fit, method="emcee", n_steps=300, seed=0, progress=False).chain[-1][:N_POSITIONS])
     batch = jax.jit(lambda X: lp.batch(X))
     lp0 = np.asarray(batch(jnp.asarray(pos)))
-    res["logp_at_positions"] = lp0.tolist()
+    res |= {"positions": pos.tolist(), "logp_at_positions": lp0.tolist()}
     if ref:
-        d = np.abs(lp0 - np.asarray(ref["logp_at_positions"]))
-        res["logp_max_abs_diff_vs_reference"] = float(np.max(d))
+        res["logp_max_abs_diff_vs_reference"] = float(np.max(np.abs(lp0 - ref["logp_at_positions"])))
     timings = {}
     for W in WALKERS:
         X = jnp.asarray(np.resize(pos, (W, pos.shape[1])))
-        with _Clock() as c:
+        with Clock() as c:
             jax.block_until_ready(batch(X))
         t = _per_call(lambda: jax.block_until_ready(batch(X)))
-        t["compile_s"] = c.wall
-        t["us_per_walker"] = t["median_s"] / W * 1e6
-        timings[str(W)] = t
+        timings[str(W)] = t = t | {"compile_s": c.wall, "us_per_walker": t["median_s"] / W * 1e6}
         print(f"batch W={W}: {t['median_s'] * 1e3:.2f} ms", flush=True)
     res["logp_batch"] = timings
     save(res)
 
-    # 3. sampler -----------------------------------------------------------------------
+    # 3. sampler: the default walkers and 8× as many
     res["posterior"] = []
     for W in (None, 8 * 36):
         sample_posterior(fit, method="emcee", n_steps=20, n_walkers=W, seed=1, progress=False)  # compile
-        with _Clock() as c:
+        with Clock() as c:
             post = sample_posterior(fit, method="emcee", n_steps=POST_STEPS, n_walkers=W, seed=0, progress=False)
         tau = np.asarray(post.tau)
         info = {"n_walkers": int(post.chain.shape[1]), "n_steps": int(post.chain.shape[0]),
@@ -140,20 +121,18 @@ def measure(args, save) -> dict:
         print("posterior", info, flush=True)
         save(res)
 
-    # 4. fit_many ----------------------------------------------------------------------
-    sys.path.insert(0, str(Path(__file__).parent))
+    # 4. fit_many
     import batch_speed
 
     paths = batch_speed.make_logs("paper", 2 + max(args.n_logs), Path(args.log_dir))
-    with _Clock() as c:
+    with Clock() as c:
         hdid.fit_many(paths[:2])
     res["fit_many"] = {"first_call_s": c.wall, "runs": []}
     for n in args.n_logs:
-        with _Clock() as c:
+        with Clock() as c:
             table = hdid.fit_many(paths[2:2 + n])
-        nerr = int(table["error"].notna().sum()) if "error" in table else 0
         res["fit_many"]["runs"].append({"n_logs": n, "wall_s": c.wall, "cpu_s": c.cpu,
-                                        "logs_per_s": n / c.wall, "errors": nerr,
+                                        "logs_per_s": n / c.wall, "errors": int(table["error"].notna().sum()),
                                         "k1_median": float(np.nanmedian(table["k1"]))})
         print("fit_many", res["fit_many"]["runs"][-1], flush=True)
         save(res)
@@ -222,24 +201,22 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--tag", default="cpu", help="results/gpu_path_<tag>.json")
     ap.add_argument("--reference", help="a CPU run's JSON: its walker positions and numbers")
-    ap.add_argument("--out-dir", default=str(_common.RESULTS))
     ap.add_argument("--log-dir", default=str(_common.ROOT / "benchmarks" / "_cache" / "batch_logs"))
     ap.add_argument("--n-logs", type=int, nargs="+", default=[100, 1000])
     ap.add_argument("--render", action="store_true", help="write gpu_path.md from the JSONs")
-    ap.add_argument("--interpretation", help="markdown stored in the GPU JSON as Interpretation")
+    ap.add_argument("--interpretation", metavar="FILE",
+                    help="with --render: markdown stored in the GPU JSON as its Interpretation")
     args = ap.parse_args(argv)
-    out = Path(args.out_dir)
     if args.render:
-        results = {t: json.loads((out / f"gpu_path_{t}.json").read_text())
-                   for t in ("cpu", "gpu") if (out / f"gpu_path_{t}.json").exists()}
+        results = {t: json.loads((RESULTS / f"gpu_path_{t}.json").read_text())
+                   for t in ("cpu", "gpu") if (RESULTS / f"gpu_path_{t}.json").exists()}
         if args.interpretation:
             key = "gpu" if "gpu" in results else "cpu"
             results[key]["interpretation"] = Path(args.interpretation).read_text()
-            (out / f"gpu_path_{key}.json").write_text(json.dumps(results[key], indent=1) + "\n")
-        (out / "gpu_path.md").write_text(render(results))
+            (RESULTS / f"gpu_path_{key}.json").write_text(json.dumps(results[key], indent=1) + "\n")
+        (RESULTS / "gpu_path.md").write_text(render(results))
         return 0
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / f"gpu_path_{args.tag}.json"
+    path = RESULTS / f"gpu_path_{args.tag}.json"
 
     def save(res):
         path.write_text(json.dumps(res, indent=1) + "\n")

@@ -1,15 +1,12 @@
-"""Fit time and peak memory against log length (issue 18: a 1 000 000-row log ran for over
-20 minutes at 3.4 GB with no output).
-
-Each size is a 4-run log (±0.157, ±0.08 rad) sampled at 10 kHz, written by the simulator
-(`hdid.cli simulate`'s `synthesize`) and fitted by `hdid.fit` in a fresh Python process
-(cold: its compile included; `HDID_NO_CACHE=1`), whose wall time and peak resident memory
-(`ru_maxrss`) are recorded. A size that runs over `--timeout` is stopped and recorded as
-such. The results decide the CLI's refusal threshold (`hdid.cli.MAX_SAMPLES_PER_RUN`).
+"""Fit time and peak memory against log length: what sets the CLI's refusal threshold
+(``MAX_SAMPLES_PER_RUN``).
 
     taskset -c 0 python benchmarks/long_log.py --samples 1000,2500,5000,10000,25000
+    python benchmarks/long_log.py --render      # results/long_log.md from its JSON
 
-Results: benchmarks/results/long_log.md (and .json).
+Each size is a 4-run log (±0.157, ±0.08 rad) at 10 kHz written by ``synthesize`` and fitted
+by ``hdid.fit`` in a fresh process, cold (``HDID_NO_CACHE=1``): wall time and ``ru_maxrss``.
+A size over ``--timeout`` is stopped and recorded as such.
 """
 
 from __future__ import annotations
@@ -23,8 +20,7 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, ROOT, cpu_model, src_fingerprint  # noqa: E402
+from _common import cpu_model, interpretation_section, parse_or_render, src_fingerprint, write_result
 
 RATE = 10_000.0
 AMPLITUDES = [0.157, -0.157, 0.08, -0.08]
@@ -69,28 +65,8 @@ def one(n: int, timeout: float, tmp: Path) -> dict:
             "simulate_s": sim_s, "process_s": wall, **res, "status": "ok"}
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--samples", default="1000,2500,5000,10000,25000",
-                    help="samples per run, comma-separated")
-    ap.add_argument("--timeout", type=float, default=600.0, help="per fit [s]")
-    ap.add_argument("--out", default=str(RESULTS / "long_log"))
-    args = ap.parse_args()
-    sizes = [int(x) for x in args.samples.split(",")]
-    rows = []
-    with tempfile.TemporaryDirectory() as tmp:
-        for n in sizes:
-            load = os.getloadavg()[0]
-            r = one(n, args.timeout, Path(tmp))
-            r["load_before"] = load
-            rows.append(r)
-            print(json.dumps(r), flush=True)
-            if r["status"] != "ok":
-                break
-    meta = {"cpu": cpu_model(), "affinity": sorted(os.sched_getaffinity(0)),
-            "src": src_fingerprint(), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
-            "load_after": os.getloadavg()[0], "rate_hz": RATE, "amplitudes": AMPLITUDES}
-    Path(args.out + ".json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=2) + "\n")
+def render(res: dict) -> str:
+    meta = res["meta"]
     lines = [
         "# Fit time and peak memory vs log length (`benchmarks/long_log.py`)", "",
         f"{meta['date']}, {meta['cpu']}, CPU affinity {meta['affinity']}, src {meta['src']}; "
@@ -98,13 +74,34 @@ def main() -> None:
         "| samples/run | rows | CSV [MB] | read [s] | fit [s] | peak RSS [MB] | k1 | RMS [counts] | load avg before | status |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for r in rows:
+    for r in res["rows"]:
         f = lambda k, fmt: (format(r[k], fmt) if k in r else "–")  # noqa: E731
         lines.append(f"| {r['samples_per_run']} | {r['rows']} | {f('mb', '.2f')} | {f('read_s', '.2f')} | "
                      f"{f('fit_s', '.1f')} | {f('peak_rss_mb', '.0f')} | {f('k1', '.1f')} | "
                      f"{f('rms_counts', '.3f')} | {r['load_before']:.2f} | {r['status']} |")
-    Path(args.out + ".md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    return "\n".join([*lines, "", *interpretation_section(res)])
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--samples", default="1000,2500,5000,10000,25000",
+                    help="samples per run, comma-separated")
+    ap.add_argument("--timeout", type=float, default=600.0, help="per fit [s]")
+    args = parse_or_render(ap, argv, "long_log", render)
+    if args is None:
+        return
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in (int(x) for x in args.samples.split(",")):
+            load = os.getloadavg()[0]
+            rows.append({**one(n, args.timeout, Path(tmp)), "load_before": load})
+            print(json.dumps(rows[-1]), flush=True)
+            if rows[-1]["status"] != "ok":
+                break
+    meta = {"cpu": cpu_model(), "affinity": sorted(os.sched_getaffinity(0)),
+            "src": src_fingerprint(), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+            "load_after": os.getloadavg()[0], "rate_hz": RATE, "amplitudes": AMPLITUDES}
+    write_result("long_log", {"meta": meta, "rows": rows}, render)
 
 
 if __name__ == "__main__":

@@ -1,26 +1,20 @@
 """Time of ``hdid fit LOG.csv --posterior`` on 4-run paper logs: this tree's sampler, and
 side by side with another tree's (``--old-src``) in the same run, alternating per log.
 
-Run (pinned to one core)::
+    taskset -c 1 python benchmarks/posterior_cli_speed.py [--old-src /tmp/wt-old/src] [--logs 5]
+    python benchmarks/posterior_cli_speed.py --render
 
-    taskset -c 1 python benchmarks/posterior_cli_speed.py [--old-src /tmp/wt-old/src] \
-        [--logs 5] [--seed0 7100] [--timeout 900]
-
-Logs: the shipped ``data/synthetic/csf8_paper.csv`` and ``--logs − 1`` paper-design logs
-from the independent simulator (``generate.make_log``, truths drawn as in
-``posterior_sbc.py``, seeds ``seed0 + i``). Each is fitted and sampled by a fresh
-``python -m hdid.cli fit LOG --posterior -q --json OUT`` process with ``PYTHONPATH`` set to
-the tree under test (the whole process is timed: imports, fit, JIT compilation, mode
-search, sampling), and the JSON's ``posterior_diagnostics`` gives the sampler's own wall
-time, its compile time (this tree only) and its convergence verdict. ``os.getloadavg()``
-beside every run. Writes ``benchmarks/results/posterior_cli_speed.{json,md}``.
+Logs: ``data/synthetic/csf8_paper.csv`` and ``--logs − 1`` paper-design logs of
+``generate.make_log`` (truths drawn as in ``posterior_sbc.py``, seeds ``seed0 + i``), each
+fitted and sampled by a fresh ``hdid fit LOG --posterior -q --json OUT`` process with
+``PYTHONPATH`` set to the tree under test (timed whole: imports, fit, compilation, mode
+search, sampling); its JSON's ``posterior_diagnostics`` gives the sampler's own time and
+its convergence. The load average beside every run.
 """
 
 from __future__ import annotations
 
-import _common  # noqa: F401,E402
 import argparse
-import datetime as _dt
 import json
 import os
 import statistics
@@ -30,9 +24,11 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-RESULTS = ROOT / "benchmarks" / "results"
-SHIPPED = ROOT / "data" / "synthetic" / "csf8_paper.csv"
+import _common
+from _common import DATA, ROOT
+
+NAME = "posterior_cli_speed"
+SHIPPED = DATA / "csf8_paper.csv"
 
 
 def _load():
@@ -120,47 +116,38 @@ def render(res):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--old-src", type=Path)
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--old-src", type=Path, help="another tree's src/, timed beside this one")
     ap.add_argument("--new-src", type=Path, default=ROOT / "src")
-    ap.add_argument("--logs", type=int, default=5)
+    ap.add_argument("--logs", type=int, default=5, help="the shipped log and N-1 drawn ones")
     ap.add_argument("--seed0", type=int, default=7100)
-    ap.add_argument("--timeout", type=float, default=900)
-    ap.add_argument("--only", default="new,old")
-    ap.add_argument("--out-dir", type=Path, default=RESULTS)
-    ap.add_argument("--name", default=None)
-    args = ap.parse_args(argv)
+    ap.add_argument("--timeout", type=float, default=900, help="per process [s]")
+    args = _common.parse_or_render(ap, argv, NAME, render)
+    if args is None:
+        return
+    import numpy as np
     import posterior_sbc as sbc
 
     gen = _common.import_generate()
     tmp = Path(tempfile.mkdtemp())
     logs = [("csf8_paper.csv", SHIPPED)]
-    for i in range(args.logs - 1):
-        import numpy as np
-
-        seed = args.seed0 + i
+    for seed in range(args.seed0, args.seed0 + args.logs - 1):
         truth = sbc.draw_truth(gen, np.random.default_rng(seed), 0.157)
-        d = dict(gen.PAPER_DESIGN, seed=seed)
         p = tmp / f"paper_{seed}.csv"
-        gen.make_log(truth, **d).to_csv(p, index=False)
+        gen.make_log(truth, **dict(gen.PAPER_DESIGN, seed=seed)).to_csv(p, index=False)
         logs.append((p.name, p))
-    args.name = args.name or "posterior_cli_speed"
-    if args.old_src is None:  # this tree alone
-        args.only = "new"
-    res = {"generated": _dt.datetime.now().isoformat(timespec="seconds"),
+    res = {"generated": time.strftime("%Y-%m-%dT%H:%M:%S"),
            "new_src": str(args.new_src), "old_src": str(args.old_src), "rows": []}
-    out = args.out_dir / f"{args.name}.json"
     for name, path in logs:
         row = {"log": name}
-        for k in args.only.split(","):
-            src = args.new_src if k == "new" else args.old_src
-            row[k] = run_cli(src, path, tmp / f"{k}.json", args.timeout)
-            print(name, k, {x: row[k].get(x) for x in ("process_s", "posterior_s", "converged", "rc")},
-                  _load(), flush=True)
+        for k, src in (("new", args.new_src), ("old", args.old_src)):
+            if src is not None:
+                row[k] = run_cli(src, path, tmp / f"{k}.json", args.timeout)
+                print(name, k, {x: row[k].get(x) for x in ("process_s", "posterior_s", "converged", "rc")},
+                      _load(), flush=True)
         res["rows"].append(row)
-        out.write_text(json.dumps(res, indent=1))
-        (args.out_dir / f"{args.name}.md").write_text(render(res))
+        _common.write_result(NAME, res, render, indent=1)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    main()

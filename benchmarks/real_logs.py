@@ -1,30 +1,26 @@
-"""Issue 16, "Must show": hdid on logs it was never tuned for, out of the box.
+"""hdid on logs it was never tuned for, out of the box: every scenario of
+``tests/independent.py`` (an event-driven numpy/scipy generator sharing no code with hdid).
 
-Every scenario of ``tests/independent.py`` (an event-driven numpy/scipy generator that
-shares no code with hdid): a pendulum drop released from a hold with the torque off
-(ratio 1 and 50, 4096-count output encoder), ring-downs that start in motion with no
-friction (analog readings), the paper's design on seven gear sizes from 7 Hz to 435 Hz,
-and the CSF-8 log in other units. Each is fitted with the options a user would type and
-nothing else; for every free parameter the table gives fit, std, truth, z = (fit −
-truth)/std and whether a warning names it. A parameter is "ok" when |z| ≤ 3 or it is
-flagged.
+    python benchmarks/real_logs.py            # ≈ 10 fits, each compiling its own program
+    python benchmarks/real_logs.py --render   # results/real_logs.md from its JSON
 
-Run by hand (slow: ~10 fits, each compiling its own program):
-
-    python benchmarks/real_logs.py            # writes benchmarks/results/real_logs.{md,json}
+Pendulum drops with the torque off (ratio 1 and 50, output encoder), a ring-down in motion
+(analog), the paper's design on seven gear sizes (7–435 Hz), fitted with the options a user
+would type: per free parameter fit, std, truth, z = (fit − truth)/std and whether a warning
+names it ("ok": |z| ≤ 3 or flagged).
 """
 
 from __future__ import annotations
 
-import json
+import argparse
 import math
 import os
 import sys
 import time
-from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent / "tests"))
+from _common import ROOT, parse_or_render, run_meta, write_result
+
+sys.path.insert(0, str(ROOT / "tests"))
 
 import hdid  # noqa: E402
 import independent as ind  # noqa: E402
@@ -63,7 +59,10 @@ def judge(result, truth):
     return rows
 
 
-def main():
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    if parse_or_render(ap, argv, "real_logs", render) is None:
+        return
     out = []
     for label, log, truth, model, key in scenarios():
         load = os.getloadavg()[0]
@@ -83,14 +82,19 @@ def main():
         print(label, f"{wall:.0f} s", "error: " + err if err else
               ", ".join(f"{p['name']} z={p['z']:+.1f}{'*' if p['flagged'] else ''}"
                         for p in row["parameters"]), flush=True)
-    (HERE / "results").mkdir(exist_ok=True)
-    (HERE / "results" / "real_logs.json").write_text(json.dumps(out, indent=1, default=str))
+    write_result("real_logs", {"meta": run_meta(), "rows": out}, render, indent=1)
+
+
+def render(res: dict) -> str:
     lines = ["# hdid on logs from an independent generator (issue 16)", "",
              "`python benchmarks/real_logs.py`; z = (fit − truth)/std; * = named in a warning; "
-             "ok = |z| ≤ 3 or flagged. Wall time includes the compile (load average beside it).",
+             "ok = |z| ≤ 3 or flagged. Wall time includes the compile (load average beside it)."
+             + (f" {res['meta']['note']}" if res["meta"].get("note") else "")
+             + (" Measured {date} on {cpu}, load {load}, src {src}.".format(**res["meta"])
+                if "date" in res["meta"] else ""),
              "", "| scenario | key | key fit / truth | all ok | not ok | wall [s] (load) |",
              "|---|---|---|---|---|---|"]
-    for r in out:
+    for r in res["rows"]:
         if r["error"]:
             lines.append(f"| {r['scenario']} | {r['key']} | error: {r['error']} | no | | "
                          f"{r['wall_s']:.0f} ({r['load']:.1f}) |")
@@ -101,10 +105,8 @@ def main():
         lines.append(f"| {r['scenario']} | {r['key']} | {k['fit']:.5g} ± {k['std']:.2g} / "
                      f"{k['truth']:.5g} | {'yes' if not bad else 'no'} | {', '.join(bad)} | "
                      f"{r['wall_s']:.0f} ({r['load']:.1f}) |")
-    (HERE / "results" / "real_logs.md").write_text("\n".join(lines) + "\n")
+    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":
-    if {"-h", "--help"} & set(sys.argv[1:]):
-        sys.exit(print(__doc__))
     main()
