@@ -1,7 +1,7 @@
-"""The rounding floor measured on the log in hand (``hdid._diagnosis._floor``, from branch
-section "the measured rounding floor") and the report and warning built on it (``hdid._diagnosis._excess``,
-section "the measured rounding floor reported"): the floor against brute force, the threshold's statistics, the generated
-thresholds against the committed calibration, the warning's rule."""
+"""The rounding floor measured on the log in hand (``hdid._diagnosis._floor``) and the
+report and warning built on it (``hdid._diagnosis._excess``;
+``docs/decisions/floor-threshold.md``): the floor against brute force, the threshold's
+statistics, the generated thresholds against the committed calibration, the warning's rule."""
 
 from __future__ import annotations
 

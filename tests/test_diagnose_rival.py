@@ -147,7 +147,7 @@ def test_below_the_floor_a_penalty_gap_the_chi2_difference_contradicts_is_a_riva
         evidence=lambda a, b: R.Evidence(b.fit.cost - a.fit.cost, -1.9, 1.9, -4.3, 1.9,
                                          lr[b.key]))
     # the two D distributions (−1.9 ± 1.9, −4.3 ± 1.9) overlap: power 1.6 < SEPARABLE, so
-    # the penalties' gap is dropped and 2·ln LR alone is the evidence (benchmarks/README.md, "the rival test calibrated by simulation")
+    # the penalties' gap is dropped and 2·ln LR alone is the evidence (docs/decisions/rival-scale.md)
     assert [round(c.floor_gap, 1) for c in results[1:3]] == [-5.5, -7.0]
     assert math.isnan(results[3].floor_gap)  # not strong, not compared
     assert sum("a rival" in n for n in notes) == 2

@@ -11,9 +11,9 @@ substeps.  Most tests use the default (``max_substep = DEFAULT_MAX_SUBSTEP = 0.5
 8 substeps at 250 Hz, 2 at 1 kHz, so ``h = 0.5 ms``, ``ω_n h = 0.183`` at both rates);
 where a test needs an exact count it passes ``substeps=n, max_substep=inf``.
 
-Numerical facts used repeatedly (measured with benchmarks/simulator_schemes.py and an
-exact-substep sweep, 2…32 substeps at 250 Hz and 1 kHz, releases ±0.157, ±0.12, ±0.08,
-0.06 rad at 5 sub-sample phases each):
+Numerical facts used repeatedly (measured with the scheme comparison of
+``docs/decisions/simulator-scheme.md`` and an exact-substep sweep, 2…32 substeps at 250 Hz
+and 1 kHz, releases ±0.157, ±0.12, ±0.08, 0.06 rad at 5 sub-sample phases each):
 
 * Smooth parts: RK4 on an oscillator has a phase error of ``(ω h)^5/120`` per step, so the
   global position error after time ``t`` is ``≈ A·ω t·(ω h)^4/120``.

@@ -38,7 +38,7 @@ Evidence
     asymptotic; at the few dozen effective observations of a 250 Hz log it is not exact,
     so the rules' false-alarm rate is *measured*: clean logs simulated from a fitted base
     model, quantized like the data, diagnosed with every candidate; a false alarm is any
-    verdict but ``adequate`` (``benchmarks/diagnose_calibration.py``; the numbers, per
+    verdict but ``adequate`` (``calibration/diagnose_rates.py``; the numbers, per
     design, in :mod:`hdid._diagnosis._rates`). ``Diagnosis.false_alarm`` reports the rate
     of the design nearest the log (or ``None``, with a warning, when none was measured
     near it).

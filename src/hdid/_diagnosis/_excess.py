@@ -1,6 +1,6 @@
 """The base fit against the rounding floor a correct model leaves on *this* log, reported
-by :func:`hdid.diagnose`, and a warning calibrated on clean logs (issue 19, branch
-section "the measured rounding floor reported"). The verdict rules and the BIC are not touched.
+by :func:`hdid.diagnose`, and a warning calibrated on clean logs
+(``docs/decisions/floor-threshold.md``). The verdict rules and the BIC are not touched.
 
 The BIC floors every model at the white-noise floor ``n − k``
 (:func:`hdid._diagnosis._ladder.bic_value`). An encoder's rounding errors are correlated
@@ -10,7 +10,7 @@ less than that: ``F``, measured on the log (:func:`hdid._diagnosis._floor.fit_fl
 floor" for the BIC while leaving more than a correct model does. :class:`FloorCheck`
 reports the base's ``χ²``, ``F`` with its sd over the grid's phase, ``χ²/F`` and ``n − k``.
 
-How far above ``F`` may a correct model's fit land? ``benchmarks/diagnose_floor.py``
+How far above ``F`` may a correct model's fit land? ``calibration/floor_thresholds.py``
 fits the base model to clean logs simulated from it (as the false-alarm calibration,
 :mod:`hdid._diagnosis._rates`, makes them) and the threshold per design is an order
 statistic of their ``χ²/F`` (:func:`choose`): the ``j``-th largest of ``N``, ``j`` the
@@ -64,7 +64,7 @@ class FloorThreshold:
 
 
 #: Thresholds per design: GENERATED between the markers by ``python
-#: benchmarks/diagnose_floor.py --threshold`` from ``benchmarks/results/diagnose_floor.json``
+#: calibration/floor_thresholds.py --threshold`` from ``calibration/results/floor_thresholds.json``
 #: — never typed by hand (a test checks the two agree).
 # BEGIN GENERATED
 ROWS = (

@@ -13,7 +13,7 @@ step between samples (near every reversal, in the slow creep to rest, at 250 Hz 
 much of a swing) they are nearly equal. A least-squares fit with ``k`` unknowns absorbs
 ``k·σ_q²`` of white noise (the textbook ``E χ² = n − k``); of this correlated error its
 smooth directions (start angles, offsets, release instants, stiffness) absorb far more.
-Measured (section "the measured rounding floor", ``benchmarks/README.md``): a correct model leaves 0.37–0.95 ×
+Measured (``docs/decisions/floor-threshold.md``): a correct model leaves 0.37–0.95 ×
 ``n − k`` on the independent suite's 250 Hz logs (median 0.7), ~0.9 on the calibration's,
 0.83–1.0 on 1 kHz logs; the white floor ``n − k`` hides every fit between the two.
 
@@ -27,10 +27,10 @@ unknowns, weights and trajectory (on white noise the same computation gives
 ``tr(I − H) = n − k``; on a log read on no grid, whose noise is white, that is the floor).
 The spread of ``χ²(c)`` over the phases is large at 250 Hz (sd 0.3–0.9 ``F``; 0.02–0.27
 at 1 kHz), and the nonlinear fit is not its linearisation: how far above ``F`` a clean
-log's fit may land is measured on simulated clean logs (``benchmarks/diagnose_floor.py``),
+log's fit may land is measured on simulated clean logs (``calibration/floor_thresholds.py``),
 not taken from this spread.
 
-The BIC does *not* use ``F`` (the work of section "the measured rounding floor" floored every BIC at ``F``: wrong verdicts
+The BIC does *not* use ``F`` (flooring every BIC at ``F`` was tried, ``docs/decisions/floor-threshold.md``: wrong verdicts
 and false alarms both rose on the independent suite and the calibration; not adopted).
 """
 

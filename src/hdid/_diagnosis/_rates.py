@@ -3,8 +3,8 @@
 A false alarm is a verdict other than ``adequate`` on a clean log: one simulated from a
 fitted base model (hdid's simulator, the design's release angles, rate and length, a
 random sub-sample release instant per run, rounded to the design's encoder), so the base
-model is exactly right. ``benchmarks/diagnose_calibration.py`` measures it per design and
-writes ``benchmarks/results/diagnose_calibration.{json,md}``; the numbers below are
+model is exactly right. ``calibration/diagnose_rates.py`` measures it per design and
+writes ``calibration/results/diagnose_rates.{json,md}``; the numbers below are
 generated from there (with the source they were measured on) and :func:`false_alarm` reports
 the design nearest a log's, or says that none was measured near it.
 
@@ -54,8 +54,8 @@ class DesignRate:
 
 
 #: The measured rates, per design: GENERATED between the markers by ``python
-#: benchmarks/diagnose_calibration.py --measured`` from
-#: ``benchmarks/results/diagnose_calibration.json`` — never typed by hand (a test checks
+#: calibration/diagnose_rates.py --measured`` from
+#: ``calibration/results/diagnose_rates.json`` — never typed by hand (a test checks
 #: the two agree).
 # BEGIN GENERATED
 ROWS = (

@@ -1,6 +1,6 @@
 """Which of two candidates the log favours when the BIC sees neither fit (both below its
 floor): the χ² difference between their optima, against its distribution under the
-rounding alone (issue 19, section "ripple vs kinematic error").
+rounding alone (``docs/decisions/rival-scale.md``).
 
 Where both candidates' fits go below the white-noise floor ``n − k``, the BIC
 (:func:`hdid._diagnosis._ladder.bic_value`) holds both at that floor: their likelihoods
@@ -37,11 +37,11 @@ by the penalty gap 14.6, with the χ² difference favouring the ripple, 2·ln LR
 Where the log cannot tell the two fits apart at all — the evidence it is expected to give
 under either as the truth (:meth:`Evidence.power`) is under ``SEPARABLE`` — the BIC gap
 between two fits it holds at the floor is the penalties' alone (parameters, scan costs),
-a prior, not the data: it is dropped and ``2·ln LR`` alone is the evidence (branch
-section "the rival test calibrated by simulation": logs drawn from 9905's *fitted* ripple, where ``2·ln LR`` ≈ 0, were otherwise
+a prior, not the data: it is dropped and ``2·ln LR`` alone is the evidence (``docs/decisions/rival-scale.md``:
+logs drawn from 9905's *fitted* ripple, where ``2·ln LR`` ≈ 0, were otherwise
 named ``asymmetric_friction`` with confidence on the penalties' 14.5).
 
-Calibration (section "the rival test calibrated by simulation", ``benchmarks/diagnose_rival_calibration.py``): on 89 logs
+Calibration (``calibration/rival_scale.py``, ``calibration/results/rival_scale.md``): on 89 logs
 drawn from the fitted forms of seeds 8905 and 8805 (ripple, kinematic error), 8901
 (backlash, kinematic error) and 9905 (ripple, asymmetric friction), each with a random
 encoder phase and release instants, the z-score of the observed ``D`` under the true form
@@ -74,8 +74,8 @@ MIN_SD = 1.0
 #: as the truth (:meth:`Evidence.power`: ``2·KL`` of the two distributions of ``D``), is
 #: at least this: Kass & Raftery's (1995) "not worth more than a bare mention" ends at
 #: ``2·ln B`` = 2. Below it, across families, the penalties alone would rank the two, and
-#: they are dropped (:func:`rank_within_families`; measured by simulation, branch
-#: section "the rival test calibrated by simulation": logs drawn from 9905's fitted ripple were named ``asymmetric_friction`` on
+#: they are dropped (:func:`rank_within_families`; measured by simulation,
+#: ``docs/decisions/rival-scale.md``: logs drawn from 9905's fitted ripple were named ``asymmetric_friction`` on
 #: the penalty gap ~14.5 alone, with ``2·ln LR`` ≈ 0).
 SEPARABLE = 2.0
 
