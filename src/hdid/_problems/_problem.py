@@ -228,7 +228,7 @@ class Problem(AbstractProblem):
         ``vmap`` over the vectors: under ``vmap`` the loop's event branch (a
         ``lax.cond`` on "any run has an event in this substep") turns into a select that
         runs at every substep; here it stays a branch. Same numbers to rounding
-        (tested); 1.6–2.1× faster for 9–36 vectors (benchmarks/results/posterior_speed.md).
+        (tested); 1.6–2.1× faster for 9–36 vectors (docs/decisions/posterior-moves.md).
         """
         L, R = U.shape[0], self.n_runs
         local = jax.vmap(self._local)(U).reshape(L * R, -1)

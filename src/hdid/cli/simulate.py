@@ -59,7 +59,7 @@ def simulate_cmd(out, amplitudes, rate, duration, hold, offset, counts_per_rev, 
 
     \b
     The default design is the one whose recovery is measured (README, "A short tour";
-    data/synthetic/csf8_rich_1khz.csv; benchmarks/results/posterior_design.md): 8 releases
+    data/synthetic/csf8_rich_1khz.csv; docs/decisions/experiment-design.md): 8 releases
     at four amplitudes (±0.157, ±0.12, ±0.08, ±0.05 rad) sampled at 1 kHz. It determines
     the stiffness, tau_c and tau_s to a few percent and brackets the stick band from both
     sides. The paper's design (--amplitudes 0.157,-0.157,0.157,-0.157 --rate 250
