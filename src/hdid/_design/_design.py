@@ -60,9 +60,6 @@ def design(
     """
     t0 = time.perf_counter()
     result = _as_fit(fit, fit_options)
-    if getattr(result, "problem", None) is not None and not hasattr(result.problem, "release_free"):
-        raise HdidError("design: this is a driven fit; hdid design plans free-motion "
-                        "release tests (fit a free-motion log)")
     base = _candidates.baseline(result)
     if candidates is None:
         cands = _candidates.default_candidates(base, result.model)
@@ -104,6 +101,9 @@ def _as_fit(fit, fit_options):
         except (KeyError, TypeError, ValueError) as exc:
             raise HdidError(f"{fit}: not a fit JSON of hdid ({exc}); give hdid fit's --json "
                             "output or the log itself") from None
+    if type(fit).__name__.endswith("FitResult"):  # a driven fit
+        raise HdidError("design: this is a driven fit; hdid design plans free-motion release "
+                        "tests (give the fit of a free-motion log)")
     from .._fitting._fit import fit as fit_log
 
     return fit_log(fit, **fit_options)
