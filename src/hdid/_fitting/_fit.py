@@ -204,6 +204,12 @@ def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", f
         Un, cn, _, _ = local_fits(p, U0)
         cn = np.where(np.isfinite(cn), cn, np.inf)
         b = int(np.argmin(cn))
+        retry = _untrapped(p, prep, Un[b]) if np.isfinite(cn[b]) else None
+        if retry is not None:  # a limit that never releases runs the log shows moving
+            Ur, cr, _, _ = local_fits(p, retry[None, :])
+            Un, cn = np.concatenate([Un, Ur]), np.concatenate([cn, np.where(
+                np.isfinite(cr), cr, np.inf)])
+            b = int(np.argmin(cn))
         if not np.isfinite(cn[b]):
             return None
         values = {**model.float_values(), **problem.values_np(Un[b])}
@@ -218,8 +224,18 @@ def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", f
     def finish(U, costs, ok, steps):
         return _finish(setup, U, costs, ok, steps, t_start)
 
+    floor = _limits.above_floor(result.n_effective) * result.quantization_floor_rad
+
+    def again(u, cost):  # still above the floor: regular Stribeck restarts from the best
+        if not _data_rms(problem, u, cost) > floor:
+            return None
+        v = {**model.float_values(), **problem.values_np(u)}
+        rows = [_limits.with_values(problem, model, u, r)
+                for r in _limits.stribeck_restarts(v, scales, setup.fixed)]
+        return local_fits(problem, np.asarray(rows)) if rows else None
+
     switch = _limits.KEEP_BETTER_AT_FLOOR or not _limits.reached_floor(result)
-    return _limits.check(result, solutions, wanted, fit_limit, restart, finish, switch)
+    return _limits.check(result, solutions, wanted, fit_limit, restart, finish, switch, again)
 
 
 def _data_rms(problem: Problem, u, cost: float) -> float:

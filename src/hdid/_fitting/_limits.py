@@ -83,6 +83,13 @@ COULOMB_RESTART_SHAPES = tuple((f, d) for f in (0.05, 0.15, 0.4) for d in (1.0, 
 #: friction) with ``c_v`` at its start rule (5 % of critical): poorer basins of clean
 #: logs put ``c_v → 1e-9`` and the damping into the Stribeck shape.
 COULOMB_RESTART_LEVELS = ((1.0 / RESTART_RATIO, 1.0), (0.75, 1.3))
+#: Restarts of a fit still above the floor after its limits (:func:`stribeck_restarts`):
+#: the share of critical damping ``2·√(k_wg·I)`` given to ``c_v`` (``None``: the fit's
+#: own). Poorer basins of clean logs trade the viscous loss (exponential decay) against
+#: the Stribeck shape or a creeping law (``tau_s ≪ tau_c``); the sliding level ``tau_c``
+#: (the linear decrement) is what they keep. Harmonic-drive grease damps 1–10 % of
+#: critical (the clean-floor plant: 1–14 %), so the restarts span 1, 3 and 10 %.
+VISCOUS_RESTART_SHARES = (None, 0.01, 0.03, 0.1)
 #: sd (transformed units) of the prior rows that hold a limit's parameters.
 PIN_SD = 1e-4
 #: Grid starts of a limit's own fit, beside the warm start at the full fit.
@@ -193,6 +200,26 @@ def limits_of(model, fixed) -> list[Limit]:
     return out
 
 
+def stribeck_restarts(values: dict, scales, fixed) -> list[dict]:
+    """Full-model restarts for a fit still above the floor after its limits: a regular
+    Stribeck law (``tau_s`` 1.3, ``tau_c`` 0.75 × the fitted sliding level ``tau_c``) in
+    the Coulomb restarts' shapes (``COULOMB_RESTART_SHAPES``), with ``c_v`` at the fit's
+    own value and at ``VISCOUS_RESTART_SHARES`` of critical damping (module constants);
+    empty unless the model has a free Stribeck law and a free ``c_v``."""
+    names = ("tau_c", "tau_s", "v_s", "delta", "c_v")
+    if set(names) & set(fixed) or not all(n in values for n in names):
+        return []
+    level = values["tau_c"]
+    critical = 2.0 * math.sqrt(scales.k_wg * scales.inertia)
+    rows = []
+    for share in VISCOUS_RESTART_SHARES:
+        c_v = values["c_v"] if share is None else share * critical
+        for f, d in COULOMB_RESTART_SHAPES:
+            rows.append({"tau_c": 0.75 * level, "tau_s": 1.3 * level, "v_s": f * scales.speed,
+                         "delta": d, "c_v": c_v})
+    return rows
+
+
 def vanishing(result, limit: Limit) -> bool:
     """Whether ``result`` shows a symptom that ``limit``'s term may vanish (module doc)."""
     if limit.key == "coulomb":
@@ -296,14 +323,17 @@ class LimitOutcome:
                 "fits_better": bool(d < -SAME_MARGIN * max(abs(chi2_fit), 1.0))}
 
 
-def check(result, solutions, limits, fit_limit, restart, finish, switch: bool = True) -> object:
+def check(result, solutions, limits, fit_limit, restart, finish, switch: bool = True,
+          again=None) -> object:
     """Fit ``limits`` for ``result``, restart the full model from each, keep the best.
 
     ``solutions`` ``(U, costs, ok, steps)``: the full model's local fits so far;
     ``fit_limit(limit)`` → :class:`LimitOutcome` (or ``None``); ``restart(limit,
     outcome)`` → ``(U, costs, ok, steps)`` of the full model's local fits started next to
     the limit's optimum (``limit.nudges``); ``finish(U, costs, ok, steps)`` analyses the
-    best (``switch`` False: no restarts, the result is kept and only named). Returns the
+    best (``switch`` False: no restarts, the result is kept and only named); ``again(u,
+    cost)`` → ``(U, costs, ok, steps)`` or ``None``: more full-model restarts from the best
+    optimum so far (:func:`stribeck_restarts`, key ``"stribeck"``). Returns the
     result (a new one when a restart won) with ``limits`` (list of dicts) and
     ``restarted_from`` (the limit key, or ``None``) set, and the warnings."""
     U, costs, ok, steps = (np.asarray(a) for a in solutions)
@@ -324,6 +354,16 @@ def check(result, solutions, limits, fit_limit, restart, finish, switch: bool = 
                                            costs[:-len(c1)], np.inf)))
             if c < cur * (1 - SAME_MARGIN):
                 won = lim.key
+    if switch and again is not None:
+        cf = np.where(np.isfinite(costs), costs, np.inf)
+        b = int(np.argmin(cf))
+        more = again(U[b], float(cf[b]))
+        if more is not None and len(more[0]):
+            U1, c1, ok1, s1 = (np.asarray(a) for a in more)
+            U, costs = np.concatenate([U, U1]), np.concatenate([costs, c1])
+            ok, steps = np.concatenate([ok, ok1]), np.concatenate([steps, s1])
+            if float(np.min(np.where(np.isfinite(c1), c1, np.inf))) < cf[b] * (1 - SAME_MARGIN):
+                won = "stribeck"
     if won is not None:
         result = finish(U, costs, ok, steps)
     chi2_fit = data_chi2(result.problem, result.u, _cost_of(result, U, costs))
