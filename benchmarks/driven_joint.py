@@ -112,13 +112,7 @@ def narrowing() -> dict:
 
 
 def _fmt(x):
-    if x is None:
-        return "—"
-    if x == "fixed":
-        return "fixed"
-    if math.isinf(x):
-        return "∞"
-    return f"{100 * x:.2g} %"
+    return "—" if x is None else "fixed" if x == "fixed" else "∞" if math.isinf(x) else f"{100 * x:.2g} %"
 
 
 def render(res: dict) -> str:
