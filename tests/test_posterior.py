@@ -100,7 +100,8 @@ def test_short_chain_is_reproducible_and_summarised(fit, modes):
     assert "stick_band_halfwidth_rad" in d["convergence"]["per_quantity"]
     # every free parameter says how much the data narrowed it
     assert set(s["posterior_width"]) == set(fit.problem.free)
-    assert all(v["verdict"] in ("measured", "partly measured", "assumed")
+    assert all(v["verdict"] in ("measured", "set by the prior (partly measured)",
+                                "set by the prior (assumed)")
                for v in s["posterior_width"].values())
     assert a.chain.shape[0] == 100 and a.burn_in == 40  # burn-in run and discarded
     # the walkers started from the optima find_modes kept; their shares are reported
@@ -376,7 +377,8 @@ def test_prior_width_is_the_box_the_linear_prior_or_the_gaussian(fit):
 
 def test_width_ratio_tells_measured_from_assumed(fit):
     """Draws 100× narrower than every prior read "measured"; draws as wide as the prior
-    of a parameter read "assumed" for it."""
+    of a parameter read "set by the prior (assumed)" for it (issue 34: "set by the prior"
+    wherever the width ratio is above 0.5)."""
     prob = fit.problem
     P = prob.n_physical
     u = np.asarray(fit.u, dtype=float)
@@ -388,7 +390,8 @@ def test_width_ratio_tells_measured_from_assumed(fit):
     assert all(v["verdict"] == "measured" for v in w.values())
     draws[:, 0] = u[0] + psd[0] * rng.standard_normal(4000)
     w = width_ratios(prob, draws, u, PRIOR_HALF_WIDTH, lin)
-    assert w[prob.free[0]]["verdict"] == "assumed"
+    assert w[prob.free[0]]["verdict"] == "set by the prior (assumed)"
+    assert w[prob.free[0]]["set_by_prior"] and not w[prob.free[1]]["set_by_prior"]
     assert w[prob.free[0]]["posterior_over_prior_width"] == pytest.approx(1.0, abs=0.05)
 
 

@@ -58,9 +58,12 @@ def test_gaussian_prior_replaces_the_default_and_orders_the_friction(fit):
     # v_s's Gaussians (the declared one and the user's) are proper: no box for v_s
     assert np.isfinite(float(base.log_prob(jnp.asarray(far))))
     assert np.isfinite(float(user.log_prob(jnp.asarray(far))))
-    # a parameter without one keeps the default's box (tau_s: flat in its log, ±7)
+    # tau_s: its default log-normal (issue 34, decision (a)) is proper, no box; under the
+    # flat option (default_prior="flat") it keeps the box (flat in its log, ±7)
     far = _x(fit, {free.index("tau_s"): PRIOR_HALF_WIDTH + 1.0})
-    assert float(base.log_prob(jnp.asarray(far))) == -np.inf
+    assert np.isfinite(float(base.log_prob(jnp.asarray(far))))
+    flat = posterior_density(fit, sample_linear=(), default_prior="flat").lp
+    assert float(flat.log_prob(jnp.asarray(far))) == -np.inf
     vals = fit.values
     ordered = posterior_density(fit, sample_linear=(), prior={
         "tau_c": (vals["tau_c"], 1.0), "tau_s": (vals["tau_s"], 1.0)}).lp
@@ -89,7 +92,7 @@ def test_width_ratio_uses_the_user_prior_sd(fit):
     w = width_ratios(prob, draws, u, PRIOR_HALF_WIDTH, dens.lin, dens.lp.gauss_prior)
     # sd of 4000 normal draws: relative se 1/√8000 ≈ 0.011; 0.05 is > 4 se
     assert w["v_s"]["posterior_over_prior_width"] == pytest.approx(1.0, abs=0.05)
-    assert w["v_s"]["verdict"] == "assumed"
+    assert w["v_s"]["verdict"] == "set by the prior (assumed)" and w["v_s"]["set_by_prior"]
 
 
 def test_chunked_batch_equals_one_loop(fit, monkeypatch):
@@ -123,18 +126,20 @@ def test_mode_search_under_a_user_prior_minimises_the_posterior(fit):
     u = np.asarray(fit.u, dtype=float)
     base_rows = float(np.sum(np.asarray(prob.prior_residuals(u)) ** 2))
     own_vs = float(((u[i] - prob.prior_mean[i]) / prob.prior_sd[i]) ** 2)
-    # the other rows G replaces: the declared posterior priors (delta's), each in place of
-    # its least-squares weak row
+    # the other rows G replaces: the default posterior priors (issue 34: every free
+    # parameter's), each in place of its least-squares weak row where it has one
     on = [k for k in np.flatnonzero(G[2] > 0) if k != i]
+    lsq = np.asarray(prob.prior_on, dtype=bool)
     others = sum(float(((u[k] - G[0, k]) / G[1, k]) ** 2
-                       - ((u[k] - prob.prior_mean[k]) / prob.prior_sd[k]) ** 2) for k in on)
+                       - (((u[k] - prob.prior_mean[k]) / prob.prior_sd[k]) ** 2 if lsq[k] else 0.0))
+                 for k in on)
     got = float(view.problem.cost(jnp.asarray(u)) - prob.cost(jnp.asarray(u)))
     assert got == pytest.approx(9.0 - own_vs + others, abs=1e-9)
     assert base_rows >= own_vs
     assert starts.shape == (1 + N_PRIOR_STARTS, u.size)
     assert starts[0, i] == pytest.approx(u[i] + 0.9)
-    kept = [k for k in range(u.size) if k >= G.shape[1] or G[2, k] == 0]
-    assert np.all(starts[:, kept] == u[kept])  # only the Gaussians' parameters are drawn
+    kept = [k for k in range(u.size) if k >= G.shape[1] or G[2, k] < 2]
+    assert np.all(starts[:, kept] == u[kept])  # only the user's priors' parameters are drawn
     assert np.array_equal(np.asarray(view.u), u) and fit.problem is prob
     assert with_user_prior(fit, None) == (fit, None)
 
@@ -163,7 +168,9 @@ def test_stribeck_priors_are_relative_to_the_log_and_physical(fit):
     assert scales.speed >= s0.prep.speed
     assert float(prob.prior_sd[i]) == 2.0 and float(prob.prior_sd[j]) == 2.0
     G, pairs = gaussian_prior(prob, None)
-    assert G[2, i] == 1.0 and G[2, j] == 1.0 and G[2].sum() == 2.0
+    assert G[2, i] == 1.0 and G[2, j] == 1.0
+    # with the flat option v_s and delta are the only Gaussian priors (as before issue 34)
+    assert gaussian_prior(prob, None, "flat")[0][2].sum() == 2.0
     assert G[0, i] == pytest.approx(float(prob.prior_mean[i]), rel=1e-12) and G[1, i] == 1.0
     m, s = G[0, j], G[1, j]
     lo, med, hi = (float(from_unconstrained(specs["delta"], m + z * s, np)) for z in (-1.96, 0, 1.96))
@@ -209,17 +216,19 @@ def test_sampling_coordinates_and_orders_are_declared_by_the_effects(fit):
     assert [free.index("tau_c"), free.index("tau_s")] in pairs.tolist()
 
 
-def test_tau_c_default_prior_is_flat_in_value_and_a_user_prior_replaces_it(fit):
-    """The default posterior prior of tau_c is flat in its value (the Coulomb limit is a
-    law of its own, effects/stribeck.py): moving tau_c by Δ in log changes the default
-    log-density by exactly Δ more than a log-flat prior does (density ∝ e^u in u), at two
-    points; the box stays (±7 in log). A Gaussian of the user's on tau_c (and the
-    calibration's ``--prior physical``, which gives one) replaces it: no value-flat term."""
+def test_tau_c_flat_option_is_flat_in_value_and_a_user_prior_replaces_it(fit):
+    """Under the flat option (``default_prior="flat"``; the default before issue 34's
+    decision (a)) the prior of tau_c is flat in its value (the Coulomb limit is a law of
+    its own, effects/stribeck.py): moving tau_c by Δ in log changes the log-density by
+    exactly Δ more than a log-flat prior does (density ∝ e^u in u), at two points; the box
+    stays (±7 in log). A Gaussian of the user's on tau_c (and the calibration's ``--prior
+    physical``, which gives one) replaces it: no value-flat term."""
     prob = fit.problem
     free = list(prob.free)
     j = free.index("tau_c")
-    dflt = posterior_density(fit, sample_linear=())
-    logflat = posterior_density(fit, sample_linear=(), linear_prior=("k2", "c_v"))
+    dflt = posterior_density(fit, sample_linear=(), default_prior="flat")
+    logflat = posterior_density(fit, sample_linear=(), linear_prior=("k2", "c_v"),
+                                default_prior="flat")
     assert dflt.lin[j] == 1.0 and logflat.lin[j] == 0.0
     assert [free[i] for i in np.flatnonzero(dflt.lin)] == ["k2", "tau_c", "c_v"]
     x0 = _x(fit)
@@ -230,7 +239,8 @@ def test_tau_c_default_prior_is_flat_in_value_and_a_user_prior_replaces_it(fit):
         assert a - b == pytest.approx(d, abs=1e-9)
     assert float(dflt.lp.log_prob(jnp.asarray(_x(fit, {j: -PRIOR_HALF_WIDTH - 0.1})))) == -np.inf
     vals = fit.values
-    user = posterior_density(fit, sample_linear=(), prior={"tau_c": (vals["tau_c"], 0.3)})
+    user = posterior_density(fit, sample_linear=(), prior={"tau_c": (vals["tau_c"], 0.3)},
+                             default_prior="flat")
     assert user.lin[j] == 0.0 and user.lin[free.index("c_v")] == 1.0
     x = _x(fit, {j: -0.7})
     a = float(user.lp.log_prob(jnp.asarray(x)) - user.lp.log_prob(jnp.asarray(x0)))

@@ -16,6 +16,7 @@ _LAZY = {
     "fit": "._fitting._fit",
     "fit_many": "._fitting._batch",
     "sample_posterior": "._posterior",
+    "PosteriorResult": "._posterior",
     "FitResult": "._results._result",
     "Model": "._models._model",
     "DEFAULT_INERTIA": "._models._model",
@@ -98,7 +99,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from ._errors import FitError, HdidError, LogError
     from ._fitting._batch import fit_many
     from ._config import configure
-    from ._posterior import sample_posterior
+    from ._posterior import PosteriorResult, sample_posterior
     from ._diagnosis._diagnose import Diagnosis, diagnose
     from ._diagnosis._ladder import model_ladder
     from ._design._design import design

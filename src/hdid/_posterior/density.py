@@ -17,14 +17,18 @@ autocorrelated beyond what i.i.d. noise gives, the log-likelihood is tempered by
 effective-sample-size factor ``(1 − ρ₁)/(1 + ρ₁)``.
 
 Priors (documented defaults, all in the sampled space):
-- physical parameters: the problem's own priors (``Problem.prior_mean``, ``prior_sd``,
-  ``prior_on``: the Stribeck law's physical priors on ``v_s`` and ``delta``, whose footing
-  is in ``effects/stribeck.py``, the inertia prior when the inertia is free), the orders
-  effects declare (``tau_s ≥ tau_c``: zero density otherwise, :func:`ordered_pairs`), times
-  a flat prior in the transformed space (flat in log for positive ones)
-  within ``± PRIOR_HALF_WIDTH`` of the least-squares value; the coefficients of terms that
-  may vanish (declared ``flat_in_value``: ``k2``, ``c_v``, ``tau_c``) are flat in their value
-  instead (same box): a log-flat prior gives their "absent" end — no cubic spring, no
+- physical parameters, by default (issue 34, decision (a); :mod:`.priors`): Gaussian in
+  the transformed space — log-normal for every positive scale (``k1``, ``k2``, ``tau_c``,
+  ``tau_s``, ``c_v``, effects' amplitudes), centred on a scale of the log in hand, 95 % a
+  factor 10.5 either way; ``v_s`` and ``delta`` the Stribeck law's physical priors — as
+  each effect declares them (``posterior_prior``); a user's ``prior=`` replaces them; the
+  orders effects declare (``tau_s ≥ tau_c``: zero density otherwise, :func:`ordered_pairs`).
+  A parameter without a Gaussian prior (an ``"identity"`` one, or every positive one with
+  ``default_prior="flat"``) has the earlier flat prior: the problem's own rows
+  (``Problem.prior_on``, the inertia prior when the inertia is free) times a flat prior in
+  the transformed space within ``± PRIOR_HALF_WIDTH`` of the least-squares value, flat in
+  the value for the coefficients of terms that may vanish (declared ``flat_in_value``:
+  ``k2``, ``c_v``, ``tau_c``; same box) — the flat option, not the default: a log-flat prior gives their "absent" end — no cubic spring, no
   viscous term, the Coulomb limit of the Stribeck law (a Stribeck hump on a viscous
   line) — equal mass per decade down to the box's floor wherever the data cannot exclude
   it (the paper design's k2 → 0; the shipped log's tau_c, flat from 3 mN m to < 10 µN m:
@@ -298,56 +302,44 @@ class PosteriorDensity(NamedTuple):
     u_fit: np.ndarray
 
 
-def gaussian_prior(problem: Problem, prior: dict | None):
-    """``(3, P)`` array (mean, sd, on) of the Gaussian prior in the transformed space that
-    ``prior`` asks for, and the ordered pairs (:func:`ordered_pairs`, imposed with or
-    without a prior of the user's). ``prior`` maps a free physical parameter's name to
-    ``(centre value, sd)``: the centre in the parameter's unit, the sd in its transformed
-    space — log for positive parameters (a log-normal: 0.2 is ±20 %), logit of the
-    interval for ``delta``. ``None``: ``(None, ordered pairs)``."""
-    prior = {**declared_prior(problem), **(prior or {})}
-    if not prior:
-        return None, ordered_pairs(problem)
-    from .._models._transforms import to_unconstrained
+def gaussian_prior(problem: Problem, prior: dict | None, default: str = "weak",
+                   exclude: tuple[str, ...] = ()):
+    """``(3, P)`` array (mean, sd, on) of the Gaussian priors in the transformed space —
+    the defaults (:func:`~hdid._posterior.priors.default_priors`: ``default="weak"``, the
+    log-normal priors around the log's scales; ``"flat"``, the effects' tuple priors only)
+    with the user's ``prior`` in place of those it names — and the ordered pairs
+    (:func:`ordered_pairs`, imposed with or without a prior of the user's). ``on`` is 2 for
+    a user's prior, 1 for a default one, 0 for a flat one (the mode search also starts
+    from draws of the user's priors, :func:`~hdid._posterior.modes.with_user_prior`).
+    ``prior`` maps a free physical parameter's name to ``(centre value, sd)``: the centre
+    in the parameter's unit, the sd in its transformed space — log for positive
+    parameters (a log-normal: 0.2 is ±20 %), logit of the interval for ``delta``.
+    ``exclude``: names whose default prior is left flat (an explicit ``linear_prior``).
+    ``(None, ordered pairs)`` when no parameter has a Gaussian prior."""
+    from .priors import default_priors, with_user
 
-    specs = problem.base.parameter_specs()
     free = list(problem.free)
+    prior = dict(prior or {})
     unknown = [n for n in prior if n not in free]
     if unknown:
         from .errors import PosteriorError
 
         raise PosteriorError(f"the prior (prior= / --prior NAME=VALUE,SD) names {unknown}, "
                              f"not free physical parameters of this fit (free: {free})")
-    G = np.zeros((3, len(free)))
-    G[1] = 1.0
     for n, (centre, sd) in prior.items():
         if not (np.isfinite(centre) and np.isfinite(sd) and sd > 0):
             from .errors import PosteriorError
 
             raise PosteriorError(f"the prior of {n} (prior= / --prior {n}=VALUE,SD) is "
                                  f"{(centre, sd)}: give a finite centre and an sd > 0")
-        i = free.index(n)
-        G[:, i] = float(to_unconstrained(specs[n], centre)), float(sd), 1.0
-    return G, ordered_pairs(problem)
-
-
-def declared_prior(problem: Problem) -> dict:
-    """The posterior priors the effects declare (``AbstractEffect.posterior_prior``) for
-    free parameters, as ``{name: (centre value, sd)}``; a centre of ``None`` is the
-    least-squares prior row's centre (the log's own start)."""
-    from .._models._transforms import from_unconstrained
-
-    specs = problem.base.parameter_specs()
-    free = list(problem.free)
-    out = {}
-    for e in problem.base.effects:
-        for n, (centre, sd) in e.posterior_prior.items():
-            if n in free:
-                if centre is None:
-                    u = float(np.asarray(problem.prior_mean)[free.index(n)])
-                    centre = float(from_unconstrained(specs[n], u, np))
-                out[n] = (centre, sd)
-    return out
+    specs = with_user(default_priors(problem, default), problem, prior)
+    G = np.zeros((3, len(free)))
+    G[1] = 1.0
+    for i, n in enumerate(free):
+        p = specs[n]
+        if np.isfinite(p.mean) and (n in prior or n not in exclude):
+            G[:, i] = p.mean, p.sd, 2.0 if n in prior else 1.0
+    return (G if G[2].any() else None), ordered_pairs(problem)
 
 
 def ordered_pairs(problem: Problem) -> np.ndarray | None:
@@ -371,7 +363,8 @@ def declared(specs, flag: str) -> tuple[str, ...]:
 
 
 def posterior_density(fit, sigma_floor=None, linear_prior=None,
-                      sample_linear=None, prior=None) -> PosteriorDensity:
+                      sample_linear=None, prior=None, default_prior: str = "weak"
+                      ) -> PosteriorDensity:
     """:class:`LogPosterior` of ``fit``: tempered by the residuals' lag-1 autocorrelation
     (effective sample size), σ bounded in steps, a flat prior in the value of the
     log-transformed parameters named in ``linear_prior`` and sampling in the value of
@@ -411,6 +404,7 @@ def posterior_density(fit, sigma_floor=None, linear_prior=None,
         )
     u_fit = np.asarray(fit.u, dtype=float)
     specs = prob.base.parameter_specs()
+    explicit = tuple(linear_prior or ())
     if linear_prior is None:
         linear_prior = declared(specs, "flat_in_value")
     if sample_linear is None:
@@ -419,7 +413,7 @@ def posterior_density(fit, sigma_floor=None, linear_prior=None,
                     for n in prob.free])
     samp = np.array([1.0 if (n in sample_linear and specs[n].transform == "log") else 0.0
                      for n in prob.free])
-    G, order = gaussian_prior(prob, prior)
+    G, order = gaussian_prior(prob, prior, default_prior, exclude=explicit)
     if G is not None:
         lin = np.where(G[2] > 0, 0.0, lin)
     lp = LogPosterior(problem=prob, centre=jnp.asarray(u_fit), temper=jnp.asarray(temper),

@@ -199,15 +199,19 @@ def prior_sd(problem, centre, half_width: float, linear_prior: np.ndarray) -> np
 MEASURED_MAX = math.sqrt(0.5)
 #: Above this the data carry less than a fifth of the precision (1 − r² < 0.2): "assumed".
 ASSUMED_MIN = math.sqrt(0.8)
+#: Posterior / prior width above which the report says "set by the prior" (issue 34): the
+#: data carry less than three quarters of the precision (1 − r² < 0.75 for Gaussians).
+SET_BY_PRIOR = 0.5
 
 
 def width_ratios(problem, draws_u: np.ndarray, centre, half_width: float,
                  linear_prior: np.ndarray, gauss_prior=None) -> dict[str, dict]:
     """For each free physical parameter: posterior sd / prior sd in the fit's transformed
-    coordinates, and the verdict ``measured`` (≤ ``MEASURED_MAX``), ``assumed``
-    (> ``ASSUMED_MIN``: the prior, not the data, sets the interval) or ``partly measured``.
+    coordinates, ``set_by_prior`` (> ``SET_BY_PRIOR``) and the verdict ``measured``
+    (≤ ``SET_BY_PRIOR``), ``set by the prior (assumed)`` (> ``ASSUMED_MIN``: the data carry
+    under a fifth of the precision) or ``set by the prior (partly measured)``.
     ``gauss_prior`` (``(3, P)``: mean, sd, on) gives the sd of parameters with a Gaussian
-    prior of the user's."""
+    prior (a default or the user's)."""
     psd = prior_sd(problem, np.asarray(centre, dtype=float), half_width, linear_prior)
     if gauss_prior is not None:
         G = np.asarray(gauss_prior, dtype=float)
@@ -215,6 +219,8 @@ def width_ratios(problem, draws_u: np.ndarray, centre, half_width: float,
     out = {}
     for i, n in enumerate(problem.free):
         r = float(np.std(draws_u[:, i]) / psd[i])
-        verdict = "measured" if r <= MEASURED_MAX else ("assumed" if r > ASSUMED_MIN else "partly measured")
-        out[n] = {"posterior_over_prior_width": r, "verdict": verdict}
+        verdict = ("measured" if r <= SET_BY_PRIOR else "set by the prior (assumed)"
+                   if r > ASSUMED_MIN else "set by the prior (partly measured)")
+        out[n] = {"posterior_over_prior_width": r, "verdict": verdict,
+                  "set_by_prior": bool(r > SET_BY_PRIOR)}
     return out

@@ -40,7 +40,8 @@ from .moves import (
     _reset_outliers,
     default_moves,
 )
-from .errors import PosteriorError
+from .errors import PosteriorError, one_line_failures, walkers_enough
+from .priors import finish
 from .result import BAND, PosteriorResult, _RunNames
 
 #: The burn-in is run in this many stages, the proposal adapted after each.
@@ -65,27 +66,7 @@ def _no_start(fit):
     )
 
 
-def _one_line_failures(sampler):
-    """``sampler`` with its numerical failures (a singular covariance of a mode or of the
-    adapted proposal, a floating-point error) raised as one-line :class:`PosteriorError`
-    naming the log and what to try; every other error passes unchanged."""
-    import functools
-
-    @functools.wraps(sampler)
-    def wrapped(fit, *args, **kwargs):
-        try:
-            return sampler(fit, *args, **kwargs)
-        except (np.linalg.LinAlgError, FloatingPointError, OverflowError) as exc:
-            raise PosteriorError(
-                f"{getattr(fit, 'source', '<fit>')}: the posterior sampler failed numerically "
-                f"({type(exc).__name__}: {exc}); read the fit's warnings (a parameter the log "
-                "does not determine: fix it, --fix / fix=), or try method='smc' (--sampler smc) "
-                "or another seed (--seed / seed=)") from exc
-
-    return wrapped
-
-
-@_one_line_failures
+@one_line_failures
 def sample_posterior(
     fit,
     *,
@@ -106,6 +87,7 @@ def sample_posterior(
     n_particles: int | None = None,
     prior: dict | None = None,
     log=None,
+    default_prior: str = "weak",
 ) -> PosteriorResult:
     """Sample the posterior of ``fit``'s parameters with emcee, until converged.
 
@@ -142,6 +124,17 @@ def sample_posterior(
     lost: benchmarks/results/posterior_flow.md; so did emcee in the latent space of a flow
     fitted to an SMC pilot, and that flow as the independence move, under the physical
     priors: benchmarks/README.md, section "normalizing-flow preconditioning".)
+
+    Priors (:mod:`~hdid._posterior.priors`, issue 34's decision (a)): every positive
+    physical scale an effect declares (``k1``, ``k2``, ``tau_c``, ``tau_s``, ``c_v``, any
+    effect's amplitudes) is log-normal around a scale of the log in hand, its central 95 %
+    a factor 10.5 either way; ``v_s`` and ``delta`` keep the Stribeck law's physical priors;
+    ``prior=`` (``--prior``) replaces the default of the parameters it names;
+    ``default_prior="flat"`` restores the earlier flat priors (flat in log, in value for
+    ``k2``, ``tau_c``, ``c_v``; not recommended: mass on limits the data do not support).
+    The result's ``priors`` (JSON ``posterior_prior``) gives each parameter's prior centre,
+    95 % range, where its scale came from and its posterior/prior width ("set by the prior"
+    above 0.5).
 
     The kept chain grows (checked after ``chunk`` steps, then at every growth by
     ``CHECK_GROWTH``) until it converges — every sampled quantity and the stick-band
@@ -205,10 +198,12 @@ def sample_posterior(
                 "method='smc' (--sampler smc), or sample with method='emcee' (the default)")
 
         progress = (sys.stderr.isatty() if progress is None else bool(progress)) and sys.stderr.isatty()
+        gaussian_prior(fit.problem, prior, default_prior)  # refused before anything runs
         fit, basin = basin_check(fit, log)
-        return _with_basin(sample_smc(fit, n_particles=n_particles or N_PARTICLES, seed=seed,
-                                      progress=progress, sigma_floor=sigma_floor, modes=modes,
-                                      prior=prior), basin)
+        return finish(sample_smc(fit, n_particles=n_particles or N_PARTICLES, seed=seed,
+                                  progress=progress, sigma_floor=sigma_floor, modes=modes,
+                                  prior=prior, default_prior=default_prior), basin,
+                      prior, default_prior, PRIOR_HALF_WIDTH)
     if method != "emcee":
         raise PosteriorError(f"method (--sampler) must be 'smc' or 'emcee', not {method!r}")
     if likelihood not in ("auto", "gaussian"):
@@ -218,19 +213,19 @@ def sample_posterior(
 
     t0 = time.perf_counter()
     # options that cannot work are refused before anything runs (one line, exit 2)
-    _walkers_enough(n_walkers, fit.problem.n_unknowns + 1)
-    gaussian_prior(fit.problem, prior)
+    walkers_enough(n_walkers, fit.problem.n_unknowns + 1)
+    gaussian_prior(fit.problem, prior, default_prior)
     fit, basin = basin_check(fit, log)
     progress = (sys.stderr.isatty() if progress is None else bool(progress)) and sys.stderr.isatty()
     prob: Problem = fit.problem
     warnings: list[str] = []
-    dens = posterior_density(fit, sigma_floor, linear_prior, sample_linear, prior)
+    dens = posterior_density(fit, sigma_floor, linear_prior, sample_linear, prior, default_prior)
     lp, temper, rho1, lin, bounds, u_fit = (dens.lp, dens.temper, dens.rho1, dens.lin,
                                             dens.bounds, dens.u_fit)
     warnings += dens.warnings
     D = lp.ndim
     W = n_walkers or max(32, 2 * D)
-    _walkers_enough(W, D)
+    walkers_enough(W, D)
 
     def log_prob(X):
         return np.asarray(lp.batch(X))
@@ -397,7 +392,7 @@ def sample_posterior(
     der["noise_sigma_rad"] = np.exp(draws[:, -1])
     widths = width_ratios(prob, chain.reshape(-1, D), u_fit, PRIOR_HALF_WIDTH, lin,
                           lp.gauss_prior)
-    return _with_basin(PosteriorResult(
+    return finish(PosteriorResult(
         samples=phys,
         derived=der,
         chain=chain,
@@ -426,23 +421,7 @@ def sample_posterior(
         compile_s=t_compile,
         stage_s={"mode_search": t_modes, "compile": t_compile, "burn_in": t_burn,
                  "kept_chain": t_kept, "diagnostics": t_diag},
-    ), basin)
-
-
-def _walkers_enough(W: int | None, D: int) -> None:
-    """Refuse fewer than ``2·D`` walkers (emcee's red-blue moves need them)."""
-    if W is not None and W < 2 * D:
-        raise PosteriorError(f"n_walkers (--walkers) = {W}: emcee needs at least 2 × {D} = "
-                             f"{2 * D} walkers for this fit; raise n_walkers (--walkers) to "
-                             f"{2 * D} or more, or leave it out (default max(32, 2·D))")
-
-
-def _with_basin(result: PosteriorResult, basin) -> PosteriorResult:
-    """``result`` with the basin check's record, its statement first in the warnings."""
-    result.basin = basin.to_dict()
-    if basin.statement:
-        result.warnings.insert(0, basin.statement)
-    return result
+    ), basin, prior, default_prior, PRIOR_HALF_WIDTH)
 
 
 def _tune(counted, burn_draws, D):

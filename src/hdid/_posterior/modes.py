@@ -222,9 +222,10 @@ N_PRIOR_STARTS = 8
 
 
 def with_user_prior(fit, gauss_prior, seed: int = 0, n_prior_draws: int = N_PRIOR_STARTS):
-    """``(fit or a view of it, extra starts)``: with a user prior ``(3, P)`` (mean, sd, on
-    in the transformed space) the problem's prior rows become that prior where it is on,
-    and the fit's optimum with those parameters at the prior's centre, and at
+    """``(fit or a view of it, extra starts)``: with Gaussian priors ``(3, P)`` (mean, sd,
+    on in the transformed space; :func:`~hdid._posterior.density.gaussian_prior`) the
+    problem's prior rows become those priors where they are on, and — for the user's own
+    (on = 2) — the fit's optimum with those parameters at the prior's centre, and at
     ``n_prior_draws`` draws from it, are more starts."""
     if gauss_prior is None:
         return fit, None
@@ -238,11 +239,16 @@ def with_user_prior(fit, gauss_prior, seed: int = 0, n_prior_draws: int = N_PRIO
     on_all = on | np.asarray(prob.prior_on, dtype=bool)
     prob2 = eqx.tree_at(lambda p: (p.prior_mean, p.prior_sd, p.prior_on), prob,
                         (jnp.asarray(mean), jnp.asarray(sd), jnp.asarray(on_all)))
+    # more starts only from the user's priors (on = 2): the defaults (on = 1) are wide
+    # (a factor 10 either way) and the fit's optimum already lies well inside them
+    user = G[2] > 1.5
+    if not user.any():
+        return _PriorFit(fit, prob2), None
     u0 = np.asarray(fit.u, dtype=float).copy()
-    u0[: len(on)] = np.where(on, G[0], u0[: len(on)])
+    u0[: len(on)] = np.where(user, G[0], u0[: len(on)])
     starts = np.tile(u0, (1 + n_prior_draws, 1))
     z = np.random.default_rng(seed).standard_normal((n_prior_draws, len(on)))
-    starts[1:, : len(on)] = np.where(on, G[0] + G[1] * z, u0[: len(on)])
+    starts[1:, : len(on)] = np.where(user, G[0] + G[1] * z, u0[: len(on)])
     return _PriorFit(fit, prob2), starts
 
 

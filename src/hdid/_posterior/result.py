@@ -8,7 +8,6 @@ from typing import Any
 import numpy as np
 
 from .._config import float64_methods
-from .density import derived_np, to_physical
 
 #: The stick-band half-width: sampled quantities' companion in every convergence test.
 BAND = "stick_band_halfwidth_rad"
@@ -57,6 +56,8 @@ class PosteriorResult:
     method: str = "emcee"                    # "smc" (tempered SMC) or "emcee"
     smc: dict = field(default_factory=dict)  # SMC: runs, particles, temperatures, evidence
     basin: dict = field(default_factory=dict)  # basin.BasinCheck.to_dict(): residual vs floor
+    priors: dict = field(default_factory=dict)  # name -> priors.prior_table row (+ width)
+    default_prior: str = "weak"              # "weak" (log-normal around the log's scales) or "flat"
 
     @property
     def converged(self) -> bool:
@@ -84,6 +85,7 @@ class PosteriorResult:
         return finite({
             "posterior": s,
             "posterior_width": dict(self.widths),
+            "posterior_prior": {"default": self.default_prior, "parameters": dict(self.priors)},
             "posterior_diagnostics": {
                 "method": self.method,
                 "engine": ("tempered SMC alone" if self.method == "smc" else
@@ -127,14 +129,29 @@ class PosteriorResult:
         lines = []
         if self.basin and self.basin.get("statement"):
             lines.append(self.basin["statement"])
-        lines.append("posterior (median, 68 % and 95 % intervals; posterior/prior width):")
+        lines.append("posterior (median, 68 % and 95 % intervals | prior median and 95 % "
+                     "range | posterior/prior width):")
         for name, s in self.summary().items():
             w = self.widths.get(name)
-            tail = f"  {w['posterior_over_prior_width']:.2g} {w['verdict']}" if w else ""
+            p = self.priors.get(name)
+            tail = ""
+            if p is not None:
+                lo, hi = p["ci95"] if p["ci95"] else (float("nan"), float("nan"))
+                mid = f"{p['centre']:.3g}" if p["centre"] is not None else "flat"
+                tail += f"  | {mid} [{lo:.3g}, {hi:.3g}]"
+            if w:
+                tail += (f"  | {w['posterior_over_prior_width']:.2g}"
+                         + ("  set by the prior" if w.get("set_by_prior") else ""))
             lines.append(
                 f"  {name:<26} {s['median']:12.5g}  [{s['ci68'][0]:.4g}, {s['ci68'][1]:.4g}]"
                 f"  [{s['ci95'][0]:.4g}, {s['ci95'][1]:.4g}]{tail}"
             )
+        if self.priors:
+            which = ("weak: log-normal around the log's own scales" if self.default_prior == "weak"
+                     else "flat (default_prior='flat')")
+            lines.append(f"  priors ({which}); where each scale came from:")
+            for name, p in self.priors.items():
+                lines.append(f"    {name:<8} {p['kind']}: {p['source']}")
         if self.method == "smc":
             z = self.smc.get("log_evidence", [])
             lines.append(
@@ -177,24 +194,34 @@ class PosteriorResult:
         return "\n".join(lines)
 
     def to_inference_data(self):
-        """arviz InferenceData (posterior group: physical and derived quantities)."""
+        """arviz InferenceData (posterior group: physical and derived quantities, walkers
+        — or SMC runs — as chains; the draws of :attr:`samples` and :attr:`derived`)."""
         import arviz as az
 
-        steps, walkers, _ = self.chain.shape
-        post = self.chain[self.burn :: self.thin]  # (S, W, D)
-        flat = post.reshape(-1, post.shape[-1])
-        phys = to_physical(self.fit.problem, flat)
-        der = derived_np(self.fit.problem, flat)
+        walkers = self.chain.shape[1]
         data = {}
-        shape = (walkers, post.shape[0])
-        for k, v in {**phys, **der}.items():
-            data[k.replace("/", "_per_")] = np.asarray(v).reshape(post.shape[0], walkers).T.reshape(shape)
-        data["noise_sigma_rad"] = np.exp(flat[:, -1]).reshape(post.shape[0], walkers).T
+        for k, v in {**self.samples, **self.derived}.items():
+            v = np.asarray(v, dtype=float)
+            data[k.replace("/", "_per_")] = v.reshape(-1, walkers).T
         return az.from_dict(posterior=data, attrs={"source": self.fit.source, "seed": self.seed})
 
     def save(self, path) -> None:
-        """Write the chains as arviz NetCDF (reopen with ``arviz.from_netcdf``)."""
-        self.to_inference_data().to_netcdf(str(path))
+        """Write the posterior as arviz NetCDF: ``arviz.from_netcdf`` reads its chains, and
+        :meth:`load` the whole result back (:mod:`hdid._posterior.saved`)."""
+        from .saved import save
+
+        save(self, path)
+
+    @classmethod
+    def load(cls, path, *, fit=None, effects: dict | None = None) -> PosteriorResult:
+        """Read a posterior written by :meth:`save` (or ``hdid fit --posterior --chains
+        OUT.nc``): draws, chain, diagnostics, warnings, priors and the fit's summary come
+        back; ``fit`` the live :class:`~hdid.FitResult` it was sampled from (default: the
+        saved one, without its log: no ``predict``/``plot_predictive``); ``effects`` as in
+        :meth:`hdid.FitResult.load`."""
+        from .saved import load
+
+        return load(path, fit, effects, cls)
 
     def plot_corner(self, names=None, *, ax=None):
         """Corner plot of the free parameters (and the stick-band half-width). Draws into
@@ -262,6 +289,12 @@ class PosteriorResult:
         from .._results._plot import plot_predictive
 
         return plot_predictive(self, ax=ax, n_draws=n_draws, seed=seed)
+
+    def plot(self, *, ax=None):
+        """The result protocol's figure (as ``FitResult.plot``): the stick band's posterior
+        beside the logged rest points (:meth:`plot_band`; a loaded result draws it too).
+        Returns the Axes; never saves (``hdid.save_figure``)."""
+        return self.plot_band(ax=ax)
 
     def plot_band(self, *, ax=None):
         """The stick band's posterior beside the logged rest points; returns the Axes."""

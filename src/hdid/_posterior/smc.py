@@ -262,7 +262,7 @@ def _failed(conv):
                        conv.ess_tail)
 
 
-def _setup(fit, seed, sigma_floor=None, modes="auto", prior=None):
+def _setup(fit, seed, sigma_floor=None, modes="auto", prior=None, default_prior="weak"):
     """Log-posterior, optima and reference mixture, as :func:`sample_posterior` builds them."""
     from .density import posterior_density
     from .modes import found_limits, sampled_modes
@@ -270,7 +270,7 @@ def _setup(fit, seed, sigma_floor=None, modes="auto", prior=None):
 
     prob = fit.problem
     warnings = []
-    dens = posterior_density(fit, sigma_floor, prior=prior)
+    dens = posterior_density(fit, sigma_floor, prior=prior, default_prior=default_prior)
     lp, temper, rho1, lin, bounds, u_fit = (dens.lp, dens.temper, dens.rho1, dens.lin,
                                             dens.bounds, dens.u_fit)
     warnings += dens.warnings
@@ -323,7 +323,7 @@ def sample_smc(fit, *, n_particles: int = N_PARTICLES, n_runs: int = N_RUNS,
                progress: bool = False, sigma_floor: float | None = None, modes="auto",
                final_rounds: int | None = None, imh: bool | None = None,
                k_min: int | None = None, max_final: int | None = None, prior=None,
-               target_ess: float = TARGET_ESS):
+               target_ess: float = TARGET_ESS, default_prior: str = "weak"):
     """Tempered SMC posterior of ``fit`` (see the module docstring); a
     :class:`PosteriorResult` whose ``chain`` is ``(n_particles, n_runs, D)``."""
     from .._fitting._identifiability import unknown_labels
@@ -341,7 +341,7 @@ def sample_smc(fit, *, n_particles: int = N_PARTICLES, n_runs: int = N_RUNS,
     t0 = time.perf_counter()
     prob = fit.problem
     lp, found, ref, warnings, temper, rho1, lin, t_modes, limits = _setup(
-        fit, seed, sigma_floor, modes, prior)
+        fit, seed, sigma_floor, modes, prior, default_prior)
     D = lp.ndim
     labels = unknown_labels(prob, _RunNames(fit)) + ["log_noise_sigma"]
     t_c = time.perf_counter()

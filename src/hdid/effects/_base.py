@@ -81,6 +81,33 @@ def order_of_magnitude(x: float) -> float:
     return 10.0 ** round(math.log10(x))
 
 
+#: sd in log of a :class:`ScalePrior` (the posterior's default prior of a positive
+#: scale): its central 95 % spans ``exp(±1.96·1.2)`` = a factor 10.5 on each side of the
+#: log's scale (issue 34: at least 10).
+SCALE_PRIOR_SD = 1.2
+
+
+@dataclass(frozen=True)
+class ScalePrior:
+    """The posterior's default prior of one parameter (``AbstractEffect.posterior_prior``):
+    Gaussian in the parameter's transformed space — log-normal for a positive (``"log"``)
+    parameter — with median ``centre(scales)``, a scale of the log in hand
+    (:class:`Scales`, in its own units: no constant encodes one gear's size), and ``sd``
+    in that space (default ``SCALE_PRIOR_SD``: a factor 10.5 either way at 95 %).
+    ``source`` says in words where the scale comes from (shown in the report and JSON).
+
+    Example: a cubic spring coefficient centred where the cubic term equals the linear
+    one at the log's release twist::
+
+        posterior_prior = {"k2": ScalePrior(lambda s: s.k_out / s.twist**2,
+                                            "k1/θ²: cubic = linear torque at the release twist")}
+    """
+
+    centre: Callable[[Scales], float]
+    source: str
+    sd: float = SCALE_PRIOR_SD
+
+
 @dataclass(frozen=True)
 class Parameter:
     """Declaration of one physical parameter of an effect.
@@ -250,11 +277,13 @@ class AbstractEffect(eqx.Module):
     #: Pairs ``(a, b)`` of this effect's parameters with ``a ≤ b`` imposed by the
     #: posterior's prior (zero density otherwise), e.g. breakaway at least Coulomb friction.
     ordered: ClassVar[tuple[tuple[str, str], ...]] = ()
-    #: The posterior's default Gaussian priors for some of this effect's parameters,
-    #: ``{name: (centre value, sd in the transformed space)}``; a centre of ``None`` is
-    #: the log's own start (as :attr:`Parameter.prior`). They replace the least-squares
-    #: weak prior rows of those parameters in the posterior only.
-    posterior_prior: ClassVar[dict[str, tuple[float | None, float]]] = {}
+    #: The posterior's default priors of this effect's parameters: ``{name: ScalePrior}``
+    #: (a log-normal around a scale of the log, :class:`ScalePrior`) or ``{name: (centre
+    #: value, sd in the transformed space)}`` (a centre of ``None`` is the log's own start,
+    #: as :attr:`Parameter.prior`). They replace the least-squares weak prior rows of those
+    #: parameters in the posterior only; a positive parameter an effect leaves out gets a
+    #: log-normal around its ``start`` rule (``hdid._posterior.priors``).
+    posterior_prior: ClassVar[dict[str, Any]] = {}
     #: How ``hdid diagnose`` tries this effect (:class:`hdid.effects.Candidate`: trial
     #: order, starting values, scanned orders, residual mark, separating experiment);
     #: ``None``: not tried.

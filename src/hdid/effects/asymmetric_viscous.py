@@ -7,6 +7,7 @@ from typing import ClassVar
 from jaxtyping import Array, ArrayLike, Float
 
 from ._base import AbstractEffect, Motion, StartValues, parameter
+from .viscous import VISCOUS_PRIOR
 
 
 class AsymmetricViscousFriction(AbstractEffect):
@@ -35,6 +36,8 @@ class AsymmetricViscousFriction(AbstractEffect):
 
     name: ClassVar[str] = "viscous"
     key: ClassVar[str] = "asymmetric_viscous"
+    #: the posterior's default priors (log-normal around scales of the log in hand)
+    posterior_prior: ClassVar[dict] = {"c_vp": VISCOUS_PRIOR, "c_vn": VISCOUS_PRIOR}
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> AsymmetricViscousFriction:

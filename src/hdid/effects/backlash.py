@@ -8,9 +8,9 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractSpring, Motion, StartValues, parameter, same_parameter
+from ._base import AbstractSpring, Motion, ScalePrior, StartValues, parameter, same_parameter
 from ._candidate import Candidate
-from .stiffness import CubicStiffness
+from .stiffness import K1_PRIOR, K2_PRIOR, CubicStiffness
 
 
 class FreePlayStiffness(AbstractSpring):
@@ -32,6 +32,10 @@ class FreePlayStiffness(AbstractSpring):
         start=lambda s: 0.06 * s.amplitude)
 
     key: ClassVar[str] = "backlash"
+    #: the posterior's default priors (log-normal around scales of the log in hand)
+    posterior_prior: ClassVar[dict] = {"k1": K1_PRIOR, "k2": K2_PRIOR, "backlash": ScalePrior(
+        lambda s: 0.06 * s.amplitude,
+        "6 % of the release amplitude (its start rule): a free play small against the swing")}
     #: how ``hdid diagnose`` tries it
     candidate: ClassVar[Candidate] = Candidate(
         trial=10, replaces="stiffness",

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ._base import AbstractFriction, Motion, StartValues, same_parameter
-from .stribeck import StribeckFriction
+from .stribeck import FRICTION_TORQUE_PRIOR, StribeckFriction
 
 
 class CoulombFriction(AbstractFriction):
@@ -31,6 +31,8 @@ class CoulombFriction(AbstractFriction):
     tau_c: Float[ArrayLike, ""] = same_parameter(StribeckFriction, "tau_c")
 
     key: ClassVar[str] = "coulomb"
+    #: the posterior's default priors (log-normal around scales of the log in hand)
+    posterior_prior: ClassVar[dict] = {"tau_c": FRICTION_TORQUE_PRIOR}
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> CoulombFriction:

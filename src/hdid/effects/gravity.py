@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, StartValues, parameter
+from ._base import AbstractEffect, Motion, ScalePrior, StartValues, parameter
 
 
 class Gravity(AbstractEffect):
@@ -44,6 +44,10 @@ class Gravity(AbstractEffect):
 
     name: ClassVar[str] = "gravity"
     key: ClassVar[str] = "gravity"
+    #: the posterior's default priors (log-normal around scales of the log in hand)
+    posterior_prior: ClassVar[dict] = {"mgl": ScalePrior(
+        lambda s: s.k_out,
+        "the stiffness of the log's own swing at the output (gravity torque per radian)")}
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> Gravity:

@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float, PyTree
 
-from ._base import AbstractEffect, Motion, StartValues, parameter
+from ._base import AbstractEffect, Motion, ScalePrior, StartValues, parameter
 from ._candidate import Candidate, friction_level
 
 
@@ -42,6 +42,11 @@ class DahlHysteresis(AbstractEffect):
 
     name: ClassVar[str] = "hysteresis"
     key: ClassVar[str] = "hysteresis"
+    #: the posterior's default priors (log-normal around scales of the log in hand)
+    posterior_prior: ClassVar[dict] = {
+        "f_h": ScalePrior(lambda s: s.torque, "the friction torque of the log's ring-down "
+                          "(k_wg × amplitude lost / 4)"),
+        "sigma_h": ScalePrior(lambda s: s.k_wg, "k_wg: the log's swing stiffness at the WG")}
     #: how ``hdid diagnose`` tries it
     candidate: ClassVar[Candidate] = Candidate(
         trial=20,

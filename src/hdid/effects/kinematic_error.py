@@ -9,7 +9,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ._base import AbstractSpring, Motion, StartValues, parameter, same_parameter
 from ._candidate import ORDERS, Candidate
-from .stiffness import CubicStiffness
+from .stiffness import K1_PRIOR, K2_PRIOR, CubicStiffness
 
 
 class KinematicErrorStiffness(AbstractSpring):
@@ -38,6 +38,8 @@ class KinematicErrorStiffness(AbstractSpring):
     order: Float[ArrayLike, ""] = 2.0
 
     key: ClassVar[str] = "kinematic_error"
+    #: the posterior's default priors (log-normal around scales of the log in hand)
+    posterior_prior: ClassVar[dict] = {"k1": K1_PRIOR, "k2": K2_PRIOR}
     #: how ``hdid diagnose`` tries it
     candidate: ClassVar[Candidate] = Candidate(
         trial=70, replaces="stiffness", orders=ORDERS, settings=len(ORDERS),

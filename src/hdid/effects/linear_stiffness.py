@@ -7,7 +7,7 @@ from typing import ClassVar
 from jaxtyping import Array, ArrayLike, Float
 
 from ._base import AbstractSpring, Motion, StartValues, same_parameter
-from .stiffness import CubicStiffness
+from .stiffness import K1_PRIOR, CubicStiffness
 
 
 class LinearStiffness(AbstractSpring):
@@ -24,6 +24,8 @@ class LinearStiffness(AbstractSpring):
     k1: Float[ArrayLike, ""] = same_parameter(CubicStiffness, "k1")
 
     key: ClassVar[str] = "linear_stiffness"
+    #: the posterior's default priors (log-normal around scales of the log in hand)
+    posterior_prior: ClassVar[dict] = {"k1": K1_PRIOR}
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> LinearStiffness:

@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, StartValues, parameter
+from ._base import AbstractEffect, Motion, ScalePrior, StartValues, parameter
 from ._candidate import Candidate
 
 
@@ -33,6 +33,11 @@ class LoadDependentFriction(AbstractEffect):
 
     name: ClassVar[str] = "load_friction"
     key: ClassVar[str] = "load_friction"
+    #: the posterior's default priors (log-normal around scales of the log in hand)
+    posterior_prior: ClassVar[dict] = {"c_load": ScalePrior(
+        lambda s: s.torque / (s.k_wg * s.amplitude),
+        "friction torque / spring torque at the release amplitude (a coefficient of 1 turns "
+        "the whole ring-down's friction into load friction)")}
     #: how ``hdid diagnose`` tries it
     candidate: ClassVar[Candidate] = Candidate(
         trial=40,

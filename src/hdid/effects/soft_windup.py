@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractSpring, Motion, StartValues, parameter
+from ._base import AbstractSpring, Motion, ScalePrior, StartValues, parameter
 from ._candidate import Candidate
 
 
@@ -44,6 +44,12 @@ class ThreeSegmentStiffness(AbstractSpring):
         start=lambda s: 0.31 * s.k_out * s.twist)
 
     key: ClassVar[str] = "soft_windup"
+    #: the posterior's default priors (log-normal around scales of the log in hand)
+    posterior_prior: ClassVar[dict] = {
+        **{k: ScalePrior(lambda s: s.k_out, "k_wg·N²: the stiffness of the log's own swing")
+           for k in ("K1", "K2", "K3")},
+        **{k: ScalePrior(lambda s: s.k_out * s.twist, "k1·θ: the spring torque at the "
+                         "release twist") for k in ("T1", "dT12")}}
     #: how ``hdid diagnose`` tries it
     candidate: ClassVar[Candidate] = Candidate(
         trial=60, replaces="stiffness",

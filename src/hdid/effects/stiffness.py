@@ -7,8 +7,20 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractSpring, Motion, StartValues, parameter
+from ._base import AbstractSpring, Motion, ScalePrior, StartValues, parameter
 from ._candidate import Candidate
+
+
+#: The posterior's default prior of a spring's linear stiffness at the output: log-normal
+#: around the stiffness of the log's own swing (a factor 10.5 either way at 95 %).
+K1_PRIOR = ScalePrior(lambda s: s.k_out,
+                      "k_wg·N²: the stiffness of the log's own swing (k_wg = J·ω², ω from its "
+                      "turning points)")
+#: ... and of its cubic coefficient: where the cubic torque equals the linear one at the
+#: log's release twist (``k1/θ²``).
+K2_PRIOR = ScalePrior(lambda s: s.k_out / s.twist**2,
+                      "k1/θ²: the cubic torque equals the linear one at the release twist "
+                      "θ = amplitude/N")
 
 
 class CubicStiffness(AbstractSpring):
@@ -30,6 +42,8 @@ class CubicStiffness(AbstractSpring):
         start=lambda s: 0.17 * s.k_out / s.twist**2, flat_in_value=True, sample_in_value=True)
 
     key: ClassVar[str] = "stiffness"
+    #: the posterior's default priors: log-normal around the log's own spring scales
+    posterior_prior: ClassVar[dict] = {"k1": K1_PRIOR, "k2": K2_PRIOR}
     #: how ``hdid diagnose`` tries it
     candidate: ClassVar[Candidate] = Candidate(
         trial=80, replaces="linear_stiffness",
@@ -60,3 +74,4 @@ class CubicStiffness(AbstractSpring):
     def wg_stiffness(self, ratio: float) -> Array:
         """Small-twist stiffness reflected to the wave generator, ``k1 / N²`` [N m/rad]."""
         return jnp.asarray(self.k1) / ratio**2
+

@@ -7,7 +7,7 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractFriction, Motion, StartValues, parameter, positive_power
+from ._base import AbstractFriction, Motion, ScalePrior, StartValues, parameter, positive_power
 from ._candidate import Candidate
 
 
@@ -25,6 +25,15 @@ DELTA_PRIOR_SD = 0.8
 #: an independent pendulum-drop log (tests/test_real_logs_synthetic.py: v_s 154 rad/s,
 #: χ² 1186 against 583 at the truth's shape, mgl 6.5 sd off, nothing flagged).
 LSQ_PRIOR_SD = 2.0
+#: The posterior's default prior of a dry-friction torque (``tau_c``, ``tau_s``): log-normal
+#: around the friction level the log's ring-down shows (``Scales.torque``), a factor 10.5
+#: either way at 95 %. It replaces the flat-in-value prior of ``tau_c`` (issue 34's
+#: decision (a): that prior put mass on a Coulomb limit the data do not support, and no
+#: sampler measured converged on it); ``sample_posterior(default_prior="flat")`` keeps it.
+FRICTION_TORQUE_PRIOR = ScalePrior(
+    lambda s: s.torque,
+    "the friction torque of the log's ring-down: k_wg × amplitude lost per run / 4, at "
+    "least 2 % of the spring torque at the release amplitude")
 
 
 class StribeckFriction(AbstractFriction):
@@ -115,7 +124,9 @@ class StribeckFriction(AbstractFriction):
     ordered: ClassVar[tuple[tuple[str, str], ...]] = (("tau_c", "tau_s"),)
     #: the physical priors, in the posterior (class docstring)
     posterior_prior: ClassVar[dict] = {"v_s": (None, V_S_PRIOR_SD),
-                                       "delta": (DELTA_MEDIAN, DELTA_PRIOR_SD)}
+                                       "delta": (DELTA_MEDIAN, DELTA_PRIOR_SD),
+                                       "tau_c": FRICTION_TORQUE_PRIOR,
+                                       "tau_s": FRICTION_TORQUE_PRIOR}
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> StribeckFriction:

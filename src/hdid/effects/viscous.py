@@ -7,9 +7,18 @@ from typing import ClassVar
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._base import AbstractEffect, Motion, StartValues, parameter
+from ._base import AbstractEffect, Motion, ScalePrior, StartValues, parameter
 from ._candidate import Candidate
 
+
+
+#: The posterior's default prior of a viscous coefficient: log-normal around the log's
+#: friction torque per its peak speed (the viscous torque at the peak speed equals the
+#: ring-down's friction level), a factor 10.5 either way at 95 %. It replaces the
+#: flat-in-value prior (issue 34, decision (a)); ``default_prior="flat"`` keeps that.
+VISCOUS_PRIOR = ScalePrior(lambda s: s.torque / s.speed,
+                           "torque per peak speed: the ring-down's friction torque over the "
+                           "log's peak speed")
 
 class ViscousFriction(AbstractEffect):
     r"""Linear viscous torque ``−c_v·ω`` (grease shear, back-EMF if phases are shorted).
@@ -24,6 +33,8 @@ class ViscousFriction(AbstractEffect):
 
     name: ClassVar[str] = "viscous"
     key: ClassVar[str] = "viscous"
+    #: the posterior's default priors (log-normal around scales of the log in hand)
+    posterior_prior: ClassVar[dict] = {"c_v": VISCOUS_PRIOR}
     #: how ``hdid diagnose`` tries it
     candidate: ClassVar[Candidate] = Candidate(
         trial=100,
