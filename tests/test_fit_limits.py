@@ -88,3 +88,23 @@ def test_the_paper_log_never_hides_a_better_limit(paper_fits):
         assert any("limit fits better" in w for w in full.warnings), full.warnings
     # the reported fit is at the floor (the rule of _limits.reached_floor)
     assert full.rms_residual_rad <= 1.2 * full.quantization_floor_rad
+
+
+def test_diagnose_refits_start_from_a_drops_swings(tmp_path):
+    # diagnose's refits (hdid._fitting._refit.grid) and the batch (_vfit) take a pendulum
+    # drop's starts read from its swings first, as hdid.fit does (_starts.with_drop_starts):
+    # without them a gravity spring starts from the grid's frequency rule alone (BAM
+    # XL330: m·g·l went to 5e-10 N m)
+    from hdid._fitting import _refit
+    from hdid._fitting._pendulum import pendulum_candidates
+    from hdid._fitting._starts import _packer
+    from test_pendulum_starts import bench_log, pendulum_model
+
+    text, _ = bench_log(1.0, rate=100.0, seed=7)
+    path = tmp_path / "drop.csv"
+    path.write_text(text)
+    s = _refit.setup(hdid.read_log(path), pendulum_model(), {})
+    drop = pendulum_candidates(s.problem, s.prep, s.model,
+                               _packer(s.problem, s.model.parameter_specs()))
+    U = _refit.grid(s, 6)
+    assert drop and np.array_equal(U[:len(drop)], np.array(drop))

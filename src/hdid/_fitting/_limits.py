@@ -27,6 +27,13 @@ limit's degrees of freedom) is named in a warning ("friction not supported: the
 viscous-only model fits as well"); a limit that still fits better than the reported fit
 is never silent.
 
+A fit still above the floor after its limits restarts once more from its best optimum
+with a regular Stribeck law at its sliding level and the viscous share spanned
+(:func:`stribeck_restarts`; ``restarted_from`` ``"stribeck"`` when one wins): poorer basins
+of clean logs put the damping into the Stribeck shape (``c_v → 0``) or into a creeping law
+(``tau_s ≪ tau_c``), which no limit undoes (clean paper logs 49, 103, 129 of
+``benchmarks/clean_floor.py``: 2.24, 2.28, 1.56× → 0.82, 0.98, 0.88× the floor).
+
 When (:func:`wanted`): a residual above :func:`above_floor` × the floor (the fit has not
 reached it: every limit), or a symptom that a term may vanish — the parameter a limit
 removes has a relative sd above ``VANISH_REL_SD`` or none finite, or ``tau_s ≤ tau_c``

@@ -34,7 +34,7 @@ from ._one_lane import (  # noqa: F401  (also diagnose's names)
     LANES, _call_args, _local_fits, _solve_lanes, _stored_solve,
 )
 from .._problems._problem import Problem
-from ._starts import _choose_starts, _grid_candidates
+from ._starts import _grid_candidates, with_drop_starts
 from .._models._transforms import interval_to_u, to_unconstrained
 
 #: Options of :func:`hdid.fit` that shape the problem (the rest belong to the schedule).
@@ -158,7 +158,7 @@ def grid(s: _Setup, n_starts: int) -> np.ndarray:
         return np.zeros((0, s.problem.n_unknowns))
     U, keys = _grid_candidates(s.problem, s.prep, s.model, False)
     cost = np.asarray(_programs.call("grid_costs", _costs, s.problem, jnp.asarray(U)))
-    U0, _ = _choose_starts(U, cost, keys, n_starts, False)
+    U0, _ = with_drop_starts(s.problem, s.prep, s.model, U, cost, keys, n_starts, False)
     return np.asarray(U0)
 
 

@@ -78,13 +78,25 @@ def _grid_starts(
     """
     U, keys = _grid_candidates(problem, prep, model, from_model)
     cost = np.asarray(_costs(problem, jnp.asarray(U)))
+    return with_drop_starts(problem, prep, model, U, cost, keys, n_starts, from_model,
+                            lambda Ud: np.asarray(_costs(problem, jnp.asarray(Ud))))
+
+
+def with_drop_starts(problem, prep, model, U, cost, keys, n_starts: int, from_model: bool,
+                     drop_cost=None):
+    """:func:`_choose_starts` of the grid ``(U, cost, keys)``, after a pendulum drop's own
+    starts read from its swings (:func:`hdid._fitting._pendulum.pendulum_candidates`, one
+    per run) when the log is one: the starts of :func:`hdid.fit`, the batch and
+    diagnose's refits alike. ``drop_cost(Ud)``: the drop starts' costs (default: below
+    the grid's, so they run first)."""
     drop = pendulum_candidates(problem, prep, model, _packer(problem, model.parameter_specs()))
-    if drop:  # a pendulum drop's starts from its swings (_pendulum.py), each run; the grid's after
-        Ud = np.array(drop)
-        U0, c0 = _choose_starts(U, cost, keys, max(n_starts - len(drop), 1), from_model)
-        return (np.concatenate([Ud, U0]),
-                np.concatenate([np.asarray(_costs(problem, jnp.asarray(Ud))), c0]))
-    return _choose_starts(U, cost, keys, n_starts, from_model)
+    if not drop:
+        return _choose_starts(U, cost, keys, n_starts, from_model)
+    Ud = np.array(drop)
+    U0, c0 = _choose_starts(U, cost, keys, max(n_starts - len(drop), 1), from_model)
+    cd = (drop_cost(Ud) if drop_cost is not None
+          else np.full(len(Ud), np.min(np.asarray(c0, dtype=float), initial=0.0)))
+    return np.concatenate([Ud, U0]), np.concatenate([np.asarray(cd, dtype=float), c0])
 
 
 def _grid_candidates(problem: Problem, prep: Prepared, model: Model, from_model: bool = False):

@@ -53,7 +53,7 @@ from ._lm import LMState, _Schedule
 from ._limits import needs_check
 from ._nested import CHECK_ABOVE_FLOOR
 from .._problems._problem import Problem
-from ._starts import _choose_starts, _grid_candidates
+from ._starts import _grid_candidates, with_drop_starts
 from ._vfit_lanes import (
     _Bucket, _bucket_key, _lane_analysis, _lane_costs, _lane_lengths, _lane_solve, _LogFit,
     _pad_problem,
@@ -288,8 +288,9 @@ def _fit_wave(items, idx, outcomes, runner, timing, lanes, bracket, on_done, opt
             if f.bucket != b:
                 continue
             n = len(cand[i][0])
-            U0, cost0 = _choose_starts(cand[i][0], costs[pos : pos + n], cand[i][1], n_starts,
-                                       from_model)
+            su = fits[i].setup  # (a pendulum drop's starts from its swings first)
+            U0, cost0 = with_drop_starts(su.problem, su.prep, su.model, cand[i][0],
+                                         costs[pos : pos + n], cand[i][1], n_starts, from_model)
             pos += n
             f.U = np.array(U0)
             f.costs = np.array(cost0, dtype=float)  # (only orders phase 1's lanes)
