@@ -45,3 +45,28 @@ def test_a_regular_friction_law_brackets_within_the_budget():
     # budget must not cost regular fits their bracket)
     lo, hi = _bracket(TRUE)
     assert lo == 0.01 and lo < hi < 0.157
+
+
+def _clean_floor_log(design: str, seed: int):
+    # the benchmark's own generator (benchmarks/clean_floor.py: the independent scipy
+    # simulator, tests/independent.py, with a broad plant drawn per seed)
+    import importlib.util
+    from synthetic import ROOT
+
+    spec = importlib.util.spec_from_file_location(
+        "clean_floor", ROOT / "benchmarks" / "clean_floor.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod.make(design, seed)
+
+
+def test_a_clean_paper_log_in_a_poorer_basin_restarts_to_the_floor():
+    # clean paper log 129 ended at 1.56x the floor (tau_s 2.4x tau_c, the limits' restarts
+    # did not leave it); the Stribeck restarts from the fit's sliding level reach the
+    # true basin. An exact model on rounded readings leaves 0.4-1.0x the floor step/√12;
+    # 1.5x is the benchmark's (and the issue's) line for "reached the floor"
+    import hdid
+
+    df, truth = _clean_floor_log("paper", 129)
+    r = hdid.fit(df, resolution=truth["resolution"], ratio=100.0)
+    assert r.rms_residual_rad <= 1.5 * r.quantization_floor_rad, (r.values, r.limits)
