@@ -130,6 +130,19 @@ def test_ranking_json_and_plot(designed):
     plt.close(fig)
 
 
+def test_save_and_load_give_the_same_result(designed, tmp_path):
+    path = tmp_path / "design.json"
+    designed.save(path)
+    loaded = hdid.DesignResult.load(path)
+    assert json.dumps(loaded.to_dict(), allow_nan=False) == json.dumps(designed.to_dict(),
+                                                                       allow_nan=False)
+    assert loaded.report() == designed.report()
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps({"kind": "fit"}))
+    with pytest.raises(HdidError, match="other.json: not a design file"):
+        hdid.DesignResult.load(other)
+
+
 def test_d_optimality_prefers_more_runs(case):
     _, fit = case
     d = hdid.design(fit, [{"name": "repeats x2", "repeats": 2}], criterion="d")

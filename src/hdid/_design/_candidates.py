@@ -118,7 +118,7 @@ class Experiment:
             "duration_s": self.duration, "hold_s": self.hold, "resolution_rad": self.resolution,
             "counts_per_rev": self.counts_per_rev, "added_inertia": list(self.added_inertia),
             "setups": list(self.setups), "offsets": dict(self.offsets),
-            "n_runs": self.n_runs, "note": self.note,
+            "n_runs": self.n_runs, "note": self.note, "releases": list(self.releases),
         }
 
 

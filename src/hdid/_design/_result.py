@@ -167,6 +167,20 @@ class DesignResult:
         }
         return finite(d)
 
+    def save(self, path) -> None:
+        """Write :meth:`to_dict` as JSON (what ``hdid design --json`` writes)."""
+        from ._saved import save
+
+        save(self, path)
+
+    @classmethod
+    def load(cls, path) -> DesignResult:
+        """Read a result written by :meth:`save` or ``hdid design --json``: the same report
+        and JSON (the ranking, every candidate's predicted stds, the check)."""
+        from ._saved import load
+
+        return load(path, cls)
+
     def plot(self, *, ax=None):
         """Predicted std of each candidate relative to this log's (log scale), one row of
         bars per candidate in rank order, one bar per shown quantity. Returns the axes;
