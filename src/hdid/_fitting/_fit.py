@@ -98,7 +98,8 @@ def fit(
     nested:
         Check the model's nested limits (:mod:`hdid._fitting._limits`: Coulomb friction
         ``tau_s = tau_c``, no dry friction, the linear spring ``k2 = 0``): fit each, restart
-        the full model next to its optimum, keep the best; ``result.limits`` records each
+        the full model next to its optimum (and, still above the floor, from regular
+        Stribeck laws at its sliding level), keep the best; ``result.limits`` records each
         limit's χ² and whether it fits as well (then a warning names it, e.g. "friction
         not supported: the viscous-only model fits as well"). ``"auto"`` (default) checks
         every limit when the residual is above the floor
