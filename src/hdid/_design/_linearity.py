@@ -4,13 +4,15 @@ A Fisher standard error is the spread of the fits only where the model's reading
 close to linear in the parameters over that spread. Three checks per candidate and
 parameter, each from the candidate's own prediction:
 
-* **stick events** — the simulator is moved to ±2 predicted std along the parameter
-  (the others and the nuisances following it, as the fit would: the covariance's
-  column), and the readings are compared with the linear prediction
-  ``θ₀ + J·δ``. A relative departure above :data:`NONLINEAR` (in the fit's own
-  weighted norm) means the std is not the spread; when a run's rest point then moves
-  more than half an encoder count beyond the linear guess, the swing stops a different
-  number of times (a stick event changes: the rest point is discontinuous there).
+* **curvature and stick events** — the simulator is moved to ±2 predicted std along the
+  parameter (the others and the nuisances following it, as the fit would: the
+  covariance's column). Linearised, the data's χ² grows there by ``|W J δ|²/σ²`` (4 less
+  the prior rows' share); simulated, by ``|W (θ(u+δ) − θ(u))|²/σ²``. The square root of
+  their ratio is how much narrower (> 1) or wider (< 1) the likelihood really is along
+  that direction (Bates & Watts' check of a linearisation along a line): beyond
+  :data:`NONLINEAR` either way the std is not the spread. When a run's rest point then
+  moves more than half an encoder count beyond the linear guess, the swing stops a
+  different number of times (a stick event changes: the rest point is discontinuous).
 * **bounds** — a parameter on an interval whose ±2 std leaves it (the spread is cut).
 * **size** — a positive (log-transformed) parameter whose predicted std exceeds
   :data:`LOG_NORMAL` of its value: its fits spread log-normally, not as ``±std``.
@@ -25,10 +27,10 @@ import numpy as np
 from . import _stack
 from ._fisher import Prediction
 
-#: Relative departure of the ±2σ readings from the linear prediction above which the
-#: linearised std is not the fits' spread (a 25 % error in the std: the design tool's
-#: own acceptance criterion).
-NONLINEAR = 0.25
+#: Factor by which the likelihood's width along a parameter's direction may differ from
+#: the linearised one at ±2 std before the std is called not the spread (25 %: the
+#: design check's own acceptance criterion).
+NONLINEAR = 1.25
 #: Predicted std above this fraction of a positive parameter's value: log-normal spread.
 LOG_NORMAL = 0.3
 #: A rest point that moves this many encoder counts beyond its linear guess: a stop changed.
@@ -99,26 +101,29 @@ def _events(preds: list[Prediction], every: tuple[str, ...]) -> None:
         lin = theta0[rows, :m] + np.einsum("rtj,rj->rt", J[rows, :m], dl)
         true = moved[k, rows, :m]
         w = np.stack(p.weights) / p.sigma
-        # δ is 2 std along the parameter's covariance column: δᵀFδ = 4, the linear
-        # readings (with the prior rows) move by 2 in the weighted norm; the departure
-        # is measured against that
-        num = math.sqrt(float(np.sum((w * (true - lin)) ** 2)))
-        ratio = num / 2.0
+        lin_chi2 = float(np.sum((w * (lin - theta0[rows, :m])) ** 2))
+        true_chi2 = float(np.sum((w * (true - theta0[rows, :m])) ** 2))
+        if lin_chi2 < 0.04:  # the prior, not the data, sets this direction (< 1 % of Δχ² 4)
+            continue
+        ratio = max(math.sqrt(true_chi2 / lin_chi2), 1e-12)
         jump = bool(np.any(np.abs(true[:, -1] - lin[:, -1]) > REST_JUMP_COUNTS * e.resolution))
         key = (id(p), n)
-        old = worst.get(key, (0.0, False))
-        worst[key] = (max(old[0], ratio), old[1] or jump)
+        old = worst.get(key, (1.0, False))
+        far = ratio if abs(math.log(ratio)) > abs(math.log(old[0])) else old[0]
+        worst[key] = (far, old[1] or jump)
     for p, n, k in plans:
         key = (id(p), n)
         if key not in worst:
             continue
         ratio, jump = worst.pop(key)
-        if ratio > NONLINEAR:
+        if not 1.0 / NONLINEAR <= ratio <= NONLINEAR:
             why = ("a stop changes: a rest point jumps" if jump
                    else "the readings are curved over that range")
-            p.honesty.append(f"{n}: readings at ±2 std depart {_pct(ratio)} from linear "
-                             f"({why})")
+            p.honesty.append(f"{n}: the likelihood at ±2 std is {_times(ratio)} the "
+                             f"linearised one ({why})")
 
 
-def _pct(x: float) -> str:
-    return f"{100 * x:.0f} %" if x < 10 else f"{x:.0f}x"
+def _times(r: float) -> str:
+    if r >= 1.0:
+        return f"{r:.2g}x as steep as"
+    return f"{1 / r:.2g}x flatter than"

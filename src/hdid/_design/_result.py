@@ -103,7 +103,7 @@ class DesignResult:
         for label, p in (("this log", self.current), ("the top candidate", best)):
             if p.honesty:
                 lines.append(f"linearisation not honest for {label} (its std is not the "
-                             "fits' spread) — " + "; ".join(p.honesty))
+                             "fits' spread): " + _summary(p.honesty))
         if self.check is not None:
             lines += ["", *self._check_lines()]
         if self.warnings:
@@ -205,6 +205,20 @@ class DesignResult:
         ax.set_xlabel("predicted std relative to this log")
         ax.legend(fontsize="small", loc="best")
         return ax
+
+
+def _summary(lines: list[str]) -> str:
+    """The honesty lines grouped by cause: ``stops change at ±2 std of k1, tau_c; …``."""
+    causes = {"a stop changes": "a stop changes within ±2 std of",
+              "curved": "the readings are curved within ±2 std of",
+              "log-normal": "log-normal spread (std > 30 % of the value) of",
+              "leaves its range": "±2 std leaves the range of"}
+    groups: dict[str, list[str]] = {}
+    for line in lines:
+        name = line.split(":", 1)[0]
+        key = next((k for k in causes if k in line), None)
+        groups.setdefault(causes[key] if key else line, []).append(name if key else "")
+    return "; ".join(f"{c} {', '.join(dict.fromkeys(n))}".strip() for c, n in groups.items())
 
 
 def _short(name: str) -> str:
