@@ -101,8 +101,8 @@ def basin_check(fit, log=None, *, echo: bool = True):
             f"{BASIN_FACTOR:g}×) after {checks}, so the intervals below would describe the "
             "wrong basin (a poorer optimum, or a model that lacks an effect the log shows), "
             "not the data's best fit — run `hdid diagnose` on the log (hdid.diagnose), add "
-            "the effect it names (--add / model=) or refit from other starts (--start / "
-            "start_from_model=True), then sample again"
+            "the effect it names (--add / model=) or refit from other starts (--start; in "
+            "Python start_from_model=True), then sample again"
             + (f"; at {after / math.sqrt(12):.3g} encoder steps RMS the step itself may be "
                "wrong: pass the encoder's step (--resolution / resolution=)"
                if after > STEP_SUSPECT else ""))

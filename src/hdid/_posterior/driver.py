@@ -330,8 +330,7 @@ def sample_posterior(
             f"NOT CONVERGED: after {done} steps ({burn_in} burn-in before) the worst quantity "
             f"is {name} ({what}), the chain {conv.chain_in_tau:.1f} τ long; the criterion is "
             f"bulk/tail ESS ≥ {ESS_MIN} and R-hat ≤ {RHAT_MAX} or a chain ≥ {TAU_MULTIPLE} τ, on "
-            f"every sampled quantity and the band. Run longer (max_steps ≥ {2 * done}, on the "
-            f"command line --steps {2 * done}); if "
+            f"every sampled quantity and the band. Run longer (max_steps (--steps) ≥ {2 * done}); if "
             "R-hat stays high the walkers sit in optima they do not leave — check the "
             "modes and the trace plot"
         )
