@@ -120,6 +120,10 @@ def _warnings(fit, preds) -> list[str]:
     if not fit.resolution_known:
         out.append("the log's readings lie on no encoder grid: 'encoder' candidates change the "
                    "noise level (step/sqrt 12) rather than a rounding")
+    problem = getattr(fit, "problem", None)
+    if problem is not None and getattr(problem, "n_moving", 0):
+        out.append("runs of this log start in motion (no hold): every design here releases "
+                   "its runs from rest at their start angle")
     bad = [p.experiment.name for p in preds if p.error]
     if bad:
         out.append("not evaluated: " + ", ".join(bad))
