@@ -152,6 +152,40 @@ def test_d_optimality_prefers_more_runs(case):
     assert d.ranking[0][1] < math.log(0.8)
 
 
+def test_separation_of_rival_fits(case):
+    """Two 'rival models': the fit, and the fit with tau_c moved by Δ and held fixed. The
+    expected 2 ln LR is the part of the readings' difference the other model cannot
+    absorb: 0 for identical fits, ∝ Δ² for small Δ (linear regime: doubling Δ
+    quadruples it), and at least doubled by repeating every run."""
+    import dataclasses
+
+    _, fit = case
+
+    def moved(frac, fixed=True):
+        tc = fit.parameters["tau_c"]
+        params = {**fit.parameters, "tau_c": dataclasses.replace(
+            tc, value=tc.value * (1 + frac), fixed=fixed)}
+        return dataclasses.replace(fit, model=fit.model.replace(tau_c=tc.value * (1 + frac)),
+                                   parameters=params, problem=None)
+
+    cands = [{"name": "repeats x2", "repeats": 2}]
+    same = hdid.design(fit, cands, separate=(fit, fit))
+    assert all(max(p.separation) < 1e-9 for p in same.predictions)
+    one = hdid.design(fit, cands, separate=(fit, moved(0.01)))
+    two = hdid.design(fit, cands, separate=(fit, moved(0.02)))
+    assert one.criterion == "separate"
+    a1, a2 = one.current.separation[0], two.current.separation[0]
+    assert a1 > 0 and a2 / a1 == pytest.approx(4.0, rel=0.1)  # ∝ Δ², 10 %: O(Δ) terms
+    rep = next(p for p in one.predictions if p.experiment.name == "repeats x2")
+    assert 1.99 * a1 <= rep.separation[0] <= 2.6 * a1
+    assert one.best.experiment.name == "repeats x2"
+    # with tau_c free in the rival, its fit absorbs the move (what is left is second order
+    # in Δ: the projection onto the rival's Jacobian works)
+    free = hdid.design(fit, cands, separate=(fit, moved(0.01, fixed=False)))
+    assert free.current.separation[0] < 0.05 * a1
+    assert "expected_2lnlr" in one.to_dict()["candidates"][0]
+
+
 def test_bad_candidates_and_targets(case, tmp_path):
     _, fit = case
     with pytest.raises(HdidError, match="unknown key 'speed'"):

@@ -23,6 +23,7 @@ def design(
     check: int = 0,
     check_candidate: str | None = None,
     seed: int = 0,
+    separate=None,
     **fit_options,
 ) -> DesignResult:
     """Rank candidate experiments by the standard errors they would give at the current fit.
@@ -51,6 +52,11 @@ def design(
         the current fit, fit them and set their spread beside the prediction.
     seed:
         Seed of the check's simulated logs.
+    separate:
+        Two fits of the same log by rival models (FitResults or fit JSON paths, e.g. two
+        diagnose candidates): each candidate also gets the expected ``2·ln LR`` that
+        tells them apart (linearised, both directions; :mod:`hdid._design._separate`),
+        and ``criterion="separate"`` (the default then) ranks by the smaller of the two.
 
     The prediction is the linearised Fisher information of the exact simulator with the
     nuisances (release instants, start angles, set-up offsets) estimated alongside and the
@@ -68,11 +74,23 @@ def design(
     free, every = _fisher.parameter_names(result)
     derived_names = list(result.derived)
     targets = _rank.resolve_targets(targets, every, derived_names)
-    criterion = criterion or ("targets" if targets else "d")
+    pair = None
+    if separate is not None:
+        if len(separate) != 2:
+            raise HdidError("separate: give two fits of the same log by the rival models")
+        pair = [_as_fit(f, {}) for f in separate]
+    criterion = criterion or ("separate" if pair else "targets" if targets else "d")
+    if criterion == "separate" and pair is None:
+        raise HdidError("criterion 'separate' needs separate=(fit_a, fit_b) (--separate A.json,B.json)")
     if criterion == "targets" and not targets:
         raise HdidError("criterion 'targets' needs targets (e.g. targets='tau_c,band')")
     preds, derived = _fisher.predict(result, cands)
     _linearity.check(result, preds, every)
+    if pair is not None:
+        from ._separate import separation
+
+        for p, sep in zip(preds, separation(pair[0], pair[1], cands)):
+            p.separation = sep
     ranking = _rank.rank(preds, criterion, targets)
     values = {n: result.model.float_values()[n] for n in every}
     out = DesignResult(

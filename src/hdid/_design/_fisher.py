@@ -57,6 +57,8 @@ class Prediction:
     null: np.ndarray | None = None       # null space of F (undetermined directions)
     scale: np.ndarray | None = None      # the unknowns' scales the null space is in
     stack_rows: tuple | None = None      # (Stacked, rows) where its runs were simulated
+    #: expected 2 ln LR of the separated pair ``(A true, B true)`` (``separate=``)
+    separation: tuple[float, float] | None = None
 
 
 def parameter_names(fit) -> tuple[tuple[str, ...], tuple[str, ...]]:

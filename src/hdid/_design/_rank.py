@@ -6,6 +6,8 @@ better), so they do not depend on the parameters' units:
 * ``"targets"`` — the mean of ``ln(std / std of this log)`` over the named targets
   (parameters, or derived quantities: ``band`` is the stick band's half-width,
   ``frequency`` the natural frequency): the geometric mean of their std ratios;
+* ``"separate"`` — minus the smaller expected ``2·ln LR`` between two fitted models
+  (:mod:`hdid._design._separate`): the design that tells them apart best first;
 * ``"d"`` (D-optimality) — ``ln det`` of the fit's free parameters' covariance (in the
   optimiser's space, nuisances marginalised) less this log's, over ``2·p``: the ratio of
   the volumes of the confidence ellipsoids as a geometric-mean std ratio.
@@ -29,7 +31,7 @@ ALIASES = {
     "fn": "natural_frequency_hz",
 }
 
-CRITERIA = ("targets", "d")
+CRITERIA = ("targets", "d", "separate")
 
 
 def resolve_targets(targets, parameters, derived) -> tuple[str, ...]:
@@ -63,6 +65,9 @@ def std_of(p: Prediction, name: str) -> float:
 def score(p: Prediction, ref: Prediction, criterion: str, targets) -> float:
     if p.error is not None:
         return math.inf
+    if criterion == "separate":  # the smaller expected 2 ln LR of the pair, negated
+        sep = min(p.separation) if p.separation else math.nan
+        return -sep if math.isfinite(sep) else math.inf
     if criterion == "d":
         n = sum(1 for _ in ref.names if _ in p.names) or 1
         if not (math.isfinite(p.logdet) and math.isfinite(ref.logdet)):

@@ -67,9 +67,10 @@ class DesignResult:
     # -- output -------------------------------------------------------------------
     def report(self) -> str:
         shown = self.shown()
-        crit = ("geometric mean of the std ratios of " + ", ".join(self.targets)
-                if self.criterion == "targets" else
-                "D-optimality (confidence-volume ratio as a geometric-mean std ratio)")
+        crit = {"targets": "geometric mean of the std ratios of " + ", ".join(self.targets),
+                "d": "D-optimality (confidence-volume ratio as a geometric-mean std ratio)",
+                "separate": "the expected 2 ln LR between the two rival fits (the smaller "
+                            "direction; score column), std ratios"}[self.criterion]
         lines = [f"hdid design: {self.source}", "",
                  f"ranking by {crit}, relative to this log (1 = as now, < 1 better):"]
         width = max(len(self.predictions[i].experiment.name) for i, _ in self.ranking)
@@ -83,7 +84,7 @@ class DesignResult:
                 lines.append(f"{k:>3}  {e.name:<{width}}  {e.n_runs:>4}  not evaluated: {p.error}")
                 continue
             row = (f"{k:>3}  {e.name:<{width}}  {e.n_runs:>4}  {e.rate:>6.0f}  "
-                   f"{e.counts_per_rev:>6.0f}  {_ratio(math.exp(s) if math.isfinite(s) else s):>7}")
+                   f"{e.counts_per_rev:>6.0f}  {self._score_text(s):>7}")
             row += "".join(f"  {_ratio(self.relative(i, n)):>10}" for n in shown)
             lines.append(row + ("  !" if p.honesty else ""))
         best = self.best
@@ -109,6 +110,11 @@ class DesignResult:
         if self.warnings:
             lines += ["", "warnings:", *[f"  - {w}" for w in self.warnings]]
         return "\n".join(lines)
+
+    def _score_text(self, s: float) -> str:
+        if self.criterion == "separate":
+            return _num(-s) if math.isfinite(s) else "n/a"
+        return _ratio(math.exp(s) if math.isfinite(s) else s)
 
     def _check_lines(self) -> list[str]:
         c = self.check
@@ -146,6 +152,8 @@ class DesignResult:
                 "derived_std": dict(p.derived_std),
                 "relative_to_this_log": {n: self.relative(i, n) for n in self.quantities()},
                 "linearisation": list(p.honesty),
+                "expected_2lnlr": None if p.separation is None else {
+                    "a_true": p.separation[0], "b_true": p.separation[1]},
             }
 
         d = {

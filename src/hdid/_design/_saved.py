@@ -68,7 +68,9 @@ def _prediction(c: dict) -> Prediction:
         prior_ratio=_floats(c.get("posterior_over_prior", {})),
         derived_std=_floats(c.get("derived_std", {})), names=tuple(std),
         n_effective=_num(c.get("n_effective")), sigma=_num(c.get("noise_rad")),
-        error=c.get("error"), honesty=list(c.get("linearisation", [])))
+        error=c.get("error"), honesty=list(c.get("linearisation", [])),
+        separation=None if c.get("expected_2lnlr") is None else (
+            _num(c["expected_2lnlr"]["a_true"]), _num(c["expected_2lnlr"]["b_true"])))
 
 
 def _check(c: dict) -> CheckResult:

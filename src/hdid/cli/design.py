@@ -15,7 +15,8 @@ from ._common import _Command, _Fail, _QUIET, _check_output, _emit
 @cloup.option_group(
     "Candidates and ranking",
     click.option("--target", "targets", metavar="NAMES", help="Rank by the std of these (comma-separated parameters or derived quantities; 'band' = stick-band half-width, 'frequency' = natural frequency), e.g. --target tau_c,band. Default: D-optimality."),
-    click.option("--criterion", type=click.Choice(["targets", "d"]), help="'targets' (default with --target) or 'd' (D-optimality on the free parameters)."),
+    click.option("--criterion", type=click.Choice(["targets", "d", "separate"]), help="'targets' (default with --target), 'd' (D-optimality on the free parameters) or 'separate' (default with --separate)."),
+    click.option("--separate", metavar="A.json,B.json", help="Two fits of the same log by rival models (hdid fit --json with different --add): rank by the expected 2 ln LR that tells them apart."),
     click.option("--candidates", "candidates_file", metavar="FILE", type=click.Path(dir_okay=False), help="Your own candidates (TOML [[candidate]] tables or JSON list): each names what differs from the log (rate, amplitudes, counts_per_rev, repeats, added_inertia, duration, hold)."),
 )
 @cloup.option_group(
@@ -29,8 +30,8 @@ from ._common import _Command, _Fail, _QUIET, _check_output, _emit
     click.option("--json", "json_out", metavar="OUT.json", type=click.Path(dir_okay=False), help="Write the result as JSON (schema hdid/schema/design.schema.json)."),
     _QUIET,
 )
-def design_cmd(source, targets, criterion, candidates_file, check_n, check_candidate, seed,
-               json_out, quiet):
+def design_cmd(source, targets, criterion, separate, candidates_file, check_n, check_candidate,
+               seed, json_out, quiet):
     """Which experiment would determine what this log cannot: predicted standard errors of
     every parameter and derived quantity for candidate release tests (amplitudes and their
     number, repeats, sample rate, encoder, added inertia), from the linearised Fisher
@@ -48,6 +49,14 @@ def design_cmd(source, targets, criterion, candidates_file, check_n, check_candi
         raise _Fail(f"--candidates {candidates_file}: no such file (TOML or JSON)")
     if check_candidate and not check_n:
         raise _Fail("--check-candidate needs --check N (how many logs to simulate)")
+    pair = None
+    if separate is not None:
+        pair = [p.strip() for p in separate.split(",") if p.strip()]
+        if len(pair) != 2:
+            raise _Fail(f"--separate {separate!r}: give two fit JSONs, A.json,B.json")
+        for p in pair:
+            if not Path(p).is_file():
+                raise _Fail(f"--separate {p}: no such file (a fit JSON from hdid fit --json)")
     if json_out:
         _check_output(json_out, [path], "--json")
     from .._design._design import design
@@ -55,7 +64,8 @@ def design_cmd(source, targets, criterion, candidates_file, check_n, check_candi
 
     try:
         result = design(str(path), candidates_file, targets=targets, criterion=criterion,
-                        check=check_n, check_candidate=check_candidate, seed=seed)
+                        check=check_n, check_candidate=check_candidate, seed=seed,
+                        separate=pair)
     except (HdidError, ValueError, KeyError) as exc:
         raise _Fail.from_error(exc) from None
     _emit(result.report(), result.to_dict(), json_out, quiet)
