@@ -67,7 +67,8 @@ def score(p: Prediction, ref: Prediction, criterion: str, targets) -> float:
         return math.inf
     if criterion == "separate":  # the smaller expected 2 ln LR of the pair, negated
         sep = min(p.separation) if p.separation else math.nan
-        return -sep if math.isfinite(sep) else math.inf
+        ok = p.separation is not None and all(math.isfinite(x) for x in p.separation)
+        return -sep if ok else math.inf  # a direction not evaluated: last
     if criterion == "d":
         n = sum(1 for _ in ref.names if _ in p.names) or 1
         if not (math.isfinite(p.logdet) and math.isfinite(ref.logdet)):

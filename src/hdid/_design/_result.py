@@ -70,7 +70,10 @@ class DesignResult:
         crit = {"targets": "geometric mean of the std ratios of " + ", ".join(self.targets),
                 "d": "D-optimality (confidence-volume ratio as a geometric-mean std ratio)",
                 "separate": "the expected 2 ln LR between the two rival fits (the smaller "
-                            "direction; score column), std ratios"}[self.criterion]
+                            "direction; score column; linearised at each rival's fit to this "
+                            "log, not confirmed by refitting: far from this log's design the "
+                            "rival's best fit moves and the value overstates), std ratios"
+                }[self.criterion]
         lines = [f"hdid design: {self.source}", "",
                  f"ranking by {crit}, relative to this log (1 = as now, < 1 better):"]
         width = max(len(self.predictions[i].experiment.name) for i, _ in self.ranking)
