@@ -97,6 +97,12 @@ COULOMB_RESTART_LEVELS = ((1.0 / RESTART_RATIO, 1.0), (0.75, 1.3))
 #: (the linear decrement) is what they keep. Harmonic-drive grease damps 1–10 % of
 #: critical (the clean-floor plant: 1–14 %), so the restarts span 1, 3 and 10 %.
 VISCOUS_RESTART_SHARES = (None, 0.01, 0.03, 0.1)
+#: The speed, a fraction of the log's peak, at which those restarts read the fitted
+#: friction level: a swing spends most of its path between half and full speed, where
+#: the level sets the amplitude decrement (a clean paper log ended with ``v_s`` 80 rad/s
+#: above its 60 rad/s peak and ``tau_s < tau_c``: its friction on the swings was
+#: ``tau_s``, not the ``tau_c`` it never reaches).
+LEVEL_SPEED = 0.5
 #: sd (transformed units) of the prior rows that hold a limit's parameters.
 PIN_SD = 1e-4
 #: Grid starts of a limit's own fit, beside the warm start at the full fit.
@@ -209,14 +215,17 @@ def limits_of(model, fixed) -> list[Limit]:
 
 def stribeck_restarts(values: dict, scales, fixed) -> list[dict]:
     """Full-model restarts for a fit still above the floor after its limits: a regular
-    Stribeck law (``tau_s`` 1.3, ``tau_c`` 0.75 × the fitted sliding level ``tau_c``) in
+    Stribeck law (``tau_s`` 1.3, ``tau_c`` 0.75 × the fitted friction at half the log's
+    peak speed, ``LEVEL_SPEED``: the sliding level ``tau_c`` where the fitted ``v_s`` lies
+    below the swing's speeds, ``tau_s`` where a fit put ``v_s`` above them) in
     the Coulomb restarts' shapes (``COULOMB_RESTART_SHAPES``), with ``c_v`` at the fit's
     own value and at ``VISCOUS_RESTART_SHARES`` of critical damping (module constants);
     empty unless the model has a free Stribeck law and a free ``c_v``."""
     names = ("tau_c", "tau_s", "v_s", "delta", "c_v")
     if set(names) & set(fixed) or not all(n in values for n in names):
         return []
-    level = values["tau_c"]
+    shape = math.exp(-(LEVEL_SPEED * scales.speed / values["v_s"]) ** values["delta"])
+    level = values["tau_c"] + (values["tau_s"] - values["tau_c"]) * shape
     critical = 2.0 * math.sqrt(scales.k_wg * scales.inertia)
     rows = []
     for share in VISCOUS_RESTART_SHARES:
