@@ -432,6 +432,8 @@ def _release_std(problem: Problem, u, std_u, i: int) -> float:
     lo, hi = float(np.asarray(problem.release_lo)[i]), float(np.asarray(problem.release_hi)[i])
     if hi == lo:  # a run released at its first sample (moving, or never moving): known
         return 0.0
+    if not math.isfinite(std_u[j]):  # undetermined (not 0·∞ = NaN at a bracket end)
+        return math.inf
     s = 1.0 / (1.0 + math.exp(-float(u[j])))
     return float((hi - lo) * s * (1 - s) * std_u[j])
 
