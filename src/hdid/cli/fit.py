@@ -52,7 +52,7 @@ from ._common import (
     click.option("--walkers", type=click.IntRange(4, 4096), metavar="N", help="emcee walkers (default max(32, 2·dim))."),
     click.option("--particles", type=click.IntRange(50, 10**5), metavar="N", help="smc particles per run (default 300)."),
     click.option("--seed", type=int, default=0, show_default=True, help="Posterior seed."),
-    click.option("--prior", "priors", multiple=True, metavar="NAME=VALUE,SD", help="A Gaussian prior of your own (a datasheet's) on a fitted parameter, replacing the default, e.g. --prior tau_c=2.5e-3,0.3 (median 2.5 mN m, sd 0.3 in log: about ±30 %; delta's sd is in its logit). Repeatable. With the default priors (flat in value for k2, tau_c, c_v) a 4-run paper log's posterior does not converge in 20 000 steps; with priors on k1, k2, tau_c, tau_s, c_v it converged on 40 of 40 calibration logs (benchmarks/README.md)."),
+    click.option("--prior", "priors", multiple=True, metavar="NAME=VALUE,SD", help="A Gaussian prior of your own (a datasheet's) on a fitted parameter, replacing the default, e.g. --prior tau_c=2.5e-3,0.3 (median 2.5 mN m, sd 0.3 in log: about ±30 %; delta's sd is in its logit). Repeatable. Without it each positive scale has a weakly informative log-normal prior centred on a scale from the log's own physics (×10 either way at 95 %), listed with its source in the report."),
     click.option("--chains", "chains_out", metavar="OUT.nc", help="Save the posterior chains (arviz NetCDF)."),
     click.option("--corner", "corner_out", metavar="OUT.png", help="Corner plot of the posterior."),
 )
