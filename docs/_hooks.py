@@ -75,7 +75,7 @@ def schema_table(name: str) -> str:
     return "\n".join(head + _rows(schema.get("properties", {}), set(schema.get("required", [])), "", 1))
 
 
-def on_page_markdown(markdown: str, **kwargs) -> str:
+def _schema_tables(markdown: str) -> str:
     return MARKER.sub(lambda m: schema_table(m.group(1)), markdown)
 
 
@@ -123,14 +123,6 @@ def layers_table() -> str:
     return "\n".join(rows)
 
 
-_on_schema = on_page_markdown
-
-
-def on_page_markdown(markdown: str, **kwargs) -> str:  # noqa: F811 (both markers)
-    markdown = _on_schema(markdown, **kwargs)
-    if LAYERS_MARKER in markdown:
-        markdown = markdown.replace(LAYERS_MARKER, layers_table())
-    return markdown
 
 
 def on_config(config, **kwargs):
@@ -168,11 +160,10 @@ def cli_help() -> str:
     return "\n".join(parts)
 
 
-_on_markers = on_page_markdown
-
-
-def on_page_markdown(markdown: str, **kwargs) -> str:  # noqa: F811 (all markers)
-    markdown = _on_markers(markdown, **kwargs)
-    if HELP_MARKER in markdown:
-        markdown = markdown.replace(HELP_MARKER, cli_help())
+def on_page_markdown(markdown: str, **kwargs) -> str:
+    """MkDocs hook: every generated block (schema tables, layer table, CLI help)."""
+    markdown = _schema_tables(markdown)
+    for marker, make in ((LAYERS_MARKER, layers_table), (HELP_MARKER, cli_help)):
+        if marker in markdown:
+            markdown = markdown.replace(marker, make())
     return markdown

@@ -244,9 +244,5 @@ def _num(x: float) -> str:
     return f"{x:.3g}"
 
 
-def _ratio(x: float) -> str:
-    if x is None or (isinstance(x, float) and math.isnan(x)):
-        return "n/a"
-    if math.isinf(x):
-        return "undet."
-    return f"{x:.3g}"
+#: ratios print as numbers do
+_ratio = _num
