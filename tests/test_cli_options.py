@@ -254,6 +254,27 @@ def test_particles_is_a_flag_for_smc(monkeypatch):
     assert seen["method"] == "smc" and seen["n_particles"] == 600
 
 
+
+def test_default_prior_is_a_posterior_flag(monkeypatch, no_fit):
+    # weak by default; flat (the earlier flat-in-value priors) one flag away; only with
+    # the posterior, refused before any fit otherwise
+    seen = {}
+    fake_fit = SimpleNamespace(report=lambda: "", to_dict=lambda: {})
+
+    def post(fit, **kwargs):
+        seen.update(kwargs)
+        return SimpleNamespace(report=lambda: "", to_dict=lambda: {})
+
+    res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "--default-prior", "flat"])
+    assert "--posterior" in _one_line_exit_2(res, "--default-prior")
+    monkeypatch.setattr(hdid._fitting._fit, "fit", lambda *a, **k: fake_fit)
+    monkeypatch.setattr(hdid._posterior, "sample_posterior", post)
+    for args, want in (([], "weak"), (["--default-prior", "flat"], "flat")):
+        seen.clear()
+        res = CliRunner().invoke(main, ["fit", str(EXAMPLE), "-q", "--posterior", *args])
+        assert res.exit_code == 0, res.output
+        assert seen["default_prior"] == want
+
 #: The library's Python names that have a flag (hdid/cli/_flags.py maps them).
 _PYTHON_NAMES = re.compile(r"(?<![-.\w])(max_steps|n_steps|n_walkers|n_particles|max_rounds|"
                            r"torque_constant|output_counts_per_rev|band_bracket|workers=|"

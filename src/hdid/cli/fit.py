@@ -53,6 +53,7 @@ from ._common import (
     click.option("--particles", type=click.IntRange(50, 10**5), metavar="N", help="smc particles per run (default 300)."),
     click.option("--seed", type=int, default=0, show_default=True, help="Posterior seed."),
     click.option("--prior", "priors", multiple=True, metavar="NAME=VALUE,SD", help="A Gaussian prior of your own (a datasheet's) on a fitted parameter, replacing the default, e.g. --prior tau_c=2.5e-3,0.3 (median 2.5 mN m, sd 0.3 in log: about ±30 %; delta's sd is in its logit). Repeatable. Without it each positive scale has a weakly informative log-normal prior centred on a scale from the log's own physics (×10 either way at 95 %), listed with its source in the report."),
+    click.option("--default-prior", type=click.Choice(["weak", "flat"]), default="weak", show_default=True, help="The prior of the parameters no --prior names. weak: log-normal around a scale of the log's physics (×10 either way at 95 %); flat: flat in log (in value for k2, tau_c, c_v) within a box around the fit — it puts mass on limits the data may not support, and chains mix slowly on it."),
     click.option("--chains", "chains_out", metavar="OUT.nc", help="Save the posterior chains (arviz NetCDF)."),
     click.option("--corner", "corner_out", metavar="OUT.png", help="Corner plot of the posterior."),
 )
@@ -74,8 +75,8 @@ from ._common import (
 def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_inertia,
             inertia_prior, fix, add_effects, remove_effects, effect_files, release_time,
             counts_per_rev, starts, posterior, steps, walkers, particles, sampler, seed, priors,
-            chains_out, corner_out, quiet, band_bracket, workers, dask_address, torque_constant,
-            output_counts_per_rev, order, joint, ratio, resolution, start_values, input_hold):
+            default_prior, chains_out, corner_out, quiet, band_bracket, workers, dask_address,
+            torque_constant, output_counts_per_rev, order, joint, ratio, resolution, start_values, input_hold):
     """Fit stiffness, friction (and inertia) jointly to all runs of LOG.csv.
 
     LOG.csv has a header with columns time [s] and theta [rad, WG/motor angle]; optional
@@ -93,6 +94,8 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
     post_prior = _common._parse_priors(priors)
     if post_prior and not (posterior or chains_out or corner_out):
         raise _Fail("--prior is the posterior's: add --posterior (or --chains/--corner)")
+    if default_prior != "weak" and not (posterior or chains_out or corner_out):
+        raise _Fail("--default-prior is the posterior's: add --posterior (or --chains/--corner)")
     model = _build_model(add_effects, remove_effects, effect_files, ratio)
     driven_options = {"torque_constant": torque_constant, "resolution": resolution,
                       "output_counts_per_rev": output_counts_per_rev}
@@ -181,6 +184,7 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
             post = sample_posterior(
                 result, n_steps=steps, n_walkers=walkers, seed=seed, progress=not quiet,
                 method=sampler, prior=post_prior or None, n_particles=particles,
+                default_prior=default_prior,
             )
         except (HdidError, ValueError) as exc:  # a --prior naming no free parameter, …
             msg = str(exc)
