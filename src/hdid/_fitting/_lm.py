@@ -276,8 +276,8 @@ def residual_rows(problem, u) -> int:
     dtypes; a problem whose prior rows or data values change has the same count. The
     shape evaluation traces the simulation (0.24–0.30 s on the shipped paper log, against
     17 ms for a 6-lane LM call; the driven fit and the posterior's mode search and limit
-    fits call :func:`solve_fresh` tens to hundreds of times, benchmarks/README.md, issue
-    17, section "the limit fits cheap")."""
+    fits call :func:`solve_fresh` tens to hundreds of times,
+    ``docs/decisions/mode-search-programs.md``)."""
     leaves, treedef = jax.tree_util.tree_flatten(problem)
     try:
         key = (treedef, tuple(u.shape), str(u.dtype), tuple((tuple(np.shape(x)), str(getattr(x, "dtype", type(x))))

@@ -9,8 +9,8 @@ Likelihood: an encoder reading ``y`` is the model angle plus Gaussian noise ``σ
 (fitted) plus the rounding to the step ``q`` treated as independent uniform noise of
 variance ``q²/12`` (Widrow): Gaussian with ``σ² = σ_n² + q²/12``, never below the
 quantization floor (the ``q²/12`` term is left out when the encoder step is not known).
-Measured on 20 noiseless rounded paper-design logs (benchmarks/results/
-posterior_likelihood.md) it puts the truth at 2Δlog L consistent with χ²₇. Each stretch
+Measured on 20 noiseless rounded paper-design logs
+(``docs/decisions/interval-likelihood.md``) it puts the truth at 2Δlog L consistent with χ²₇. Each stretch
 of identical readings (pre-release hold, stuck tail) carries one observation's weight, as
 in the fit (``weight²`` multiplies the log-likelihood). When the fit's residuals are
 autocorrelated beyond what i.i.d. noise gives, the log-likelihood is tempered by the
@@ -58,7 +58,7 @@ from .._models._transforms import from_unconstrained
 PRIOR_HALF_WIDTH = 7.0
 #: Noise prior bounds, in encoder steps. The floor is the forward model's own accuracy:
 #: the simulator's error at the default substep is ≤ 0.042 steps
-#: (benchmarks/results/simulator_schemes.md); a smaller σ_n would claim the model reproduces
+#: (docs/decisions/simulator-scheme.md); a smaller σ_n would claim the model reproduces
 #: readings more exactly than it can compute them.
 SIGMA_BOUNDS = (0.05, 20.0)
 #: Which log-transformed parameters have a default prior flat in their *value* (not
@@ -67,9 +67,9 @@ SIGMA_BOUNDS = (0.05, 20.0)
 #: declares ``k2``, ``c_v`` and ``tau_c`` flat in value — coefficients of terms that may
 #: vanish, whose "absent" end a log-flat prior gives an unbounded volume that pulled the
 #: paper design to k2 → 0 and a 92 mrad band, and made the shipped log's tau_c interval
-#: one of the box's floor (issue 17, section "tau_c flat in value") — and samples ``k1``, ``k2``, ``tau_c``, ``c_v`` in value — the
+#: one of the box's floor (docs/decisions/tau-c-flat-in-value.md) — and samples ``k1``, ``k2``, ``tau_c``, ``c_v`` in value — the
 #: data fix ``k1·d + k2·d³`` and ``τ_c + c_v·v`` as straight lines, bananas in their logs;
-#: benchmarks/results/posterior_calibration.md, posterior_coordinates.md).
+#: docs/decisions/posterior-moves.md).
 #: Where the fit's RMS residual is beyond the noise bound in steps, σ_n is bounded by this
 #: many times the residual instead (a step that does not describe the readings' noise).
 NOISE_BOUND_OVER_RMS = 4.0
@@ -202,7 +202,7 @@ class LogPosterior(eqx.Module):
 #: Rows per simulation loop in :meth:`LogPosterior.batch` (0: all rows in one loop). The
 #: batched simulator integrates until *every* run of the batch has stuck, so one slow row
 #: (little friction: it rings for the whole log) makes every row pay for its length; in
-#: chunks each loop ends with its own slowest row (benchmarks/results/posterior_profile.json).
+#: chunks each loop ends with its own slowest row (docs/decisions/posterior-moves.md).
 BATCH_CHUNK = 128
 
 
@@ -212,7 +212,7 @@ def _batch_rows(lp: LogPosterior, X):
     # least-squares optimum's (which sticks within a few samples). The batched loop lasts
     # until its slowest run sticks, and such rows (Stribeck velocity 10⁴ rad/s, static
     # friction near zero: a ring-down over the whole log) made one call of 2000 SMC
-    # reference draws cost 4 s instead of 0.4 s (benchmarks/results/posterior_profile.md).
+    # reference draws cost 4 s instead of 0.4 s (docs/decisions/posterior-moves.md).
     ok = inside & jnp.isfinite(jax.vmap(lp._log_prior)(U, X[:, -1]))
     U_sim = jnp.where(ok[:, None], U, lp.centre[None, :])
     out = jax.vmap(lp._log_prob_given)(X, lp.problem.predict_many(U_sim))

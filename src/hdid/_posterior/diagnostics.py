@@ -9,7 +9,7 @@ that sit in different modes lengthen it). The report says which rule was met.
 
 Why both: R-hat with each of 36 walkers taken as a chain asks every walker alone for
 enough independent draws to match the others' spread: on 46 paper-design chains
-(benchmarks/results/posterior_sbc_physical_all, _friction_post6, _sidebyside_post6_plain)
+(docs/decisions/ensemble-convergence-rule.md)
 R-hat came down to 1.01 only at ≈ 85–125 τ (1.013–1.022 at 50–70 τ with ESS ≥ 1200),
 while 50 τ is emcee's own rule for a reliable τ and leaves ≈ 36 × 50 / 2 = 900 and more
 effective draws in the ensemble, which the ESS floor checks.

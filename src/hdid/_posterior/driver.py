@@ -95,7 +95,7 @@ def sample_posterior(
     started from the optima's Laplace approximations, differential-evolution moves plus an
     independence Metropolis–Hastings move from a t-mixture over the optima (below); the
     verdict is arviz's on its chain. Measured side by side on the same logs
-    (benchmarks/README.md, issue 17, section "emcee back as the engine") it mixed better than emcee started
+    (docs/decisions/smc-vs-emcee.md) it mixed better than emcee started
     from a tempered-SMC pilot with a proposal fitted to the SMC particles (retired).
 
     ``method="smc"``: tempered sequential Monte Carlo alone from the optima's Laplace
@@ -103,7 +103,7 @@ def sample_posterior(
     its convergence test; gives the log-evidence); ``n_particles`` per run. It passes its
     own test in seconds, but on the shipped paper log its intervals are narrower than the
     emcee chains' (v_s, tau_c) and widen with its particle count
-    (benchmarks/results/posterior_engine_scratch.md): kept for comparison and the evidence,
+    (docs/decisions/smc-vs-emcee.md): kept for comparison and the evidence,
     not as the default. The options from ``n_walkers`` to ``sample_linear`` other than
     ``prior`` are emcee's.
 
@@ -121,9 +121,9 @@ def sample_posterior(
     Metropolis–Hastings from a t-mixture over the optima (:class:`MixtureProposal`),
     refitted after each of ``BURN_IN_STAGES`` stages; the kept chain uses the last mixture,
     fixed. (A normalizing flow fitted to the burn-in draws in its place was measured and
-    lost: benchmarks/results/posterior_flow.md; so did emcee in the latent space of a flow
+    lost: docs/decisions/normalizing-flow.md; so did emcee in the latent space of a flow
     fitted to an SMC pilot, and that flow as the independence move, under the physical
-    priors: benchmarks/README.md, section "normalizing-flow preconditioning".)
+    priors: the same record.)
 
     Priors (:mod:`~hdid._posterior.priors`, issue 34's decision (a)): every positive
     physical scale an effect declares (``k1``, ``k2``, ``tau_c``, ``tau_s``, ``c_v``, any
@@ -155,7 +155,7 @@ def sample_posterior(
     likelihood:
         ``"auto"`` / ``"gaussian"``: Gaussian with the ``q²/12`` rounding variance added when
         the encoder step is known (the interval likelihood was retired, see
-        benchmarks/README.md).
+        docs/decisions/interval-likelihood.md).
     moves:
         emcee moves (a move, a list of moves or of ``(move, weight)``), or a callable
         ``(log_posterior, proposal) -> moves``; default :func:`default_moves`. A move with
@@ -208,7 +208,7 @@ def sample_posterior(
         raise PosteriorError(f"method (--sampler) must be 'smc' or 'emcee', not {method!r}")
     if likelihood not in ("auto", "gaussian"):
         raise PosteriorError(f"likelihood must be 'auto' or 'gaussian', not {likelihood!r} (the "
-                             "interval likelihood was retired: benchmarks/README.md)")
+                             "interval likelihood was retired: docs/decisions/interval-likelihood.md)")
     import emcee
 
     t0 = time.perf_counter()

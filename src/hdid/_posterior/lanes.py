@@ -13,7 +13,7 @@ from .._fitting._lm import solve_fresh  # noqa: E402,F401 (the fit's engine, re-
 #: default ``n_starts``), so that the search runs the program the fit compiled (same
 #: problem, same lane count: one in-memory or persistent-cache hit) instead of compiling
 #: one for its own number of candidates, which varies from log to log (27–32 s in a fresh
-#: process, benchmarks/README.md, issue 17, section "emcee back as the engine").
+#: process, docs/decisions/mode-search-programs.md).
 MODE_LANES = 6
 
 

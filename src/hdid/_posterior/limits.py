@@ -4,7 +4,7 @@ A parameter whose default prior is flat in its value (``flat_in_value``: ``k2``,
 ``tau_c``, ``c_v``) is the coefficient of a term that may vanish. Where the data cannot
 exclude that end — the shipped paper log's Coulomb limit of the Stribeck law: along laws
 with v_s ≈ 17–24 rad/s, −2 log p rises by only 3 from the best optimum down to tau_c
-0.5 mN m and by 4.4 at 6 µN m (benchmarks/README.md, issue 17, sections "the friction law in data coordinates" and "tau_c flat in value") — an
+0.5 mN m and by 4.4 at 6 µN m (docs/decisions/friction-coordinates.md, tau-c-flat-in-value.md) — an
 ensemble started at the least-squares optimum may never go down the curved ridge.
 
 The *limit fit* of such a parameter is the least-squares fit with it held at

@@ -134,7 +134,7 @@ def _restart_candidates(fit, rng, n_random: int) -> np.ndarray:
 #: Restarts drawn from the widened Laplace approximation in :func:`find_modes`. 30 instead
 #: of 6 found more optima (paper log 1007 with seed 0: the one nearest the truth, which 6
 #: missed; with seed 7 not) but did not change the coverage on 14 paper logs (95 %
-#: intervals 86 % vs 84 %, band 12/14 both; benchmarks/results/posterior_calibration_paper30.md)
+#: intervals 86 % vs 84 %, band 12/14 both; docs/decisions/mode-search-starts.md)
 #: and costs ≈ 8 s more per call.
 N_RANDOM_RESTARTS = 6
 
@@ -217,7 +217,7 @@ class _PriorFit:
 
 #: Starts drawn from a user prior for the mode search (besides its centre): on paper log
 #: 7203 with the catalog prior the search from the fit's neighbourhood missed an optimum
-#: near the truth that holds 28 % of the posterior (benchmarks/README.md).
+#: near the truth that holds 28 % of the posterior (docs/decisions/mode-search-starts.md).
 N_PRIOR_STARTS = 8
 
 
@@ -306,7 +306,7 @@ def sampled_modes(fit, modes, seed: int, u_fit: np.ndarray, lin: np.ndarray,
         # with a prior of the user's the optima sought are the posterior's: the fit's
         # optima sit where the default weak priors put them (paper log 7203 with the
         # catalog prior: delta 1.6–2.4 against the prior's 1 ± 10 %, and the draws never
-        # reached a region of higher density near the truth; benchmarks/README.md)
+        # reached a region of higher density near the truth; docs/decisions/mode-search-starts.md)
         view, extra = with_user_prior(fit, gauss_prior, seed)
         found = (find_modes(view, seed=seed, extra_starts=extra)
                  if modes == "auto" else [_fit_mode(view)])

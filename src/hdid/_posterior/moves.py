@@ -118,9 +118,8 @@ def default_moves(proposal=None):
     walkers, 20000 steps): emcee's default stretch move has τ ≈ 250–290 steps, the
     differential-evolution mixture ≈ 65 — the stretch move's efficiency falls with the
     dimension. DE only undoes *linear* correlations and moves walkers locally; the
-    paper design's posterior has several modes and curved ridges
-    (benchmarks/results/posterior_geometry.md), which the independence proposal
-    crosses in one step (benchmarks/results/posterior_speed.md).
+    paper design's posterior has several modes and curved ridges, which the
+    independence proposal crosses in one step (docs/decisions/posterior-moves.md).
     """
     import emcee
 

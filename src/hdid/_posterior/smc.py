@@ -295,7 +295,7 @@ def _setup(fit, seed, sigma_floor=None, modes="auto", prior=None, default_prior=
 
 #: Particles per run and independent runs (the runs are the "chains" of the convergence test).
 #: 300 (with the independence moves) converged on the shipped paper log with ESS ≥ 900
-#: (benchmarks/results/posterior_profile.md); 500 without them did not (R-hat 1.011).
+#: (docs/decisions/posterior-moves.md); 500 without them did not (R-hat 1.011).
 N_PARTICLES = 300
 N_RUNS = 4
 #: Moves per tempering step (and per round at β = 1), alternating independence MH from the

@@ -169,7 +169,7 @@ def noise_sigma(runs, step: float | None, still_only: bool = False) -> float:
     positive = [x for x in (sig_still, sig_d3) if np.isfinite(x) and x > 0]
     sig = min(positive) if positive else 0.0
     # The simulator's own error (RK4 substeps: 1.9e-5 rad on a 0.157 rad swing,
-    # benchmarks/results/simulator_schemes.md) is ~1e-4 of the swing; weights finer than
+    # docs/decisions/simulator-scheme.md) is ~1e-4 of the swing; weights finer than
     # what the model can resolve only make the fit ill-conditioned (a noiseless log).
     return max(sig, 1e-4 * span)
 

@@ -1,6 +1,6 @@
 """Stick-exact simulation of the free-motion test.
 
-Scheme (chosen by measurement, see ``benchmarks/simulator_schemes.py``): fixed RK4
+Scheme (chosen by measurement, see ``docs/decisions/simulator-scheme.md``): fixed RK4
 substeps between samples with the friction *direction* frozen inside a step. When the
 velocity would cross zero inside a substep the step is split at the crossing: the
 crossing fraction ``α = ω0 / (ω0 − ω1)`` and the cubic-Hermite position there are smooth
@@ -33,7 +33,7 @@ from .._models._model import Model
 from ..effects import Motion
 
 #: Longest RK4 substep [s]. Against the event-driven reference this keeps the error far
-#: below the 250 Hz quantization floor (benchmarks/results/simulator_schemes.md).
+#: below the 250 Hz quantization floor (docs/decisions/simulator-scheme.md).
 DEFAULT_MAX_SUBSTEP = 5e-4
 
 
@@ -135,7 +135,7 @@ def _event_step(model: Model, inertia, carry, h, full):
     # Close the small remaining gap to ω = 0 with a quadratic in time: the stop lies
     # dt = −ω_a/a later, at θ_stop = θ_a + ω_a·dt/2; motion that slides on resumes from
     # that corrected instant (α·h + dt), which keeps the scheme high-order after
-    # reversals (benchmarks/results/simulator_schemes.md).
+    # reversals (docs/decisions/simulator-scheme.md).
     acc_stop = _accel(model, inertia, theta_a, omega_a, direction, states)
     dt_gap = _safe_div(-omega_a, acc_stop, crossed & (acc_stop != 0))
     theta_cross = theta_a + 0.5 * omega_a * dt_gap
