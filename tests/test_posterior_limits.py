@@ -1,6 +1,6 @@
 """The vanishing ends of value-flat parameters (``_posterior/limits.py``): the limit fits,
 their place among the optima, and the warning when a chain stops short of an end the
-data allow (issue 17, section "tau_c flat in value")."""
+data allow (docs/decisions/tau-c-flat-in-value.md)."""
 
 from __future__ import annotations
 
@@ -61,8 +61,8 @@ def test_warning_fires_where_the_data_allow_values_the_chain_never_reached():
 
 def test_limit_fits_on_the_shipped_log(fit):
     """tau_c held at e⁻⁶ of its least-squares value, the rest refitted: the shipped log's
-    Coulomb limit is within the data's reach (least-squares Δχ² below 3.84; the measurement of section "the friction law in data coordinates",
-    profile: 0.32 at 1 mN m); the viscous term's vanishing end is not (c_v → 0)."""
+    Coulomb limit is within the data's reach (least-squares Δχ² below 3.84; the profile of docs/decisions/friction-coordinates.md:
+    0.32 at 1 mN m); the viscous term's vanishing end is not (c_v → 0)."""
     import jax.numpy as jnp
 
     from hdid._posterior.modes import MODE_LANES
@@ -116,7 +116,8 @@ def test_limit_fits_skip_parameters_the_fit_measures_well(fit):
 def test_mode_search_solver_is_the_fits_program_without_its_trace(fit):
     """The mode search's and limit fits' ``solve_fresh`` (its residual count evaluated
     once per problem structure, not per call: 0.24–0.30 s of tracing each on this log,
-    ~150 calls per default ``sample_posterior``; section "the limit fits cheap") returns what the fit's
+    ~150 calls per default ``sample_posterior``; docs/decisions/mode-search-programs.md)
+    returns what the fit's
     compiled program returns for a state sized by ``jax.eval_shape`` now, bit for bit —
     also for the limit fits' problems, whose prior rows differ."""
     import equinox as eqx

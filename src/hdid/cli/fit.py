@@ -47,7 +47,7 @@ from ._common import (
 @cloup.option_group(
     "Posterior (one free-motion log)",
     click.option("--posterior", is_flag=True, help="Also sample the posterior (slow; see README)."),
-    click.option("--sampler", type=click.Choice(["emcee", "smc"]), default="emcee", show_default=True, help="Posterior sampler: emcee (ensemble MCMC from the fit's optima, differential-evolution + independence moves; --steps/--walkers) or smc (tempered SMC alone; --particles; gives the log-evidence; its intervals were narrower than emcee's on the same logs). Calibration: benchmarks/README.md, Posterior."),
+    click.option("--sampler", type=click.Choice(["emcee", "smc"]), default="emcee", show_default=True, help="Posterior sampler: emcee (ensemble MCMC from the fit's optima, differential-evolution + independence moves; --steps/--walkers) or smc (tempered SMC alone; --particles; gives the log-evidence; its intervals were narrower than emcee's on the same logs). Calibration: benchmarks/results/posterior_sbc.md; the choice: docs/decisions/smc-vs-emcee.md."),
     click.option("--steps", type=click.IntRange(100, 10**6), metavar="N", help="emcee chain length (default: until 50 autocorrelation times, at most 20000)."),
     click.option("--walkers", type=click.IntRange(4, 4096), metavar="N", help="emcee walkers (default max(32, 2·dim))."),
     click.option("--particles", type=click.IntRange(50, 10**5), metavar="N", help="smc particles per run (default 300)."),

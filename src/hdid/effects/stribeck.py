@@ -63,7 +63,7 @@ class StribeckFriction(AbstractFriction):
       speed on the paper's design, the prior's lower 2.5 % point). The previous sd of 2 (a factor e² = 7.4 either way, 2σ beyond the peak speed)
       let the posterior run along the Coulomb limit of the law (low ``tau_c``, high
       ``c_v``, ``v_s`` and low ``delta``), where emcee did not converge on the paper design
-      in 20 000 steps (benchmarks/README.md, issue 17, section "emcee back as the engine").
+      in 20 000 steps (docs/decisions/stribeck-priors.md).
     - ``delta``: logit-normal on its interval (0.3, 4), median 1 (the exponential law),
       sd 0.8 in the logit: 95 % between 0.47 and 2.3. Footing: the shape exponents
       published for lubricated contacts lie between ½ and 2 (½–1 Bo & Pavelescu,
@@ -80,7 +80,7 @@ class StribeckFriction(AbstractFriction):
       arbitrary box: on the shipped paper log (``data/synthetic/csf8_paper.csv``) the
       least-squares cost rises by less than 1.6 (χ²) from the fit's ``tau_c`` of 2.2 mN m
       down to 6 µN m along laws with ``v_s`` ≈ 20–24 rad/s and ``c_v`` ≈ 5–7e-5
-      (benchmarks/README.md, issue 17, sections "the friction law in data coordinates" and "tau_c flat in value"). Flat in value, the mass
+      (docs/decisions/friction-coordinates.md, tau-c-flat-in-value.md). Flat in value, the mass
       there is proportional to the torque range the data allow: the data bound ``tau_c``
       above; where they do not bound it below, the posterior says so (a warning, see
       ``hdid._posterior.limits``), instead of a box-made interval. A
