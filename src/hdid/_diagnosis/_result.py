@@ -150,15 +150,10 @@ class Diagnosis:
         :meth:`report`, :meth:`to_dict` and :meth:`plot`. The refits do not come back (the
         base fit is a :class:`SavedBase`). ``effects`` maps class names to your own effect
         classes (those not in hdid), as for :meth:`hdid.FitResult.load`."""
-        from .._errors import HdidError
+        from .._results._saved import load_complete
 
-        try:
-            return _load(path, effects, cls)
-        except (KeyError, TypeError, ValueError, IndexError) as exc:
-            raise HdidError(
-                f"{path}: not a complete hdid diagnosis JSON ({type(exc).__name__}: {exc}); "
-                "write it with hdid diagnose LOG.csv --json or Diagnosis.save"
-            ) from None
+        return load_complete(path, lambda: _load(path, effects, cls), "diagnosis",
+                             "hdid diagnose LOG.csv --json or Diagnosis.save")
 
     def to_dict(self) -> dict[str, Any]:
         from .._results._saved import finite

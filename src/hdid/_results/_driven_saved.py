@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import HdidError
-from ._saved import SCHEMA_VERSION, model_from_structure
+from ._saved import SCHEMA_VERSION, load_complete, model_from_structure
 from ._summaries import ParameterEstimate
 
 
@@ -65,13 +65,8 @@ def load(path, effects: dict | None, cls):
                         "fit's is read by FitResult.load")
     if d.get("schema_version", 0) > SCHEMA_VERSION:
         raise HdidError(f"{path}: written by a newer hdid ({d.get('hdid_version')}); upgrade hdid")
-    try:
-        return _load(d, effects, cls)
-    except (KeyError, TypeError, ValueError, IndexError) as exc:
-        raise HdidError(
-            f"{path}: not a complete hdid driven-fit JSON ({type(exc).__name__}: {exc}); "
-            "write it with hdid fit DRIVEN.csv --json or DrivenFitResult.save"
-        ) from None
+    return load_complete(path, lambda: _load(d, effects, cls), "driven-fit",
+                         "hdid fit DRIVEN.csv --json or DrivenFitResult.save")
 
 
 def _load(d: dict, effects, cls):

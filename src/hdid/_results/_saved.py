@@ -194,13 +194,20 @@ def load(path, effects: dict | None, cls):
     """A ``cls`` (:class:`~hdid.FitResult`) from its JSON (without the log: no
     predict/plot). The class comes from :meth:`FitResult.load`: this module is below the
     results and does not import them."""
+    return load_complete(path, lambda: _load(path, effects, cls), "fit",
+                         "hdid fit LOG.csv --json or FitResult.save",
+                         (KeyError, TypeError, IndexError))
+
+
+def load_complete(path, load, what: str, how: str,
+                  missing=(KeyError, TypeError, ValueError, IndexError)):
+    """``load()``, or the one-line error of a saved ``what`` file that lacks a field its
+    loader needs (a field missing or of the wrong type), saying how to write one."""
     try:
-        return _load(path, effects, cls)
-    except (KeyError, TypeError, IndexError) as exc:  # a field missing or of the wrong type
-        raise HdidError(
-            f"{path}: not a complete hdid fit JSON ({type(exc).__name__}: {exc}); write it "
-            "with hdid fit LOG.csv --json or FitResult.save"
-        ) from None
+        return load()
+    except missing as exc:
+        raise HdidError(f"{path}: not a complete hdid {what} JSON ({type(exc).__name__}: "
+                        f"{exc}); write it with {how}") from None
 
 
 def _load(path, effects, FitResult):
