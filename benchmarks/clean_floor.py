@@ -119,9 +119,27 @@ def _load(path: Path) -> list[dict]:
     return json.loads(path.read_text())["rows"] if path.exists() else []
 
 
+#: Rows at or below this ratio keep no truth or fitted values in the results file (the
+#: truth is redrawn from the seed; the fit is at the floor): the file stays small.
+KEEP_DETAIL_ABOVE = 1.2
+
+
+def _slim(row: dict) -> dict:
+    """A row as stored: floats to 6 digits; the truth, the values and each limit's whole
+    record only where the fit missed the floor (or raised), else each limit's Δχ²."""
+    keep = "error" in row or not row.get("ratio", math.inf) <= KEEP_DETAIL_ABOVE
+    rnd = lambda v: float(f"{v:.6g}") if isinstance(v, float) else (  # noqa: E731
+        {k: rnd(x) for k, x in v.items()} if isinstance(v, dict) else v)
+    out = {k: rnd(v) for k, v in row.items() if keep or k not in ("truth", "values", "limits")}
+    if not keep and isinstance(row.get("limits"), list):  # each limit's Δχ² to the fit
+        out["limits"] = {x["limit"]: rnd(x.get("dchi2")) for x in row["limits"]}
+    return out
+
+
 def _save(rows: list[dict], path: Path) -> None:
     path.parent.mkdir(exist_ok=True)
-    path.write_text(json.dumps({"rows": rows}, indent=1, default=float) + "\n")
+    body = ",\n".join(json.dumps(_slim(r), default=float) for r in rows)
+    path.write_text('{"rows": [\n' + body + "\n]}\n")
     path.with_suffix(".md").write_text(render(rows))
 
 
