@@ -214,18 +214,29 @@ def test_cli(case, tmp_path):
     cands.write_text(json.dumps({"candidates": [{"name": "far", "amplitudes": [0.2, -0.2]}]}))
     out = tmp_path / "d.json"
     runner = CliRunner()
-    r = runner.invoke(main, ["design", str(fit_json), "--candidates", str(cands), "--target",
+    r = runner.invoke(main, ["design", str(fit_json), "--experiments", str(cands), "--target",
                              "k1,band", "--json", str(out), "-q"])
     assert r.exit_code == 0, r.output
     d = json.loads(out.read_text())
     assert [c["experiment"]["name"] for c in d["candidates"]] == ["this log", "far"]
     assert d["targets"] == ["k1", "stick_band_halfwidth_rad"]
+    # the former name (diagnose's --candidates names effects): still read, with a warning
+    old = tmp_path / "old.json"
+    r = runner.invoke(main, ["design", str(fit_json), "--candidates", str(cands), "--target",
+                             "k1", "--json", str(old), "-q"])
+    assert r.exit_code == 0, r.output
+    assert "use --experiments" in r.output
+    assert [c["experiment"]["name"] for c in json.loads(old.read_text())["candidates"]] == [
+        "this log", "far"]
+    assert "--candidates" not in runner.invoke(main, ["design", "--help"]).output
     for args, words in [
         (["design", str(tmp_path / "missing.json")], "no such file"),
         (["design", str(fit_json), "--target", "nope"], "target 'nope'"),
-        (["design", str(fit_json), "--candidates", str(tmp_path / "none.toml")], "no such file"),
+        (["design", str(fit_json), "--experiments", str(tmp_path / "none.toml")], "no such file"),
+        (["design", str(fit_json), "--experiments", str(cands), "--candidates", str(out)],
+         "give --experiments alone"),
         (["design", str(fit_json), "--check-candidate", "far"], "needs --check"),
-        (["design", str(path), "--candidates", str(path)], "not valid JSON"),
+        (["design", str(path), "--experiments", str(path)], "not valid JSON"),
     ]:
         r = runner.invoke(main, args)
         assert r.exit_code == 2, (args, r.output)
