@@ -1,12 +1,12 @@
-"""What the benchmark and calibration scripts share: paths, the synthetic generators, the
-machine and load record, and the results files (``results/<name>.json`` and the markdown
-rendered from it). Run the scripts as ``python benchmarks/<script>.py``."""
+"""What the benchmark and calibration scripts share: paths, the machine and load record,
+and the results files (``results/<name>.json`` and the markdown rendered from it). Run
+the scripts as ``python benchmarks/<script>.py``; synthetic logs come from
+:mod:`hdid.reference.logs`."""
 
 from __future__ import annotations
 
 import datetime
 import hashlib
-import importlib.util
 import json
 import os
 import platform
@@ -22,18 +22,6 @@ hdid.configure()
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "data" / "synthetic"
 RESULTS = ROOT / "benchmarks" / "results"
-
-
-def import_synthetic(name: str = "generate"):
-    """``data/synthetic/<name>.py`` as a module: ``generate`` (``make_log``, ``TRUTH_CSF8``,
-    designs), ``hidden`` (effects hidden through the reference simulator), ``driven``."""
-    spec = importlib.util.spec_from_file_location(f"_hdid_{name}", DATA / f"{name}.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-import_generate = import_synthetic
 
 
 def src_fingerprint() -> str:

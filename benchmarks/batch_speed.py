@@ -28,6 +28,8 @@ from pathlib import Path
 import _common
 from _common import ROOT, Clock, load
 
+from hdid.reference import logs
+
 NAME = "batch_speed"
 GOAL_1000_S = 60.0
 GOAL_RATIO = 50.0
@@ -49,7 +51,7 @@ def truth_of(i: int, gen=None) -> dict:
     """The truth of log ``i`` (seed 1000+i)."""
     import numpy as np
 
-    gen = gen or _common.import_generate()
+    gen = gen or logs
     rng = np.random.default_rng(1000 + i)
     truth = dict(gen.TRUTH_CSF8)
     for k in ("k1", "tau_c", "tau_s", "c_v"):
@@ -60,7 +62,7 @@ def truth_of(i: int, gen=None) -> dict:
 
 def make_logs(design: str, n: int, log_dir: Path) -> list[str]:
     """``n`` logs of a design (cached): truths around the CSF-8 values, seeds 1000+i."""
-    gen = _common.import_generate()
+    gen = logs
     amps, fs, duration = DESIGNS[design]
     d = log_dir / design.replace(" ", "_").replace(".", "p")
     d.mkdir(parents=True, exist_ok=True)
@@ -291,7 +293,7 @@ def render(res: dict) -> str:
                  "replace the first run's.\n")
     L.append("Logs: paper design (4 runs ±0.157 rad, 250 Hz, 0.5 s per run, 125 samples), "
              "truths k1, tau_c, tau_s, c_v drawn log-normal (sd 15 %) around the CSF-8 values, "
-             "made with `data/synthetic/generate.py::make_log`. Every configuration runs in a "
+             "made with `hdid.reference.logs.make_log`. Every configuration runs in a "
              "fresh subprocess: it first fits 2 other logs (compile or persistent-cache read; "
              "reported as *first call*), then the N timed logs; peak RSS is that process's.\n")
 

@@ -14,8 +14,8 @@ Every log draws its own plant, design and effect size (seeds 8800+ rich, 9800+ p
 * the hidden effect's size relative to the plant (:func:`hidden_params`), or an effect
   outside the library (``c_2·ω|ω|`` drag).
 
-Logs of the reference simulator (``data/synthetic/generate.py``, exact stick/slip) with
-the effects in numpy (``data/synthetic/hidden.py``), diagnosed with every candidate.
+Logs of the reference simulator (``hdid.reference.logs.make_log``, exact stick/slip) with
+the effects in numpy (``hdid.reference.logs.HIDDEN``), diagnosed with every candidate.
 Per log: the verdict, the first candidate, RMS before/after in quantization floors, ΔBIC,
 warnings; per design the confusion matrix (hidden effect × what the verdict names).
 """
@@ -29,7 +29,9 @@ import os
 import sys
 
 import numpy as np
-from _common import RESULTS, Clock, import_generate, import_synthetic, load_text, parse_or_render, run_meta, write_result
+from _common import RESULTS, Clock, load_text, parse_or_render, run_meta, write_result
+
+from hdid.reference import logs
 
 NAME = "diagnose_independent"
 HIDDEN = ("none", "backlash", "hysteresis", "asymmetric_friction", "load_friction", "ripple",
@@ -37,10 +39,6 @@ HIDDEN = ("none", "backlash", "hysteresis", "asymmetric_friction", "load_frictio
 N = 100.0
 SAMPLES = 300  # per run, rich design (hold 40 samples): the calibration's rich shape
 SEED0 = {"rich": 8800, "paper": 9800}
-
-
-def _hidden_module():
-    return import_synthetic("hidden")
 
 
 def draw(design: str, seed: int) -> tuple[dict, dict]:
@@ -105,14 +103,13 @@ def run_design(design: str, records: list, meta: dict, per: int, seed0: int,
                only: set | None = None) -> None:
     import hdid
 
-    gen, hid = import_generate(), _hidden_module()
     for i in range(per * len(HIDDEN)):
         name, seed = HIDDEN[i % len(HIDDEN)], seed0 + i
         if only and name not in only:
             continue
         truth, des = draw(design, seed)
         hp = hidden_params(name, truth, des, np.random.default_rng(seed + 10_000)) if name != "none" else {}
-        kw = hid.reference_kwargs(name, truth, **hp) if name != "none" else None
+        kw = logs.reference_kwargs(name, truth, **hp) if name != "none" else None
         rec = {"design": design, "hidden": name, "seed": seed,
                "expected": None if name == "quadratic_drag" else name,
                "truth": truth, "hidden_params": hp, "design_params": dict(des),
@@ -121,7 +118,7 @@ def run_design(design: str, records: list, meta: dict, per: int, seed0: int,
                "code": os.environ.get("HDID_BENCH_CODE", meta.get("src", ""))}
         records.append(rec)
         try:
-            df = gen.make_log(truth, **{k: v for k, v in des.items() if k != "gear_factor"},
+            df = logs.make_log(truth, **{k: v for k, v in des.items() if k != "gear_factor"},
                               seed=seed, hidden=kw)
             rec["min_run_span_rad"] = float(min(np.ptp(g["theta"].to_numpy()) for _, g in df.groupby("run")))
             with Clock() as clock:

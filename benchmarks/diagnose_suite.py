@@ -5,7 +5,7 @@
     python benchmarks/diagnose_suite.py --render
 
 The paper design (±0.157 rad, 250 Hz, two set-ups) and a richer one (four amplitudes,
-1 kHz): a log with nothing hidden, one per library effect (``data/synthetic/hidden.py``
+1 kHz): a log with nothing hidden, one per library effect (``hdid.reference.logs.HIDDEN``
 through the reference simulator) and one outside the library (quadratic drag), diagnosed
 with all candidates. ``--removed``: a base piece (viscous, Stribeck, the cubic term)
 switched off in the *model* of a clean log, which must be diagnosable too.
@@ -16,7 +16,9 @@ from __future__ import annotations
 import argparse
 import json
 
-from _common import RESULTS, Clock, import_generate, import_synthetic, parse_or_render, run_designs, run_meta, write_result
+from _common import RESULTS, Clock, parse_or_render, run_designs, run_meta, write_result
+
+from hdid.reference import logs
 
 NAME = "diagnose_suite"
 #: The richer design: four release amplitudes at 1 kHz, one set-up. Smallest amplitude
@@ -156,7 +158,7 @@ def main(argv=None) -> None:
     if args is None:
         return
     designs = args.designs or ["rich", "paper"]
-    gen, hid = import_generate(), import_synthetic("hidden")
+    gen = hid = logs  # the generators and the hidden effects
     records: list = []
     if args.removed and (RESULTS / f"{NAME}.json").exists():
         old = json.loads((RESULTS / f"{NAME}.json").read_text())["records"]

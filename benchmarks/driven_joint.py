@@ -5,7 +5,7 @@ free-motion + driven fit narrows the uncertainty compared with either log alone.
     python benchmarks/driven_joint.py --render       # results/driven_joint.md from its JSON
 
 Recovery: ``hdid.fit_driven`` (order by BIC) on ``driven_csf8.csv`` and logs of other seeds
-of ``data/synthetic/driven.py`` (no hdid code). Narrowing: relative standard errors of
+of ``hdid.reference.logs.make_driven_log`` (no code shared with hdid's simulator). Narrowing: relative standard errors of
 (A) free motion alone, inertia free; (A′) inertia fixed at the datasheet (conditional);
 (B) driven alone; (C) without its output encoder; (D) joint; (E) joint without it.
 """
@@ -15,15 +15,15 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import tempfile
 import time
 from pathlib import Path
 
 import pandas as pd
-from _common import DATA, cpu_model, import_synthetic, interpretation_section, parse_or_render, src_fingerprint, write_result
+from _common import DATA, interpretation_section, load_text, parse_or_render, run_meta, write_result
 
 import hdid
+from hdid.reference import logs
 
 PHYSICAL = ("k1", "k2", "tau_c", "tau_s", "v_s", "delta", "c_v", "inertia", "tau_fout")
 
@@ -36,13 +36,12 @@ def _pos_truth(p):
 
 
 def recovery(seeds: int) -> list[dict]:
-    drv = import_synthetic("driven")
     truth = json.loads((DATA / "truth.json").read_text())["driven_csf8.csv"]
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         logs = [("shipped", DATA / "driven_csf8.csv", truth["params"])]
         for s in range(1, seeds):
-            df, tr = drv.make_driven_log(seed=1000 + s)
+            df, tr = logs.make_driven_log(seed=1000 + s)
             path = Path(tmp) / f"seed{s}.csv"
             df.to_csv(path, index=False)
             logs.append((f"seed {1000 + s}", path, tr["params"]))
@@ -61,10 +60,8 @@ def recovery(seeds: int) -> list[dict]:
                 if c is not None:
                     row["positional"][n] = {"value": c["value"], "std": c["std"], "truth": v,
                                             "z": (c["value"] - v) / c["std"]}
-            truth_pos = _pos_truth(p)
-            row["extra_harmonics"] = {
-                n: c for n, c in r.positional["coefficients"].items() if n not in truth_pos
-            }
+            row["extra_harmonics"] = {n: c for n, c in r.positional["coefficients"].items()
+                                      if n not in _pos_truth(p)}
             rows.append(row)
             print(label, f"{wall:.0f} s", "order", row["order"], flush=True)
     return rows
@@ -77,17 +74,10 @@ def narrowing() -> dict:
     truth = json.loads((DATA / "truth.json").read_text())["driven_csf8.csv"]["params"]
     cases = {}
 
-    def rel(result, fixed_inertia=False):
-        out = {}
-        for n in PHYSICAL:
-            est = result.parameters.get(n)
-            if est is None:
-                out[n] = None  # not in this model (free motion has no output friction)
-            elif est.fixed:
-                out[n] = "fixed"
-            else:
-                out[n] = est.std / abs(est.value) if math.isfinite(est.std) else math.inf
-        return out
+    def rel(result):  # None: not in this model (free motion has no output friction)
+        ests = {n: result.parameters.get(n) for n in PHYSICAL}
+        return {n: None if e is None else "fixed" if e.fixed else
+                e.std / abs(e.value) if math.isfinite(e.std) else math.inf for n, e in ests.items()}
 
     runs = [
         ("A free-motion alone, inertia free", lambda: hdid.fit(free, free_inertia=True)),
@@ -119,7 +109,7 @@ def render(res: dict) -> str:
     rec, nar, meta = res["recovery"], res["narrowing"], res["meta"]
     lines = ["# Driven joint: recovery and joint narrowing", "",
              f"CPU {meta['cpu']}, load {meta['load']}, src {meta['src']}, {meta['date']}", "",
-             "## Recovery from logs of the independent reference (`data/synthetic/driven.py`)", "",
+             "## Recovery from logs of the independent reference (`hdid.reference.logs`)", "",
              "z = (fit − truth)/reported std. Order: BIC choice (truth 3).", ""]
     head = "| log | order | " + " | ".join(PHYSICAL) + " | max |z| Fourier | WG RMS/floor | kin RMS/floor | s |"
     lines += [head, "|" + "---|" * (len(PHYSICAL) + 6)]
@@ -163,10 +153,9 @@ def main(argv=None):
     args = parse_or_render(ap, argv, "driven_joint", render)
     if args is None:
         return
-    meta = {"cpu": cpu_model(), "load": [round(x, 2) for x in os.getloadavg()],
-            "src": src_fingerprint(), "date": time.strftime("%Y-%m-%d %H:%M")}
+    meta = run_meta()
     res = {"meta": meta, "recovery": recovery(args.seeds), "narrowing": narrowing()}
-    meta["load_end"] = [round(x, 2) for x in os.getloadavg()]
+    meta["load_end"] = load_text()
     write_result("driven_joint", res, render)
     print(render(res))
 

@@ -91,7 +91,8 @@ def bench_cli(cache: Path, reps: dict) -> dict:
 
 
 def _make_logs(tmp: Path) -> list[dict]:
-    gen = _common.import_generate()
+    from hdid.reference import logs as gen
+
     truth = json.loads((DATA / "truth.json").read_text())["csf8_paper.csv"]
     logs = [{"name": "csf8_paper.csv", "path": LOG, "truth": truth, "seed": truth["seed"]}]
     for seed in EXTRA_SEEDS:

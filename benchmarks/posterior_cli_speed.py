@@ -128,7 +128,8 @@ def main(argv=None):
     import numpy as np
     import posterior_sbc as sbc
 
-    gen = _common.import_generate()
+    from hdid.reference import logs as gen
+
     tmp = Path(tempfile.mkdtemp())
     logs = [("csf8_paper.csv", SHIPPED)]
     for seed in range(args.seed0, args.seed0 + args.logs - 1):

@@ -506,7 +506,8 @@ def main(argv=None):
     import hdid
 
     hdid.configure()  # float64 and the program cache, as the CLI
-    gen = _common.import_generate()
+    from hdid.reference import logs as gen
+
     res = {"generated": _dt.datetime.now().isoformat(timespec="seconds"), "load_start": _load(),
            "options": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()
                        if k not in ("render", "out_dir")},

@@ -132,7 +132,8 @@ def main(argv=None):
     import hdid
 
     hdid.configure()
-    gen = _common.import_synthetic()
+    from hdid.reference import logs as gen
+
     import posterior_sbc as sbc
 
     res = {"meta": _common.run_meta(), "rows": []}

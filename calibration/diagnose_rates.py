@@ -2,7 +2,7 @@
 
 Per design (the paper's ±0.157 rad at 250 Hz, and a rich one: four amplitudes at 1 kHz):
 a log with nothing hidden is made with the independent generator
-(``data/synthetic/generate.py``) and fitted with the base model; then ``N`` clean logs
+(``hdid.reference.logs.make_log``) and fitted with the base model; then ``N`` clean logs
 are simulated *from that fitted model* with hdid's own simulator (``hdid.simulate``'s
 ``synthesize``: the same release angles, rate and length, a random sub-sample release
 instant per run, rounded to the same 4000-count encoder) and diagnosed with every
@@ -25,7 +25,9 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))  # _common
-from _common import ROOT, import_generate, run_designs, run_meta  # noqa: E402
+from _common import ROOT, run_designs, run_meta  # noqa: E402
+
+from hdid.reference import logs  # noqa: E402
 
 OUT = ROOT / "calibration" / "results"
 NAME = "diagnose_rates"
@@ -225,7 +227,7 @@ def main(argv: list[str]) -> None:
         return
     n = int(argv[0]) if argv and argv[0].isdigit() else 10
     designs = [a for a in argv if a in ("paper", "rich")] or ["paper", "rich"]
-    gen = import_generate()
+    gen = logs
     meta = run_meta(n_per_design=n, cmd="taskset -c 0 python calibration/diagnose_rates.py "
                     + " ".join(argv))
     records: list = []

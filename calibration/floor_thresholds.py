@@ -56,7 +56,9 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE), str(HERE.parent / "benchmarks")]  # diagnose_rates; _common, the suite
 from _common import RESULTS as BENCH_RESULTS  # noqa: E402
-from _common import ROOT, import_generate, run_meta  # noqa: E402
+from _common import ROOT, run_meta  # noqa: E402
+
+from hdid.reference import logs  # noqa: E402
 
 RESULTS = HERE / "results"
 NAME = "floor_thresholds"
@@ -225,16 +227,15 @@ def render(res: dict) -> str:
 def _suite_log(design: str, seed: int):
     """The independent suite's log ``seed`` of ``design`` and its hidden effect's name, as
     ``diagnose_independent.run_design`` draws them."""
-    from diagnose_independent import HIDDEN, _hidden_module, draw, hidden_params
+    from diagnose_independent import HIDDEN, draw, hidden_params
 
     name = HIDDEN[seed % 100]
     truth, des = draw(design, seed)
     rng = np.random.default_rng(seed + 10_000)
     hp = hidden_params(name, truth, des, rng) if name != "none" else {}
-    kw = _hidden_module().reference_kwargs(name, truth, **hp) if name != "none" else None
-    return import_generate().make_log(truth, **{k: v for k, v in des.items()
-                                               if k != "gear_factor"}, seed=seed,
-                                      hidden=kw), name
+    kw = logs.reference_kwargs(name, truth, **hp) if name != "none" else None
+    return logs.make_log(truth, **{k: v for k, v in des.items() if k != "gear_factor"},
+                         seed=seed, hidden=kw), name
 
 
 def diagnosed_rows(design: str, seeds: list) -> list:
@@ -320,7 +321,7 @@ def main(argv):
     n = int(argv[0]) if argv and argv[0].isdigit() else 6
     seed0 = int(argv[argv.index("--seed0") + 1]) if "--seed0" in argv else 5000
     designs = [a for a in argv if a in ("paper", "rich")] or ["paper", "rich"]
-    gen = import_generate()
+    gen = logs
     meta = run_meta(cmd="taskset -c 1 python calibration/floor_thresholds.py " + " ".join(argv))
     res = json.loads(out.read_text()) if out.exists() else {"meta": meta, "rows": []}
     append = "--append" in argv  # keep the designs' calibration logs of other seeds

@@ -38,7 +38,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 import diagnose_independent as di  # noqa: E402
-from _common import import_generate, run_meta  # noqa: E402
+from _common import run_meta  # noqa: E402
+
+from hdid.reference import logs  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 OUT = RESULTS / (os.environ.get("HDID_RIVAL_OUT", "rival_scale") + ".json")
@@ -49,7 +51,7 @@ STEP = 2 * math.pi / 4000
 
 def suite_log(design: str, seed: int):
     """The independent suite's log of ``seed`` (hidden effect by the seed's position)."""
-    gen, hid = import_generate(), di._hidden_module()
+    gen = hid = logs  # the generators and the hidden effects
     name = di.HIDDEN[(seed % 100) % len(di.HIDDEN)]
     truth, des = di.draw(design, seed)
     rng = np.random.default_rng(seed + 10_000)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import math
 from pathlib import Path
 
@@ -44,27 +43,19 @@ def test_cli_summary(tmp_path):
 # ------------------------------------------------------------------ vectorised path
 
 
-def _load_generate():
-    spec = importlib.util.spec_from_file_location(
-        "hdid_gen_batch", EXAMPLE.parent / "generate.py"
-    )
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 @pytest.fixture(scope="module")
 def batch_logs(tmp_path_factory):
     """The example plus two paper-design logs of other truths and lengths (125 and 115
     samples per run: both pad to 128, so they share one compiled program)."""
-    gen = _load_generate()
+    from hdid.reference import logs
+
     out = tmp_path_factory.mktemp("batch")
     paths = [EXAMPLE]
     for seed, scale, duration in ((11, 0.85, 0.5), (12, 1.2, 0.46)):
-        truth = dict(gen.TRUTH_CSF8, k1=940.0 * scale, tau_c=2.5e-3 * scale)
-        design = dict(gen.PAPER_DESIGN, seed=seed, duration=duration)
+        truth = dict(logs.TRUTH_CSF8, k1=940.0 * scale, tau_c=2.5e-3 * scale)
+        design = dict(logs.PAPER_DESIGN, seed=seed, duration=duration)
         path = out / f"joint{seed}.csv"
-        gen.make_log(truth, **design).to_csv(path, index=False)
+        logs.make_log(truth, **design).to_csv(path, index=False)
         paths.append(path)
     return paths
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
@@ -17,11 +16,10 @@ EXAMPLE = Path(__file__).resolve().parents[1] / "data" / "synthetic" / "csf8_pap
 
 
 def _other_log(path: Path) -> Path:
-    spec = importlib.util.spec_from_file_location("hdid_gen_dask", EXAMPLE.parent / "generate.py")
-    gen = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(gen)
-    truth = dict(gen.TRUTH_CSF8, k1=800.0, tau_c=2.2e-3)
-    gen.make_log(truth, **dict(gen.PAPER_DESIGN, seed=5)).to_csv(path, index=False)
+    from hdid.reference import logs
+
+    truth = dict(logs.TRUTH_CSF8, k1=800.0, tau_c=2.2e-3)
+    logs.make_log(truth, **dict(logs.PAPER_DESIGN, seed=5)).to_csv(path, index=False)
     return path
 
 

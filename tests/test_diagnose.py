@@ -1,6 +1,6 @@
 """``hdid diagnose`` on logs with a hidden effect, nothing hidden, and an effect outside
 the library. The logs come from the independent reference simulator with the effect
-written in numpy (``data/synthetic/hidden.py``). The full suite (every effect, both
+written in numpy (``hdid.reference.logs.HIDDEN``). The full suite (every effect, both
 designs, all candidates) is ``benchmarks/diagnose_suite.py``; here a reduced candidate
 set keeps the compile count (one per model structure) small.
 """
@@ -16,10 +16,11 @@ from click.testing import CliRunner
 import hdid
 from hdid._diagnosis._diagnose import STRONG_DBIC, bic
 from hdid.cli import main
+from hdid.reference import logs
 
-from synthetic import GEN, HID, ROOT
+from synthetic import ROOT
 
-TRUTH = {k: v for k, v in GEN.TRUTH_CSF8.items() if k != "ratio"}
+TRUTH = {k: v for k, v in logs.TRUTH_CSF8.items() if k != "ratio"}
 # Two amplitudes at 1 kHz: a small "rich" design (the benchmark uses four amplitudes).
 DESIGN = dict(amplitudes=[0.157, -0.157, 0.08, -0.08], fs=1000.0, duration=0.25, hold=0.02,
               offsets_by_setup={"A": 0.005})
@@ -27,8 +28,8 @@ CANDIDATES = ["hysteresis", "backlash", "load_friction"]
 
 
 def _log(hidden: str | None, seed: int):
-    kw = HID.reference_kwargs(hidden, TRUTH) if hidden else None
-    return GEN.make_log(TRUTH, **DESIGN, seed=seed, hidden=kw)
+    kw = logs.reference_kwargs(hidden, TRUTH) if hidden else None
+    return logs.make_log(TRUTH, **DESIGN, seed=seed, hidden=kw)
 
 
 @pytest.fixture(scope="module")
@@ -150,9 +151,9 @@ DESIGN_8905 = dict(amplitudes=[s * a for a in (0.274878, 0.183369, 0.0747664, 0.
 
 @pytest.mark.slow
 def test_a_ripple_order_outside_the_old_list_is_named():
-    kw = HID.reference_kwargs("ripple", TRUTH_8905, ripple_a=-1.04036e-3,
-                              ripple_b=-8.41080e-5, order=36.0)
-    log = GEN.make_log(TRUTH_8905, **DESIGN_8905, seed=8905, hidden=kw)
+    kw = logs.reference_kwargs("ripple", TRUTH_8905, ripple_a=-1.04036e-3,
+                               ripple_b=-8.41080e-5, order=36.0)
+    log = logs.make_log(TRUTH_8905, **DESIGN_8905, seed=8905, hidden=kw)
     d = hdid.diagnose(log, candidates=["ripple", "hysteresis"])
     assert "ripple (order 36)" in d.scanned["ripple"]
     assert d.verdict == "missing_effect", d.report()

@@ -310,11 +310,11 @@ def test_an_order_replaced_in_one_set_up_is_the_set_up_of_that_order():
     from hdid._fitting import _refit
     from hdid.effects import library
 
-    from synthetic import GEN
+    from hdid.reference import logs
 
-    truth = {k: v for k, v in GEN.TRUTH_CSF8.items() if k != "ratio"}
-    log = GEN.make_log(truth, amplitudes=[0.157, -0.157], fs=250.0, duration=0.3, hold=0.04,
-                       offsets_by_setup={"A": 0.0}, seed=3)
+    truth = {k: v for k, v in logs.TRUTH_CSF8.items() if k != "ratio"}
+    log = logs.make_log(truth, amplitudes=[0.157, -0.157], fs=250.0, duration=0.3, hold=0.04,
+                        offsets_by_setup={"A": 0.0}, seed=3)
     m = hdid.Model.default()
     v = m.float_values()
     for key in ("ripple", "kinematic_error"):

@@ -1,13 +1,12 @@
 """The driven joint (issue 5): JAX simulator against the independent reference, fits.
 
-The reference is ``data/synthetic/driven.py`` (numpy/scipy, event-driven, shares no code
-with hdid); the shipped log ``driven_csf8.csv`` was made by it, quantized to the 4000-count
+The reference is ``hdid.reference.logs.simulate_driven`` (numpy/scipy, event-driven, shares
+no code with hdid's JAX simulator); the shipped log ``driven_csf8.csv`` was made by it, quantized to the 4000-count
 motor encoder and a 2**19-count output encoder.
 """
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import subprocess
 import sys
@@ -21,12 +20,10 @@ import pytest
 import hdid
 from hdid._simulation._driven import DrivenJoint, simulate_driven
 from hdid._models._positional import PositionalError
+from hdid.reference import logs as DRV
 
 from synthetic import ROOT, SYNTH
 
-_spec = importlib.util.spec_from_file_location("hdid_tests_driven_ref", SYNTH / "driven.py")
-DRV = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(DRV)
 
 DRIVEN = SYNTH / "driven_csf8.csv"
 FREE = SYNTH / "csf8_paper.csv"
@@ -207,7 +204,7 @@ def test_without_load_variation_the_spring_is_reported_undetermined():
     so (infinite std and a note), not print a confident k1."""
     import copy
 
-    design = copy.deepcopy(DRV.DESIGN)
+    design = copy.deepcopy(DRV.DRIVEN_DESIGN)
     for run in design["runs"]:
         run["load"] = (0.0,) + tuple(run["load"][1:])
     df, _ = DRV.make_driven_log(DRV.TRUTH_DRIVEN_CSF8, design)

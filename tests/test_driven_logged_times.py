@@ -1,7 +1,7 @@
 """Driven logs at their logged times: the equation-error start of a jittered/gapped log
 equals its uniform twin's, and a driven log's implausible units lead its report.
 
-The logs come from the independent reference simulator ``data/synthetic/driven.py``
+The logs come from the independent reference simulator ``hdid.reference.logs.simulate_driven``
 (event-driven, any sample spacing): one continuous experiment is simulated on a 1 ms
 grid, and each twin is a set of its rows — every 10th (the uniform 10 ms twin) or steps
 of 8–12 ms (10 ms ± 20 %, with extra 12 ms gaps: a controller's timestamps).
@@ -9,7 +9,6 @@ of 8–12 ms (10 ms ± 20 %, with extra 12 ms gaps: a controller's timestamps).
 
 from __future__ import annotations
 
-import importlib.util
 import math
 from pathlib import Path
 
@@ -21,14 +20,12 @@ import hdid
 from hdid._fitting._driven_fit import _as_joint, _free_names
 from hdid._fitting._driven_starts import _start_values
 from hdid._problems._driven_problem import DrivenData
+from hdid.reference import logs as DRV
 
 from synthetic import SYNTH
 
 UR10E = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "ur10e_hd"
 
-_spec = importlib.util.spec_from_file_location("hdid_tests_driven_ref_times", SYNTH / "driven.py")
-DRV = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(DRV)
 
 N = 100.0
 #: The shipped driven CSF-8 physics with a 20× WG inertia: its mechanical time constant

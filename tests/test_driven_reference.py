@@ -1,4 +1,5 @@
-"""The independent driven-joint reference (data/synthetic/driven.py) against analytic solutions.
+"""The independent driven-joint reference (``hdid.reference.logs.simulate_driven``) against
+analytic solutions.
 
 Tolerances: the reference integrates with DOP853 at rtol 1e-10, atol 1e-12 and locates
 velocity zeros to ~1e-15 s, so on O(1) rad trajectories the angle is right to ~1e-10 rad;
@@ -8,7 +9,6 @@ asserts use 1e-9 rad (10x margin) unless stated otherwise next to them.
 from __future__ import annotations
 
 import ast
-import importlib.util
 import json
 import math
 from pathlib import Path
@@ -18,11 +18,10 @@ import pandas as pd
 import pytest
 from scipy.optimize import brentq
 
+from hdid.reference import logs as DRV
+
 ROOT = Path(__file__).resolve().parents[1]
 SYNTH = ROOT / "data" / "synthetic"
-_spec = importlib.util.spec_from_file_location("hdid_tests_driven", SYNTH / "driven.py")
-DRV = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(DRV)
 
 N = 100.0
 I = 7e-7
@@ -266,13 +265,30 @@ def test_make_driven_log_small_design_on_grids():
     assert np.all(u[:10] == pytest.approx(0.0, abs=1e-18))
 
 
-def test_reference_is_independent_of_hdid():
-    tree = ast.parse((SYNTH / "driven.py").read_text())
-    imported = set()
-    for node in ast.walk(tree):
+#: What the reference modules may import: numpy, scipy, pandas and a few standard modules.
+ALLOWED = {"__future__", "collections", "copy", "dataclasses", "math", "numpy", "pandas", "scipy"}
+
+
+def _foreign_imports(source: str) -> set[str]:
+    """The imports of a module of ``hdid.reference`` that leave it: anything outside
+    :data:`ALLOWED` (``jax``, ``hdid``, …) and relative imports above the package."""
+    out = set()
+    for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Import):
-            imported |= {a.name.split(".")[0] for a in node.names}
+            out |= {a.name for a in node.names if a.name.split(".")[0] not in ALLOWED}
         elif isinstance(node, ast.ImportFrom):
-            imported.add((node.module or "").split(".")[0])
-    assert imported <= {"__future__", "copy", "json", "math", "collections", "pathlib",
-                        "numpy", "pandas", "scipy"}
+            module = node.module or ""
+            if node.level > 1 or (node.level == 0 and module.split(".")[0] not in ALLOWED):
+                out.add("." * node.level + module)
+    return out
+
+
+def test_reference_is_independent_of_hdid():
+    # every module of hdid.reference: the simulators and the log generators built on them
+    package = Path(DRV.__file__).parent
+    found = {p.name: _foreign_imports(p.read_text()) for p in sorted(package.glob("*.py"))}
+    assert {"_driven.py", "_driven_log.py", "_hidden.py", "_logs.py", "logs.py"} <= set(found)
+    assert not {name: bad for name, bad in found.items() if bad}
+    # and the check refuses what it must (an upward import, hdid, jax); sibling imports pass
+    planted = "import jax.numpy\nfrom .. import _config\nfrom hdid.effects import x\nfrom ._spring import y\n"
+    assert _foreign_imports(planted) == {"jax.numpy", "..", "hdid.effects"}

@@ -1,7 +1,7 @@
 """Library effects against independent numpy implementations run in the reference simulator.
 
 Each effect of ``hdid.effects`` is written a second time, from its equation, in
-``data/synthetic/hidden.py`` for the event-driven scipy reference. The JAX simulator with
+``hdid.reference.logs.HIDDEN`` for the event-driven scipy reference. The JAX simulator with
 the effect must reproduce the reference trajectory: this checks both codes at once.
 """
 
@@ -12,26 +12,26 @@ import pytest
 
 import hdid
 from hdid.effects import AbstractEffect, library
-from hdid.reference import simulate_reference
+from hdid.reference import logs, simulate_reference
 
-from synthetic import GEN, HID, ROOT
+from synthetic import ROOT
 
-TRUTH = {k: v for k, v in GEN.TRUTH_CSF8.items() if k not in ("ratio", "inertia")}
-INERTIA = GEN.TRUTH_CSF8["inertia"]
+TRUTH = {k: v for k, v in logs.TRUTH_CSF8.items() if k not in ("ratio", "inertia")}
+INERTIA = logs.TRUTH_CSF8["inertia"]
 STEP = 2 * np.pi / 4000
 T = np.arange(0.0, 0.5, 0.004)
-IN_LIBRARY = [k for k, v in HID.HIDDEN.items() if v["library"] is not None]
+IN_LIBRARY = [k for k, v in logs.HIDDEN.items() if v["library"] is not None]
 
 
 @pytest.mark.parametrize("name", IN_LIBRARY)
 def test_effect_matches_reference_implementation(name):
-    entry = HID.HIDDEN[name]
+    entry = logs.HIDDEN[name]
     effect = library({**TRUTH, **entry["truth"]})[entry["library"]]
     model = hdid.Model.default(inertia=INERTIA, **TRUTH).with_effect(effect)
     for theta0 in (0.157, -0.157, 0.08):
         jax_theta = np.asarray(hdid.simulate(model, T, theta0, 0.0013))
         ref = simulate_reference(T, theta0=theta0, t_release=0.0013, inertia=INERTIA, **TRUTH,
-                                 **HID.reference_kwargs(name, TRUTH))
+                                 **logs.reference_kwargs(name, TRUTH))
         base = simulate_reference(T, theta0=theta0, t_release=0.0013, inertia=INERTIA, **TRUTH)
         # The base scheme is within 0.042 of a count of the reference (simulator_schemes
         # benchmark); the effects add kinks (dead zone, segment corners) and state, so

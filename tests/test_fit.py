@@ -1,6 +1,6 @@
 """Statistical tests of :func:`hdid.fit` against the independent event-driven reference.
 
-Every synthetic log here comes from ``data/synthetic/generate.py::make_log``, i.e. from the
+Every synthetic log here comes from :func:`hdid.reference.logs.make_log`, i.e. from the
 scipy event-driven simulator :mod:`hdid.reference` (exact sticking, DOP853 at rtol 1e-11),
 rounded to a 4000 counts/rev encoder and otherwise noiseless.  The fit uses the JAX RK4
 path, so agreement is a genuine end-to-end check.
@@ -28,7 +28,6 @@ paper-shaped with free inertia, and paper-shaped with k2 and release times fixed
 from __future__ import annotations
 
 import functools
-import importlib.util
 import json
 import math
 from pathlib import Path
@@ -38,22 +37,13 @@ import pandas as pd
 import pytest
 
 import hdid
-from hdid.reference import stick_band_halfwidth
+from hdid.reference import logs, stick_band_halfwidth
 
 ROOT = Path(__file__).resolve().parent.parent
 SYNTH = ROOT / "data" / "synthetic"
 
 
-def _load_generator():
-    spec = importlib.util.spec_from_file_location("hdid_synthetic_generate", SYNTH / "generate.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-gen = _load_generator()
-
-TRUTH = dict(gen.TRUTH_CSF8)
+TRUTH = dict(logs.TRUTH_CSF8)
 #: A second, stiffer and more frictional gear with a lighter rotor (ω_n ≈ 87 Hz).
 TRUTH2 = dict(TRUTH, k1=1500.0, tau_c=3.5e-3, tau_s=5.5e-3, inertia=5.0e-7)
 #: Deliberately wrong inertia for TRUTH2: 1.4 × truth.  (7e-7 is also the default inertia,
@@ -77,7 +67,7 @@ PARAM_NAMES = {"k1", "k2", "tau_c", "tau_s", "v_s", "delta", "c_v", "inertia"}
 
 
 def _rich_log(truth, seed):
-    return gen.make_log(truth, seed=seed, return_truth=True, **RICH)
+    return logs.make_log(truth, seed=seed, return_truth=True, **RICH)
 
 
 def _normalised(result, name):
@@ -345,8 +335,8 @@ def test_run_released_near_the_band_edge_is_not_left_trapped():
     their hold readings (``_fit._untrapped``) and must end at the floor, every run released:
     χ²/N ≈ 1 in quantization units, so RMS ≤ 1.5 floors leaves room for the model's small
     misfit while a trap (≥ 5 floors) fails."""
-    df = gen.make_log(gen.TRUTH_CSF8, amplitudes=[0.157, -0.157, 0.05, -0.05], fs=250.0,
-                      duration=0.5, hold=0.04, offsets_by_setup={"A": 0.005}, seed=20240611)
+    df = logs.make_log(logs.TRUTH_CSF8, amplitudes=[0.157, -0.157, 0.05, -0.05], fs=250.0,
+                       duration=0.5, hold=0.04, offsets_by_setup={"A": 0.005}, seed=20240611)
     result = hdid.fit(df)
     assert result.rms_residual_rad < 1.5 * result.quantization_floor_rad, result.warnings
     assert all(r.peak_speed > 0 for r in result.runs)
@@ -419,9 +409,9 @@ def _added_inertia_log():
     reference with inertia ``I + ADDED``.  Same shape as the paper log, so the free-inertia
     fit of the paper log shares its compiled solver.
     """
-    d0 = gen.make_log(TRUTH, [0.157, -0.157], 250.0, 0.5, 0.04, {"A": 0.012}, 11)
-    d1 = gen.make_log(dict(TRUTH, inertia=TRUTH["inertia"] + ADDED), [0.157, -0.157],
-                      250.0, 0.5, 0.04, {"B": -0.020}, 111)
+    d0 = logs.make_log(TRUTH, [0.157, -0.157], 250.0, 0.5, 0.04, {"A": 0.012}, 11)
+    d1 = logs.make_log(dict(TRUTH, inertia=TRUTH["inertia"] + ADDED), [0.157, -0.157],
+                       250.0, 0.5, 0.04, {"B": -0.020}, 111)
     d0["added_inertia"] = 0.0
     d1["added_inertia"] = ADDED
     d1["run"] += 2
@@ -476,7 +466,7 @@ def test_added_inertia_makes_inertia_identifiable():
 def fixed_fit():
     """Paper design with every run's time axis shifted so that the release is at 42 ms;
     k2 fixed at the catalog value and the release time given."""
-    df, info = gen.make_log(TRUTH, **gen.PAPER_DESIGN, return_truth=True)
+    df, info = logs.make_log(TRUTH, **logs.PAPER_DESIGN, return_truth=True)
     t_rel = 0.042
     for run in info["runs"]:
         sel = df["run"] == run["run"]
@@ -533,7 +523,7 @@ def test_log_that_never_moves_raises_log_error(tmp_path):
 
 def test_too_few_samples_raises_fit_error():
     """One run of 8 samples (the reader's minimum) vs 7 parameters + release + θ0 + offset."""
-    df = gen.make_log(TRUTH, [0.157], 250.0, 8 / 250.0, 0.004, {"A": 0.0}, 1)
+    df = logs.make_log(TRUTH, [0.157], 250.0, 8 / 250.0, 0.004, {"A": 0.0}, 1)
     assert len(df) == 8
     with pytest.raises(hdid.FitError, match="unknowns"):
         hdid.fit(df)

@@ -128,9 +128,9 @@ def _log_7001():
     # A paper-design log (4 releases ±0.157 rad, 250 Hz, 4000 counts) of a CSF-8 whose
     # truth was drawn around the catalog (benchmarks/posterior_sbc.py, seed 7001); the
     # true frequency is 1.30× the log's own estimate (4 samples per period).
-    from synthetic import GEN
+    from hdid.reference import logs
 
-    return GEN.make_log(TRUTH_7001, **{**GEN.PAPER_DESIGN, "seed": 7001})
+    return logs.make_log(TRUTH_7001, **{**logs.PAPER_DESIGN, "seed": 7001})
 
 
 def _at_truth(r):

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
@@ -11,21 +10,18 @@ import pytest
 import hdid
 from hdid._log import read_log
 from hdid._simulation._prepare import prepare
-from hdid.reference import stick_band_halfwidth
+from hdid.reference import logs, stick_band_halfwidth
 
 ROOT = Path(__file__).resolve().parents[1]
-_spec = importlib.util.spec_from_file_location("gen", ROOT / "data" / "synthetic" / "generate.py")
-gen = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(gen)
-TRUTH = gen.TRUTH_CSF8
+TRUTH = logs.TRUTH_CSF8
 PAPER = dict(amplitudes=[0.157, -0.157, 0.157, -0.157], fs=250.0, duration=0.5, hold=0.04)
 
 
 @pytest.fixture(scope="module")
 def noisy():
     # 0.3 counts of noise before quantization: the last digit flickers in hold and tail.
-    df, info = gen.make_log(TRUTH, PAPER["amplitudes"], PAPER["fs"], PAPER["duration"], PAPER["hold"],
-                            {"A": 0.01}, seed=4, noise_std=5e-4, return_truth=True)
+    df, info = logs.make_log(TRUTH, PAPER["amplitudes"], PAPER["fs"], PAPER["duration"], PAPER["hold"],
+                             {"A": 0.01}, seed=4, noise_std=5e-4, return_truth=True)
     return df, info
 
 

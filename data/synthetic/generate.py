@@ -1,7 +1,9 @@
-"""Generate the synthetic free-motion logs in ``data/synthetic`` from the reference simulator.
+"""Regenerate the shipped synthetic logs of ``data/synthetic``, deterministically (fixed
+seeds), from :mod:`hdid.reference.logs` (the independent numpy/scipy reference
+simulators; see that module for the logs' physics and format)::
 
-Run ``python data/synthetic/generate.py`` to regenerate, deterministically (fixed seeds), all
-committed files:
+    python data/synthetic/generate.py    # every file below, bit for bit
+    python data/synthetic/driven.py      # driven_csf8.csv alone (its truth.json key)
 
 * ``csf8_paper.csv``        – the paper's design: 250 Hz, releases +0.157, −0.157, +0.157,
   −0.157 rad; runs 1–2 on set-up ``A`` (encoder offset +0.012 rad), runs 3–4 on set-up ``B``
@@ -9,267 +11,24 @@ committed files:
 * ``csf8_paper_counts.csv`` – the same data with ``theta`` as raw integer encoder counts.
 * ``csf8_rich_1khz.csv``    – a richer design: 1 kHz, 8 runs at ±0.157, ±0.12, ±0.08,
   ±0.05 rad, one set-up (offset +0.005 rad), quantized, 0.3 s per run.
+* ``hidden_hysteresis_1khz.csv`` – the paper's plant with a hidden Dahl hysteresis element.
+* ``driven_csf8.csv``       – the driven joint (motor and load torques, both encoders).
 * ``truth.json``            – per file: true parameters, per-run physical ``theta0``,
   ``t_release``, set-up offset, rest point, sample rate, counts per rev, notes.
-
-Log format: columns ``run,setup,time,theta``; ``time`` restarts at 0 for each run with sample
-period ``1/fs``; ``theta`` is the encoder reading
-``round((θ_phys + offset)/step)·step`` [rad], ``step = 2π/counts_per_rev``.
-
-The module is importable (e.g. with :mod:`importlib`) so that tests and benchmarks can make
-many random synthetic logs with :func:`make_log`; file writing happens only under
-``if __name__ == "__main__":``.
 """
 
 from __future__ import annotations
 
-import copy
 import json
-import math
-import sys
-from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
+from hdid import reference
+from hdid.reference import logs
+
 _HERE = Path(__file__).resolve().parent
-_SRC = _HERE.parent.parent / "src"
-
-try:  # pragma: no cover - depends on the environment
-    from hdid.reference import reference_trajectory, stick_band_halfwidth
-except ImportError:  # hdid not installed: use the source tree
-    sys.path.insert(0, str(_SRC))
-    from hdid.reference import reference_trajectory, stick_band_halfwidth
-
-__all__ = [
-    "TRUTH_CSF8",
-    "COUNTS_PER_REV",
-    "PARAM_NAMES",
-    "encoder_step",
-    "make_log",
-    "rest_gap",
-    "build_all",
-]
-
-#: Names of the physical parameters passed to the simulator (``ratio`` aside).
-PARAM_NAMES = ("k1", "k2", "tau_c", "tau_s", "v_s", "delta", "c_v", "inertia")
-
-#: CSF-8-100-like truth (see ``shared/reference/physics-notes.md``).  ``tau_c``/``tau_s`` and
-#: ``c_v`` were tuned so that the rest points of the ±0.157 rad releases are ≈ 0.07 rad apart,
-#: as in the paper (gap = 0.0711 rad; each release reverses twice and sticks ≈ 17 ms after
-#: release).  c_v = 1.8e-5 Nm·s/rad is 3.5 % of critical damping 2·sqrt(k1/N²·I) = 5.13e-4.
-TRUTH_CSF8: dict[str, float] = {
-    "k1": 940.0,  # Nm/rad (output side)
-    "k2": 6.5e7,  # Nm/rad^3 (output side)
-    "tau_c": 2.5e-3,  # Nm (WG)
-    "tau_s": 4.5e-3,  # Nm (WG)
-    "v_s": 5.0,  # rad/s (WG)
-    "delta": 1.0,  # -
-    "c_v": 1.8e-5,  # Nm s/rad (WG)
-    "inertia": 7.0e-7,  # kg m^2 (WG)
-    "ratio": 100.0,  # gear ratio N
-}
-
-COUNTS_PER_REV = 4000
-
-
-def encoder_step(counts_per_rev: int = COUNTS_PER_REV) -> float:
-    """Encoder resolution ``2π/counts_per_rev`` [rad]."""
-    return 2.0 * math.pi / counts_per_rev
-
-
-def _sim_kwargs(truth: Mapping) -> dict[str, float]:
-    params = truth["params"] if "params" in truth else truth  # a truth.json entry works too
-    kw = {name: float(params[name]) for name in PARAM_NAMES}
-    kw["ratio"] = float(truth.get("ratio", params.get("ratio", 100.0)))
-    return kw
-
-
-def rest_gap(truth: Mapping[str, float], amplitude: float = 0.157) -> float:
-    """Gap between the rest points of the ``+amplitude`` and ``−amplitude`` releases [rad].
-
-    Parameters
-    ----------
-    truth : mapping
-        Physical parameters (``PARAM_NAMES``, optional ``ratio``).
-    amplitude : float, optional
-        Release angle magnitude [rad, WG] (default 0.157).
-
-    Returns
-    -------
-    float
-        ``θ_rest(+amplitude) − θ_rest(−amplitude)`` (positive when each run stops on the side
-        it started from).
-    """
-    kw = _sim_kwargs(truth)
-    rest = []
-    for a in (amplitude, -amplitude):
-        tr = reference_trajectory(10.0, theta0=a, t_release=0.0, **kw)
-        rest.append(tr.theta_rest if tr.stuck else float(tr.evaluate([10.0])[0][0]))
-    return rest[0] - rest[1]
-
-
-def make_log(
-    truth: Mapping[str, float],
-    amplitudes: Sequence[float],
-    fs: float,
-    duration: float,
-    hold: float,
-    offsets_by_setup: Mapping[str, float],
-    seed: int,
-    quantize: bool = True,
-    noise_std: float = 0.0,
-    *,
-    setups: Sequence[str] | None = None,
-    counts_per_rev: int = COUNTS_PER_REV,
-    as_counts: bool = False,
-    return_truth: bool = False,
-    hidden: Mapping | None = None,
-) -> pd.DataFrame | tuple[pd.DataFrame, dict]:
-    """Make one synthetic free-motion log with the reference simulator.
-
-    Parameters
-    ----------
-    truth : mapping
-        Physical parameters ``k1, k2, tau_c, tau_s, v_s, delta, c_v, inertia`` and optionally
-        ``ratio`` (default 100), e.g. :data:`TRUTH_CSF8`; an entry of ``truth.json`` (with a
-        nested ``"params"``) is accepted as well.
-    amplitudes : sequence of float
-        Physical release angle ``theta0`` [rad, WG, from the spring's zero] of each run.
-    fs : float
-        Sample rate [Hz].
-    duration : float
-        Length of each run [s]; each run has ``round(duration·fs)`` samples at ``k/fs``.
-    hold : float
-        Pre-release hold [s].  The release instant is ``hold + u/fs`` with ``u ~ U(0, 1)``, i.e.
-        at a random sub-sample instant.
-    offsets_by_setup : mapping of str to float
-        Encoder offset of each set-up [rad]: the encoder reads ``θ_phys + offset``.
-    seed : int
-        Seed of :func:`numpy.random.default_rng` (release instants, noise).
-    quantize : bool, optional
-        Round readings to the encoder's counts (default True).
-    noise_std : float, optional
-        Standard deviation [rad] of Gaussian noise added to ``θ_phys + offset`` *before*
-        quantization (default 0).
-    setups : sequence of str, optional
-        Set-up label of each run.  By default the runs are split into contiguous, equal blocks
-        over the set-ups in the order of ``offsets_by_setup`` (4 runs, 2 set-ups → A, A, B, B).
-    counts_per_rev : int, optional
-        Encoder resolution (default 4000).
-    as_counts : bool, optional
-        Write ``theta`` as integer counts instead of radians (needs ``quantize``).
-    return_truth : bool, optional
-        Also return the truth dictionary as a second value.
-    hidden : mapping, optional
-        Extra keyword arguments of :func:`hdid.reference.reference_trajectory`
-        (``extra_torque``, ``extra_holding``, ``dahl``) that hide an effect the base
-        model lacks; see ``data/synthetic/hidden.py``.
-
-    Returns
-    -------
-    pandas.DataFrame or (pandas.DataFrame, dict)
-        Columns ``run`` (1-based int), ``setup`` (str), ``time`` [s], ``theta`` [rad, or counts].
-        The truth dictionary is always attached as ``df.attrs["truth"]``: ``params``, ``ratio``,
-        ``fs``, ``counts_per_rev``, ``step_rad``, ``units``, ``quantized``, ``noise_std``,
-        ``seed``, ``duration``, ``hold``, ``offsets``, ``stick_band_halfwidth`` and ``runs``
-        (per run: ``run``, ``setup``, ``theta0`` (physical), ``theta0_enc`` (first reading),
-        ``t_release``, ``offset``, ``theta_rest`` (physical), ``t_stick``).
-    """
-    if as_counts and not quantize:
-        raise ValueError("as_counts requires quantize=True")
-    amplitudes = [float(a) for a in amplitudes]
-    n_runs = len(amplitudes)
-    setup_names = list(offsets_by_setup)
-    if setups is None:
-        if not setup_names:
-            raise ValueError("offsets_by_setup is empty")
-        per = math.ceil(n_runs / len(setup_names))
-        setups = [setup_names[min(i // per, len(setup_names) - 1)] for i in range(n_runs)]
-    setups = [str(s) for s in setups]
-    if len(setups) != n_runs:
-        raise ValueError("setups must have one label per run")
-    missing = set(setups) - set(map(str, setup_names))
-    if missing:
-        raise ValueError(f"no offset given for set-ups {sorted(missing)}")
-
-    kw = _sim_kwargs(truth)
-    rng = np.random.default_rng(seed)
-    step = encoder_step(counts_per_rev)
-    n = int(round(duration * fs))
-    t = np.arange(n) / fs
-
-    frames = []
-    runs_info = []
-    for i, (a, setup) in enumerate(zip(amplitudes, setups), start=1):
-        offset = float(offsets_by_setup[setup])
-        t_rel = float(hold + rng.uniform(0.0, 1.0) / fs)
-        traj = reference_trajectory(float(t[-1]), theta0=a, t_release=t_rel, **kw,
-                                    **(dict(hidden) if hidden else {}))
-        theta_phys, _ = traj.evaluate(t)
-        reading = theta_phys + offset
-        if noise_std > 0:
-            reading = reading + rng.normal(0.0, noise_std, size=reading.shape)
-        if quantize:
-            counts = np.round(reading / step)
-            reading = counts.astype(np.int64) if as_counts else counts * step
-        frames.append(pd.DataFrame({"run": i, "setup": setup, "time": t, "theta": reading}))
-        runs_info.append({
-            "run": i,
-            "setup": setup,
-            "theta0": a,
-            "theta0_enc": float(reading[0]) * (step if as_counts else 1.0),
-            "t_release": t_rel,
-            "offset": offset,
-            "theta_rest": float(traj.theta_rest) if traj.stuck else None,
-            "t_stick": float(traj.t_stick) if traj.stuck else None,
-        })
-    df = pd.concat(frames, ignore_index=True)
-    info = {
-        "params": {name: kw[name] for name in PARAM_NAMES},
-        "ratio": kw["ratio"],
-        "fs": float(fs),
-        "counts_per_rev": int(counts_per_rev),
-        "step_rad": step,
-        "units": "counts" if as_counts else "rad",
-        "quantized": bool(quantize),
-        "noise_std": float(noise_std),
-        "seed": int(seed),
-        "duration": float(duration),
-        "hold": float(hold),
-        "offsets": {str(k): float(v) for k, v in offsets_by_setup.items()},
-        "stick_band_halfwidth": stick_band_halfwidth(kw["k1"], kw["k2"], kw["tau_s"],
-                                                     kw["ratio"]),
-        "runs": runs_info,
-    }
-    df.attrs["truth"] = info
-    if return_truth:
-        return df, copy.deepcopy(info)
-    return df
-
-
-# ---------------------------------------------------------------- committed files
-
-PAPER_DESIGN = dict(amplitudes=[0.157, -0.157, 0.157, -0.157], fs=250.0, duration=0.5,
-                    hold=0.04, offsets_by_setup={"A": 0.012, "B": -0.020}, seed=20240611)
-RICH_DESIGN = dict(amplitudes=[0.157, -0.157, 0.12, -0.12, 0.08, -0.08, 0.05, -0.05],
-                   fs=1000.0, duration=0.3, hold=0.04, offsets_by_setup={"A": 0.005},
-                   seed=20240612)
-
-#: A log with a hidden effect (Dahl hysteresis, ``hidden.py``) for ``hdid diagnose`` and
-#: ``notebooks/discover-missing-effect.ipynb``: 1 kHz, two amplitudes, one set-up.
-HIDDEN_DESIGN = dict(amplitudes=[0.157, -0.157, 0.08, -0.08], fs=1000.0, duration=0.25,
-                     hold=0.02, offsets_by_setup={"A": 0.005}, seed=20240613)
-
-
-def _hidden_module():
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("_hdid_hidden", _HERE / "hidden.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+DRIVEN = "driven_csf8.csv"
 
 
 def _write_csv(df: pd.DataFrame, path: Path, counts: bool) -> None:
@@ -282,11 +41,11 @@ def _write_csv(df: pd.DataFrame, path: Path, counts: bool) -> None:
 
 
 def build_all(outdir: Path | str = _HERE) -> dict:
-    """Regenerate all committed synthetic files in ``outdir`` and return the truth dict."""
+    """Regenerate every shipped synthetic file in ``outdir``; return the truth dict."""
     outdir = Path(outdir)
-    truth = dict(TRUTH_CSF8)
-    gap = rest_gap(truth)
-    band = stick_band_halfwidth(truth["k1"], truth["k2"], truth["tau_s"], truth["ratio"])
+    truth = dict(logs.TRUTH_CSF8)
+    gap = logs.rest_gap(truth)
+    band = reference.stick_band_halfwidth(truth["k1"], truth["k2"], truth["tau_s"], truth["ratio"])
     common_note = (
         "Generated by data/synthetic/generate.py with hdid.reference.simulate_reference "
         "(event-driven DOP853, rtol 1e-11). Model: I*th'' = -T_k(th/N)/N - tau_f, "
@@ -298,49 +57,95 @@ def build_all(outdir: Path | str = _HERE) -> dict:
     )
     files: dict[str, dict] = {}
 
-    df, info = make_log(truth, **PAPER_DESIGN, return_truth=True)
+    df, info = logs.make_log(truth, **logs.PAPER_DESIGN, return_truth=True)
     _write_csv(df, outdir / "csf8_paper.csv", counts=False)
     info["notes"] = ("The paper's design (250 Hz, +/-0.157 rad, two set-ups A/B). Quantized, "
                      "noiseless. " + common_note)
     info["rest_gap_pm0157"] = gap
     files["csf8_paper.csv"] = info
 
-    dfc, infoc = make_log(truth, **PAPER_DESIGN, as_counts=True, return_truth=True)
+    dfc, infoc = logs.make_log(truth, **logs.PAPER_DESIGN, as_counts=True, return_truth=True)
     _write_csv(dfc, outdir / "csf8_paper_counts.csv", counts=True)
     infoc["notes"] = ("Same data as csf8_paper.csv with theta in raw integer encoder counts "
                       "(use --counts-per-rev 4000). " + common_note)
     infoc["rest_gap_pm0157"] = gap
     files["csf8_paper_counts.csv"] = infoc
 
-    dfr, infor = make_log(truth, **RICH_DESIGN, return_truth=True)
+    dfr, infor = logs.make_log(truth, **logs.RICH_DESIGN, return_truth=True)
     _write_csv(dfr, outdir / "csf8_rich_1khz.csv", counts=False)
     infor["notes"] = ("Richer design: 1 kHz, 8 releases at +/-0.157, 0.12, 0.08, 0.05 rad, one "
                       "set-up. Quantized, noiseless. " + common_note)
     infor["rest_gap_pm0157"] = gap
     files["csf8_rich_1khz.csv"] = infor
 
-    hid = _hidden_module()
-    dfh, infoh = make_log(truth, **HIDDEN_DESIGN, return_truth=True,
-                          hidden=hid.reference_kwargs("hysteresis", truth))
+    dfh, infoh = logs.make_log(truth, **logs.HIDDEN_DESIGN, return_truth=True,
+                               hidden=logs.reference_kwargs("hysteresis", truth))
     _write_csv(dfh, outdir / "hidden_hysteresis_1khz.csv", counts=False)
     infoh["hidden"] = {"effect": "hysteresis", "model": "DahlHysteresis",
-                       **hid.HIDDEN["hysteresis"]["truth"]}
+                       **logs.HIDDEN["hysteresis"]["truth"]}
     infoh["notes"] = ("A hidden effect: Dahl hysteresis (f_h, sigma_h in 'hidden') on top of "
                       "the base model. 1 kHz, releases +/-0.157 and +/-0.08 rad, one set-up. "
                       "The base model's stick-band numbers do not apply. " + common_note)
     files["hidden_hysteresis_1khz.csv"] = infoh
 
+    df_driven, files[DRIVEN] = logs.make_driven_log(logs.TRUTH_DRIVEN_CSF8, logs.DRIVEN_DESIGN)
+    _write_driven_csv(df_driven, outdir / DRIVEN)
+    _write_truth(outdir, files)
+    return files
+
+
+def build_driven(outdir: Path | str = _HERE) -> dict:
+    """Regenerate ``driven_csf8.csv`` alone in ``outdir`` and set its key in ``truth.json``
+    (the other keys kept); return its truth."""
+    outdir = Path(outdir)
+    df, truth = logs.make_driven_log(logs.TRUTH_DRIVEN_CSF8, logs.DRIVEN_DESIGN)
+    _write_driven_csv(df, outdir / DRIVEN)
+    path = outdir / "truth.json"
+    files = json.loads(path.read_text()) if path.exists() else {}
+    files[DRIVEN] = truth
+    _write_truth(outdir, files)
+    return truth
+
+
+def _write_truth(outdir: Path, files: dict) -> None:
     with open(outdir / "truth.json", "w") as fh:
         json.dump(files, fh, indent=2)
         fh.write("\n")
-    return files
+
+
+def _write_driven_csv(df: pd.DataFrame, path: Path) -> None:
+    out = pd.DataFrame({
+        "time": [f"{v:.12g}" for v in df["time"]],
+        "run": df["run"].astype(int),
+        "theta": [f"{v:.15g}" for v in df["theta"]],
+        "theta_out": [f"{v:.15g}" for v in df["theta_out"]],
+        "motor_torque": [repr(float(v)) for v in df["motor_torque"]],
+        "load_torque": [repr(float(v)) for v in df["load_torque"]],
+    })
+    out.to_csv(path, index=False, lineterminator="\n")
+
+
+def report_driven(info: dict) -> None:
+    """Print what the driven log holds (runs, speeds, reversals, sticks)."""
+    size = (_HERE / DRIVEN).stat().st_size
+    print(f"{DRIVEN}: {len(info['runs'])} runs, {size / 1024:.1f} kB, "
+          f"capacity {info['capacity_wg'] * 1e3:.2f} mN m")
+    for r in info["runs"]:
+        sticks = ", ".join(f"{a:.3f}-{'end' if b is None else f'{b:.3f}'}"
+                           for a, b in r["stick_intervals"])
+        print(f"  run {r['run']}: n {r['n_samples']}, max|w| {r['max_abs_omega']:.1f} rad/s, "
+              f"reversals {r['reversals']}, revs travelled {r['revolutions_travelled']:.1f} "
+              f"(net {r['revolutions_net']:+.1f}), twist [{r['twist_range'][0]:+.3e}, "
+              f"{r['twist_range'][1]:+.3e}] rad, sticks {sticks}")
 
 
 if __name__ == "__main__":
     files = build_all(_HERE)
+    driven = files.pop(DRIVEN)
     for name, info in files.items():
         size = (_HERE / name).stat().st_size
         rests = ", ".join(f"{r['theta_rest']:+.4f}" for r in info["runs"])
         print(f"{name}: {len(info['runs'])} runs, {size / 1024:.1f} kB, rest points {rests}")
     gap = files["csf8_paper.csv"]["rest_gap_pm0157"]
     print(f"rest-point gap (+0.157 vs -0.157): {gap:.4f} rad")
+    report_driven(driven)

@@ -10,7 +10,7 @@ exactly ``τ_l + τ_fout``:
 * output, eq. 8:  ``θ_out = −θ/N + T_k⁻¹(τ_l + τ_fout) + θ̃_p(θ)``, with ``T_k`` the
   model's stiffness law and ``θ̃_p`` the positional error (eq. 3).
 
-Conventions (shared with the independent reference in ``data/synthetic/driven.py``):
+Conventions (shared with the independent reference, ``hdid.reference.logs.simulate_driven``):
 
 * ``τ_d`` is held from each sample to the next (``input_hold="zoh"``, zero-order hold:
   a digital drive's command, held by its DAC or PWM until the next), or interpolated

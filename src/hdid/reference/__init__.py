@@ -1,8 +1,9 @@
 """Independent, high-accuracy, event-driven reference simulator of the free-motion test.
 
-This module is the ground truth against which the JAX simulator is tested and the generator
-of the synthetic logs in ``data/synthetic``.  It deliberately uses nothing but numpy and
-scipy (no JAX), and shares no code with the JAX simulator.
+This package is the ground truth against which the JAX simulator is tested and, through
+:mod:`hdid.reference.logs`, the generator of the synthetic logs in ``data/synthetic``.  It
+deliberately uses nothing but numpy and scipy (no JAX), and shares no code with the JAX
+simulator.
 
 Model (all angles at the wave generator, WG, measured from the spring's zero)::
 
@@ -36,8 +37,10 @@ so the friction there is exactly ``s·τ_s``.  At every event the state is reset
 exactly and the stick/slide rule above is applied.  A guard (``max_events``) stops Zeno
 chattering by sticking after that many events.
 
-The module is a package of three parts: the spring and its stick band (``_spring``), the
-event-driven trajectory (``_events``) and the trajectory read like a log (``_sampled``).
+The package's parts: the spring and its stick band (``_spring``), the event-driven
+trajectory (``_events``) and the trajectory read like a log (``_sampled``); the driven
+joint's reference simulator (``_driven``); and the synthetic logs built on them, for the
+tests, benchmarks, calibrations and notebooks: :mod:`hdid.reference.logs`.
 """
 
 from __future__ import annotations

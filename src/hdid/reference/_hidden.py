@@ -15,7 +15,7 @@ chosen at the visible end of each range; the notes beside each say why.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -148,7 +148,3 @@ def reference_kwargs(name: str, base: Mapping, **override: float) -> dict:
     entry = HIDDEN[name]
     params = {**entry["truth"], **override}
     return entry["reference"](base, **params)
-
-
-def builders() -> dict[str, Callable]:
-    return {k: v["reference"] for k, v in HIDDEN.items()}
