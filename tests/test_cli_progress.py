@@ -1,5 +1,5 @@
-"""A new user's first hour, the parts found in the walk-through after issue 18's first
-round: the figure's phase on a terminal, and -q on every command."""
+"""The command line's progress output: drawing the figure is a phase of its own on a
+terminal (it compiles a Jacobian), and every command takes ``-q`` to silence it."""
 
 from __future__ import annotations
 
