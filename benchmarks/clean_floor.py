@@ -1,9 +1,8 @@
 """Clean logs from an independent simulator: how many fits end above 1.5× the floor?
 
-Issue 33 ("A clean log reaches the floor"): a noiseless log of an exact model, quantized to
-its encoder, leaves a residual at the quantization floor ``step/√12`` at the true
-parameters (0.4–1.0× measured: less where the gear sticks). A fit that ends above 1.5× the
-floor has stopped in a poorer optimum. This script counts them.
+A noiseless log of an exact model, quantized to its encoder, leaves a residual at the
+quantization floor ``step/√12`` at the true parameters (0.4–1.0× measured: less where the
+gear sticks). A fit that ends above 1.5× the floor has stopped in a poorer optimum.
 
 Logs come from ``tests/independent.py`` — pure numpy/scipy, event-driven
 ``solve_ivp`` (DOP853) with an exact set-valued stick decision at every zero of the
@@ -26,7 +25,7 @@ residual ratio ``rms/floor`` recorded with the parameters, the wall time and the
 result's ``limits`` (when the code has them).
 
     taskset -c 1 python benchmarks/clean_floor.py rich --seeds 0:200 [--append] [--label after]
-    PYTHONPATH=/tmp/wt_c/src taskset -c 1 python benchmarks/clean_floor.py rich --seeds 0:50 --label before --append
+    PYTHONPATH=<other tree>/src taskset -c 1 python benchmarks/clean_floor.py rich --label before --append
     python benchmarks/clean_floor.py --report
 
 Results: ``benchmarks/results/clean_floor.json`` (one row per log and label) and ``.md``.
@@ -188,17 +187,10 @@ def main(argv=None) -> int:
     ap.add_argument("--label", default="after")
     ap.add_argument("--append", action="store_true", help="keep the rows already stored")
     ap.add_argument("--report", action="store_true", help="only rewrite the .md")
-    ap.add_argument("--out", default=str(OUT), help="results JSON (the .md beside it)")
-    ap.add_argument("--merge", nargs="*", default=[],
-                    help="rows of other results JSONs to add (e.g. a run of older code)")
     a = ap.parse_args(argv)
-    out = Path(a.out)
+    out = OUT
     rows = _load(out)
-    if a.report or a.merge:
-        for m in a.merge:
-            new = _load(Path(m))
-            keys = {(r.get("label"), r["design"], r["seed"]) for r in new}
-            rows = [r for r in rows if (r.get("label"), r["design"], r["seed"]) not in keys] + new
+    if a.report:
         _save(rows, out)
         return 0
     if not a.append:

@@ -20,7 +20,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _common import cpu_model, interpretation_section, parse_or_render, src_fingerprint, write_result
+from _common import interpretation_section, parse_or_render, run_meta, write_result
 
 RATE = 10_000.0
 AMPLITUDES = [0.157, -0.157, 0.08, -0.08]
@@ -98,9 +98,8 @@ def main(argv=None) -> None:
             print(json.dumps(rows[-1]), flush=True)
             if rows[-1]["status"] != "ok":
                 break
-    meta = {"cpu": cpu_model(), "affinity": sorted(os.sched_getaffinity(0)),
-            "src": src_fingerprint(), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
-            "load_after": os.getloadavg()[0], "rate_hz": RATE, "amplitudes": AMPLITUDES}
+    meta = run_meta(affinity=sorted(os.sched_getaffinity(0)), load_after=os.getloadavg()[0],
+                    rate_hz=RATE, amplitudes=AMPLITUDES)
     write_result("long_log", {"meta": meta, "rows": rows}, render)
 
 

@@ -53,7 +53,7 @@ def run_cli(src, log, out, timeout):
         conv = d.get("convergence") or {}
         r.update(posterior_s=d["wall_time_s"], compile_s=d.get("compile_s"),
                  mode_search_s=d.get("mode_search_s"), converged=d["converged"],
-                 criterion=conv.get("criterion", "chain >= 50 tau (old sampler)"),
+                 criterion=conv.get("criterion"),
                  steps=d["n_steps"], burn_in=d["burn_in"], tau_max=d["tau_max"],
                  method=d.get("method"), engine=d.get("engine"), stage_s=d.get("stage_s"),
                  chain_in_tau=d["chain_in_tau_max"], rhat_max=conv.get("rhat_max"),
@@ -69,13 +69,9 @@ def _f(v, spec):
     return "" if v is None else format(v, spec)
 
 
-def _rule(r, arviz):
-    """The rule that passed (``met_by``) or, failing/older trees, the criterion's family."""
-    if r.get("met_by"):
-        return r["met_by"]
-    if not arviz:
-        return "50 τ, old sampler"
-    return "R-hat or 50 τ" if "tau" in str(r.get("criterion", "")) else "arviz"
+def _rule(r):
+    """The rule that passed (``met_by``) or, where the tree does not say, the criterion's."""
+    return r.get("met_by") or ("R-hat or 50 τ" if "tau" in str(r.get("criterion")) else "arviz")
 
 
 def render(res):
@@ -97,11 +93,10 @@ def render(res):
                          "| | | | | | | | | |")
                 continue
             b = r["band95"]
-            arviz = r["rhat_max"] is not None
             L.append(
                 f"| {row['log']} | {k} | {r['process_s']:.0f} | {r['posterior_s']:.0f} | "
                 f"{_f(r['compile_s'], '.1f')} | {_f(r['mode_search_s'], '.1f')} | "
-                f"{'yes' if r['converged'] else 'NO'} ({_rule(r, arviz)}) | "
+                f"{'yes' if r['converged'] else 'NO'} ({_rule(r)}) | "
                 f"{r['steps']} (+{r['burn_in']}) | {_f(r['rhat_max'], '.3f')} | "
                 f"{_f(r['ess_bulk_min'], '.0f')}/{_f(r['ess_tail_min'], '.0f')} | "
                 f"{r['chain_in_tau']:.1f} | {1e3 * b[0]:.1f}–{1e3 * b[1]:.1f} | "

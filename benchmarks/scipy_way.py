@@ -46,26 +46,19 @@ class _TooStiff(Exception):
     """Raised inside the right-hand side to abandon a pathological integration."""
 
 
-def simulate_run_scipy(
-    time_s: np.ndarray,
-    *,
-    theta0: float,
-    t_release: float,
-    params: Mapping[str, float],
-    inertia: float,
-    ratio: float = 100.0,
-    eps: float = 1e-4,
-    rtol: float = 1e-6,
-    atol: float = 1e-9,
-    max_rhs_calls: int = 50_000,
-) -> np.ndarray:
+#: Right-hand-side calls after which a solve is abandoned: a 0.5 s run needs ≈ 800; a first
+#: trust-region step can jump to k2 ~ 1e13 and would stall LSODA for minutes.
+MAX_RHS_CALLS = 50_000
+
+
+def simulate_run_scipy(time_s: np.ndarray, *, theta0: float, t_release: float,
+                       params: Mapping[str, float], inertia: float, ratio: float = 100.0,
+                       eps: float = 1e-4) -> np.ndarray:
     """Physical WG angle [rad] at the sorted times ``time_s`` [s] of one release from
     ``theta0`` (from the spring's zero) at ``t_release``, with ``params`` (``k1, k2, tau_c,
     tau_s, v_s, delta, c_v``), the WG ``inertia`` [kg m²], gear ``ratio`` and the ``tanh``
-    sign smoothing at velocity ``eps`` [rad/s]; LSODA at ``rtol``/``atol``. NaN after the
-    release if the integration failed or the right-hand side ran over ``max_rhs_calls``
-    (a 0.5 s run needs ≈ 800; a first trust-region step can jump to k2 ~ 1e13 and would
-    stall LSODA for minutes)."""
+    sign smoothing at velocity ``eps`` [rad/s]; LSODA at rtol 1e-6, atol 1e-9. NaN after
+    the release if the integration failed or ran over :data:`MAX_RHS_CALLS`."""
     k1, k2, tc, ts, vs, dl, cv = (float(params[n]) for n in PARAM_NAMES)
     N, inv_i = float(ratio), 1.0 / float(inertia)
     tanh, exp = math.tanh, math.exp
@@ -73,7 +66,7 @@ def simulate_run_scipy(
 
     def rhs(_t, y):
         calls[0] += 1
-        if calls[0] > max_rhs_calls:
+        if calls[0] > MAX_RHS_CALLS:
             raise _TooStiff
         th, w = y
         d = th / N
@@ -87,14 +80,11 @@ def simulate_run_scipy(
         return out
     try:
         sol = solve_ivp(rhs, (float(t_release), float(t[-1])), [float(theta0), 0.0],
-                        method="LSODA", rtol=rtol, atol=atol, t_eval=t[after])
+                        method="LSODA", rtol=1e-6, atol=1e-9, t_eval=t[after])
     except _TooStiff:
-        out[after] = np.nan
-        return out
-    if sol.status < 0 or sol.y.shape[1] != int(after.sum()):
-        out[after] = np.nan
-        return out
-    out[after] = sol.y[0]
+        sol = None
+    ok = sol is not None and sol.status >= 0 and sol.y.shape[1] == int(after.sum())
+    out[after] = sol.y[0] if ok else np.nan
     return out
 
 
@@ -136,16 +126,15 @@ def guess_offsets(runs: Sequence[Mapping]) -> dict[str, float]:
     return out
 
 
-def fit_scipy(
-    runs: list[dict],
-    x0: dict,
-    inertia: float,
-    ratio: float = 100.0,
-    *,
-    eps: float = 1e-4,
-    diff_step: float = 1e-4,
-    max_nfev: int | None = 200,
-) -> dict:
+#: ``least_squares``' relative finite-difference step (absolute below 1: 0.1 ms for release
+#: times, 0.1 mrad for angles; ≈ 0.05 % for the log-parameters). LSODA at rtol 1e-6 makes
+#: the default ``sqrt(eps_machine)`` useless; 1e-3 gave worse fits (coarser, biased
+#: Jacobian), 3e-3 sent the first step to absurd parameters.
+DIFF_STEP = 1e-4
+
+
+def fit_scipy(runs: list[dict], x0: dict, inertia: float, ratio: float = 100.0, *,
+              eps: float = 1e-4, max_nfev: int | None = 200) -> dict:
     """Fit the free-motion model to all runs of a log with scipy only.
 
     ``runs``: one dict per release with ``"time"`` [s] and ``"theta"`` [encoder rad] arrays,
@@ -157,16 +146,10 @@ def fit_scipy(
     reversals is a local minimum), release times within a sample. ``inertia`` [kg m²] is
     fixed; ``eps`` is the ``tanh`` smoothing velocity [rad/s] (module docstring).
 
-    ``diff_step`` is ``least_squares``' relative finite-difference step (absolute below 1:
-    0.1 ms for release times, 0.1 mrad for angles; ≈ 0.05 % for the log-parameters). LSODA
-    at rtol 1e-6 makes the default ``sqrt(eps_machine)`` useless; 1e-3 gave worse fits
-    (coarser, biased Jacobian), 3e-3 sent the first step to absurd parameters.
-
     Returns ``params`` (fitted, and the fixed ``inertia``), ``runs`` (per run: ``t_release``,
     physical ``theta0``, ``theta0_enc``), ``offsets`` (by set-up), ``nfev`` (residual
-    evaluations, Jacobian ones excluded), ``njev``, ``n_residual_calls`` (all),
-    ``n_simulations`` (single-run ODE solves), ``wall_s``, ``cost`` (``0.5·Σ residual²``,
-    rad²), ``rms`` (rad), ``success``, ``message``.
+    evaluations, Jacobian ones excluded), ``n_simulations`` (single-run ODE solves),
+    ``wall_s``, ``rms`` (rad) and ``success``.
     """
     t_start = time.perf_counter()
     missing = [n for n in PARAM_NAMES if n not in x0]
@@ -191,7 +174,7 @@ def fit_scipy(
         np.asarray(th_enc0, float),
         np.asarray([offsets0[s] for s in setups], float),
     ])
-    counters = {"calls": 0, "sims": 0}
+    counters = {"sims": 0}
 
     def unpack(x):
         params = dict(zip(PARAM_NAMES, np.exp(x[:n_p])))
@@ -212,7 +195,6 @@ def fit_scipy(
         return np.concatenate(out)
 
     def residuals(x):
-        counters["calls"] += 1
         r = model(x) - y_all
         return np.where(np.isfinite(r), r, 1.0)  # a failed solve is a large residual
 
@@ -223,26 +205,20 @@ def fit_scipy(
         lo[j], hi[j] = math.log(b_lo), math.log(b_hi)
     x_init = np.clip(x_init, np.nextafter(lo, np.inf), np.nextafter(hi, -np.inf))
     res = least_squares(residuals, x_init, method="trf", x_scale="jac", jac="2-point",
-                        diff_step=diff_step, bounds=(lo, hi), max_nfev=max_nfev)
+                        diff_step=DIFF_STEP, bounds=(lo, hi), max_nfev=max_nfev)
     params, t_rel, th_enc, offs = unpack(res.x)
     r_final = model(res.x) - y_all
-    out_params = {n: float(v) for n, v in params.items()}
-    out_params["inertia"] = float(inertia)
     wall = time.perf_counter() - t_start
     return {
-        "params": out_params,
+        "params": {**{n: float(v) for n, v in params.items()}, "inertia": float(inertia)},
         "runs": [{"t_release": float(t_rel[i]), "theta0": float(th_enc[i] - offs[run_setup[i]]),
                   "theta0_enc": float(th_enc[i])} for i in range(n_runs)],
         "offsets": {s: float(offs[j]) for j, s in enumerate(setups)},
         "nfev": int(res.nfev),
-        "njev": int(res.njev) if res.njev is not None else None,
-        "n_residual_calls": counters["calls"],
         "n_simulations": counters["sims"],
         "wall_s": wall,
-        "cost": float(res.cost),
         "rms": float(np.sqrt(np.mean(r_final**2))),
         "success": bool(res.success),
-        "message": str(res.message),
     }
 
 
