@@ -2,8 +2,8 @@
 seeds), from :mod:`hdid.reference.logs` (the independent numpy/scipy reference
 simulators; see that module for the logs' physics and format)::
 
-    python data/synthetic/generate.py    # every file below, bit for bit
-    python data/synthetic/driven.py      # driven_csf8.csv alone (its truth.json key)
+    python data/synthetic/generate.py [DIR]   # every file below, bit for bit (DIR: here)
+    python data/synthetic/driven.py           # driven_csf8.csv alone (its truth.json key)
 
 * ``csf8_paper.csv``        – the paper's design: 250 Hz, releases +0.157, −0.157, +0.157,
   −0.157 rad; runs 1–2 on set-up ``A`` (encoder offset +0.012 rad), runs 3–4 on set-up ``B``
@@ -20,6 +20,7 @@ simulators; see that module for the logs' physics and format)::
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import pandas as pd
@@ -125,9 +126,9 @@ def _write_driven_csv(df: pd.DataFrame, path: Path) -> None:
     out.to_csv(path, index=False, lineterminator="\n")
 
 
-def report_driven(info: dict) -> None:
+def report_driven(info: dict, outdir: Path = _HERE) -> None:
     """Print what the driven log holds (runs, speeds, reversals, sticks)."""
-    size = (_HERE / DRIVEN).stat().st_size
+    size = (outdir / DRIVEN).stat().st_size
     print(f"{DRIVEN}: {len(info['runs'])} runs, {size / 1024:.1f} kB, "
           f"capacity {info['capacity_wg'] * 1e3:.2f} mN m")
     for r in info["runs"]:
@@ -140,12 +141,13 @@ def report_driven(info: dict) -> None:
 
 
 if __name__ == "__main__":
-    files = build_all(_HERE)
+    out = Path(sys.argv[1]) if len(sys.argv) > 1 else _HERE
+    files = build_all(out)
     driven = files.pop(DRIVEN)
     for name, info in files.items():
-        size = (_HERE / name).stat().st_size
+        size = (out / name).stat().st_size
         rests = ", ".join(f"{r['theta_rest']:+.4f}" for r in info["runs"])
         print(f"{name}: {len(info['runs'])} runs, {size / 1024:.1f} kB, rest points {rests}")
     gap = files["csf8_paper.csv"]["rest_gap_pm0157"]
     print(f"rest-point gap (+0.157 vs -0.157): {gap:.4f} rad")
-    report_driven(driven)
+    report_driven(driven, out)
