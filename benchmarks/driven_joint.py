@@ -39,13 +39,13 @@ def recovery(seeds: int) -> list[dict]:
     truth = json.loads((DATA / "truth.json").read_text())["driven_csf8.csv"]
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        logs = [("shipped", DATA / "driven_csf8.csv", truth["params"])]
+        cases = [("shipped", DATA / "driven_csf8.csv", truth["params"])]
         for s in range(1, seeds):
             df, tr = logs.make_driven_log(seed=1000 + s)
             path = Path(tmp) / f"seed{s}.csv"
             df.to_csv(path, index=False)
-            logs.append((f"seed {1000 + s}", path, tr["params"]))
-        for label, path, p in logs:
+            cases.append((f"seed {1000 + s}", path, tr["params"]))
+        for label, path, p in cases:
             t0 = time.perf_counter()
             r = hdid.fit_driven(path)
             wall = time.perf_counter() - t0

@@ -14,8 +14,6 @@ import hdid
 from hdid.effects import AbstractEffect, library
 from hdid.reference import logs, simulate_reference
 
-from synthetic import ROOT
-
 TRUTH = {k: v for k, v in logs.TRUTH_CSF8.items() if k not in ("ratio", "inertia")}
 INERTIA = logs.TRUTH_CSF8["inertia"]
 STEP = 2 * np.pi / 4000
