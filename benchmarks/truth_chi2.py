@@ -1,8 +1,9 @@
 """Is a calibration log's truth consistent with hdid's likelihood? (Δχ² of the truth)
 
-For each seed: draw a truth as the posterior calibration does (``posterior_sbc.draw_physical``),
-write its log with the independent simulator, fit it freely and with the seven physical
-parameters held at the truth (release times, start angles and set-up offsets refitted).
+For each seed: the posterior calibration's truth and log (``posterior_sbc.draw_log``: drawn
+from the default priors of the design's nominal log, written by the independent
+simulator), fitted freely and with the seven physical parameters held at the truth
+(release times, start angles and set-up offsets refitted).
 Δχ² = data χ² at the truth minus the free fit's, in q²/12 units. If the model and the
 likelihood are right, Δχ² follows χ²₇ (mean 7, 95 % point 14.07); far above it, the
 simulator and the model disagree at that truth; below zero, the fit ended in a poorer
@@ -42,7 +43,7 @@ def _chi2(fit, q, power):
 
 def one(hdid, gen, sbc, design_name, seed):
     design = gen.RICH_DESIGN if design_name == "rich" else gen.PAPER_DESIGN
-    truth, df, _, _ = sbc.draw_physical(gen, np.random.default_rng(seed), design, seed)
+    truth, df, _, _ = sbc.draw_log(gen, design_name, seed)
     q = 2 * np.pi / gen.COUNTS_PER_REV
     row = {"design": design_name, "seed": seed, "truth": {n: truth[n] for n in PHYSICAL}}
     t0 = time.perf_counter()

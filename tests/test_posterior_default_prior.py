@@ -64,6 +64,27 @@ def test_scales_follow_the_logs_physics(fit):
     assert prior_scales(refit) == s1
 
 
+@pytest.mark.parametrize("name", ["csf8_paper.csv", "csf8_rich_1khz.csv"])
+def test_k1_scale_is_the_swing_stiffness_at_250_hz_and_1_khz(name):
+    """The k1 prior's centre is the stiffness of the log's own swing, ``J·ω²·N²``: between
+    the linear stiffness k1 and the secant stiffness at the largest release twist
+    ``k1 + k2·θ²`` (the cubic spring swings faster at large amplitude), each with 5 % for
+    the frequency's error (1 % readings of the amplitude over ~20 readings: ω to ~1 %, k
+    to ~2 %). At 250 Hz a swing has two readings a half-period; the turning-point
+    estimate read the paper log's k1 at 0.57×."""
+    truth = TRUTH[name]["params"]
+    ratio = TRUTH[name]["ratio"]
+    import pandas as pd
+
+    from hdid._fitting._fit import _setup
+
+    prob = _setup(pd.read_csv(ROOT / "data" / "synthetic" / name),
+                  inertia=truth["inertia"]).problem
+    s = prior_scales(prob)
+    twist = max(abs(r["theta0"]) for r in TRUTH[name]["runs"]) / ratio
+    assert 0.95 * truth["k1"] <= s.k_out <= 1.05 * (truth["k1"] + truth["k2"] * twist**2)
+
+
 def test_the_truth_lies_inside_every_default_prior_range(fit):
     """Weakly informative means the physics scale is right to within its range: the shipped
     paper log's true k1, k2, tau_c, tau_s, c_v lie inside the 95 % range of their default
