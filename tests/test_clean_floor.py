@@ -48,16 +48,16 @@ def test_a_regular_friction_law_brackets_within_the_budget():
 
 
 def _clean_floor_log(design: str, seed: int):
-    # the benchmark's own generator (benchmarks/clean_floor.py: the independent scipy
+    # the benchmark's own logs (benchmarks/clean_floor.py: the independent scipy
     # simulator, tests/independent.py, with a broad plant drawn per seed)
-    import importlib.util
+    import sys
+
     from synthetic import ROOT
 
-    spec = importlib.util.spec_from_file_location(
-        "clean_floor", ROOT / "benchmarks" / "clean_floor.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod.make(design, seed)
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import clean_floor
+
+    return clean_floor.make(design, seed)
 
 
 def test_a_clean_paper_log_in_a_poorer_basin_restarts_to_the_floor():
