@@ -2,6 +2,12 @@
 
     python benchmarks/fit_speed.py [--quick]     # ≈ 5 min on 2 busy cores (--quick ≈ 2)
     python benchmarks/fit_speed.py --render      # results/fit_speed.md from its JSON
+    python benchmarks/fit_speed.py --profile [--before TREE]   # ≈ 3 min (+ 3 with TREE)
+
+``--profile``: where a warm ``hdid.fit`` of the shipped paper log spends its time, pinned
+to one core in a subprocess per tree (``--before``: a checkout of an older commit, run
+alternately with this one in the same run; the ratio is the robust figure on a shared
+machine), with the load recorded; the other sections of the result are kept as they were.
 
 On ``data/synthetic/csf8_paper.csv`` and 3 more paper-design logs: (1) the cold CLI as a
 subprocess with an empty compilation cache (``HDID_CACHE_DIR=<tmp>``), then populated, and
@@ -287,6 +293,8 @@ def render(res: dict) -> str:
     L += ["", "scipy details: " + "; ".join(
         f"{p['name']}: nfev {p['nfev']}, {p['n_simulations']} ODE solves, success "
         f"{p['success']}" for p in sp["per_log"]) + ".\n"]
+    if res.get("profile"):
+        L += render_profile(res["profile"])
     if res.get("notes"):
         L += ["## Notes\n", *(f"- {n}" for n in res["notes"]), ""]
     L += _common.interpretation_section(res)
@@ -313,6 +321,160 @@ def _notes(res) -> list[str]:
     return notes
 
 
+#: Phases of a warm fit, each timed where :func:`hdid.fit` calls it (only the outermost
+#: call counts: the limit checks' own grid, Levenberg–Marquardt and analysis are "limits").
+PHASES = {"read_log": "read the log", "_setup": "prepare + problem", "_grid_starts": "grid of starts",
+          "_local_fits": "Levenberg–Marquardt (the starts)", "_untrapped": "stuck-run check",
+          "analyse": "analysis at the optimum", "nested_check": "limit checks"}
+
+
+def child_profile(reps: int) -> dict:
+    """In this process (pinned by the caller): ``reps`` warm fits of LOG, each phase timed;
+    in a tree with the one-lane engine also its program calls and one forward pass,
+    Jacobian and LM linear-algebra step alone."""
+    import jax
+    import numpy as np
+
+    import hdid
+    from hdid._compile_clock import _clock
+    from hdid._fitting import _fit
+
+    acc, depth = {}, [0]
+
+    def wrap(name):
+        f = getattr(_fit, name)
+
+        def g(*a, **k):
+            depth[0] += 1
+            t = time.perf_counter()
+            try:
+                return f(*a, **k)
+            finally:
+                depth[0] -= 1
+                if depth[0] == 0:
+                    acc[name] = acc.get(name, 0.0) + time.perf_counter() - t
+        setattr(_fit, name, g)
+
+    calls = []
+    try:
+        from hdid._fitting import _one_lane
+        solve = _one_lane._stored_solve
+
+        def timed_solve(*a):
+            t = time.perf_counter()
+            out = jax.block_until_ready(solve(*a))
+            calls.append((time.perf_counter() - t, int(np.asarray(out[3]).sum())))
+            return out
+        _one_lane._stored_solve = timed_solve
+    except (ImportError, AttributeError):
+        pass
+    hdid.fit(str(LOG)), hdid.fit(str(LOG))  # warm-up: programs compiled or read
+    for name in PHASES:
+        wrap(name)
+    clock = _clock()
+    rows = []
+    for _ in range(reps):
+        acc.clear()
+        calls.clear()
+        mark = clock.mark()
+        with Clock() as c:
+            r = hdid.fit(str(LOG))
+        rows.append({"wall_s": c.wall, "cpu_s": c.cpu, "compile_s": clock.since(mark),
+                     "phases": dict(acc), "solve_calls": len(calls),
+                     "solve_s": sum(x for x, _ in calls), "iterations": sum(n for _, n in calls)})
+    out = {"rows": rows, "hdid_file": hdid.__file__,
+           "limits": [(x["limit"], x["chi2"], x["fits_as_well"]) for x in r.limits],
+           "warnings": len(r.warnings), "k1": float(r.parameters["k1"].value)}
+    with Clock() as c:
+        hdid.fit(str(LOG), nested=False)
+    out["nested_false_s"] = c.wall
+    if calls or rows[-1]["solve_calls"]:  # the parts of one iteration, alone
+        import equinox as eqx
+
+        p, u = r.problem, jax.numpy.asarray(r.u)
+        fwd = eqx.filter_jit(lambda p, u: p.residuals(u))
+        jac = eqx.filter_jit(lambda p, u: p.residuals_and_jacobian(u))
+        A = np.asarray(jac(p, u)[1])
+        lin = jax.jit(lambda A, g: jax.scipy.linalg.cho_solve(
+            (jax.numpy.linalg.cholesky(A.T @ A + np.eye(A.shape[1])), True), g))
+        g = jax.numpy.ones(A.shape[1])
+        for name, f in (("forward_ms", lambda: fwd(p, u)), ("jacobian_ms", lambda: jac(p, u)),
+                        ("lm_linear_algebra_ms", lambda: lin(A, g))):
+            jax.block_until_ready(f())
+            t = time.perf_counter()
+            for _ in range(50):
+                jax.block_until_ready(f())
+            out[name] = (time.perf_counter() - t) / 50 * 1e3
+        out["unknowns"], out["samples"] = int(p.n_unknowns), list(p.times.shape)
+    return out
+
+
+def bench_profile(trees: dict, reps: int, rounds: int) -> dict:
+    """:func:`child_profile` in a fresh process per tree, pinned to one core, the trees
+    alternating for ``rounds`` rounds; load (``uptime``) recorded around each."""
+    res = {"trees": {}, "rounds": [], "core": 1, "reps": reps}
+    for k in range(rounds):
+        for label, src in trees.items():
+            before = load(f"{label} {k} start")
+            env = os.environ | {"PYTHONPATH": str(src)}
+            cmd = ["taskset", "-c", "1", sys.executable, str(Path(__file__).resolve()),
+                   "--child", str(reps)]
+            p = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=ROOT)
+            if p.returncode != 0:
+                raise RuntimeError(f"{label}: {p.stderr[-2000:]}")
+            got = json.loads(p.stdout.strip().splitlines()[-1])
+            got["load_before"], got["load_after"] = before, load(f"{label} {k} end")
+            res["rounds"].append({"tree": label, **got})
+            print(f"  {label} round {k}: " + ", ".join(f"{r['wall_s'] * 1e3:.0f}" for r in got["rows"])
+                  + f" ms (load {before['load1']:.1f})", flush=True)
+    for label in trees:
+        rows = [r for x in res["rounds"] if x["tree"] == label for r in x["rows"]]
+        res["trees"][label] = {
+            "src": str(trees[label]), "wall_s": _stats(r["wall_s"] for r in rows),
+            "cpu_s": _stats(r["cpu_s"] for r in rows),
+            "phases_s": {ph: statistics.median(r["phases"].get(ph, 0.0) for r in rows) for ph in PHASES},
+            "nested_false_s": statistics.median(x["nested_false_s"] for x in res["rounds"]
+                                                if x["tree"] == label)}
+    return res
+
+
+def render_profile(pr: dict) -> list[str]:
+    trees = pr["trees"]
+    names = list(trees)
+    L = [f"## Where a warm fit's time goes ({pr['date']}, one core pinned, "
+         f"{pr['reps']} fits × {len(pr['rounds']) // len(names)} rounds per tree)\n",
+         "Each tree in a fresh process (`taskset -c 1`), after two warm-up fits (no tracing "
+         "or compiling in the timed fits: compile time " + ", ".join(
+             f"{max(r['compile_s'] for x in pr['rounds'] if x['tree'] == n for r in x['rows']):.3f} s"
+             for n in names) + "); medians. Load (1-min) before each process: "
+         + ", ".join(f"{x['tree']} {x['load_before']['load1']:.1f}" for x in pr["rounds"])
+         + ". The machine is shared: compare the trees by their ratio, not the absolute times.\n",
+         "| phase | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+    for ph, text in PHASES.items():
+        L.append(f"| {text} | " + " | ".join(_ms(trees[n]["phases_s"][ph]) for n in names) + " |")
+    L.append("| **warm `hdid.fit`, total (wall)** | " + " | ".join(
+        f"**{_ms(trees[n]['wall_s']['median'])}** (min {_ms(trees[n]['wall_s']['min'])})" for n in names) + " |")
+    L.append("| CPU (user+sys) | " + " | ".join(_ms(trees[n]["cpu_s"]["median"]) for n in names) + " |")
+    L.append("| `nested=False` | " + " | ".join(_ms(trees[n]["nested_false_s"]) for n in names) + " |")
+    if len(names) == 2:
+        a, b = (trees[n]["wall_s"]["median"] for n in names)
+        ratios = [x["rows"] for x in pr["rounds"]]
+        L.append(f"\nRatio {names[0]} / {names[1]}: **{a / b:.2f}×** (medians of wall time).")
+    last = [x for x in pr["rounds"] if "forward_ms" in x]
+    if last:
+        x = last[-1]
+        r = x["rows"][-1]
+        L += ["", f"Inside the Levenberg–Marquardt calls ({x['tree']}, one fit): {r['solve_calls']} "
+              f"program calls, {r['iterations']} iterations, {_ms(r['solve_s'])} of compute "
+              f"({r['solve_s'] / max(r['iterations'], 1) * 1e3:.2f} ms an iteration); one forward "
+              f"pass (the stick-exact simulation of {x['samples'][0]} runs × {x['samples'][1]} "
+              f"samples) {x['forward_ms']:.2f} ms, residuals with the forward-mode Jacobian "
+              f"({x['unknowns']} unknowns) {x['jacobian_ms']:.2f} ms, the LM's linear algebra "
+              f"(normal equations, Cholesky) {x['lm_linear_algebra_ms']:.3f} ms. The rest of "
+              "each phase is host work (schedule, NumPy, dispatch)."]
+    return L + [""]
+
+
 def _machine() -> dict:
     import importlib
 
@@ -325,8 +487,25 @@ def _machine() -> dict:
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="fewer repetitions (≈ 2 min)")
+    ap.add_argument("--profile", action="store_true",
+                    help="only the warm fit's profile (kept beside the other sections)")
+    ap.add_argument("--before", type=Path, help="with --profile: an older checkout to compare")
+    ap.add_argument("--child", type=int, help=argparse.SUPPRESS)
     args = _common.parse_or_render(ap, argv, NAME, render)
     if args is None:
+        return
+    if args.child:
+        print(json.dumps(child_profile(args.child)))
+        return
+    if args.profile:
+        trees = {"before": args.before.resolve() / "src"} if args.before else {}
+        trees["now"] = ROOT / "src"
+        res = json.loads((_common.RESULTS / f"{NAME}.json").read_text())
+        res["profile"] = bench_profile(trees, reps=5, rounds=2 if args.before else 1)
+        res["profile"] |= {"date": time.strftime("%Y-%m-%d %H:%M"),
+                           "src_fingerprint": _common.src_fingerprint()}
+        _common.write_result(NAME, res, render)
+        print("\n".join(render_profile(res["profile"])))
         return
     t_script = time.perf_counter()
     reps = (dict(cold=1, cli=2, small=3, warm=5, warm_n1=5, scipy=1, scipy_logs=1) if args.quick

@@ -25,10 +25,10 @@ from .._results._summaries import StartSummary
 from .._simulation._simulate import DEFAULT_MAX_SUBSTEP
 from .._models._transforms import interval_to_u, to_unconstrained
 from ..effects import order_of_magnitude
-from ._lm import _local_fits
 from ._one_lane import _local_fits as _one_lane
 from ._pendulum import pendulum_prepared
-from ._starts import _choose_starts, _costs, _grid_candidates, _grid_starts, log_scales
+from ._starts import (_choose_starts, _costs, _grid_candidates, _grid_starts, grid_costs,
+                      log_scales)
 
 
 #: Natural frequency [Hz] at which the default substep (``DEFAULT_MAX_SUBSTEP``) was
@@ -174,17 +174,9 @@ def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", f
     # compile per model structure, kept in the program store).
 
     def local_fits(p, U0):
-        U0 = np.asarray(U0, dtype=float)
-        if not lanes:
-            return _one_lane(p, U0, max_steps)[:4]
-        # as calls of the fit's own program: ``lanes`` rows a call, a short one padded
-        # with copies of its first row (their results dropped)
-        outs = []
-        for i in range(0, len(U0), lanes):
-            rows = U0[i:i + lanes]
-            pad = np.concatenate([rows, np.repeat(rows[:1], lanes - len(rows), axis=0)])
-            outs.append([np.asarray(x)[:len(rows)] for x in _local_fits(p, pad, max_steps)])
-        return tuple(np.concatenate(parts) for parts in zip(*outs))
+        # ``lanes`` rows a schedule (the fit's former ``lanes``-wide program: a short group
+        # padded with copies of its first row, computed once), else one schedule for all
+        return _one_lane(p, np.asarray(U0, dtype=float), max_steps, group=lanes or None)[:4]
 
     model, prep = setup.model, setup.prep
     scales = log_scales(prep, model, np.asarray(problem.offset0))
@@ -195,10 +187,9 @@ def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", f
         pins = limit.pins(result.values, scales)
         p = _limits.pinned(problem, model, pins)
         # the limit's starts: the fit's optimum and the best of the grid, held at the limit
-        U = np.stack([_limits.with_values(problem, model, u,
-                                          {**limit.start(problem.values_np(u)), **pins})
-                      for u in np.concatenate([u_fit[None, :], grid_U])])
-        cost = np.asarray(_costs(p, jnp.asarray(U[1:])), dtype=float)
+        U = _limits.with_values_rows(problem, model, np.concatenate([u_fit[None, :], grid_U]),
+                                     limit.start, pins)
+        cost = grid_costs(p, U[1:])
         n_grid = max(lanes - 1, 1) if lanes else _limits.LIMIT_GRID_STARTS
         U0, _ = _choose_starts(U[1:], cost, grid_keys, n_grid, False)
         U0 = np.concatenate([U[:1], np.asarray(U0)])
@@ -237,6 +228,14 @@ def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", f
 
     switch = _limits.KEEP_BETTER_AT_FLOOR or not _limits.reached_floor(result)
     return _limits.check(result, solutions, wanted, fit_limit, restart, finish, switch, again)
+
+
+def _local_fits(problem: Problem, U0, max_steps: int):
+    """Levenberg–Marquardt from every row of ``U0`` (:func:`hdid._fitting._lm._local_fits`'s
+    schedule), one start at a time through the one-lane program of the problem's
+    structure (:mod:`hdid._fitting._one_lane`: the simulator's event branch stays a
+    branch): ``(U, costs, ok, steps)``."""
+    return _one_lane(problem, U0, max_steps)[:4]
 
 
 def _data_rms(problem: Problem, u, cost: float) -> float:

@@ -300,6 +300,22 @@ def with_values(problem, model, u, values: dict) -> np.ndarray:
     return v
 
 
+def with_values_rows(problem, model, U, start: Callable[[dict], dict], pins: dict) -> np.ndarray:
+    """:func:`with_values` for every row of ``U`` at once: row ``i`` with the values
+    ``start(v_i)`` (``v_i`` its own values, fixed ones included) and then ``pins`` set —
+    a limit's starts (NumPy on whole columns: one pass, not a model per row)."""
+    U = np.array(U, dtype=float, ndmin=2)
+    specs = model.parameter_specs()
+    free = list(problem.free)
+    values = {**{k: np.full(len(U), float(v)) for k, v in problem.base.values().items()},
+              **problem.free_values_np(U)}
+    for n, x in {**start(values), **pins}.items():
+        if n in free:
+            U[:, free.index(n)] = to_unconstrained(specs[n], np.broadcast_to(
+                np.asarray(x, dtype=float), (len(U),)))
+    return U
+
+
 def pinned(problem, model, pins: dict):
     """``problem`` with strong prior rows (sd ``PIN_SD``) holding ``pins`` (values of free
     parameters): the same compiled programs (the rows are array leaves)."""

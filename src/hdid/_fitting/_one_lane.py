@@ -40,15 +40,33 @@ def _call_args(U, on, k, state: LMState):
     return jnp.asarray(U), jnp.asarray(on), jnp.asarray(k), state
 
 
-def _local_fits(problem: Problem, U0, max_steps: int, lanes: int = LANES, solve=None):
+def _local_fits(problem: Problem, U0, max_steps: int, lanes: int = LANES, solve=None,
+                group: int | None = None):
     """:func:`hdid._fitting._lm._local_fits` (the same schedule, :class:`hdid._fitting._lm._Schedule`,
     and, lanes not interacting, the same iterates for every start up to rounding: a
     vmapped simulator selects where a one-lane one branches) run as calls of one
     ``lanes``-wide program from :mod:`hdid._problems._programs`: the starts a call advances are
     taken ``lanes`` at a time, a short group padded with inactive copies. (``solve``:
-    another program with :func:`_solve_lanes`'s signature, for tests.) Returns
-    ``(U, costs, ok, steps, residuals)``, the residuals at each row of ``U`` (NaN where
-    none were computed)."""
+    another program with :func:`_solve_lanes`'s signature, for tests.)
+
+    ``group``: the rows are scheduled ``group`` at a time, each group with a schedule of
+    its own, a short group padded with copies of its first row — what a ``group``-lane
+    vmapped call of :func:`hdid._fitting._lm._local_fits` did (the limit checks of
+    :func:`hdid.fit` keep that schedule); default: one schedule for all rows. Rows whose
+    unknowns and state are identical (such copies) are computed once: a one-lane program
+    gives them identical results.
+
+    Returns ``(U, costs, ok, steps, residuals)``, the residuals at each row of ``U`` (NaN
+    where none were computed)."""
+    U0 = np.asarray(U0, dtype=float)
+    if group is not None and len(U0) > 0:
+        outs = []
+        for i in range(0, len(U0), group):
+            rows = U0[i:i + group]
+            pad = np.concatenate([rows, np.repeat(rows[:1], group - len(rows), axis=0)])
+            outs.append([np.asarray(x)[:len(rows)]
+                         for x in _local_fits(problem, pad, max_steps, lanes, solve)])
+        return tuple(np.concatenate(parts) for parts in zip(*outs))
     solve = _stored_solve if solve is None else solve
     U = np.array(U0, dtype=float)
     N, n = U.shape
@@ -59,6 +77,18 @@ def _local_fits(problem: Problem, U0, max_steps: int, lanes: int = LANES, solve=
         active, k, fresh = task
         costs, done, steps = np.full(N, np.inf), np.zeros(N, dtype=bool), np.zeros(N, dtype=int)
         idx = np.flatnonzero(active)
+        if lanes == 1:  # identical rows (padding copies) once: identical results
+            first: dict = {}
+            twins = {}
+            for r in idx:
+                key = (U[r].tobytes(), *(f[r].tobytes() for f in state))
+                if key in first:
+                    twins[r] = first[key]
+                else:
+                    first[key] = r
+            idx = np.array(list(first.values()), dtype=int)
+        else:
+            twins = {}
         for g in range(0, len(idx), lanes):
             rows = idx[g:g + lanes]
             take = np.concatenate([rows, np.repeat(rows[:1], lanes - len(rows))])
@@ -72,5 +102,9 @@ def _local_fits(problem: Problem, U0, max_steps: int, lanes: int = LANES, solve=
                                                     np.asarray(s2)[:h])
             for f, new in zip(state, st2):
                 f[rows] = np.asarray(new)[:h]
+        for r, o in twins.items():
+            U[r], costs[r], done[r], steps[r] = U[o], costs[o], done[o], steps[o]
+            for f in state:
+                f[r] = f[o]
         sched.update(costs, done, steps)
     return U, sched.costs, sched.ok, sched.steps, np.where(state[2][:, None], state[0], np.nan)

@@ -34,7 +34,7 @@ from ._one_lane import (  # noqa: F401  (also diagnose's names)
     LANES, _call_args, _local_fits, _solve_lanes, _stored_solve,
 )
 from .._problems._problem import Problem
-from ._starts import _grid_candidates, with_drop_starts
+from ._starts import _grid_candidates, grid_costs, with_drop_starts
 from .._models._transforms import interval_to_u, to_unconstrained
 
 #: Options of :func:`hdid.fit` that shape the problem (the rest belong to the schedule).
@@ -52,12 +52,6 @@ def residuals_and_jacobian(problem: Problem, u) -> tuple[np.ndarray, np.ndarray]
     *_, state = _stored_solve(problem, jnp.asarray(U), jnp.asarray(np.ones(1, dtype=bool)),
                               jnp.asarray(1), LMState.empty(1, m, n))
     return np.asarray(state[0])[0], np.asarray(state[1])[0]
-
-
-def _costs(problem: Problem, U):
-    # a loop, not a vmap: the simulator's event branch stays a branch (see LANES);
-    # 120 grid points of the shipped 1 kHz log: 0.03 s, vmapped 0.10 s
-    return jax.lax.map(problem.cost, U)
 
 
 def _analysis_parts(p: Problem, u, fine):
@@ -157,7 +151,7 @@ def grid(s: _Setup, n_starts: int) -> np.ndarray:
     if n_starts <= 0:
         return np.zeros((0, s.problem.n_unknowns))
     U, keys = _grid_candidates(s.problem, s.prep, s.model, False)
-    cost = np.asarray(_programs.call("grid_costs", _costs, s.problem, jnp.asarray(U)))
+    cost = grid_costs(s.problem, U)
     U0, _ = with_drop_starts(s.problem, s.prep, s.model, U, cost, keys, n_starts, False)
     return np.asarray(U0)
 
