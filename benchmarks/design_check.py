@@ -12,6 +12,17 @@ stds, and the prediction checked against the spread of fits of simulated logs.
    predicted std with the fits' spread for k1, tau_c, tau_s and the band. Criterion:
    within 25 % (the sample std of 30 values is itself uncertain by 1/sqrt(2*29) = 13 %).
    Where a candidate's linearisation is flagged, the table says so.
+4. ``--pairs``: the separating experiment of two confusable forms, confirmed by
+   simulation. Each case is a hidden-effect log of the independent suite
+   (``benchmarks/diagnose_independent.py``'s draw: a plant and design per seed), refitted
+   with the two candidate forms by ``hdid.diagnose``; the experiment that separates them is
+   computed (:func:`hdid._diagnosis._separating.separating`, as diagnose names it); then
+   ``--n`` logs of that experiment are simulated from each fitted form (random release
+   phase and encoder phase, :func:`hdid._design._check.simulate_logs`), each fitted by
+   both forms with ``hdid.fit``, and the realised ``2·ln LR = χ²(other form) − χ²(true
+   form)`` (χ² = n_eff·(RMS/σ_q)², σ_q = step/√12) is set beside the predicted one. The
+   same for the log's own design (the prediction: indistinguishable). Results are added
+   to the same files under ``pairs``.
 Results: benchmarks/results/design_check.{json,md}, the load average next to each timing.
 """
 
@@ -29,10 +40,23 @@ QUANTITIES = ("k1", "tau_c", "tau_s", "stick_band_halfwidth_rad")
 TARGETS = "tau_c,tau_s,v_s,band"
 
 
+#: (name, design, seed, the two forms): ripple vs kinematic error on a 2 kHz rich log
+#: (seed 8805: a hidden ripple named kinematic_error order 10), and the paper-design
+#: hidden ripple named among asymmetric_friction / kinematic_error / ripple (seed 9905).
+PAIRS = (("ripple vs kinematic_error, rich 2 kHz", "rich", 8805, ("ripple", "kinematic_error")),
+         ("asymmetric_friction vs ripple, paper", "paper", 9905,
+          ("asymmetric_friction", "ripple")),
+         ("asymmetric_friction vs kinematic_error, paper", "paper", 9905,
+          ("asymmetric_friction", "kinematic_error")))
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--n", type=int, default=30)
+    ap.add_argument("--pairs", action="store_true", help="only the separating-experiment check")
     args = ap.parse_args(argv)
+    if args.pairs:
+        return pairs(args.n)
     import hdid
     from hdid._design import _candidates, _check, _rank
 
@@ -84,6 +108,113 @@ def main(argv=None) -> int:
     return 0
 
 
+def _case_log(design: str, seed: int):
+    import numpy as np
+    from hdid.reference import logs
+
+    import diagnose_independent as di
+
+    truth, des = di.draw(design, seed)
+    stored = json.loads((RESULTS / "diagnose_independent.json").read_text())["records"]
+    name = next(r["hidden"] for r in stored if (r["design"], r["seed"]) == (design, seed))
+    hp = di.hidden_params(name, truth, des, np.random.default_rng(seed + 10_000))
+    kw = logs.reference_kwargs(name, truth, **hp)
+    df = logs.make_log(truth, **{k: v for k, v in des.items() if k != "gear_factor"},
+                       seed=seed, hidden=kw)
+    return name, df
+
+
+def _chi2(r, step):
+    return r.n_effective * (r.rms_residual_rad / (step / math.sqrt(12.0))) ** 2
+
+
+def _fit_opts(f, e):
+    fixed = {k: p.value for k, p in f.parameters.items() if p.fixed and k != "inertia"}
+    opts = dict(model=f.model, fix=fixed or None)
+    inertia = f.model.float_values().get("inertia")
+    if e.free_inertia:
+        opts["free_inertia"] = True
+    elif inertia is not None:
+        opts["inertia"] = inertia
+    return opts
+
+
+def _realised(fits, e, n, seed):
+    """Realised 2 ln LR on ``n`` logs of ``e`` simulated from each fitted form."""
+    import numpy as np
+
+    import hdid
+    from hdid._design._check import simulate_logs
+
+    out = {}
+    for i, truth in enumerate(fits):
+        other = fits[1 - i]
+        vals, wins = [], 0
+        for log in simulate_logs(truth, e, n, seed=seed + i):
+            try:
+                rt = hdid.fit(log, **_fit_opts(truth, e))
+                ro = hdid.fit(log, **_fit_opts(other, e))
+            except Exception as exc:  # a failed fit is a result too
+                print("  fit failed:", exc, flush=True)
+                continue
+            x = _chi2(ro, e.resolution) - _chi2(rt, e.resolution)
+            vals.append(x)
+            wins += x > 0
+        v = np.asarray(vals)
+        out["ab"[i] + "_true"] = {"n": int(v.size), "mean": float(v.mean()) if v.size else None,
+                                  "sd": float(v.std(ddof=1)) if v.size > 1 else None,
+                                  "min": float(v.min()) if v.size else None,
+                                  "true_form_lower_chi2": int(wins)}
+    return out
+
+
+def pairs(n: int) -> int:
+    """Item 4 of the module docstring."""
+    import hdid
+    from hdid._config import float64
+    from hdid._diagnosis._separating import experiments_for, separating
+
+    path = RESULTS / "design_check.json"
+    res = json.loads(path.read_text()) if path.exists() else {}
+    rows = []
+    res["pairs"] = {"src": src_fingerprint(), "cpu": cpu_model(), "n": n, "rows": rows}
+    diagnosed = {}
+    for title, design, seed, keys in PAIRS:
+        if (design, seed) not in diagnosed:
+            hidden, df = _case_log(design, seed)
+            t = time.perf_counter()
+            keys_here = sorted({k for p in PAIRS if p[1:3] == (design, seed) for k in p[3]})
+            d = hdid.diagnose(df, candidates=keys_here, design=False)
+            diagnosed[(design, seed)] = (hidden, d, time.perf_counter() - t)
+        hidden, d, dt = diagnosed[(design, seed)]
+        by = {c.key: c for c in d.candidates if c.error is None}
+        a, b = by[keys[0]], by[keys[1]]
+        row = {"title": title, "design": design, "seed": seed, "hidden": hidden,
+               "forms": [a.label, b.label], "delta_bic": [a.delta_bic, b.delta_bic],
+               "diagnose_s": dt, "load_before": load("before separation")}
+        t = time.perf_counter()
+        rec = separating(a, b)
+        row["separation_s"] = time.perf_counter() - t
+        row["separating"] = {k: v for k, v in rec.items() if k != "text"}
+        row["text"] = rec["text"]
+        print(title, "->", rec["text"], flush=True)
+        rows.append(row)
+        fa, fb = a.fit.result(), b.fit.result()
+        exps = experiments_for(fa, fb)
+        chosen = next(e for e in exps if e.name == rec.get("experiment"))
+        for e in (chosen, exps[0]):
+            t = time.perf_counter()
+            with float64():
+                real = _realised((fa, fb), e, n, seed=seed)
+            row.setdefault("realised", {})[e.name] = {**real, "seconds": time.perf_counter() - t,
+                                                      **load(f"after {e.name}")}
+            print("  ", e.name, real, flush=True)
+            _write(res)
+    res["pairs"]["load_end"] = load("end")
+    _write(res)
+    return 0
+
+
 def _write(res):
     (RESULTS / "design_check.json").write_text(json.dumps(res, indent=2, allow_nan=False,
                                                           default=_nan) + "\n")
@@ -128,6 +259,35 @@ def render(res) -> str:
                      f"{'' if w == '' else ('yes' if w else ('no' if w is False else 'n/a'))} |")
         L += ["", f"fits above 3x the floor: {c['fits_above_floor']}; failures: {len(c['failures'])}",
               "linearisation flags: " + ("; ".join(c["linearisation"]) or "none"), ""]
+    pr = res.get("pairs")
+    if pr:
+        L += [f"## Separating experiments confirmed by simulation (--pairs, src {pr['src']}, "
+              f"{pr['cpu']}, {pr['n']} logs per form)", "",
+              "Predicted: expected 2·ln LR with the rival refitted (A true / B true; "
+              "linearised in brackets). Realised: χ²(other form) − χ²(true form) of hdid.fit "
+              "on logs simulated from each fitted form (mean ± sd, min; how many logs the "
+              "true form fits better).", "",
+              "| pair (log) | experiment | predicted A / B (linearised) | realised A true | "
+              "realised B true | s | load |", "|---|---|---|---|---|---|---|"]
+        for r in pr["rows"]:
+            s_ = r["separating"]
+            for name, real in r.get("realised", {}).items():
+                own = name == s_.get("experiment")
+                pred = (f"{_fmt(s_.get('a_true'))} / {_fmt(s_.get('b_true'))} "
+                        f"({_fmt(s_['linearised']['a_true'])} / "
+                        f"{_fmt(s_['linearised']['b_true'])})" if own else
+                        f"this log: {_fmt(s_.get('this_log_2lnlr'))}")
+
+                def cell(q):
+                    if not q or q.get("mean") is None:
+                        return "n/a"
+                    return (f"{_fmt(q['mean'])} ± {_fmt(q.get('sd'))}, min {_fmt(q['min'])}; "
+                            f"{q['true_form_lower_chi2']}/{q['n']}")
+                L.append(f"| {r['title']} (seed {r['seed']}, hidden {r['hidden']}; "
+                         f"{' vs '.join(r['forms'])}) | {name} | {pred} | {cell(real.get('a_true'))} "
+                         f"| {cell(real.get('b_true'))} | {real['seconds']:.0f} | "
+                         f"{real['load1']:.1f} |")
+        L += [""] + [f"- {r['text']}" for r in pr["rows"]] + [""]
     if res.get("interpretation"):
         L += ["## Interpretation", "", res["interpretation"]]
     return "\n".join(L) + "\n"

@@ -157,13 +157,19 @@ def test_below_the_floor_a_penalty_gap_the_chi2_difference_contradicts_is_a_riva
 
 
 def test_below_the_floor_evidence_for_the_best_keeps_it_named():
-    results = _paper_9905()
-    R.rank_within_families(
-        results, CANDS, D.STRONG_DBIC, D.AMBIGUOUS_DBIC,
-        evidence=lambda a, b: R.Evidence(b.fit.cost - a.fit.cost, 1.0, 1.0, -1.0, 1.0, 3.0))
-    verdict, summary, _ = D._verdict([{"results": results, "white": None, "floor": 1.0}],
-                                     CANDS)
-    assert verdict == "missing_effect" and summary.startswith("add asymmetric_friction")
+    """Only the data name one of two floor-level forms of different families: the
+    rounding's 2·ln LR for the best of 12 (> AMBIGUOUS_DBIC) keeps asymmetric friction
+    named; 3 (the penalties' gap of 12.7 beside it no longer counts) is ambiguous."""
+    for lr, want in ((12.0, "missing_effect"), (3.0, "ambiguous")):
+        results = _paper_9905()
+        R.rank_within_families(
+            results, CANDS, D.STRONG_DBIC, D.AMBIGUOUS_DBIC,
+            evidence=lambda a, b: R.Evidence(b.fit.cost - a.fit.cost, 1.0, 1.0, -1.0, 1.0,
+                                             lr))
+        verdict, summary, _ = D._verdict([{"results": results, "white": None, "floor": 1.0}],
+                                         CANDS)
+        assert verdict == want, (lr, summary)
+    assert summary.startswith("ambiguous between asymmetric_friction")
 
 
 def test_the_evidence_is_in_each_compared_candidates_json_entry():
@@ -242,9 +248,12 @@ def test_below_the_floor_a_log_that_cannot_tell_two_families_apart_names_neither
     assert verdict == "ambiguous"
 
 
-def test_below_the_floor_a_log_that_separates_the_fits_keeps_the_penalty_gap():
+def test_below_the_floor_a_log_that_separates_the_fits_no_longer_keeps_the_penalty_gap():
     """The same gaps and 2·ln LR with distributions the log separates (8901's, power 4.6):
-    the BIC gap counts, asymmetric friction stays named."""
+    the rival rule of :mod:`._rival` keeps the BIC gap (13.2, 15.1: not rivals by it), but
+    the three forms all reach the floor and the data's own evidence for asymmetric friction
+    is 2·ln LR 0.5: the penalties alone would choose, so the verdict is ambiguous (issue:
+    penalties never choose between floor-level forms of different families)."""
     results = _paper_9905()
     R.rank_within_families(
         results, CANDS, D.STRONG_DBIC, D.AMBIGUOUS_DBIC,
@@ -253,4 +262,5 @@ def test_below_the_floor_a_log_that_separates_the_fits_keeps_the_penalty_gap():
     assert [round(c.floor_gap, 1) for c in results[1:3]] == [13.2, 15.1]
     verdict, summary, _ = D._verdict([{"results": results, "white": None, "floor": 1.0}],
                                      CANDS)
-    assert verdict == "missing_effect" and summary.startswith("add asymmetric_friction")
+    assert verdict == "ambiguous"
+    assert summary.startswith("ambiguous between asymmetric_friction, kinematic_error, ripple")

@@ -3,90 +3,268 @@
 Given two fits of one log by different models ``A`` and ``B`` (two diagnose candidates:
 a ripple and a kinematic error, backlash and hysteresis), a candidate's noise-free
 readings under ``A`` are fitted by ``B``. The expected ``2·ln LR`` in ``A``'s favour is
-that fit's χ² — linearised at ``B``'s fitted values, the part of the readings'
-difference ``W (θ_A − θ_B)/σ`` that ``B``'s Jacobian (physical parameters and every
-run's nuisances) cannot absorb:
+that fit's χ² (a noncentrality: with noise the expected value adds nothing), in units of
+the candidate's quantization variance ``step²/12``. The separation of the pair is the
+smaller of the two directions (data from ``A`` fitted by ``B``, and from ``B`` by ``A``).
+
+Linearised (:func:`separation`), at ``B``'s fitted values for the *log*: the part of the
+readings' difference ``W (θ_A − θ_B)/σ`` that ``B``'s Jacobian (physical parameters and
+every run's nuisances) cannot absorb,
 
     2 ln LR_A≻B ≈ |r|² − |Q Qᵀ r|²,   r = W (θ_A − θ_B)/σ,   J_B = Q R.
 
-The separation of the pair is the smaller of the two directions (data from ``A`` fitted
-by ``B``, and from ``B`` by ``A``): with noise the expected value adds nothing (it is a
-noncentrality). Linearised at ``B``'s optimum for the *log*: a design that moves ``B``'s
-best approximation far from it overstates the separation; a ``check`` by simulation is
-the remedy (not done here).
+On a design far from the log's, ``B``'s best approximation of ``A`` moves far from its fit
+to the log, and the linearised value overstates the separation (1e3–1e5 on new designs
+where refitting leaves tens). :func:`separations` therefore also *refits*: ``B``'s
+parameters and nuisances are moved by Levenberg–Marquardt steps on the exact simulator
+(every candidate of a sample rate in one simulation per step, :mod:`._stack`) until the
+χ² stops falling; the refitted χ² is the computed ``2·ln LR``. Where the refit did not
+converge within ``REFIT_STEPS`` it is an upper bound, and where it differs from the
+linearised value by more than ``CREDIBLE_FACTOR`` the linearisation is not credible
+there (:attr:`Separation.credible`). The refit is local (no multi-start): a rival optimum
+behind a change of the stick–slip sequence may not be reached, so even a refitted value
+is an upper bound on the noncentrality. Noisy logs of the design, fitted by ``hdid.fit``,
+confirm it (``benchmarks/design_check.py``).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
+from .._config import float64
 from . import _stack
 from ._candidates import Experiment
 from ._fisher import as_log, max_substep, parameter_names, readings
 
+#: Levenberg–Marquardt steps of the rival's refit (each one simulation per sample rate).
+REFIT_STEPS = 8
+#: A refit whose χ² fell by less than this fraction in a step has stopped.
+REFIT_RTOL = 1e-3
+#: The linearised value within this factor of the refitted one is credible.
+CREDIBLE_FACTOR = 2.0
+#: Singular values below this fraction of the largest are no direction of a refit.
+RCOND = 1e-10
 
+
+@dataclass
+class Separation:
+    """The expected ``2·ln LR`` of one experiment between fits ``A`` and ``B``."""
+
+    experiment: Experiment
+    #: linearised at each fit to the log: ``(A true, B true)``
+    linear: tuple[float, float]
+    #: after refitting the rival on the noise-free readings: ``(A true, B true)``
+    refitted: tuple[float, float] = (math.nan, math.nan)
+    #: whether each refit stopped (its χ² no longer falling)
+    converged: tuple[bool, bool] = (False, False)
+
+    @property
+    def value(self) -> float:
+        """The separation: the smaller direction, refitted where refitted."""
+        ref = min(self.refitted)
+        return ref if math.isfinite(ref) else min(self.linear)
+
+    @property
+    def credible(self) -> bool:
+        """Refitted in both directions, and in each the linearised value within
+        ``CREDIBLE_FACTOR`` of the refitted one (give or take one quantization variance:
+        a separation below that is none either way)."""
+        if not all(math.isfinite(x) for x in (*self.refitted, *self.linear)):
+            return False
+        return all(ref <= CREDIBLE_FACTOR * lin + 1.0 and lin <= CREDIBLE_FACTOR * ref + 1.0
+                   for lin, ref in zip(self.linear, self.refitted))
+
+    def to_dict(self) -> dict:
+        return {"experiment": self.experiment.name, "description": self.experiment.describe(),
+                "expected_2lnlr": self.value,
+                "a_true": self.refitted[0], "b_true": self.refitted[1],
+                "linearised": {"a_true": self.linear[0], "b_true": self.linear[1]},
+                "refit_converged": list(self.converged),
+                "linearisation_credible": self.credible}
+
+
+@float64
 def separation(fit_a, fit_b, experiments: list[Experiment]) -> list[tuple[float, float]]:
-    """``(2 ln LR with A true, with B true)`` for every experiment (NaN where a design
-    gives no usable log)."""
-    ta = _trajectories(fit_a, experiments)
-    tb = _trajectories(fit_b, experiments)
-    out = []
-    for i, e in enumerate(experiments):
-        out.append((_lr(fit_b, e, ta[i][0], tb[i]), _lr(fit_a, e, tb[i][0], ta[i])))
+    """``(2 ln LR with A true, with B true)`` for every experiment, linearised (NaN where
+    a design gives no usable log)."""
+    ma, mb = _Model(fit_a, experiments), _Model(fit_b, experiments)
+    return [(_Direction(ma, mb, i, e).linear, _Direction(mb, ma, i, e).linear)
+            for i, e in enumerate(experiments)]
+
+
+@float64
+def separations(fit_a, fit_b, experiments: list[Experiment],
+                steps: int = REFIT_STEPS) -> list[Separation]:
+    """Linearised and refitted separation of every experiment (module docstring)."""
+    ma, mb = _Model(fit_a, experiments), _Model(fit_b, experiments)
+    ab = [_Direction(ma, mb, i, e) for i, e in enumerate(experiments)]  # A true, B fitted
+    ba = [_Direction(mb, ma, i, e) for i, e in enumerate(experiments)]
+    out = [Separation(e, (d1.linear, d2.linear)) for e, d1, d2 in zip(experiments, ab, ba)]
+    _refit(mb, ab, steps)
+    _refit(ma, ba, steps)
+    for s, d1, d2 in zip(out, ab, ba):
+        s.refitted = (d1.chi2, d2.chi2)
+        s.converged = (d1.converged, d2.converged)
     return out
 
 
-def _trajectories(fit, experiments):
-    """Per experiment ``(θ (R, n), J (R, n, P+3), names)`` of ``fit``'s model."""
-    free, every = parameter_names(fit)
-    groups: dict[float, list[tuple[int, Experiment]]] = {}
-    for i, e in enumerate(experiments):
-        groups.setdefault(float(e.rate), []).append((i, e))
-    out = [None] * len(experiments)
-    for cands in groups.values():
-        st = _stack.stack(cands, fit, every, max_substep(fit))
-        theta, J = _stack.evaluate(st)
-        for pos, e in cands:
-            rows = st.index[pos]
-            cols = [every.index(n) for n in free] + [len(every) + k for k in range(3)]
-            out[pos] = (theta[rows, :e.n_samples], J[rows, :e.n_samples][:, :, cols], free)
-    return out
+class _Model:
+    """One fit's model simulated on every experiment (a stack per sample rate)."""
+
+    def __init__(self, fit, experiments):
+        self.fit = fit
+        free, every = parameter_names(fit)
+        self.free, self.every = free, every
+        P = len(every)
+        self.cols = [every.index(n) for n in free] + [P, P + 1, P + 2]
+        groups: dict[float, list[tuple[int, Experiment]]] = {}
+        for i, e in enumerate(experiments):
+            groups.setdefault(float(e.rate), []).append((i, e))
+        self.stacks = []
+        self.where = {}
+        for cands in groups.values():
+            st = _stack.stack(cands, fit, every, max_substep(fit))
+            _stack.evaluate(st)
+            self.stacks.append(st)
+            for pos, _ in cands:
+                self.where[pos] = (st, st.index[pos])
+
+    def theta_jac(self, pos, n):
+        st, rows = self.where[pos]
+        return st.theta[rows, :n].copy(), st.J[rows, :n][:, :, self.cols].copy()
 
 
-def _lr(fit_fitted, e: Experiment, theta_true, fitted) -> float:
-    """Expected 2 ln LR when ``theta_true`` is fitted by the model of ``fitted``."""
-    from .._errors import HdidError
-    from .._simulation._prepare import prepare
+class _Direction:
+    """Noise-free readings of experiment ``e`` under ``truth`` fitted by ``fitted``."""
 
-    theta_fit, J, names = fitted
-    if not (np.all(np.isfinite(theta_true)) and np.all(np.isfinite(J))):
-        return math.nan
-    quantized = bool(fit_fitted.resolution_known)
-    try:
-        prep = prepare(as_log(e, readings(e, theta_true, quantized), e.name, quantized))
-    except HdidError:
-        return math.nan
-    w = prep.weight[:, :e.n_samples]
-    sigma = e.resolution / math.sqrt(12.0)
-    P, R, setups = len(names), e.n_runs, e.setup_names
-    n_unk = P + 2 * R + len(setups)
-    m = e.n_samples
-    A = np.zeros((R * m, n_unk))
-    r = np.zeros(R * m)
-    for j in range(R):
-        rows = slice(j * m, (j + 1) * m)
-        wj = w[j][:, None] / sigma
-        A[rows, :P] = wj * J[j][:, :P]
-        A[rows, P + j] = wj[:, 0] * J[j][:, P]
-        A[rows, P + R + j] = wj[:, 0] * J[j][:, P + 1]
-        A[rows, P + 2 * R + setups.index(e.setups[j])] = wj[:, 0] * J[j][:, P + 2]
-        r[rows] = w[j] * (theta_true[j] - theta_fit[j]) / sigma
-    scale = np.linalg.norm(A, axis=0)
-    keep = scale > 0
-    # the projection onto J_B's column space from its SVD (a rank-deficient J_B — an
-    # undetermined direction — must not add directions of its own, as a plain QR would)
-    U, sv, _ = np.linalg.svd(A[:, keep] / scale[keep], full_matrices=False)
-    U = U[:, sv > 1e-10 * sv.max()] if sv.size else U[:, :0]
-    return float(r @ r - np.sum((U.T @ r) ** 2))
+    def __init__(self, truth: _Model, fitted: _Model, pos: int, e: Experiment):
+        from .._errors import HdidError
+        from .._simulation._prepare import prepare
+
+        self.fitted, self.pos, self.e = fitted, pos, e
+        self.y, _ = truth.theta_jac(pos, e.n_samples)
+        self.theta, self.J = fitted.theta_jac(pos, e.n_samples)
+        st, rows = fitted.where[pos]
+        self.local = st.local[rows].copy()
+        self.chi2 = self.linear = math.nan
+        self.converged = False
+        self.lam = 1e-3
+        self.w = None
+        if not (np.all(np.isfinite(self.y)) and np.all(np.isfinite(self.theta))
+                and np.all(np.isfinite(self.J))):
+            return
+        quantized = bool(fitted.fit.resolution_known)
+        try:
+            prep = prepare(as_log(e, readings(e, self.y, quantized), e.name, quantized))
+        except HdidError:
+            return
+        self.w = prep.weight[:, :e.n_samples]
+        self.sigma = e.resolution / math.sqrt(12.0)
+        A, r = self.system()
+        self.chi2 = float(r @ r)
+        self.linear = self.chi2 - self._absorbed(A, r)
+
+    @property
+    def ok(self) -> bool:
+        return self.w is not None and math.isfinite(self.chi2)
+
+    def system(self):
+        """Weighted design matrix (physical, each run's release and start, each set-up's
+        offset) and residual of the current state."""
+        e, P = self.e, len(self.fitted.free)
+        R, setups, m = e.n_runs, e.setup_names, e.n_samples
+        A = np.zeros((R * m, P + 2 * R + len(setups)))
+        r = np.zeros(R * m)
+        for j in range(R):
+            rows = slice(j * m, (j + 1) * m)
+            wj = self.w[j][:, None] / self.sigma
+            A[rows, :P] = wj * self.J[j][:, :P]
+            A[rows, P + j] = wj[:, 0] * self.J[j][:, P]
+            A[rows, P + R + j] = wj[:, 0] * self.J[j][:, P + 1]
+            A[rows, P + 2 * R + setups.index(e.setups[j])] = wj[:, 0] * self.J[j][:, P + 2]
+            r[rows] = self.w[j] * (self.y[j] - self.theta[j]) / self.sigma
+        return A, r
+
+    @staticmethod
+    def _svd(A):
+        scale = np.linalg.norm(A, axis=0)
+        scale = np.where(scale > 0, scale, 1.0)
+        # from the SVD (a rank-deficient J — an undetermined direction — must not add
+        # directions of its own, as a plain QR would)
+        U, sv, Vt = np.linalg.svd(A / scale, full_matrices=False)
+        keep = sv > RCOND * sv.max() if sv.size else sv > 0
+        return U[:, keep], sv[keep], Vt[keep], scale
+
+    def _absorbed(self, A, r) -> float:
+        U, _, _, _ = self._svd(A)
+        return float(np.sum((U.T @ r) ** 2))
+
+    def trial(self) -> np.ndarray | None:
+        """Local unknowns after one Levenberg–Marquardt step (``None``: nothing to do)."""
+        A, r = self.system()
+        U, sv, Vt, scale = self._svd(A)
+        proj = U.T @ r
+        # the linearised fit would lower χ² by |Uᵀr|²: a refit that cannot gain a
+        # thousandth of it (or 1e-6 quantization variances) has stopped
+        if not sv.size or float(proj @ proj) <= REFIT_RTOL * self.chi2 + 1e-6:
+            self.converged = True
+            return None
+        lam = self.lam * sv[0] ** 2
+        delta = (Vt.T @ ((sv / (sv**2 + lam)) * proj)) / scale
+        e, P = self.e, len(self.fitted.free)
+        R, setups = e.n_runs, e.setup_names
+        local = self.local.copy()
+        for j in range(R):
+            idx = self.fitted.cols
+            local[j, idx[:P]] += delta[:P]
+            local[j, idx[P]] += delta[P + j]
+            local[j, idx[P + 1]] += delta[P + R + j]
+            local[j, idx[P + 2]] += delta[P + 2 * R + setups.index(e.setups[j])]
+        return local
+
+
+def _refit(fitted: _Model, directions: list[_Direction], steps: int) -> None:
+    """Refit ``fitted``'s model to each direction's readings (all experiments of a stack
+    in one simulation per step)."""
+    live = [d for d in directions if d.ok]
+    for _ in range(steps):
+        live = [d for d in live if not d.converged]
+        if not live:
+            return
+        trials = {}
+        for st in fitted.stacks:
+            mine = [d for d in live if fitted.where[d.pos][0] is st]
+            if not mine:
+                continue
+            local = st.local.copy()
+            for d in mine:
+                t = d.trial()
+                if t is None:
+                    continue
+                trials[id(d)] = t
+                local[fitted.where[d.pos][1]] = t
+            saved = (st.local, st.theta, st.J)
+            st.local, st.theta, st.J = local, None, None
+            _stack.evaluate(st)
+            for d in mine:
+                if id(d) not in trials:
+                    continue
+                theta, J = fitted.theta_jac(d.pos, d.e.n_samples)
+                old = d.chi2
+                if np.all(np.isfinite(theta)) and np.all(np.isfinite(J)):
+                    keep = (d.theta, d.J)
+                    d.theta, d.J = theta, J
+                    _, r = d.system()
+                    new = float(r @ r)
+                    if new < old:
+                        d.local, d.chi2 = trials[id(d)], new
+                        d.lam = max(d.lam / 10.0, 1e-9)
+                        d.converged = old - new <= REFIT_RTOL * old
+                        continue
+                    d.theta, d.J = keep
+                d.lam *= 10.0
+                d.converged = d.lam > 1e6
+            st.local, st.theta, st.J = saved

@@ -53,15 +53,25 @@ Verdicts (the only four; :func:`_verdict`)
         the floor a whiteness test with little power (a few lags at 250 Hz) does not
         overrule it: a non-white residual is noted and warned about, not turned into
         ``unexplained``. Candidates of one family (``ripple``/``kinematic_error``: a
-        torque periodic in the WG angle) tying is noted with the separating experiment;
-        where the BIC holds both fits at the floor, the χ² difference judged under the
-        rounding alone decides which is named first (:mod:`hdid._diagnosis._rival`).
+        torque periodic in the WG angle) tying is noted with the separating experiment
+        computed for the pair; where the BIC holds both fits at the floor, the χ²
+        difference judged under the rounding alone decides which is named first
+        (:mod:`hdid._diagnosis._rival`).
     ``ambiguous``
         the best candidate has strong evidence and candidates of other families are
         within ``AMBIGUOUS_DBIC`` of it (below the floor, the BIC gap plus the rounding's
-        ``2·ln LR``: :mod:`hdid._diagnosis._rival`): "ambiguous between A, B", with each one's
-        separating experiment — never a single confident name (a warning says when none
-        of them brings the residual to the floor).
+        ``2·ln LR``: :mod:`hdid._diagnosis._rival`), or — where the best and a strong
+        candidate of another family both bring the RMS residual to the floor — the
+        likelihood alone (the BIC gap without its penalties) does not favour the best by
+        ``AMBIGUOUS_DBIC`` (:func:`hdid._diagnosis._verdict._likelihood_gap`: penalties
+        never choose between forms that both reach the floor): "ambiguous between A, B" —
+        never a single confident name (a warning says when none of them brings the
+        residual to the floor).
+Separating experiments (``design=True``, ``Diagnosis.separating_experiments``)
+    for an ``ambiguous`` verdict (the best against each rival) and a same-mark pair, the
+    experiment that separates the two forms, *computed* by :mod:`hdid._design` from the
+    two refits with its expected ``2·ln LR``, linearised and with the rival refitted, and
+    whether the linearisation is credible (:mod:`hdid._diagnosis._separating`).
     ``unexplained``
         the residual is above the floor and either no candidate has strong evidence or
         the best leaves it above the floor (and ``steps`` > 1 did not reach it).
@@ -249,6 +259,7 @@ def diagnose(
     steps: int = 1,
     n_starts: int = 2,
     progress: Callable[[str], None] | None = None,
+    design: bool = True,
     **fit_options,
 ) -> Diagnosis:
     """Fit ``model``, then rank the effects that could be missing from it.
@@ -271,6 +282,11 @@ def diagnose(
         candidate, and a start from every candidate's optimum).
     progress:
         Called with a short message at each phase (e.g. ``print``).
+    design:
+        For an ``ambiguous`` verdict and a same-mark pair, compute the experiment that
+        separates the two forms (:mod:`hdid._diagnosis._separating`, by
+        :mod:`hdid._design`: ``Diagnosis.separating_experiments``). ``False`` skips it
+        (its programs cost a compile per model structure on a cold store).
     **fit_options:
         Passed to :func:`hdid.fit` (``inertia``, ``fix``, ``counts_per_rev``, …).
 
@@ -455,7 +471,8 @@ def diagnose(
         if best is None:
             break
         ladder.append(_ladder_step(f"+ {best.label}", best.fit, all_cands[best.key]))
-        if best.adequate_after or step + 1 >= steps or _rivals(best, results, all_cands):
+        if (best.adequate_after or step + 1 >= steps
+                or _rivals(best, results, all_cands, floor)):
             break
         current = best.fit
         wanted = [k for k in wanted if k != best.key]
@@ -463,6 +480,12 @@ def diagnose(
     first = rounds[0]
     verdict, summary, vnotes = _verdict(rounds, all_cands)
     notes += vnotes
+    separating = _separating_experiments(verdict, rounds, all_cands, say) if design else []
+    if separating and verdict == "ambiguous":
+        summary += ". Separating experiment (computed): " + "; ".join(
+            f"{x['forms'][0]} vs {x['forms'][1]}: {x['experiment']}, expected 2·ln LR "
+            f"{x['expected_2lnlr']:.3g}" if "experiment" in x else x["text"]
+            for x in separating)
     results = first["results"]
     if any(c.error for c in results):
         notes.append("some candidate fits failed: " + ", ".join(c.key for c in results if c.error))
@@ -494,6 +517,25 @@ def diagnose(
         warnings=warns,
         false_alarm=fa.to_dict() if fa is not None else None,
         rounding_floor=fcheck.to_dict() if fcheck is not None else None,
+        separating_experiments=separating,
     )
+
+
+#: Pairs a separating experiment is computed for (an ambiguous verdict's best against
+#: its first rivals): each costs two refits over the default candidate experiments.
+MAX_SEPARATED_PAIRS = 3
+
+
+def _separating_experiments(verdict, rounds, all_cands, say) -> list[dict]:
+    """:func:`hdid._diagnosis._separating.separating` for the verdict's pairs."""
+    from ._separating import separating
+    from ._verdict import pairs_to_separate
+
+    pairs = pairs_to_separate(verdict, rounds, all_cands)[:MAX_SEPARATED_PAIRS]
+    out = []
+    for a, b in pairs:
+        say(f"  separating experiment for {a.key} vs {b.key} (hdid.design)")
+        out.append(separating(a, b))
+    return out
 
 

@@ -119,6 +119,10 @@ class Diagnosis:
     #: the base fit's χ² against the rounding floor a correct model leaves on this log
     #: (:meth:`hdid._diagnosis._excess.FloorCheck.to_dict`), ``None`` where not computed
     rounding_floor: dict[str, Any] | None = None
+    #: for an ``ambiguous`` verdict (the best against each rival) and a same-mark pair,
+    #: the experiment that separates the two forms, computed by :mod:`hdid._design` with
+    #: its expected ``2·ln LR`` (:func:`hdid._diagnosis._separating.separating`)
+    separating_experiments: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def best(self) -> CandidateResult | None:
@@ -175,6 +179,7 @@ class Diagnosis:
             "warnings": self.warnings,
             "false_alarm": self.false_alarm,
             "rounding_floor": self.rounding_floor,
+            "separating_experiments": self.separating_experiments,
             "timing": self.timing,
         })
 
@@ -215,6 +220,9 @@ class Diagnosis:
                     f"    {step['model']:45s} RMS {step['rms_rad'] / fl:5.2f}× floor  "
                     f"BIC {step['bic']:9.1f}"
                 )
+        if self.separating_experiments:
+            lines.append("[[separating experiments]]")
+            lines += [f"    - {x['text']}" for x in self.separating_experiments]
         if self.warnings:
             lines.append("[[warnings]]")
             lines += [f"    - {n}" for n in self.warnings]
@@ -340,4 +348,5 @@ def _load(path, effects, cls) -> Diagnosis:
         scanned=dict(d.get("scanned") or {}), refitted=dict(d.get("refitted") or {}),
         warnings=list(d.get("warnings") or []), false_alarm=d.get("false_alarm"),
         rounding_floor=d.get("rounding_floor"),
+        separating_experiments=list(d.get("separating_experiments") or []),
     )

@@ -4,6 +4,8 @@ Pure functions of the candidate table: no fit, no program."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ._candidates import Candidate
@@ -51,18 +53,85 @@ def _reason(c: CandidateResult, cand: Candidate, feat: dict[str, float], floor: 
 
 
 
-def _rivals(best: CandidateResult, ranked: list[CandidateResult], all_cands) -> list:
+def _rivals(best: CandidateResult, ranked: list[CandidateResult], all_cands,
+            floor: float | None = None) -> list:
     """Candidates of another family within ``AMBIGUOUS_DBIC`` of the (strong) best: the
     evidence for the best *over them* is not very strong (Kass–Raftery), whether or not
     theirs against the current model is (a best at −14 and a rival at −6 are 8 apart: no
     ground to name the first). Where both fit below the floor, the BIC sees neither χ²
     and the gap is the penalties': the evidence is then ``floor_gap`` (the BIC gap plus
-    the rounding's ``2·ln LR``, :mod:`hdid._diagnosis._rival`)."""
+    the rounding's ``2·ln LR``, :mod:`hdid._diagnosis._rival`). And (with ``floor``) a
+    strong candidate of another family that, like the best, brings the residual to the
+    floor is a rival unless the *likelihood* favours the best by ``AMBIGUOUS_DBIC``
+    (:func:`_likelihood_gap`: the penalties — parameters, scan costs — never decide
+    between two forms that both reach the floor)."""
     fam = all_cands[best.key].family or best.key
+    # the best reaches the floor as missing_effect asks it to (its moving residual, where
+    # analysed), a rival by its RMS (its moving residual is not analysed)
+    at_floor = best.adequate_after is not False and _reaches_floor(best, floor)
     return [c for c in ranked if c is not best and c.error is None
             and (c.delta_bic - best.delta_bic < AMBIGUOUS_DBIC
-                 or c.floor_gap < AMBIGUOUS_DBIC)  # below the floor: _rival's evidence
+                 or c.floor_gap < AMBIGUOUS_DBIC  # below the floor: _rival's evidence
+                 or (at_floor and c.delta_bic < STRONG_DBIC and _reaches_floor(c, floor)
+                     and _likelihood_gap(best, c) < AMBIGUOUS_DBIC))
             and (all_cands[c.key].family or c.key) != fam]
+
+
+def _reaches_floor(c: CandidateResult, floor: float | None) -> bool:
+    """The candidate's refit leaves an RMS residual at the floor (≤ ``AT_FLOOR_RATIO``
+    quantization floors, the whiteness test's rule)."""
+    from .._results._whiteness import AT_FLOOR_RATIO
+
+    return (floor is not None and c.error is None and math.isfinite(c.rms_after_rad)
+            and c.rms_after_rad <= AT_FLOOR_RATIO * floor)
+
+
+def _likelihood_gap(best: CandidateResult, c: CandidateResult) -> float:
+    """The evidence for ``best`` over ``c`` without the penalties: the likelihood part of
+    their BIC difference, ``n·ln(max(χ², n − k)/n)`` (:func:`hdid._diagnosis._ladder.bic_value`);
+    where both fits are below the white floor ``n − k`` (the BIC holds both at it), the
+    χ² difference judged under the rounding instead (``2·ln LR`` for the best,
+    :mod:`hdid._diagnosis._rival`; 0 where not computed). ``inf`` without the refits (a
+    loaded diagnosis): the rule is then not applied."""
+    a, b = best.fit, c.fit
+    if a is None or b is None or not (a.finite and b.finite):
+        return math.inf
+    fa, fb = a.n_effective - a.n_unknowns, b.n_effective - b.n_unknowns
+    if a.cost <= max(fa, 1.0) and b.cost <= max(fb, 1.0):
+        ev = c.floor_evidence or {}
+        lr = ev.get("two_ln_lr_for_against") if ev.get("against") == best.key else None
+        return float(lr) if lr is not None and math.isfinite(lr) else 0.0
+    n = a.n_effective
+
+    def lik(sf):
+        return n * math.log(max(sf.cost, sf.n_effective - sf.n_unknowns, 1e-300) / n)
+
+    return lik(b) - lik(a)
+
+
+def _contenders(first, all_cands):
+    """``(best, rivals, same)`` of a round: the strong best, the candidates of other
+    families it cannot be told from (:func:`_rivals`), and the strong ones of its own
+    family within ``AMBIGUOUS_DBIC`` (the same mark); ``(None, [], [])`` without a strong
+    candidate."""
+    ok = [c for c in first["results"] if c.error is None]
+    strong = [c for c in ok if c.delta_bic < STRONG_DBIC]
+    if not strong:
+        return None, [], []
+    best = strong[0]
+    rivals = _rivals(best, ok, all_cands, first.get("floor"))
+    same = [c for c in strong[1:] if c.delta_bic - best.delta_bic < AMBIGUOUS_DBIC
+            and c not in rivals]
+    return best, rivals, same
+
+
+def pairs_to_separate(verdict: str, rounds, all_cands) -> list[tuple]:
+    """The candidate pairs a separating experiment is computed for: an ``ambiguous``
+    verdict's best against each rival; a named effect against each same-mark one."""
+    best, rivals, same = _contenders(rounds[0], all_cands)
+    if best is None or verdict not in ("ambiguous", "missing_effect"):
+        return []
+    return [(best, c) for c in (rivals if verdict == "ambiguous" else same)]
 
 
 def _verdict(rounds, all_cands) -> tuple[str, str, list[str]]:
@@ -89,23 +158,20 @@ def _verdict(rounds, all_cands) -> tuple[str, str, list[str]]:
             f"the residual is above the floor (moving RMS {white.rms_ratio:.2f}× floor, "
             f"Ljung–Box p = {white.p_value:.2g}) but no library effect improves it strongly"
         ), notes
-    best = strong[0]
-    rivals = _rivals(best, ok, all_cands)
-    same = [c for c in strong[1:] if c.delta_bic - best.delta_bic < AMBIGUOUS_DBIC
-            and c not in rivals]
+    best, rivals, same = _contenders(first, all_cands)
     if same:
         notes.append(
             f"{best.key} and {', '.join(c.key for c in same)} leave the same mark "
-            f"({all_cands[best.key].family}) and fit about equally well; to separate them: "
-            f"{all_cands[best.key].experiment}"
+            f"({all_cands[best.key].family}) and fit about equally well (the experiment "
+            "that separates them: separating_experiments)"
         )
     if rivals:
         names = [best.key] + [c.key for c in rivals]
-        exps = "; ".join(f"{c.key}: {all_cands[c.key].experiment}" for c in [best] + rivals)
         return "ambiguous", (
             f"ambiguous between {', '.join(names)} (ΔBIC "
-            f"{', '.join(f'{c.delta_bic:.1f}' for c in [best] + rivals)}): the log cannot tell "
-            f"them apart. Separating experiments — {exps}"
+            f"{', '.join(f'{c.delta_bic:.1f}' for c in [best] + rivals)}; RMS "
+            f"{', '.join(f'{c.rms_after_rad / floor:.2f}' for c in [best] + rivals)}× the "
+            "floor): the log cannot tell them apart"
         ), notes
     if best.adequate_after:
         if best.white_after is False:
@@ -124,7 +190,8 @@ def _verdict(rounds, all_cands) -> tuple[str, str, list[str]]:
     if len(rounds) > 1:
         every = [c for c in rounds[-1]["results"] if c.error is None]
         last = [c for c in every if c.delta_bic < STRONG_DBIC]
-        if last and last[0].adequate_after and not _rivals(last[0], every, all_cands):
+        if last and last[0].adequate_after and not _rivals(last[0], every, all_cands,
+                                                            rounds[-1].get("floor")):
             names = [r["results"][0].label for r in rounds]
             return "missing_effect", (
                 "add " + " and ".join(names) + f": RMS → {last[0].rms_after_rad / floor:.2f}× floor"
