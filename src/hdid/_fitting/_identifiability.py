@@ -58,6 +58,15 @@ def analyse(
     every run, the slowest part); ``precomputed`` holds the JAX parts evaluated elsewhere
     (:func:`hdid._fitting._vfit` does them for many logs at once): ``"jacobian"`` ``(J, r)``,
     ``"dense"`` ``(theta, omega, stuck)`` and ``"derived"`` ``(values, jacobian)``.
+
+    The steps, in order (each a function below, each adding its warnings in this order):
+    the noise scale (:func:`_noise`), the covariance with and without the priors
+    (:func:`_uncertainty`), which parameters the data determine (:func:`_identifiability`)
+    and which pairs they confuse (:func:`_correlations`), the parameter estimates
+    (:func:`_parameters`) and derived quantities, the per-run summaries
+    (:func:`_run_summaries`) and what the runs show about the fit (:func:`_run_warnings`:
+    Stribeck visibility, the stick band's data bracket, runs held, still moving or cut),
+    then the trust and plausibility checks; :class:`~hdid.FitResult` assembles them.
     """
     pre = precomputed or {}
     u = jnp.asarray(u) if not pre else np.asarray(u)
@@ -65,7 +74,57 @@ def analyse(
     P = problem.n_physical
     labels = unknown_labels(problem, prep)
     warnings: list[str] = list(getattr(prep, "log_notes", ()))  # split / still runs
+    s2, s2_used, dof = _noise(problem, prep, r, warnings)
+    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(r))):
+        from .._errors import FitError
 
+        raise FitError(
+            f"{prep.source}: the fit diverged (non-finite residuals or sensitivities at its "
+            "optimum); check the units (time in s, angles in rad or --resolution), the ratio "
+            "and the inertia, or fix parameters the log cannot determine"
+        )
+    fisher_data, cov, null, std_u, std_u_data = _uncertainty(problem, J, s2_used)
+    flags = _identifiability(problem, labels, J, fisher_data, std_u, std_u_data, warnings)
+    corr = _correlations(labels, P, cov, std_u, warnings)
+    values, model, params = _parameters(problem, u, std_u, flags)
+    derived = _derived(problem, u, cov, null, pre.get("derived"))
+    runs, rms_all, offset = _run_summaries(problem, prep, u, std_u, pre)
+    bracket = _run_warnings(prep, runs, values, model, derived, bracket, warnings)
+    warnings += _trust_warnings(problem, u, params, std_u, values)
+    warnings += plausibility_warnings(prep, model, values, rms_all)
+
+    return FitResult(
+        source=prep.source,
+        model=model,
+        parameters=params,
+        derived=derived,
+        runs=runs,
+        setups={s: float(offset[k]) for k, s in enumerate(prep.setup_names)},
+        rms_residual_rad=rms_all,
+        resolution_rad=prep.resolution,
+        resolution_known=prep.resolution_known,
+        resolution_source=prep.resolution_source,
+        print_unit=getattr(prep, "print_unit", None),
+        resolution_note=getattr(prep, "resolution_note", None),
+        sample_period=prep.sample_period,
+        n_effective=prep.n_effective,
+        n_unknowns=problem.n_unknowns,
+        noise_scale=math.sqrt(s2) if dof > 0 else float("nan"),
+        correlation={(labels[i], labels[j]): float(corr[i, j]) for i in range(P) for j in range(i + 1, P)},
+        band_bracket=bracket,
+        warnings=warnings,
+        starts=starts,
+        problem=problem,
+        u=np.asarray(u),
+        covariance=cov,
+        labels=labels,
+    )
+
+
+def _noise(problem: Problem, prep: Prepared, r, warnings: list[str]):
+    """``(s2, s2_used, dof)``: the residual variance in units of the floor's (χ²/dof), and
+    the one the covariance uses — 1 where there are no degrees of freedom, at least 1
+    where the floor is the noise estimated from the log (never more precision than it)."""
     n_eff = prep.n_effective
     dof = n_eff - problem.n_unknowns
     rss = float(np.sum(r**2))
@@ -89,15 +148,14 @@ def analyse(
             )
     else:
         s2_used = max(s2, 1e-12)
+    return s2, s2_used, dof
 
-    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(r))):
-        from .._errors import FitError
 
-        raise FitError(
-            f"{prep.source}: the fit diverged (non-finite residuals or sensitivities at its "
-            "optimum); check the units (time in s, angles in rad or --resolution), the ratio "
-            "and the inertia, or fix parameters the log cannot determine"
-        )
+def _uncertainty(problem: Problem, J, s2_used: float):
+    """The Fisher information of the data ``JᵀJ/s²``, the covariance of the unknowns with
+    the prior rows and its null space, and the standard deviations of the unknowns with
+    and without the priors (∞ along an undetermined direction)."""
+    P = problem.n_physical
     fisher_data = J.T @ J / s2_used
     prior_prec = np.zeros(problem.n_unknowns)
     prior_on = np.asarray(problem.prior_on)
@@ -114,8 +172,18 @@ def analyse(
         math.inf if _undetermined(eye[i], null_data) else math.sqrt(max(cov_data[i, i], 0.0))
         for i in range(problem.n_unknowns)
     ])
+    return fisher_data, cov, null, std_u, std_u_data
 
-    # -- identifiability ------------------------------------------------------------
+
+def _identifiability(problem: Problem, labels, J, fisher_data, std_u, std_u_data,
+                     warnings: list[str]) -> dict[str, str]:
+    """What the data determine: a flag per physical parameter that they do not (no effect,
+    only a combination, set by the prior, poorly determined), and warnings for the
+    combinations (eigen-directions of the data's Fisher information wider than
+    ``ILL_DETERMINED_STD``), the flags and the friction shape."""
+    P = problem.n_physical
+    prior_on = np.asarray(problem.prior_on)
+    prior_sd = np.asarray(problem.prior_sd)
     flags: dict[str, str] = {}
     col_norm = np.linalg.norm(J, axis=0)
     for i, name in enumerate(labels[:P]):
@@ -152,7 +220,12 @@ def analyse(
     for name, why in flags.items():
         warnings.append(f"{name}: {why}")
     warnings += _shape_warnings(problem, flags)
+    return flags
 
+
+def _correlations(labels, P: int, cov, std_u, warnings: list[str]) -> np.ndarray:
+    """The physical parameters' correlation matrix (0 where undetermined); pairs above
+    ``HIGH_CORRELATION`` are named in a warning."""
     with np.errstate(invalid="ignore"):
         corr = cov[:P, :P] / np.outer(std_u[:P], std_u[:P]).clip(1e-300)
     corr = np.where(np.isfinite(corr), corr, 0.0)
@@ -168,8 +241,13 @@ def analyse(
             f"strongly correlated (|r| > {HIGH_CORRELATION}): {shown}{more}; the data fix "
             "mainly combinations of these"
         )
+    return corr
 
-    # -- parameters -----------------------------------------------------------------
+
+def _parameters(problem: Problem, u, std_u, flags: dict[str, str]):
+    """``(values, model, estimates)``: every parameter's value at ``u`` (fixed ones
+    included), the model with them, and a :class:`ParameterEstimate` each (its standard
+    error by the delta method through the parameter's transform)."""
     values = problem.values_np(u)
     model = problem.base.replace(**values)
     specs = model.parameter_specs()
@@ -184,11 +262,13 @@ def analyse(
             name=name, value=values[name], std=std, unit=spec.unit, fixed=name not in problem.free,
             doc=spec.doc, note=flags.get(name, ""),
         )
+    return values, model, params
 
-    # -- derived quantities ---------------------------------------------------------
-    derived = _derived(problem, u, cov, null, pre.get("derived"))
 
-    # -- per run --------------------------------------------------------------------
+def _run_summaries(problem: Problem, prep: Prepared, u, std_u, pre: dict):
+    """``(runs, rms, offsets)``: a :class:`RunSummary` per run from the model's prediction
+    at the samples, the weighted RMS residual of the whole log [log units] and each
+    set-up's offset."""
     _, t_release, theta0_enc, offset = problem.unpack_np(u)
     theta_pred, omega_pred, stuck = map(
         np.asarray, pre["dense"] if "dense" in pre else _dense(problem, u, problem.times)
@@ -218,7 +298,15 @@ def analyse(
             )
         )
     rms_all = math.sqrt(np.sum(w2 * err**2) / np.sum(w2))
+    return runs, rms_all, offset
 
+
+def _run_warnings(prep: Prepared, runs, values, model, derived, bracket: bool,
+                  warnings: list[str]):
+    """What the runs show about the fit: the Stribeck shape out of the swings' reach, the
+    stick band against its data bracket (the event-driven reference at the fitted values,
+    :func:`band_bracket`; ``bracket`` False skips it), runs the model never releases, runs
+    it leaves moving, runs the log cuts before they stop. Returns the bracket (or None)."""
     if "v_s" in values and runs:
         peak = max(r.peak_speed for r in runs)
         if peak < STRIBECK_VISIBLE * values["v_s"]:
@@ -283,35 +371,7 @@ def analyse(
             + ": their rest points are not in the data, so they say nothing about the "
             "stick band; log until the gear is at rest to see it"
         )
-    warnings += _trust_warnings(problem, u, params, std_u, values)
-    warnings += plausibility_warnings(prep, model, values, rms_all)
-
-    return FitResult(
-        source=prep.source,
-        model=model,
-        parameters=params,
-        derived=derived,
-        runs=runs,
-        setups={s: float(offset[k]) for k, s in enumerate(prep.setup_names)},
-        rms_residual_rad=rms_all,
-        resolution_rad=prep.resolution,
-        resolution_known=prep.resolution_known,
-        resolution_source=prep.resolution_source,
-        print_unit=getattr(prep, "print_unit", None),
-        resolution_note=getattr(prep, "resolution_note", None),
-        sample_period=prep.sample_period,
-        n_effective=n_eff,
-        n_unknowns=problem.n_unknowns,
-        noise_scale=math.sqrt(s2) if dof > 0 else float("nan"),
-        correlation={(labels[i], labels[j]): float(corr[i, j]) for i in range(P) for j in range(i + 1, P)},
-        band_bracket=bracket,
-        warnings=warnings,
-        starts=starts,
-        problem=problem,
-        u=np.asarray(u),
-        covariance=cov,
-        labels=labels,
-    )
+    return bracket
 
 
 #: An interval parameter within this fraction of its interval's width from an end is
