@@ -29,7 +29,8 @@ both represented):
    the draws (uniform over logs if the posterior is calibrated: the SBC identity).
 
 Writes ``benchmarks/results/posterior_sbc.json`` (after every log) and ``.md``;
-``--render JSON`` re-writes the markdown only. ``os.getloadavg()`` beside every time.
+``--render JSON [--interpretation FILE]`` re-writes the markdown only (with a hand-written
+interpretation stored in the JSON). ``os.getloadavg()`` beside every time.
 """
 
 from __future__ import annotations
@@ -218,7 +219,8 @@ def render(res):
         return _render(res, res["logs"])
     head = (f"# Posterior calibration, samplers side by side: {', '.join(methods)}\n\n"
             "Each log is fitted once and its optima found once; every sampler gets the same "
-            "fit and optima (time of that search is counted in each sampler's time).\n")
+            "fit and optima (time of that search is counted in each sampler's time).\n\n"
+            + "\n".join(_common.interpretation_section(res)))
     return head + "\n".join(_render(res, [r for r in res["logs"]
                                           if (r.get("method") or "emcee") == m], m)
                             for m in methods)
@@ -264,6 +266,15 @@ def _render(res, all_logs, method=None):
     lo, hi = _wilson(tot["k"], tot["n"])
     L.append(f"\nPooled 95 % coverage over k1, k2, tau_c, tau_s, c_v and the band: "
              f"{tot['k']}/{tot['n']} = {tot['k'] / tot['n']:.1%} [{lo:.1%}, {hi:.1%}].\n")
+    for des in ("paper", "rich", None):
+        rs = [r for r in conv if des in (None, r["design"])]
+        k = sum(r["quantities"][n]["cover95"] for r in rs for n in CHECKED)
+        if rs:
+            lo, hi = _wilson(k, len(rs) * len(CHECKED))
+            L.append(f"Converged logs only, {des or 'both designs'}: {k}/{len(rs) * len(CHECKED)} "
+                     f"= {k / (len(rs) * len(CHECKED)):.1%} [{lo:.1%}, {hi:.1%}].")
+    basin = sum(any(w.startswith("WRONG BASIN") for w in r.get("warnings", [])) for r in logs)
+    L.append(f"\nLogs with the WRONG BASIN statement: {basin} of {len(logs)}.\n")
     L.append(f"## Rank of the truth among the draws ({BINS} bins, counts; uniform if calibrated)\n")
     L.append("| quantity | " + " | ".join(f"{i / BINS:.1f}" for i in range(BINS)) + " |")
     L.append("|---|" + "---|" * BINS)
@@ -318,6 +329,7 @@ def main(argv=None):
     ap.add_argument("--out-dir", type=Path, default=RESULTS)
     ap.add_argument("--name", default="posterior_sbc")
     ap.add_argument("--render", type=Path)
+    ap.add_argument("--interpretation", type=Path, help="with --render: markdown stored in the JSON")
     ap.add_argument("--method", default="emcee,smc",
                     help="samplers, comma-separated (each log's fit and optima shared)")
     args = ap.parse_args(argv)
@@ -325,6 +337,9 @@ def main(argv=None):
     out_md = args.out_dir / f"{args.name}.md"
     if args.render:
         res = json.loads(args.render.read_text())
+        if args.interpretation:
+            res["interpretation"] = args.interpretation.read_text().rstrip("\n")
+            args.render.write_text(json.dumps(res, indent=1))
         out_md.write_text(render(res))
         return
     import hdid
