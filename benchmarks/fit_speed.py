@@ -427,6 +427,18 @@ def bench_profile(trees: dict, reps: int, rounds: int) -> dict:
             res["rounds"].append({"tree": label, **got})
             print(f"  {label} round {k}: " + ", ".join(f"{r['wall_s'] * 1e3:.0f}" for r in got["rows"])
                   + f" ms (load {before['load1']:.1f})", flush=True)
+    hdid = shutil.which("hdid", path=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
+    cli = {label: {"wall": [], "cpu": [], "load": []} for label in trees}
+    for k in range(rounds + 1):  # the cold CLI (fresh process, the persistent cache warm)
+        for label, src in trees.items():
+            env = os.environ | {"PYTHONPATH": str(src)}
+            cpu = []
+            cmd = ["taskset", "-c", "1", hdid, "fit", str(LOG), "-q"]
+            wall = _timed(cmd, env, cpu)
+            if k:  # (round 0 fills the program store of that tree's source)
+                cli[label]["wall"].append(wall)
+                cli[label]["cpu"].append(cpu[0])
+                cli[label]["load"].append(os.getloadavg()[0])
     for label in trees:
         rows = [r for x in res["rounds"] if x["tree"] == label for r in x["rows"]]
         res["trees"][label] = {
@@ -434,7 +446,9 @@ def bench_profile(trees: dict, reps: int, rounds: int) -> dict:
             "cpu_s": _stats(r["cpu_s"] for r in rows),
             "phases_s": {ph: statistics.median(r["phases"].get(ph, 0.0) for r in rows) for ph in PHASES},
             "nested_false_s": statistics.median(x["nested_false_s"] for x in res["rounds"]
-                                                if x["tree"] == label)}
+                                                if x["tree"] == label),
+            "cold_cli_s": _stats(cli[label]["wall"]), "cold_cli_cpu_s": _stats(cli[label]["cpu"]),
+            "cold_cli_load": cli[label]["load"]}
     return res
 
 
@@ -456,6 +470,10 @@ def render_profile(pr: dict) -> list[str]:
         f"**{_ms(trees[n]['wall_s']['median'])}** (min {_ms(trees[n]['wall_s']['min'])})" for n in names) + " |")
     L.append("| CPU (user+sys) | " + " | ".join(_ms(trees[n]["cpu_s"]["median"]) for n in names) + " |")
     L.append("| `nested=False` | " + " | ".join(_ms(trees[n]["nested_false_s"]) for n in names) + " |")
+    if all("cold_cli_s" in trees[n] for n in names):
+        L.append("| cold `hdid fit … -q` (new process, caches warm): wall; CPU | " + " | ".join(
+            f"{_ms(trees[n]['cold_cli_s']['median'])}; {_ms(trees[n]['cold_cli_cpu_s']['median'])}"
+            for n in names) + " |")
     if len(names) == 2:
         a, b = (trees[n]["wall_s"]["median"] for n in names)
         c, d = (trees[n]["cpu_s"]["median"] for n in names)
