@@ -150,9 +150,12 @@ def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", f
     ``result.limits``. ``nested`` True: every limit; ``"auto"``: every limit when the
     residual has not reached the floor, else those whose term may vanish; False: none.
     ``solutions`` ``(U, costs, ok, steps)``: the full model's local fits (default: the
-    result's optimum alone); ``lanes``: the number of starts of the fit's own
-    Levenberg–Marquardt program (the limits then run as calls of it, no compile of their
-    own), else the one-lane program of diagnose's store. Options as in :func:`fit`."""
+    result's optimum alone); ``lanes``: the number of the fit's starts — each limit then
+    gets ``lanes − 1`` grid starts beside the fit's optimum and its rows are scheduled
+    ``lanes`` at a time (what the fit's former ``lanes``-wide program did), else
+    ``_limits.LIMIT_GRID_STARTS`` grid starts in one schedule (diagnose, the batch, the
+    posterior). Either way every start runs through the one-lane program of the model's
+    structure (:mod:`hdid._fitting._one_lane`), as the fit's own. Options as in :func:`fit`."""
     if nested not in (True, False, "auto"):
         raise ValueError(f"nested = {nested!r}: use True, False or 'auto'")
     del n_starts  # (the limits' own grids are ``_limits.LIMIT_GRID_STARTS`` wide)
@@ -170,8 +173,7 @@ def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", f
         solutions = (u, c, np.ones(1, dtype=bool), np.zeros(1, dtype=int))
     del log, fix, inertia_prior, release_time, max_substep  # the limits live in ``setup``
     # The limits are prior rows on the fit's own problem: they share its programs (the
-    # fit's ``lanes``-start LM program; without it diagnose's one-lane program, one
-    # compile per model structure, kept in the program store).
+    # one-lane LM program, one compile per model structure, kept in the program store).
 
     def local_fits(p, U0):
         # ``lanes`` rows a schedule (the fit's former ``lanes``-wide program: a short group

@@ -18,7 +18,6 @@ from .._results._summaries import ParameterEstimate, RunSummary, StartSummary
 from .._models._transforms import derivative
 from .._problems._derived import BracketTooCostly, _derived, band_bracket
 from ..effects import StribeckFriction
-# re-exported while the posterior and diagnose branches still import them from here
 
 
 #: A direction in the optimiser's space whose data-only standard deviation exceeds this
@@ -245,9 +244,8 @@ def _correlations(labels, P: int, cov, std_u, warnings: list[str]) -> np.ndarray
 
 
 def _parameters(problem: Problem, u, std_u, flags: dict[str, str]):
-    """``(values, model, estimates)``: every parameter's value at ``u`` (fixed ones
-    included), the model with them, and a :class:`ParameterEstimate` each (its standard
-    error by the delta method through the parameter's transform)."""
+    """``(values, model, estimates)`` at ``u`` (fixed ones included); each standard error by
+    the delta method through the parameter's transform."""
     values = problem.values_np(u)
     model = problem.base.replace(**values)
     specs = model.parameter_specs()
@@ -266,9 +264,8 @@ def _parameters(problem: Problem, u, std_u, flags: dict[str, str]):
 
 
 def _run_summaries(problem: Problem, prep: Prepared, u, std_u, pre: dict):
-    """``(runs, rms, offsets)``: a :class:`RunSummary` per run from the model's prediction
-    at the samples, the weighted RMS residual of the whole log [log units] and each
-    set-up's offset."""
+    """``(runs, rms, offsets)``: a :class:`RunSummary` per run, the weighted RMS residual of
+    the whole log [log units] and each set-up's offset."""
     _, t_release, theta0_enc, offset = problem.unpack_np(u)
     theta_pred, omega_pred, stuck = map(
         np.asarray, pre["dense"] if "dense" in pre else _dense(problem, u, problem.times)

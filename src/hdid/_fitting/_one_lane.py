@@ -1,7 +1,8 @@
 """Levenberg–Marquardt fits one start at a time through one stored program per model
-structure (:mod:`hdid._problems._programs`): the refits of :func:`hdid.diagnose` and the
-limit checks of :func:`hdid.fit` (:mod:`hdid._fitting._limits`, whose limits are prior
-rows on the fit's own problem, so they share its program)."""
+structure (:mod:`hdid._problems._programs`): the starts and the limit checks of
+:func:`hdid.fit` (:mod:`hdid._fitting._limits`, whose limits are prior rows on the fit's
+own problem, so they share its program) and the refits of :func:`hdid.diagnose` — the
+multi-start driver of both (:func:`_local_fits`, :class:`hdid._fitting._lm._Schedule`)."""
 
 from __future__ import annotations
 

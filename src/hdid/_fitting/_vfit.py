@@ -1,7 +1,8 @@
 """Vectorised batch fit: the multi-start fits of many logs as lanes of shared programs.
 
-:func:`hdid.fit` runs its starts as lanes of one Levenberg–Marquardt program
-(:func:`hdid._fitting._lm._lm_lanes`). Here the lanes of *many* logs share compiled programs: logs
+:func:`hdid.fit` runs its starts one at a time through the one-lane Levenberg–Marquardt
+program of its structure (:mod:`hdid._fitting._one_lane`, :func:`hdid._fitting._lm._lm_lanes`).
+Here the lanes of *many* logs share compiled programs: logs
 whose problems have the same structure and shape (runs × samples after padding, free
 parameters, set-ups) form a *bucket*; each call advances ``lanes`` (log, start) pairs, each
 lane with its own log's arrays. The schedule is :func:`hdid.fit`'s own
