@@ -99,3 +99,23 @@ def test_fit_never_runs_the_vmapped_starts(monkeypatch):
     monkeypatch.setattr(_lm, "_solve_lanes", refuse)
     r = hdid.fit(PAPER, nested=True)
     assert np.isfinite(r.rms_residual_rad) and r.limits
+
+
+def test_solve_fresh_one_lane_is_the_fits_program(paper_setup):
+    # the posterior's drop-in: a fresh LM per row through the fit's one-lane program; with
+    # no iterations it returns each row's cost, which must be the χ² the grid computes (the
+    # same residuals, summed in another program: agreement to rounding, 1e-9 relative)
+    from hdid._fitting._starts import grid_costs
+
+    s = paper_setup
+    grid, _ = _fit._grid_candidates(s.problem, s.prep, s.model, False)
+    U = grid[:3]
+    got_U, cost, done, k = _one_lane.solve_fresh(s.problem, U, [True, False, True], 0)
+    # (the whole grid: the program hdid.fit already runs)
+    np.testing.assert_allclose(cost[[0, 2]], grid_costs(s.problem, grid)[[0, 2]], rtol=1e-9)
+    assert cost[1] == np.inf  # an inactive row is not run
+    np.testing.assert_array_equal(got_U, U)
+    assert not done.any() and k.tolist() == [1, 0, 1]
+    # a few iterations lower each active row's χ² (LM accepts only decreasing steps)
+    _, cost5, _, _ = _one_lane.solve_fresh(s.problem, U, [True, True, True], 5)
+    assert np.all(cost5 <= cost)

@@ -109,3 +109,28 @@ def _local_fits(problem: Problem, U0, max_steps: int, lanes: int = LANES, solve=
                 f[r] = f[o]
         sched.update(costs, done, steps)
     return U, sched.costs, sched.ok, sched.steps, np.where(state[2][:, None], state[0], np.nan)
+
+
+def solve_fresh(problem: Problem, U0, active, max_steps: int):
+    """:func:`hdid._fitting._lm.solve_fresh` (every row a fresh Levenberg–Marquardt of at
+    most ``max_steps`` iterations; ``max_steps`` 0 evaluates the cost only) row by row
+    through the stored one-lane program of :func:`hdid.fit`: no vmapped program of its
+    own to trace, and the simulator's event branch stays a branch. A drop-in for the
+    posterior's mode search and limit fits (``_posterior/lanes.py``, with one lane per
+    call). Inactive rows: unchanged, cost inf, not done, 0 iterations. Returns ``(U, cost,
+    done, iterations)`` as NumPy arrays."""
+    from ._lm import residual_rows
+
+    U = np.array(U0, dtype=float)
+    on = np.broadcast_to(np.asarray(active, dtype=bool), (len(U),))
+    cost, done, k = np.full(len(U), np.inf), np.zeros(len(U), bool), np.zeros(len(U), int)
+    if not on.any():
+        return U, cost, done, k
+    m, n = residual_rows(problem, jnp.asarray(U[0])), U.shape[1]
+    empty = [np.asarray(f) for f in LMState.empty(1, m, n)]
+    for i in np.flatnonzero(on):
+        u2, c2, d2, k2, _ = _stored_solve(problem, *_call_args(U[i:i + 1], on[i:i + 1],
+                                                               max_steps, LMState(*empty)))
+        U[i], cost[i], done[i], k[i] = (np.asarray(u2)[0], np.asarray(c2)[0],
+                                        np.asarray(d2)[0], np.asarray(k2)[0])
+    return U, cost, done, k
