@@ -10,8 +10,10 @@ was a rival already). So only those logs of ``benchmarks/results/diagnose_indepe
 can change verdict; every other log's verdict is the same by construction (and no
 ``adequate`` verdict changes: the false-alarm rates of ``calibration/diagnose_rates.py``
 stand). Each affected log is made again (the suite's draw) and diagnosed with the
-candidates that matter — the stored best and its floor-level strong rivals — with
-``design=False`` (the verdict only); the stored full-suite verdict is the "before".
+candidates that matter — every strong one of the stored record (the first run refitted
+only the best and its floor-level rivals: on a log already ``ambiguous`` by a rival within
+ΔBIC 10 that rival was then missing, rows 9802/9902) — with ``design=False`` (the verdict
+only); the stored full-suite verdict is the "before".
 Results: benchmarks/results/diagnose_floor_rule.{json,md}, the load next to each row.
 """
 
@@ -43,9 +45,11 @@ def affected(records):
         fam = FAMILY.get(b["effect"], b["effect"])
         riv = [x for x in c[1:] if FAMILY.get(x["effect"], x["effect"]) != fam
                and x["rms_after_floor"] <= 1.3 and x["delta_bic"] - b["delta_bic"] >= 10]
-        if riv:
-            out.append((r, [b["effect"]] + [x["effect"] for x in riv]))
-    return out
+        if riv:  # every strong candidate: the stored verdict's own rivals are among them
+            out.append((r, [x["effect"] for x in c],
+                        min(x["delta_bic"] for x in riv) - b["delta_bic"]))
+    # the smallest ΔBIC gaps first (the likeliest to change): a partial run holds those
+    return [(r, k) for r, k, _ in sorted(out, key=lambda x: x[2])]
 
 
 def main(argv=None) -> int:
@@ -87,6 +91,12 @@ def main(argv=None) -> int:
     return 0
 
 
+def render_only() -> None:
+    """Re-write the md from the JSON (after a hand-added ``meta.note``)."""
+    res = json.loads((RESULTS / f"{NAME}.json").read_text())
+    (RESULTS / f"{NAME}.md").write_text(render(res))
+
+
 def _write(res):
     (RESULTS / f"{NAME}.json").write_text(json.dumps(res, indent=1, default=float) + "\n")
     (RESULTS / f"{NAME}.md").write_text(render(res))
@@ -97,8 +107,9 @@ def render(res) -> str:
     L = ["# The floor-level rule on the independent suite (affected logs only)", "",
          f"{m.get('cpu', '')}; src {m.get('src', '')}; `{m.get('command', '')}`. "
          "Before: the stored full-suite verdict (benchmarks/results/diagnose_independent.md); "
-         "after: diagnose with the best and its floor-level strong rivals, design=False. "
+         "after: diagnose with the candidates listed, design=False. "
          "Every other log of the suite cannot change verdict (module docstring).", "",
+         *([m["note"], ""] if m.get("note") else []),
          "| design | seed | hidden | candidates | before | after | ΔBIC (RMS/floor) after | s | load |",
          "|---|---|---|---|---|---|---|---|---|"]
     for r in res["rows"]:
