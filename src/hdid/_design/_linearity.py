@@ -102,11 +102,16 @@ def _events(preds: list[Prediction], every: tuple[str, ...]) -> None:
         true = moved[k, rows, :m]
         w = np.stack(p.weights) / p.sigma
         lin_chi2 = float(np.sum((w * (lin - theta0[rows, :m])) ** 2))
-        true_chi2 = float(np.sum((w * (true - theta0[rows, :m])) ** 2))
+        with np.errstate(over="ignore", invalid="ignore"):  # a diverging simulation: inf
+            true_chi2 = float(np.sum((w * (true - theta0[rows, :m])) ** 2))
+        if not math.isfinite(true_chi2):
+            true_chi2 = math.inf
         if lin_chi2 < 0.04:  # the prior, not the data, sets this direction (< 1 % of Δχ² 4)
             continue
         ratio = max(math.sqrt(true_chi2 / lin_chi2), 1e-12)
-        jump = bool(np.any(np.abs(true[:, -1] - lin[:, -1]) > REST_JUMP_COUNTS * e.resolution))
+        with np.errstate(invalid="ignore"):
+            jump = bool(np.any(~(np.abs(true[:, -1] - lin[:, -1])
+                                 <= REST_JUMP_COUNTS * e.resolution)))
         key = (id(p), n)
         old = worst.get(key, (1.0, False))
         far = ratio if abs(math.log(ratio)) > abs(math.log(old[0])) else old[0]
@@ -124,6 +129,8 @@ def _events(preds: list[Prediction], every: tuple[str, ...]) -> None:
 
 
 def _times(r: float) -> str:
+    if not math.isfinite(r):
+        return "far steeper (the simulation diverges there) than"
     if r >= 1.0:
         return f"{r:.2g}x as steep as"
     return f"{1 / r:.2g}x flatter than"
