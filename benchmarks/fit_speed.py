@@ -3,6 +3,7 @@
     python benchmarks/fit_speed.py [--quick]     # ≈ 5 min on 2 busy cores (--quick ≈ 2)
     python benchmarks/fit_speed.py --render      # results/fit_speed.md from its JSON
     python benchmarks/fit_speed.py --profile [--before TREE]   # ≈ 3 min (+ 3 with TREE)
+    python benchmarks/fit_speed.py --cold N [--before TREE]    # the cold command alone
 
 ``--profile``: where a warm ``hdid.fit`` of the shipped paper log spends its time, pinned
 to one core in a subprocess per tree (``--before``: a checkout of an older commit, run
@@ -295,6 +296,8 @@ def render(res: dict) -> str:
         f"{p['success']}" for p in sp["per_log"]) + ".\n"]
     if res.get("profile"):
         L += render_profile(res["profile"])
+    if res.get("cold"):
+        L += render_cold(res["cold"])
     if res.get("notes"):
         L += ["## Notes\n", *(f"- {n}" for n in res["notes"]), ""]
     L += _common.interpretation_section(res)
@@ -452,6 +455,68 @@ def bench_profile(trees: dict, reps: int, rounds: int) -> dict:
     return res
 
 
+def bench_cold(trees: dict, rounds: int) -> dict:
+    """Cold ``hdid fit LOG`` (a new process) per tree, pinned to one core, trees alternating:
+    one run in an empty cache (``HDID_CACHE_DIR=<tmp>``: a fresh environment), then
+    ``rounds`` with the persistent cache warm (after one that fills it); wall, CPU (user +
+    sys, all threads), 1-min load; and whether the report (timing masked) and the JSON
+    (``wall_time_s`` left out) are the same for every tree."""
+    import re
+
+    hdid = shutil.which("hdid", path=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
+    out = {label: {"wall": [], "cpu": [], "load": [], "empty": None} for label in trees}
+    same = {}
+    with tempfile.TemporaryDirectory(prefix="hdid_cold_") as tmpd:
+        for k in range(-1, rounds + 1):
+            for label, src in trees.items():
+                env = os.environ | {"PYTHONPATH": str(src)}
+                if k < 0:
+                    env["HDID_CACHE_DIR"] = str(Path(tmpd) / label)
+                js = Path(tmpd) / f"{label}.json"
+                cmd = ["taskset", "-c", "1", hdid, "fit", str(LOG), "--json", str(js)]
+                cpu, l0 = [], os.getloadavg()[0]
+                wall = _timed(cmd, env, cpu)
+                row = {"wall_s": wall, "cpu_s": cpu[0], "load1": (l0 + os.getloadavg()[0]) / 2}
+                print(f"  {label} round {k}: {wall:.2f} s wall, {cpu[0]:.2f} s CPU, load {l0:.1f}", flush=True)
+                if k < 0:
+                    out[label]["empty"] = row
+                elif k > 0:  # (round 0 fills the program store of that tree's source)
+                    for f, key in (("wall", "wall_s"), ("cpu", "cpu_s"), ("load", "load1")):
+                        out[label][f].append(row[key])
+                p = subprocess.run(cmd[3:], env=env, capture_output=True, text=True, cwd=ROOT) if k == rounds else None
+                if p is not None:
+                    d = json.loads(js.read_text())
+                    d.pop("wall_time_s", None)
+                    same[label] = (re.sub(r"; [0-9.]+ s\n", "\n", p.stdout.replace(str(js), "OUT")),
+                                   json.dumps(d, sort_keys=True))
+    res = {label: {"cold_cli_s": _stats(o["wall"]), "cold_cli_cpu_s": _stats(o["cpu"]),
+                   "load": o["load"], "empty_cache": o["empty"], "src": str(trees[label])}
+           for label, o in out.items()}
+    first = next(iter(same.values()))
+    return {"trees": res, "same_report": all(v[0] == first[0] for v in same.values()),
+            "same_json": all(v[1] == first[1] for v in same.values()), "rounds": rounds}
+
+
+def render_cold(c: dict) -> list[str]:
+    names = list(c["trees"])
+    T = c["trees"]
+    L = [f"## Cold command ({c['date']}: `hdid fit {LOG.name}`, a new process, one core pinned, "
+         f"trees alternating, {c['rounds']} runs each with the caches warm)\n",
+         "| | " + " | ".join(names) + " |", "|---|" + "---|" * len(names),
+         "| persistent cache warm: wall median (min) | " + " | ".join(
+             f"{_ms(T[n]['cold_cli_s']['median'])} ({_ms(T[n]['cold_cli_s']['min'])})" for n in names) + " |",
+         "| … CPU (user+sys) median (min) | " + " | ".join(
+             f"{_ms(T[n]['cold_cli_cpu_s']['median'])} ({_ms(T[n]['cold_cli_cpu_s']['min'])})" for n in names) + " |",
+         "| … 1-min load | " + " | ".join(", ".join(f"{x:.1f}" for x in T[n]["load"]) for n in names) + " |",
+         "| empty cache (fresh environment): wall; CPU; load | " + " | ".join(
+             f"{_ms(T[n]['empty_cache']['wall_s'])}; {_ms(T[n]['empty_cache']['cpu_s'])}; "
+             f"{T[n]['empty_cache']['load1']:.1f}" for n in names) + " |",
+         f"\nSame report (timing masked): {'yes' if c['same_report'] else '**no**'}; same JSON "
+         f"(wall_time_s left out): {'yes' if c['same_json'] else '**no**'}. On 2 cores shared "
+         "with other jobs, wall ≈ CPU × the load on the pinned core: CPU time is the robust figure.", ""]
+    return L + [f"- {n}" for n in c.get("notes", [])] + [""]
+
+
 def render_profile(pr: dict) -> list[str]:
     trees = pr["trees"]
     names = list(trees)
@@ -509,12 +574,22 @@ def main(argv=None) -> None:
     ap.add_argument("--profile", action="store_true",
                     help="only the warm fit's profile (kept beside the other sections)")
     ap.add_argument("--before", type=Path, help="with --profile: an older checkout to compare")
+    ap.add_argument("--cold", type=int, metavar="N",
+                    help="only the cold command: N warm-cache runs per tree (with --before)")
     ap.add_argument("--child", type=int, help=argparse.SUPPRESS)
     args = _common.parse_or_render(ap, argv, NAME, render)
     if args is None:
         return
     if args.child:
         print(json.dumps(child_profile(args.child)))
+        return
+    if args.cold:
+        trees = {"before": args.before.resolve() / "src"} if args.before else {}
+        trees["now"] = ROOT / "src"
+        res = json.loads((_common.RESULTS / f"{NAME}.json").read_text())
+        res["cold"] = bench_cold(trees, args.cold) | {"date": time.strftime("%Y-%m-%d %H:%M")}
+        _common.write_result(NAME, res, render)
+        print("\n".join(render_cold(res["cold"])))
         return
     if args.profile:
         trees = {"before": args.before.resolve() / "src"} if args.before else {}

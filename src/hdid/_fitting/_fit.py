@@ -9,11 +9,13 @@ import time
 from collections.abc import Iterable, Mapping
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._errors import FitError
 from .._problems._evaluate import dense as _dense
+from .._problems import _programs
 from ._identifiability import MOVED_COUNTS, analyse
 from .._log import Log, read_log
 from .._models._model import Model
@@ -25,6 +27,8 @@ from .._results._summaries import StartSummary
 from .._simulation._simulate import DEFAULT_MAX_SUBSTEP
 from .._models._transforms import interval_to_u, to_unconstrained
 from ..effects import order_of_magnitude
+from ._lm import PHASE1_STEPS, LMState
+from ._one_lane import LANES, _call_args, _solve_lanes
 from ._one_lane import _local_fits as _one_lane
 from ._pendulum import pendulum_prepared
 from ._starts import (_choose_starts, _costs, _grid_candidates, _grid_starts, grid_costs,
@@ -123,6 +127,7 @@ def fit(
         resolution=resolution,
     )
     problem, prep, model = setup.problem, setup.prep, setup.model
+    _prefetch(problem)
 
     U0, grid_cost = _grid_starts(problem, prep, model, n_starts, start_from_model)
     U, costs, ok, steps = _local_fits(problem, U0, max_steps)
@@ -255,7 +260,7 @@ def trapped_runs(problem: Problem, prep: Prepared, u) -> np.ndarray:
     although the log shows them moving (rest ≠ hold by more than ``MOVED_COUNTS``)."""
     # Jitted: an eager call compiled a fresh `while` program on every fit (its loop body
     # is a new closure each time), ~140 memory mappings that were never freed.
-    _, omega, _ = map(np.asarray, _dense(problem, jnp.asarray(u), problem.times))
+    _, omega, _ = _stored_dense(problem, u)
     moved = np.abs(prep.rest - prep.hold) > MOVED_COUNTS * prep.resolution
     return np.flatnonzero(moved & (np.max(np.abs(omega), axis=1) == 0.0))
 
@@ -362,6 +367,8 @@ def _finish(setup: _Setup, U, costs, ok, steps, t_start: float, **analyse_option
     best = int(order[0])
     u = U[best]
     starts = StartSummary.from_solutions(problem, U, costs, ok, steps, best)
+    if analyse_options.get("precomputed") is None:
+        analyse_options["precomputed"] = _stored_analysis(problem, u)
     result = analyse(problem, prep, u, starts, fixed=set(setup.fixed), **analyse_options)
     result.wall_time_s = time.perf_counter() - t_start
     if not ok[best]:
@@ -370,6 +377,48 @@ def _finish(setup: _Setup, U, costs, ok, steps, t_start: float, **analyse_option
             "the convergence tolerance; results may not be at the optimum"
         )
     return result
+
+
+def _prefetch(problem: Problem) -> None:
+    """Start reading the stored programs the fit calls after its grid (the one-lane
+    Levenberg–Marquardt program, then :func:`_stored_dense`'s and
+    :func:`_stored_analysis`'s) in the program store's background thread
+    (:func:`hdid._problems._programs.prefetch`: the XLA cache reads release the GIL), while
+    this thread computes the grid's costs and the first starts; nothing where they are
+    loaded already or not stored."""
+    n = int(problem.n_unknowns)
+    m = int(np.prod(problem.times.shape)) + problem.n_physical
+    state = LMState(*(np.asarray(f) for f in LMState.empty(LANES, m, n)))
+    _programs.prefetch("solve_lanes", _solve_lanes, problem, *_call_args(
+        np.zeros((LANES, n)), np.ones(LANES, dtype=bool), PHASE1_STEPS, state))
+    u = jnp.zeros(n)
+    _programs.prefetch("dense", _dense, problem, u, problem.times)
+    _programs.prefetch("fit_analysis", _jacobian_and_derived, problem, u)
+
+
+def _stored_dense(problem: Problem, u):
+    """``(theta, omega, stuck)`` at ``u`` on the log's samples, NumPy, through the
+    program store's ``dense`` program (:mod:`hdid._problems._programs`: a later process
+    reads it instead of tracing; the residual frame shares it)."""
+    out = _programs.call("dense", _dense, problem, jnp.asarray(u), problem.times)
+    return tuple(np.asarray(a) for a in out)
+
+
+def _jacobian_and_derived(problem: Problem, u):
+    """The JAX parts of :func:`analyse` besides the trajectory: ``((J, r), (values,
+    jacobian))`` — the data Jacobian and residuals, the derived quantities and theirs."""
+    r, J = problem.data_residuals_and_jacobian(u)
+    return (J, r), problem.derived_and_jacobian(u)
+
+
+def _stored_analysis(problem: Problem, u) -> dict:
+    """:func:`analyse`'s ``precomputed`` parts at ``u`` from two stored programs (the
+    trajectory is :func:`_stored_dense`'s, already loaded by :func:`trapped_runs`): a
+    later process reads them instead of tracing the Jacobian (~1.5 s CPU of a cold
+    ``hdid fit``)."""
+    jr, derived = _programs.call("fit_analysis", _jacobian_and_derived, problem, jnp.asarray(u))
+    to_np = lambda t: jax.tree_util.tree_map(np.asarray, t)  # noqa: E731
+    return {"jacobian": to_np(jr), "dense": _stored_dense(problem, u), "derived": to_np(derived)}
 
 
 def substep_for(frequency_hz: float) -> float:
