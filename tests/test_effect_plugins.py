@@ -88,9 +88,7 @@ def test_a_plugin_package_adds_an_effect_everywhere(plugin, tmp_path):
     site, env = plugin
     cli = [sys.executable, "-m", "hdid.cli"]
     assert "cogging" in _run([*cli, "fit", "--help"], env, tmp_path).replace("\n", " ")
-    keys = _run([sys.executable, "-c", "import hdid; print(sorted(hdid.effects.library({})), "
-                 "hdid.effects.Cogging is hdid.effects.registry()['cogging'])"], env, tmp_path)
-    assert "'cogging'" in keys and keys.strip().endswith("True")  # hdid.effects.Cogging too
+    # hdid.effects.library and hdid.effects.Cogging: in the next test's process
     _run([*cli, "fit", str(PAPER), "--add", "cogging", "--starts", "2", "-q", "--json",
           "fit.json"], env, tmp_path)
     d = json.loads((tmp_path / "fit.json").read_text())
@@ -118,7 +116,9 @@ fit = hdid.fit(sys.argv[1], hdid.Model.default().with_effect(
 G, _ = gaussian_prior(fit.problem, None)
 i = list(fit.problem.free).index("amplitude")
 d = hdid.diagnose(sys.argv[1], candidates=["cogging"], n_starts=1)
-print(json.dumps({"first": cands[0], "prior": [float(x) for x in G[:, i]],
+print(json.dumps({"library": sorted(hdid.effects.library({})),
+                  "attribute": hdid.effects.Cogging is hdid.effects.registry()["cogging"],
+                  "first": cands[0], "prior": [float(x) for x in G[:, i]],
                   "tried": [c.key for c in d.candidates],
                   "reasons": [c.reason for c in d.candidates]}))
 """
@@ -128,6 +128,7 @@ def test_a_plugins_candidate_and_prior_reach_diagnose_and_the_posterior(plugin, 
     site, env = plugin
     out = json.loads(_run([sys.executable, "-c", DIAGNOSE_AND_POSTERIOR, str(PAPER)], env,
                           tmp_path).strip().splitlines()[-1])
+    assert "cogging" in out["library"] and out["attribute"]  # hdid.effects.Cogging too
     assert out["first"] == "cogging"  # trial=5 puts it before the library's (10 …)
     assert out["prior"] == [0.0, 1e-3, 1.0]  # the declared (centre, sd) in use
     assert out["tried"] == ["cogging"]
