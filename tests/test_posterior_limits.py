@@ -113,17 +113,21 @@ def test_limit_fits_skip_parameters_the_fit_measures_well(fit):
     assert limit_names(prob, lin, C) == ["k2", "c_v"]
 
 
-def test_mode_search_solver_is_the_fits_program_without_its_trace(fit):
-    """The mode search's and limit fits' ``solve_fresh`` (its residual count evaluated
-    once per problem structure, not per call: 0.24–0.30 s of tracing each on this log,
-    ~150 calls per default ``sample_posterior``; docs/decisions/mode-search-programs.md)
-    returns what the fit's
-    compiled program returns for a state sized by ``jax.eval_shape`` now, bit for bit —
-    also for the limit fits' problems, whose prior rows differ."""
+def test_mode_search_solver_is_the_fits_program_without_its_trace(fit, monkeypatch):
+    """The mode search's and limit fits' ``solve_fresh`` runs its rows through the fit's
+    stored one-lane program (:mod:`hdid._fitting._one_lane`), so a ``--posterior``
+    process traces no vmapped program of its own (27–32 s per lane count in a fresh
+    process; docs/decisions/mode-search-programs.md): the vmapped program is never
+    called, and each active row ends where the vmapped program takes it — also for the
+    limit fits' problems, whose prior rows differ. Tolerance: one lane against a vmapped
+    lane differ only by the order of floating-point operations (~1e-13 relative per
+    step); 1e-9 relative on the cost leaves that room over 12 steps and fails on any
+    different accept/reject path or a wrong row."""
     import equinox as eqx
     import jax
     import jax.numpy as jnp
 
+    from hdid._fitting import _lm
     from hdid._fitting._lm import LMState, _solve_lanes
     from hdid._posterior.lanes import MODE_LANES, solve_fresh
 
@@ -135,8 +139,14 @@ def test_mode_search_solver_is_the_fits_program_without_its_trace(fit):
     for p in (prob, pinned):
         m = jax.eval_shape(p.residuals, U[0]).shape[0]
         ref = _solve_lanes(p, U, active, jnp.asarray(12), LMState.empty(MODE_LANES, m, len(fit.u)))
-        for a, b in zip(solve_fresh(p, U, active, 12), ref[:4]):
-            assert np.array_equal(np.asarray(a), np.asarray(b))
+        with monkeypatch.context() as mp:
+            mp.setattr(_lm, "_solve_lanes", lambda *a, **k: pytest.fail("vmapped program called"))
+            U2, cost, done, _ = solve_fresh(p, U, active, 12)
+        on = np.asarray(active)
+        np.testing.assert_allclose(cost[on], np.asarray(ref[1])[on], rtol=1e-9)
+        np.testing.assert_allclose(U2[on], np.asarray(ref[0])[on], rtol=1e-6, atol=1e-9)
+        assert np.array_equal(done[on], np.asarray(ref[2])[on])
+        assert np.all(np.isinf(cost[~on])) and np.array_equal(U2[~on], np.asarray(U)[~on])
 
 
 def test_limit_fits_are_made_once_per_fit(fit, monkeypatch):

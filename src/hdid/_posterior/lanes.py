@@ -6,14 +6,15 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from .._fitting._lm import solve_fresh  # noqa: E402,F401 (the fit's engine, re-exported)
+from .._fitting._one_lane import solve_fresh  # noqa: E402,F401 (the fit's engine, re-exported)
 
 
-#: Lanes per call of the mode search's Levenberg–Marquardt: the fit's own (``hdid.fit``'s
-#: default ``n_starts``), so that the search runs the program the fit compiled (same
-#: problem, same lane count: one in-memory or persistent-cache hit) instead of compiling
-#: one for its own number of candidates, which varies from log to log (27–32 s in a fresh
-#: process, docs/decisions/mode-search-programs.md).
+#: Rows per call of the mode search's Levenberg–Marquardt. ``solve_fresh`` is the fit's
+#: one-lane engine (:mod:`hdid._fitting._one_lane`): it runs the rows of a call one at a
+#: time through the program ``hdid.fit`` stored, so the search compiles nothing of its own
+#: whatever its number of candidates (a program per candidate count cost 27–32 s in a fresh
+#: process, docs/decisions/mode-search-programs.md); the block size only bounds the
+#: padding (padded rows are inactive and not run).
 MODE_LANES = 6
 
 
