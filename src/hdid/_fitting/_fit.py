@@ -28,7 +28,7 @@ from .._simulation._simulate import DEFAULT_MAX_SUBSTEP
 from .._models._transforms import interval_to_u, to_unconstrained
 from ..effects import order_of_magnitude
 from ._lm import PHASE1_STEPS, LMState
-from ._one_lane import LANES, _call_args, _solve_lanes
+from ._one_lane import LANES, _call_args, _solve_lanes, _stored_solve
 from ._one_lane import _local_fits as _one_lane
 from ._pendulum import pendulum_prepared
 from ._starts import (_choose_starts, _costs, _grid_candidates, _grid_starts, grid_costs,
@@ -381,8 +381,8 @@ def _finish(setup: _Setup, U, costs, ok, steps, t_start: float, **analyse_option
 
 def _prefetch(problem: Problem) -> None:
     """Start reading the stored programs the fit calls after its grid (the one-lane
-    Levenberg–Marquardt program, then :func:`_stored_dense`'s and
-    :func:`_stored_analysis`'s) in the program store's background thread
+    Levenberg–Marquardt program, then :func:`_stored_dense`'s and the derived
+    quantities') in the program store's background thread
     (:func:`hdid._problems._programs.prefetch`: the XLA cache reads release the GIL), while
     this thread computes the grid's costs and the first starts; nothing where they are
     loaded already or not stored."""
@@ -393,7 +393,7 @@ def _prefetch(problem: Problem) -> None:
         np.zeros((LANES, n)), np.ones(LANES, dtype=bool), PHASE1_STEPS, state))
     u = jnp.zeros(n)
     _programs.prefetch("dense", _dense, problem, u, problem.times)
-    _programs.prefetch("fit_analysis", _jacobian_and_derived, problem, u)
+    _programs.prefetch("derived", _derived_and_jacobian, problem, u)
 
 
 def _stored_dense(problem: Problem, u):
@@ -404,21 +404,35 @@ def _stored_dense(problem: Problem, u):
     return tuple(np.asarray(a) for a in out)
 
 
-def _jacobian_and_derived(problem: Problem, u):
-    """The JAX parts of :func:`analyse` besides the trajectory: ``((J, r), (values,
-    jacobian))`` — the data Jacobian and residuals, the derived quantities and theirs."""
-    r, J = problem.data_residuals_and_jacobian(u)
-    return (J, r), problem.derived_and_jacobian(u)
+def _derived_and_jacobian(problem: Problem, u):
+    """The derived quantities at ``u`` and their Jacobian in the physical unknowns."""
+    return problem.derived_and_jacobian(u)
+
+
+def _lm_residuals_and_jacobian(problem: Problem, u):
+    """The data residuals ``r`` and their Jacobian ``J`` at ``u`` from the fit's own
+    one-lane Levenberg–Marquardt program (a fresh lane evaluates both at its start and,
+    with an iteration budget of one, stops there): no program of their own to trace,
+    compile or read (the same function, :meth:`Problem.data_residuals_and_jacobian`,
+    inside it; the prior rows after the data rows are dropped)."""
+    n = int(problem.n_unknowns)
+    m_data = int(np.prod(problem.times.shape))
+    state = LMState(*(np.asarray(f) for f in LMState.empty(LANES, m_data + problem.n_physical, n)))
+    *_, state = _stored_solve(problem, *_call_args(np.asarray(u, dtype=float)[None, :],
+                                                   np.ones(LANES, dtype=bool), 1, state))
+    return np.asarray(state[1])[0][:m_data], np.asarray(state[0])[0][:m_data]
 
 
 def _stored_analysis(problem: Problem, u) -> dict:
-    """:func:`analyse`'s ``precomputed`` parts at ``u`` from two stored programs (the
-    trajectory is :func:`_stored_dense`'s, already loaded by :func:`trapped_runs`): a
-    later process reads them instead of tracing the Jacobian (~1.5 s CPU of a cold
-    ``hdid fit``)."""
-    jr, derived = _programs.call("fit_analysis", _jacobian_and_derived, problem, jnp.asarray(u))
-    to_np = lambda t: jax.tree_util.tree_map(np.asarray, t)  # noqa: E731
-    return {"jacobian": to_np(jr), "dense": _stored_dense(problem, u), "derived": to_np(derived)}
+    """:func:`analyse`'s ``precomputed`` parts at ``u`` without a program of the analysis'
+    own to trace or compile in a new process: the Jacobian from the fit's LM program
+    (:func:`_lm_residuals_and_jacobian`), the trajectory from :func:`_stored_dense`'s
+    (already loaded by :func:`trapped_runs`), the derived quantities from a small stored
+    program (``derived``)."""
+    derived = _programs.call("derived", _derived_and_jacobian, problem, jnp.asarray(u))
+    return {"jacobian": _lm_residuals_and_jacobian(problem, u),
+            "dense": _stored_dense(problem, u),
+            "derived": jax.tree_util.tree_map(np.asarray, derived)}
 
 
 def substep_for(frequency_hz: float) -> float:
