@@ -2,6 +2,7 @@
 
     taskset -c 1 python benchmarks/diagnose_independent.py [rich|paper ...] [--per N]
     python benchmarks/diagnose_independent.py --render
+    taskset -c 1 python benchmarks/diagnose_independent.py --floor-rule [--seeds 8801,9803] [--render]
 
 Every log draws its own plant, design and effect size (seeds 8800+ rich, 9800+ paper):
 
@@ -34,6 +35,7 @@ from _common import RESULTS, Clock, load_text, parse_or_render, run_meta, write_
 from hdid.reference import logs
 
 NAME = "diagnose_independent"
+FLOOR_RULE = "diagnose_independent_floor_rule"  # the --floor-rule mode's result
 HIDDEN = ("none", "backlash", "hysteresis", "asymmetric_friction", "load_friction", "ripple",
           "soft_windup", "kinematic_error", "quadratic_drag")
 N = 100.0
@@ -99,6 +101,19 @@ def hidden_params(name: str, truth: dict, design: dict, rng) -> dict:
     raise KeyError(name)
 
 
+def suite_log(design: str, seed: int, name: str) -> tuple[dict, dict, dict]:
+    """The suite's draw for one log: truth, design and the hidden effect's parameters."""
+    truth, des = draw(design, seed)
+    hp = hidden_params(name, truth, des, np.random.default_rng(seed + 10_000)) if name != "none" else {}
+    return truth, des, hp
+
+
+def make_log(truth: dict, des: dict, hp: dict, seed: int, name: str):
+    kw = logs.reference_kwargs(name, truth, **hp) if name != "none" else None
+    return logs.make_log(truth, **{k: v for k, v in des.items() if k != "gear_factor"},
+                         seed=seed, hidden=kw)
+
+
 def run_design(design: str, records: list, meta: dict, per: int, seed0: int,
                only: set | None = None) -> None:
     import hdid
@@ -107,9 +122,7 @@ def run_design(design: str, records: list, meta: dict, per: int, seed0: int,
         name, seed = HIDDEN[i % len(HIDDEN)], seed0 + i
         if only and name not in only:
             continue
-        truth, des = draw(design, seed)
-        hp = hidden_params(name, truth, des, np.random.default_rng(seed + 10_000)) if name != "none" else {}
-        kw = logs.reference_kwargs(name, truth, **hp) if name != "none" else None
+        truth, des, hp = suite_log(design, seed, name)
         rec = {"design": design, "hidden": name, "seed": seed,
                "expected": None if name == "quadratic_drag" else name,
                "truth": truth, "hidden_params": hp, "design_params": dict(des),
@@ -118,8 +131,7 @@ def run_design(design: str, records: list, meta: dict, per: int, seed0: int,
                "code": os.environ.get("HDID_BENCH_CODE", meta.get("src", ""))}
         records.append(rec)
         try:
-            df = logs.make_log(truth, **{k: v for k, v in des.items() if k != "gear_factor"},
-                              seed=seed, hidden=kw)
+            df = make_log(truth, des, hp, seed, name)
             rec["min_run_span_rad"] = float(min(np.ptp(g["theta"].to_numpy()) for _, g in df.groupby("run")))
             with Clock() as clock:
                 d = hdid.diagnose(df)
@@ -189,6 +201,63 @@ def _grade(r) -> str:
     if v == "missing_effect" and FAMILY.get(named) and FAMILY.get(named) == FAMILY.get(exp):
         return "honest"
     return "wrong"
+
+
+def floor_rule(seeds: set | None) -> None:
+    """``--floor-rule``: the floor-level rule's effect on the stored suite's verdicts.
+
+    The rule (:func:`hdid._diagnosis._verdict._rivals`) makes a strong candidate of another
+    family that also reaches the floor a rival unless the likelihood alone favours the best
+    by 10, so only logs whose best is strong and at the floor, with such a candidate more
+    than ΔBIC 10 behind, can change verdict (and no ``adequate`` one: the false-alarm rates
+    of ``calibration/diagnose_rates.py`` stand). Those logs are made again and diagnosed with
+    every strong candidate of their record, ``design=False``; the record is the "before"."""
+    import hdid
+
+    todo = []
+    for r in json.loads((RESULTS / f"{NAME}.json").read_text())["records"]:
+        c = [x for x in r.get("candidates") or [] if x["delta_bic"] < -10]
+        if not c or c[0]["rms_after_floor"] > 1.3 or c[0].get("adequate_after") is False:
+            continue
+        fam = FAMILY.get(c[0]["effect"], c[0]["effect"])
+        gaps = [x["delta_bic"] - c[0]["delta_bic"] for x in c[1:] if x["rms_after_floor"] <= 1.3
+                and FAMILY.get(x["effect"], x["effect"]) != fam and x["delta_bic"] - c[0]["delta_bic"] >= 10]
+        if gaps and (not seeds or r["seed"] in seeds):
+            todo.append((min(gaps), r, [x["effect"] for x in c]))
+    res = {"meta": run_meta(command="python benchmarks/diagnose_independent.py "
+                            + " ".join(sys.argv[1:])), "rows": []}
+    for _, rec, keys in sorted(todo, key=lambda x: x[0]):  # the likeliest to change first
+        design, seed, name = rec["design"], rec["seed"], rec["hidden"]
+        truth, des, hp = suite_log(design, seed, name)
+        with Clock() as clock:
+            d = hdid.diagnose(make_log(truth, des, hp, seed, name), candidates=keys, design=False)
+        res["rows"].append({
+            "design": design, "seed": seed, "hidden": name, "candidates": keys,
+            "before": {"verdict": rec["verdict"], "named": rec["named"]},
+            "after": {"verdict": d.verdict, "named": _named(d), "summary": d.summary},
+            "table": [(c.key, c.delta_bic, c.rms_after_rad / d.floor_rad)
+                      for c in d.candidates if c.error is None],
+            "wall_s": clock.wall, "load1": os.getloadavg()[0]})
+        print(design, seed, name, rec["named"], "->", _named(d), flush=True)
+        write_result(FLOOR_RULE, res, render_floor_rule, indent=1)
+
+
+def render_floor_rule(res: dict) -> str:
+    m = res["meta"]
+    L = ["# The floor-level rule on the independent suite (affected logs only)", "",
+         f"{m.get('cpu', '')}; src {m.get('src', '')}; `{m.get('command', '')}`. "
+         "Before: the stored full-suite verdict (benchmarks/results/diagnose_independent.md); "
+         "after: diagnose with the candidates listed, design=False. "
+         "Every other log of the suite cannot change verdict (module docstring).", "",
+         *([m["note"], ""] if m.get("note") else []),
+         "| design | seed | hidden | candidates | before | after | ΔBIC (RMS/floor) after | s | load |",
+         "|---|---|---|---|---|---|---|---|---|"]
+    for r in res["rows"]:
+        tab = ", ".join(f"{k} {b:.1f} ({x:.2f})" for k, b, x in r["table"])
+        L.append(f"| {r['design']} | {r['seed']} | {r['hidden']} | {', '.join(r['candidates'])} "
+                 f"| {r['before']['named']} | {r['after']['named']} | {tab} | "
+                 f"{r['wall_s']:.0f} | {r['load1']:.1f} |")
+    return "\n".join(L) + "\n"
 
 
 def write(records: list, meta: dict) -> None:
@@ -280,9 +349,15 @@ def main(argv=None) -> None:
                     help="a further batch (seeds S, S+1, …) added to the earlier records")
     ap.add_argument("--only", help="EFFECT,…: rerun those logs, every other record kept")
     ap.add_argument("--fresh", action="store_true", help="drop the earlier records")
-    args = parse_or_render(ap, argv, NAME, render)
+    ap.add_argument("--floor-rule", action="store_true",
+                    help="re-diagnose the stored logs the floor-level rule can change")
+    ap.add_argument("--seeds", help="with --floor-rule: only these seeds (comma-separated)")
+    args = parse_or_render(ap, argv, lambda a: FLOOR_RULE if a.floor_rule else NAME,
+                           lambda res: (render_floor_rule if "rows" in res else render)(res))
     if args is None:
         return
+    if args.floor_rule:
+        return floor_rule({int(x) for x in args.seeds.split(",")} if args.seeds else None)
     designs, seed0 = args.designs or ["rich", "paper"], args.seed0
     if set(designs) - set(SEED0):
         ap.error(f"designs are rich and paper, not {' '.join(set(designs) - set(SEED0))}")
