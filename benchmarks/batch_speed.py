@@ -1,14 +1,8 @@
-"""Batch speed: ``hdid.fit_many`` (vectorised) vs a Python loop over ``hdid.fit`` vs the scipy way.
+"""Batch speed: ``hdid.fit_many`` (vectorised, and ``workers=2``) vs a loop over ``hdid.fit``
+vs the scipy way, for 1–1000 paper-design logs; cost vs design; compile time.
 
     python benchmarks/batch_speed.py [--quick] [--only LABEL…] [--skip LABEL…]   # 15–25 min
     python benchmarks/batch_speed.py --render    # results/batch_speed.md from its JSON
-
-Each configuration runs in its own subprocess (its peak RSS its own), fits 2 other logs
-first (compile or cache read: *first call*), then times N paper-design logs (truths
-log-normal around the CSF-8 values, cached in ``--log-dir``): vectorised ``fit_many`` for
-1–1000 logs (band bracket off, its default; on 100 also on), ``workers=2``, a loop over
-``hdid.fit`` and ``scipy_way.fit_scipy`` (rates extrapolated where not measured); cost vs
-design (20 logs each); compile time with an empty and a populated cache.
 """
 
 from __future__ import annotations

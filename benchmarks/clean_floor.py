@@ -1,34 +1,9 @@
-"""Clean logs from an independent simulator: how many fits end above 1.5× the floor?
-
-A noiseless log of an exact model, quantized to its encoder, leaves a residual at the
-quantization floor ``step/√12`` at the true parameters (0.4–1.0× measured: less where the
-gear sticks). A fit that ends above 1.5× the floor has stopped in a poorer optimum.
-
-Logs come from ``tests/independent.py`` — pure numpy/scipy, event-driven
-``solve_ivp`` (DOP853) with an exact set-valued stick decision at every zero of the
-velocity, nothing imported from hdid — with a broad plant per log (seeded):
-
-* ``k1`` 940 N m/rad ±40 % (uniform), ``k2`` 0–2× the catalog's 6.5e7 N m/rad³ (uniform),
-  ratio 100, inertia 7e-7 kg m² (the fit's default: free motion fixes torques relative to
-  it);
-* ``tau_s`` from a stick band half-width ``tau_s/k_wg`` uniform 0.012–0.040 rad (below the
-  smallest release, 0.05 rad, so every run moves), ``tau_s/tau_c`` uniform 1.1–2;
-* ``v_s`` log-uniform 2–20 rad/s, ``delta`` uniform 0.8–3, ``c_v`` log-uniform over a
-  decade around the paper's 1.8e-5 N m s/rad (0.57–5.7e-5);
-* a 4000-count encoder on the wave generator; set-up offsets uniform ±0.03 rad; each run's
-  release at a random phase of its sample interval.
-
-Designs: ``paper`` (±0.157 rad twice, 250 Hz, 0.5 s, two set-ups) and ``rich`` (±0.157,
-±0.12, ±0.08, ±0.05 rad, 1 kHz, 0.3 s, two set-ups). Each log is fitted with
-:func:`hdid.fit` (the encoder step given, the default model, ratio 100) and the
-residual ratio ``rms/floor`` recorded with the parameters, the wall time and the
-result's ``limits`` (when the code has them).
+"""Clean logs of an independent simulator (``tests/independent.py``), broad plant per log:
+how many fits end above 1.5× the quantization floor ``step/√12`` (a poorer optimum).
 
     taskset -c 1 python benchmarks/clean_floor.py rich --seeds 0:200 [--append] [--label after]
     PYTHONPATH=<other tree>/src taskset -c 1 python benchmarks/clean_floor.py rich --label before --append
     python benchmarks/clean_floor.py --report
-
-Results: ``benchmarks/results/clean_floor.json`` (one row per log and label) and ``.md``.
 """
 
 from __future__ import annotations

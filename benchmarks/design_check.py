@@ -1,29 +1,8 @@
-"""``hdid design`` on the shipped paper log: the ranking, the top candidate's predicted
-stds, and the prediction checked against the spread of fits of simulated logs.
+"""``hdid design`` on the shipped paper log: ranking, speed of 20 candidates, and the predicted
+stds checked against the spread of fits of simulated logs; ``--pairs``: diagnose's
+separating experiments checked by simulation.
 
-    taskset -c 1 python benchmarks/design_check.py [--n 30]
-
-1. Fit data/synthetic/csf8_paper.csv (hdid.fit defaults), rank the default candidates by
-   the std of tau_c, tau_s, v_s and the band (``targets``).
-2. Speed: 20 candidates (the 17 defaults and 3 user ones), cold (first call of the
-   process, programs possibly from the store) and warm (second call).
-3. Simulate ``--n`` logs of the top candidate and of the paper design at the fit (random
-   release phase, the fit's encoder step), fit each with hdid.fit, and compare the
-   predicted std with the fits' spread for k1, tau_c, tau_s and the band. Criterion:
-   within 25 % (the sample std of 30 values is itself uncertain by 1/sqrt(2*29) = 13 %).
-   Where a candidate's linearisation is flagged, the table says so.
-4. ``--pairs``: the separating experiment of two confusable forms, confirmed by
-   simulation. Each case is a hidden-effect log of the independent suite
-   (``benchmarks/diagnose_independent.py``'s draw: a plant and design per seed), refitted
-   with the two candidate forms by ``hdid.diagnose``; the experiment that separates them is
-   computed (:func:`hdid._diagnosis._separating.separating`, as diagnose names it); then
-   ``--n`` logs of that experiment are simulated from each fitted form (random release
-   phase and encoder phase, :func:`hdid._design._check.simulate_logs`), each fitted by
-   both forms with ``hdid.fit``, and the realised ``2·ln LR = χ²(other form) − χ²(true
-   form)`` (χ² = n_eff·(RMS/σ_q)², σ_q = step/√12) is set beside the predicted one. The
-   same for the log's own design (the prediction: indistinguishable). Results are added
-   to the same files under ``pairs``.
-Results: benchmarks/results/design_check.{json,md}, the load average next to each timing.
+    taskset -c 1 python benchmarks/design_check.py [--n 30] [--pairs]
 """
 
 from __future__ import annotations

@@ -1,24 +1,9 @@
-"""Hidden-effect suite on parameters and designs ``diagnose`` was never tuned on.
+"""``hdid diagnose`` on a hidden-effect suite whose plants, designs and effect sizes are drawn
+per log (never tuned on): verdicts graded right / honest / wrong, confusion per design;
+``--floor-rule``: the stored logs the floor-level rule can change, diagnosed again.
 
-    taskset -c 1 python benchmarks/diagnose_independent.py [rich|paper ...] [--per N]
-    python benchmarks/diagnose_independent.py --render
+    taskset -c 1 python benchmarks/diagnose_independent.py [rich|paper ...] [--per N] [--render]
     taskset -c 1 python benchmarks/diagnose_independent.py --floor-rule [--seeds 8801,9803] [--render]
-
-Every log draws its own plant, design and effect size (seeds 8800+ rich, 9800+ paper):
-
-* plant: a gear size factor ``g`` log-uniform over 0.3–3 scaling stiffness, friction,
-  damping and inertia, each with its own spread; ``v_s`` 2–10 rad/s, ``δ`` 0.5–2.5,
-  ``tau_s/tau_c`` 1.3–2.0, capped so the smallest release still swings;
-* rich design: four release amplitudes (0.05–0.08 to 0.2–0.3 rad, each + and −), one
-  set-up, 500/1000/2000 Hz, 300 samples a run (one compile serves the design); paper
-  design: ±0.157 rad twice at 250 Hz, two set-ups, offsets drawn;
-* the hidden effect's size relative to the plant (:func:`hidden_params`), or an effect
-  outside the library (``c_2·ω|ω|`` drag).
-
-Logs of the reference simulator (``hdid.reference.logs.make_log``, exact stick/slip) with
-the effects in numpy (``hdid.reference.logs.HIDDEN``), diagnosed with every candidate.
-Per log: the verdict, the first candidate, RMS before/after in quantization floors, ΔBIC,
-warnings; per design the confusion matrix (hidden effect × what the verdict names).
 """
 
 from __future__ import annotations

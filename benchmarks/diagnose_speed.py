@@ -1,13 +1,8 @@
-"""`hdid diagnose` of the shipped 1 kHz hidden-effect log: cold and warm time, per code.
+"""``hdid diagnose`` of the shipped 1 kHz hidden-effect log: cold and warm time, per code,
+each call a fresh pinned process with its own cache folder.
 
     python benchmarks/diagnose_speed.py [--code before=/tmp/wt_before/src --code after=src] [--core 1]
     python benchmarks/diagnose_speed.py --render
-
-Each call is a fresh process running the CLI's diagnose in-process, pinned to ``--core``
-with its own cache folder: "cold" = empty, "warm" = the cache the cold run left. Each
-``--code`` is a source folder (e.g. a ``git worktree`` of an older commit), measured one
-after the other in one run, each row with its load average. Where the time goes:
-diagnose's own ``timing`` and the program store's record (``hdid._problems._programs.STATS``).
 """
 
 from __future__ import annotations

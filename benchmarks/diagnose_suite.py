@@ -1,14 +1,9 @@
-"""Diagnosis suite: hide each library effect in turn and see what ``diagnose`` ranks first.
+"""Diagnosis suite: hide each library effect in turn (and none, one outside the library) in
+the shipped plant and see what ``diagnose`` names; ``--removed``: base pieces switched off.
 
     python benchmarks/diagnose_suite.py [rich|paper ...]   # about 20–40 min on 2 cores
     python benchmarks/diagnose_suite.py --removed          # then: the base pieces' rows
     python benchmarks/diagnose_suite.py --render
-
-The paper design (±0.157 rad, 250 Hz, two set-ups) and a richer one (four amplitudes,
-1 kHz): a log with nothing hidden, one per library effect (``hdid.reference.logs.HIDDEN``
-through the reference simulator) and one outside the library (quadratic drag), diagnosed
-with all candidates. ``--removed``: a base piece (viscous, Stribeck, the cubic term)
-switched off in the *model* of a clean log, which must be diagnosable too.
 """
 
 from __future__ import annotations

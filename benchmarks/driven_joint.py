@@ -3,11 +3,6 @@ free-motion + driven fit narrows the uncertainty compared with either log alone.
 
     python benchmarks/driven_joint.py [--seeds 4]    # 5–8 min
     python benchmarks/driven_joint.py --render       # results/driven_joint.md from its JSON
-
-Recovery: ``hdid.fit_driven`` (order by BIC) on ``driven_csf8.csv`` and logs of other seeds
-of ``hdid.reference.logs.make_driven_log`` (no code shared with hdid's simulator). Narrowing: relative standard errors of
-(A) free motion alone, inertia free; (A′) inertia fixed at the datasheet (conditional);
-(B) driven alone; (C) without its output encoder; (D) joint; (E) joint without it.
 """
 
 from __future__ import annotations

@@ -3,11 +3,6 @@
     python benchmarks/gpu_path.py --tag cpu                 # JAX_PLATFORMS=cpu forces the CPU
     python benchmarks/gpu_path.py --tag gpu --reference benchmarks/results/gpu_path_cpu.json
     python benchmarks/gpu_path.py --render                  # gpu_path.md from both JSONs
-
-Writes ``results/gpu_path_<tag>.json``: (1) the fit of the shipped paper log, first call and
-warm; (2) one call of ``LogPosterior.batch`` for 1 … 8192 walkers at the CPU run's walker
-positions (so log p compares number for number); (3) ``sample_posterior`` (2000 steps) with
-36 and 288 walkers; (4) ``fit_many`` over 100 and 1000 of ``batch_speed.py``'s logs.
 """
 
 from __future__ import annotations

@@ -3,10 +3,6 @@
 
     taskset -c 0 python benchmarks/long_log.py --samples 1000,2500,5000,10000,25000
     python benchmarks/long_log.py --render      # results/long_log.md from its JSON
-
-Each size is a 4-run log (±0.157, ±0.08 rad) at 10 kHz written by ``synthesize`` and fitted
-by ``hdid.fit`` in a fresh process, cold (``HDID_NO_CACHE=1``): wall time and ``ru_maxrss``.
-A size over ``--timeout`` is stopped and recorded as such.
 """
 
 from __future__ import annotations

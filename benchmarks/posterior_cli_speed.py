@@ -1,15 +1,8 @@
-"""Time of ``hdid fit LOG.csv --posterior`` on 4-run paper logs, emcee and SMC side by side
-(``--sampler``), alternating in the same run (issue 34 item 5).
+"""Time of ``hdid fit LOG.csv --posterior`` as a whole process on 4-run paper logs, emcee and
+SMC side by side (``--sampler``), alternating in the same run.
 
     taskset -c 1 python benchmarks/posterior_cli_speed.py [--logs 1] [--repeats 3]
     python benchmarks/posterior_cli_speed.py --render
-
-Logs: ``data/synthetic/csf8_paper.csv`` and ``--logs − 1`` paper-design logs of the
-posterior calibration (``posterior_sbc.draw_log``, seeds ``seed0 + i``), each fitted and
-sampled ``--repeats`` times per sampler by a fresh ``hdid fit LOG --posterior --sampler S
--q --json OUT`` process (timed whole: imports, fit, compilation, mode search, sampling);
-its JSON's ``posterior_diagnostics`` gives ``sample_posterior``'s own time and its
-convergence. The load average beside every run.
 """
 
 from __future__ import annotations

@@ -1,36 +1,9 @@
-"""Simulation-based calibration of the posterior under its default priors (issue 34):
-coverage, rank histograms, convergence and time per log, emcee and SMC side by side.
+"""Simulation-based calibration of the posterior under its default priors: coverage, rank
+histograms, convergence and time per log, emcee and SMC on the same fits.
 
-Run (pinned to one core; ≈ 1–5 min a log)::
-
-    taskset -c 1 python benchmarks/posterior_sbc.py [--paper-logs 20 --rich-logs 20]
-        [--seed0 34000] [--max-steps 20000] [--budget-min 600] [--method emcee,smc]
-
-For each log (paper and four-amplitude designs interleaved, so that an early stop leaves
-both represented):
-
-1. prior: the library's default priors (``hdid._posterior.priors``: log-normal around the
-   log's own scales, sd 1.2 in log, for k1, k2, tau_c, tau_s, c_v; the Stribeck law's
-   v_s and delta priors) *of the design's nominal log* — the catalog truth
-   (``hdid.reference.logs.TRUTH_CSF8``) simulated with the design at seed 0, its problem built as
-   ``hdid.fit`` builds it — fixed per design (:func:`nominal_default_prior`);
-2. truth: drawn from exactly that prior (:func:`draw_default`), rejecting tau_s < tau_c
-   (the sampler imposes it too) and stick bands beyond ``BAND_MARGIN`` of the smallest
-   release (the sampler does not: a release inside the band never moves; rejections are
-   counted per log), inertia at the catalog value (given to the fit);
-3. a log from ``hdid.reference.logs.make_log`` — the event-driven scipy reference
-   simulator, independent of hdid's JAX simulator — paper design (4 runs
-   ±0.157 rad, 250 Hz, two set-ups) or four-amplitude (8 runs, 1 kHz), seed ``seed0 + i``
-   (rich: ``seed0 + 1000 + i``), quantized to 4000 counts/rev, no added noise;
-4. ``hdid.fit(log, inertia=truth)``, its optima sought once, then for each sampler of
-   ``--method`` ``hdid.sample_posterior(fit, method=..., prior=<the nominal prior>,
-   modes=optima)`` until converged by its rule or ``--max-steps``;
-5. per quantity: is the truth inside the central 95 % / 68 % interval, and its rank among
-   the draws (uniform over logs if the posterior is calibrated: the SBC identity).
-
-Writes ``benchmarks/results/posterior_sbc.json`` (after every log) and ``.md``;
-``--render JSON [--interpretation FILE]`` re-writes the markdown only (with a hand-written
-interpretation stored in the JSON). ``os.getloadavg()`` beside every time.
+    taskset -c 1 python benchmarks/posterior_sbc.py [--paper-logs 20 --rich-logs 20] [--seed0 34000]
+        [--max-steps 20000] [--budget-min 600] [--method emcee,smc]
+    python benchmarks/posterior_sbc.py --render [--interpretation FILE]
 """
 
 from __future__ import annotations

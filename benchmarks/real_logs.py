@@ -1,13 +1,8 @@
-"""hdid on logs it was never tuned for, out of the box: every scenario of
+"""hdid out of the box on logs it was never tuned for: every scenario of
 ``tests/independent.py`` (an event-driven numpy/scipy generator sharing no code with hdid).
 
     python benchmarks/real_logs.py            # ≈ 10 fits, each compiling its own program
     python benchmarks/real_logs.py --render   # results/real_logs.md from its JSON
-
-Pendulum drops with the torque off (ratio 1 and 50, output encoder), a ring-down in motion
-(analog), the paper's design on seven gear sizes (7–435 Hz), fitted with the options a user
-would type: per free parameter fit, std, truth, z = (fit − truth)/std and whether a warning
-names it ("ok": |z| ≤ 3 or flagged).
 """
 
 from __future__ import annotations

@@ -1,25 +1,8 @@
-"""The free-motion fit done "the way a user would without hdid": scipy only.
+"""The free-motion fit done "the way a user would without hdid": scipy only (``solve_ivp``
+LSODA, tanh-smoothed friction, ``least_squares``); ``fit_scipy`` is the baseline of
+``fit_speed.py`` and ``batch_speed.py``.
 
     python benchmarks/scipy_way.py [LOG.csv]   # one demo fit of a log of data/synthetic
-
-Model (hdid's physics; angles at the wave generator, WG)::
-
-    I·θ̈ = −T_k(θ/N)/N − τ_f(ω),   T_k(d) = k1·d + k2·d³
-    τ_f(ω) = tanh(ω/ε)·(τ_c + (τ_s − τ_c)·exp(−|ω/v_s|^δ)) + c_v·ω
-
-The friction sign is smoothed with ``tanh(ω/ε)``; stiction is only the Stribeck curve (no
-exact stick state). With ``ε = 1e-4`` rad/s and the CSF-8 numbers a "stuck" WG creeps about
-4e-5 rad (0.03 count) over a 0.5 s record, while LSODA (stiff BDF near ω = 0) stays at
-≈ 5 ms a run; ``ε = 1e-3`` creeps a quarter count, ``1e-2`` a few counts.
-
-Each run is integrated by :func:`scipy.integrate.solve_ivp` (LSODA, rtol 1e-6, atol 1e-9)
-from its release, at rest; :func:`scipy.optimize.least_squares` (``"trf"``, ``x_scale="jac"``,
-2-point Jacobian, ``diff_step=1e-4``) fits all runs jointly: the shared ``k1, k2, tau_c,
-tau_s, v_s, delta, c_v`` in log space (inertia fixed: free motion fixes only ratios to it),
-per run the release time and held reading ``theta0_enc``, per set-up the encoder offset
-(physical start angle = ``theta0_enc − offset``). Residuals: model minus readings at every
-sample, unweighted; a right-hand-side call cap turns pathological trial points into large
-residuals instead of minutes-long solves.
 """
 
 from __future__ import annotations
