@@ -13,7 +13,7 @@ import math
 import sys
 import time
 
-from _common import DATA, RESULTS, cpu_model, load, src_fingerprint
+from _common import DATA, RESULTS, cpu_model, load, parse_or_render, src_fingerprint
 
 QUANTITIES = ("k1", "tau_c", "tau_s", "stick_band_halfwidth_rad")
 TARGETS = "tau_c,tau_s,v_s,band"
@@ -30,10 +30,12 @@ PAIRS = (("ripple vs kinematic_error, rich 2 kHz", "rich", 8805, ("ripple", "kin
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--n", type=int, default=30)
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--n", type=int, default=30, help="simulated logs per check (per form)")
     ap.add_argument("--pairs", action="store_true", help="only the separating-experiment check")
-    args = ap.parse_args(argv)
+    args = parse_or_render(ap, argv, "design_check", render)
+    if args is None:
+        return 0
     if args.pairs:
         return pairs(args.n)
     import hdid
@@ -88,19 +90,13 @@ def main(argv=None) -> int:
 
 
 def _case_log(design: str, seed: int):
-    import numpy as np
-    from hdid.reference import logs
-
+    """The independent suite's log ``seed`` (its hidden effect from the stored record)."""
     import diagnose_independent as di
 
-    truth, des = di.draw(design, seed)
     stored = json.loads((RESULTS / "diagnose_independent.json").read_text())["records"]
     name = next(r["hidden"] for r in stored if (r["design"], r["seed"]) == (design, seed))
-    hp = di.hidden_params(name, truth, des, np.random.default_rng(seed + 10_000))
-    kw = logs.reference_kwargs(name, truth, **hp)
-    df = logs.make_log(truth, **{k: v for k, v in des.items() if k != "gear_factor"},
-                       seed=seed, hidden=kw)
-    return name, df
+    truth, des, hp = di.suite_log(design, seed, name)
+    return name, di.make_log(truth, des, hp, seed, name)
 
 
 def _chi2(r, step):
@@ -148,7 +144,7 @@ def _realised(fits, e, n, seed):
 
 
 def pairs(n: int) -> int:
-    """Item 4 of the module docstring."""
+    """``--pairs``: diagnose's separating experiments, checked by simulation."""
     import hdid
     from hdid._config import float64
     from hdid._diagnosis._separating import experiments_for, separating
@@ -196,12 +192,8 @@ def pairs(n: int) -> int:
 
 def _write(res):
     (RESULTS / "design_check.json").write_text(json.dumps(res, indent=2, allow_nan=False,
-                                                          default=_nan) + "\n")
+                                                          default=lambda x: None) + "\n")
     (RESULTS / "design_check.md").write_text(render(res))
-
-
-def _nan(x):
-    return None
 
 
 def _fmt(x):
