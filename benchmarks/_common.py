@@ -55,6 +55,28 @@ def load_text() -> str:
     return " ".join(f"{x:.1f}" for x in os.getloadavg())
 
 
+def loads() -> list[float]:
+    """The 1/5/15-min load averages, rounded to 0.01, as the posterior results store them."""
+    return [round(x, 2) for x in os.getloadavg()]
+
+
+def machine() -> dict:
+    """The speed results' machine record: date, cores, CPU, python, platform, JAX backend and
+    device, package versions, the source fingerprint and the 1-min load now."""
+    import importlib
+
+    import jax
+
+    dev = jax.devices()[0]
+    return {"date": time.strftime("%Y-%m-%dT%H:%M:%S"), "nproc": os.cpu_count(), "cpu": cpu_model(),
+            "python": platform.python_version(), "platform": platform.platform(),
+            "backend": jax.default_backend(), "device": str(dev),
+            "device_kind": getattr(dev, "device_kind", "?"), "x64": bool(jax.config.jax_enable_x64),
+            "src_fingerprint": src_fingerprint(), "load_start": os.getloadavg()[0],
+            **{m: importlib.import_module(m).__version__
+               for m in ("jax", "jaxlib", "numpy", "scipy", "equinox", "optimistix", "hdid")}}
+
+
 def run_meta(**extra) -> dict:
     """Date, CPU, cores, load and source fingerprint for a results file's header."""
     return {"date": time.strftime("%Y-%m-%d %H:%M"), "cpu": cpu_model(),

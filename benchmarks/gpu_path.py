@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import sys
 import time
 from pathlib import Path
@@ -37,19 +36,6 @@ def _per_call(fn, reps=20, min_time=1.0):
     return {"median_s": walls[len(walls) // 2], "min_s": walls[0], "n": len(walls)}
 
 
-def _machine() -> dict:
-    import jax
-    import jaxlib
-
-    dev = jax.devices()[0]
-    return {"backend": jax.default_backend(), "device": str(dev),
-            "device_kind": getattr(dev, "device_kind", "?"), "nproc": os.cpu_count(),
-            "cpu": _common.cpu_model(), "python": platform.python_version(),
-            "jax": jax.__version__, "jaxlib": jaxlib.__version__,
-            "x64": bool(jax.config.jax_enable_x64), "src_fingerprint": _common.src_fingerprint(),
-            "load_start": os.getloadavg()[0]}
-
-
 def measure(args, save) -> dict:
     """Run the four measurements, calling ``save(res)`` after each (a run cut short by a
     time limit keeps what it measured)."""
@@ -60,7 +46,7 @@ def measure(args, save) -> dict:
     import hdid
     from hdid._posterior import LogPosterior, sample_posterior
 
-    res: dict = {"generated": time.strftime("%Y-%m-%dT%H:%M:%S"), "tag": args.tag, "machine": _machine()}
+    res: dict = {"generated": time.strftime("%Y-%m-%dT%H:%M:%S"), "tag": args.tag, "machine": _common.machine()}
     print(res["machine"], flush=True)
     ref = json.loads(Path(args.reference).read_text()) if args.reference else None
 

@@ -24,14 +24,10 @@ NAME = "posterior_cli_speed"
 SHIPPED = DATA / "csf8_paper.csv"
 
 
-def _load():
-    return [round(x, 2) for x in os.getloadavg()]
-
-
 def run_cli(sampler, log, out, timeout):
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
     t0 = time.perf_counter()
-    la0 = _load()
+    la0 = _common.loads()
     try:
         p = subprocess.run([sys.executable, "-c", "from hdid.cli import main; main()", "fit",
                             str(log), "--posterior", "--sampler", sampler, "-q", "--json",
@@ -41,7 +37,7 @@ def run_cli(sampler, log, out, timeout):
     except subprocess.TimeoutExpired:
         rc, err = "timeout", ""
     wall = time.perf_counter() - t0
-    r = {"process_s": wall, "rc": rc, "load_start": la0, "load_end": _load()}
+    r = {"process_s": wall, "rc": rc, "load_start": la0, "load_end": _common.loads()}
     if rc == 0:
         d = json.loads(Path(out).read_text())["posterior_diagnostics"]
         conv = d.get("convergence") or {}
@@ -141,7 +137,7 @@ def main(argv=None):
                 row[k] = run_cli(k, path, tmp / f"{k}.json", args.timeout)
                 print(name, k, {x: row[k].get(x) for x in ("process_s", "posterior_s",
                                                            "converged", "rc")},
-                      _load(), flush=True)
+                      _common.loads(), flush=True)
             res["rows"].append(row)
             _common.write_result(NAME, res, render, indent=1)
 

@@ -8,20 +8,19 @@ histograms, convergence and time per log, emcee and SMC on the same fits.
 
 from __future__ import annotations
 
-import _common  # noqa: F401,E402  (benchmarks/ is on sys.path when run as a script)
 import argparse
 import datetime as _dt
 import json
 import math
-import os
 import statistics
 import sys
 import time
 import traceback
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-RESULTS = ROOT / "benchmarks" / "results"
+import _common
+from _common import RESULTS
+
 CHECKED = ("k1", "k2", "tau_c", "tau_s", "c_v", "stick_band_halfwidth_rad")
 REPORTED = CHECKED + ("v_s", "delta")
 BINS = 10
@@ -31,10 +30,6 @@ BINS = 10
 BAND_MARGIN = 0.9
 DEFAULT_PRIOR_NAMES = ("k1", "k2", "tau_c", "tau_s", "c_v", "v_s", "delta")
 _NOMINAL = {}
-
-
-def _load():
-    return [round(x, 2) for x in os.getloadavg()]
 
 
 def nominal_default_prior(gen, design_name, design):
@@ -105,7 +100,7 @@ def run_one(gen, design_name, seed, max_steps, method="emcee,smc"):
     truth, df, info, notes = draw_log(gen, design_name, seed)
     design = gen.RICH_DESIGN if design_name == "rich" else gen.PAPER_DESIGN
     prior = nominal_default_prior(gen, design_name, design)
-    out = {"design": design_name, "seed": seed, "truth_params": truth, "load_start": _load(),
+    out = {"design": design_name, "seed": seed, "truth_params": truth, "load_start": _common.loads(),
            "prior": "default", "band_rejects": notes["band_rejects"], "truth_notes": notes}
     t0 = time.perf_counter()
     fit = hdid.fit(df, inertia=truth["inertia"])
@@ -121,7 +116,7 @@ def run_one(gen, design_name, seed, max_steps, method="emcee,smc"):
     outs = []
     for m in method.split(","):
         o = dict(out)
-        o["load_start"] = _load()
+        o["load_start"] = _common.loads()
         outs.append(_sample_one(hdid, fit, modes, shared_modes_s, m, seed, max_steps, prior,
                                 truth, info, o, t0))
     return outs
@@ -136,7 +131,7 @@ def _sample_one(hdid, fit, modes, modes_s, method, seed, max_steps, prior, truth
     post = hdid.sample_posterior(fit, seed=seed % 1000, method=method, prior=prior,
                                  modes=modes, **kw)
     out["posterior_s"] = time.perf_counter() - t1 + modes_s
-    out["load_end"] = _load()
+    out["load_end"] = _common.loads()
     diag = post.to_dict()["posterior_diagnostics"]
     out.update(steps=int(post.chain.shape[0]), converged=bool(post.converged),
                rhat_max=diag["convergence"]["rhat_max"],
@@ -320,7 +315,7 @@ def main(argv=None):
     hdid.configure()  # float64 and the program cache, as the CLI
     from hdid.reference import logs as gen
 
-    res = {"generated": _dt.datetime.now().isoformat(timespec="seconds"), "load_start": _load(),
+    res = {"generated": _dt.datetime.now().isoformat(timespec="seconds"), "load_start": _common.loads(),
            "options": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()
                        if k not in ("render", "out_dir")},
            "logs": []}
@@ -344,7 +339,7 @@ def main(argv=None):
         out_md.write_text(render(res))
         for r in rs:
             print(name, seed, {k: r.get(k) for k in ("method", "converged", "steps", "posterior_s",
-                                                    "rhat_max", "ess_bulk_min")}, _load(), flush=True)
+                                                    "rhat_max", "ess_bulk_min")}, _common.loads(), flush=True)
 
 
 if __name__ == "__main__":
