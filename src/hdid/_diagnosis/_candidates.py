@@ -144,7 +144,7 @@ def _reorder(s, key: str, order):
 
 
 def _scan_fits(cand, groups, setups, current, tail, grid_points, say, scans, scan_refitted):
-    """The refits of a scanned candidate (for :func:`hdid._diagnosis._diagnose._candidate_fits`):
+    """The refits of a scanned candidate (for :func:`hdid._diagnosis._refits._candidate_fits`):
     every setting (order) screened by one Gauss–Newton step from the current optimum;
     the best and every tie refitted (:func:`_scan_refits`) from the current optimum, its
     step and the other bases (the catalog friction shape); the best ``SCAN_GRID`` by

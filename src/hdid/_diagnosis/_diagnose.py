@@ -134,6 +134,9 @@ from ._ladder import _chi2, _ladder_step, bic, bic_value, model_ladder  # noqa: 
 from ._excess import floor_check
 from ._rival import rank_within_families
 from ._wrong_step import readings_step
+from ._refits import (  # noqa: F401 (re-exported)
+    _base_starts, _cand_bic, _candidate_fits, _own_optimum, _record, sf_key)
+from ._separating import MAX_SEPARATED_PAIRS, for_verdict as _separating_experiments  # noqa: F401
 
 #: A current fit with RMS above this many quantization floors is a poor warm start ...
 FAR_FROM_FLOOR = 3.0
@@ -154,101 +157,7 @@ BASIN_PASSES = 2
 BASE_IMPROVED_DBIC = 2.0
 
 
-# -- statistics --------------------------------------------------------------------
-
-
 # -- the driver -----------------------------------------------------------------------
-
-
-def _own_optimum(fits):
-    """A candidate's own optimum: its best finite refit (``None`` if it has none)."""
-    if isinstance(fits, Exception) or not fits:
-        return None
-    ok = [f for f in fits if f.finite]
-    return min(ok, key=lambda f: f.cost) if ok else None
-
-
-def sf_key(by_key, sf) -> str:
-    """The candidate key whose refits hold ``sf``."""
-    return next(k for k, v in by_key.items() if not isinstance(v, Exception)
-                and any(f is sf for f in v))
-
-
-def _base_starts(base_setup, current, cand_fits, values_reset):
-    """Starts for the current model from candidates' optima with the effect removed
-    (parameters it shares with the current model, and its release instants, start angles
-    and offsets; a piece the candidate replaced, e.g. the cubic spring under
-    ``soft_windup``, at the current fit's values, not the set-up model's), and from the
-    catalog friction shape."""
-    from .._fitting import _refit
-
-    starts = []
-    now = current.values()
-    for sf in cand_fits:
-        if not sf.finite:
-            continue
-        v = sf.values()
-        try:
-            starts.append((f"reverse:{sf.label}", _refit.warm(
-                base_setup, {**now, **{k: v[k] for k in base_setup.problem.free if k in v}},
-                _refit.tail_of(sf.setup.problem, sf.u))))
-        except ValueError:
-            continue
-    if values_reset:
-        starts.append(("shape_reset", _refit.warm(
-            base_setup, {**current.values(), **values_reset},
-            _refit.tail_of(current.setup.problem, current.u))))
-    return starts
-
-
-def _candidate_fits(log, cand, current, hints, opts, grid_points, say, scans,
-                    scan_refitted=None, prepared=None):
-    """Refit ``cand`` on ``log`` from ``current``: a list of StructureFits (one per
-    discrete setting refitted) — warm starts from the current optimum with the effect at
-    each variant's data-derived values (and from the catalog friction shape), plus the
-    best points of the base model's data-driven grid (``grid_points``: ``(values, tail)``
-    pairs) with the effect at its first variant's values. (The base grid's points, not
-    the candidate's own grid: the same data-driven rule, and one compiled grid program
-    instead of one per candidate.) Scanned settings (orders) are first
-    screened by one Gauss–Newton step; the best ``SCAN_REFITS`` are refitted.
-    (``prepared``: :func:`_candidate_setups`'s result for the same arguments.)"""
-    from .._fitting import _refit
-
-    tail = _refit.tail_of(current.setup.problem, current.u)
-    scan_refitted = {} if scan_refitted is None else scan_refitted
-    groups, setups = (prepared if prepared is not None
-                      else _candidate_setups(log, cand, current, hints, opts))
-    fits = []
-    if cand.scanned:
-        return _scan_fits(cand, groups, setups, current, tail, grid_points, say, scans,
-                          scan_refitted)
-    for label, models in groups.items():
-        s = setups[label]
-        starts = [("warm", _refit.warm(s, m.float_values(), tail)) for m in models]
-        first = models[0].float_values()
-        starts += [("grid", _refit.warm(s, {**first, **v}, t)) for v, t in grid_points]
-        say(f"  + {label}  ({len(starts)} starts)")
-        fits.append(_refit.run(label, s, starts))
-    return fits
-
-
-def _cand_bic(sf, cand) -> float:
-    """BIC of a candidate's refit, its scan's cost included (:meth:`Candidate.penalty`)."""
-    return bic_value(sf.cost, sf.n_effective, sf.n_unknowns) + cand.penalty(sf.n_effective)
-
-
-def _record(cand, sf, current_fit, base_bic_k):
-    """A :class:`CandidateResult` from a candidate's refit (ΔBIC against ``current_fit``)."""
-    dbic = (_cand_bic(sf, cand)
-            - bic_value(current_fit.cost, current_fit.n_effective, base_bic_k))
-    vals = sf.values()
-    shown = {k: v for k, v in vals.items()
-             if k not in current_fit.setup.problem.free or k in ("k1", "tau_c", "tau_s")}
-    shown = {k: v for k, v in shown.items() if k in sf.setup.problem.free or k == "order"}
-    return CandidateResult(
-        cand.key, sf.label, math.nan, sf.rms_rad(), dbic, sf.n_unknowns - current_fit.n_unknowns,
-        None, "", shown, None, None, fit=sf,
-    )
 
 
 def diagnose(
@@ -519,23 +428,3 @@ def diagnose(
         rounding_floor=fcheck.to_dict() if fcheck is not None else None,
         separating_experiments=separating,
     )
-
-
-#: Pairs a separating experiment is computed for (an ambiguous verdict's best against
-#: its first rivals): each costs two refits over the default candidate experiments.
-MAX_SEPARATED_PAIRS = 3
-
-
-def _separating_experiments(verdict, rounds, all_cands, say) -> list[dict]:
-    """:func:`hdid._diagnosis._separating.separating` for the verdict's pairs."""
-    from ._separating import separating
-    from ._verdict import pairs_to_separate
-
-    pairs = pairs_to_separate(verdict, rounds, all_cands)[:MAX_SEPARATED_PAIRS]
-    out = []
-    for a, b in pairs:
-        say(f"  separating experiment for {a.key} vs {b.key} (hdid.design)")
-        out.append(separating(a, b))
-    return out
-
-

@@ -94,3 +94,20 @@ def _text(a, b, s, this) -> str:
         head += (f"; no default candidate reaches 2·ln LR {MIN_SEPARATION:g}: a longer "
                  "campaign (several of them together) is needed")
     return head
+
+
+#: Pairs a separating experiment is computed for (an ambiguous verdict's best against
+#: its first rivals): each costs two refits over the default candidate experiments.
+MAX_SEPARATED_PAIRS = 3
+
+
+def for_verdict(verdict, rounds, all_cands, say) -> list[dict]:
+    """:func:`separating` for the verdict's pairs (at most ``MAX_SEPARATED_PAIRS``)."""
+    from ._verdict import pairs_to_separate
+
+    pairs = pairs_to_separate(verdict, rounds, all_cands)[:MAX_SEPARATED_PAIRS]
+    out = []
+    for a, b in pairs:
+        say(f"  separating experiment for {a.key} vs {b.key} (hdid.design)")
+        out.append(separating(a, b))
+    return out
