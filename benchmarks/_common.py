@@ -103,7 +103,7 @@ def write_result(name: str, res, render, indent: int = 2) -> None:
     (RESULTS / f"{name}.md").write_text(render(res))
 
 
-def parse_or_render(ap, argv, name, render):
+def parse_or_render(ap, argv, name, render, indent: int = 2):
     """Parse ``argv`` with ``--render`` (re-write ``results/<name>.md`` from its JSON, nothing
     run) and ``--interpretation FILE`` (hand-written markdown stored in the JSON, rendered as
     its Interpretation section) added: the parsed arguments, or ``None`` after a render.
@@ -119,7 +119,7 @@ def parse_or_render(ap, argv, name, render):
     res = json.loads((RESULTS / f"{name}.json").read_text())
     if args.interpretation:
         res["interpretation"] = Path(args.interpretation).read_text().rstrip("\n")
-        write_result(name, res, render)
+        write_result(name, res, render, indent)
     (RESULTS / f"{name}.md").write_text(render(res))
     return None
 

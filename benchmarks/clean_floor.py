@@ -38,7 +38,7 @@ SEED_BASE = {"paper": 330000, "rich": 331000}
 
 
 def draw_plant(rng: np.random.Generator) -> ind.Plant:
-    """One broad plant (module docstring)."""
+    """One broad plant (the ranges: benchmarks/README.md)."""
     N, inertia = 100.0, 7e-7
     k1 = 940.0 * rng.uniform(0.6, 1.4)
     k2 = K2_CATALOG * rng.uniform(0.0, 2.0)
@@ -78,19 +78,12 @@ def fit_one(design: str, seed: int) -> dict:
         return row
     row["wall_s"] = time.perf_counter() - t0
     row["ratio"] = r.rms_residual_rad / r.quantization_floor_rad
-    row["values"] = r.values
-    lim = getattr(r, "limits", None)
-    row["limits"] = lim
-    row["restarted_from"] = getattr(r, "restarted_from", None)
-    row["n_warnings"] = len(r.warnings)
+    row.update(values=r.values, limits=getattr(r, "limits", None),
+               restarted_from=getattr(r, "restarted_from", None), n_warnings=len(r.warnings))
     return row
 
 
 OUT = RESULTS / f"{NAME}.json"
-
-
-def _load(path: Path) -> list[dict]:
-    return json.loads(path.read_text())["rows"] if path.exists() else []
 
 
 #: Rows at or below this ratio keep no truth or fitted values in the results file (the
@@ -164,7 +157,7 @@ def main(argv=None) -> int:
     ap.add_argument("--report", action="store_true", help="only rewrite the .md")
     a = ap.parse_args(argv)
     out = OUT
-    rows = _load(out)
+    rows = json.loads(out.read_text())["rows"] if out.exists() else []
     if a.report:
         _save(rows, out)
         return 0
@@ -172,8 +165,7 @@ def main(argv=None) -> int:
         rows = [r for r in rows if r.get("label") != a.label]
     import hdid
 
-    if hasattr(hdid, "configure"):
-        hdid.configure()
+    hdid.configure()
     head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=Path(hdid.__file__).parent,
                           capture_output=True, text=True).stdout.strip()
     lo, hi = (int(x) for x in a.seeds.split(":"))

@@ -16,7 +16,6 @@ import statistics
 import sys
 import time
 import traceback
-from pathlib import Path
 
 import _common
 from _common import RESULTS
@@ -288,36 +287,23 @@ def _verdict(r):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--paper-logs", type=int, default=20)
     ap.add_argument("--rich-logs", type=int, default=20)
     ap.add_argument("--seed0", type=int, default=34000)
-    ap.add_argument("--max-steps", type=int, default=20000)
-    ap.add_argument("--budget-min", type=float, default=600.0)
-    ap.add_argument("--out-dir", type=Path, default=RESULTS)
-    ap.add_argument("--name", default="posterior_sbc")
-    ap.add_argument("--render", type=Path)
-    ap.add_argument("--interpretation", type=Path, help="with --render: markdown stored in the JSON")
+    ap.add_argument("--max-steps", type=int, default=20000, help="emcee's chain length cap")
+    ap.add_argument("--budget-min", type=float, default=600.0, help="start no log after this")
+    ap.add_argument("--name", default="posterior_sbc", help="results/NAME.{json,md}")
     ap.add_argument("--method", default="emcee,smc",
                     help="samplers, comma-separated (each log's fit and optima shared)")
-    args = ap.parse_args(argv)
-    out_json = args.out_dir / f"{args.name}.json"
-    out_md = args.out_dir / f"{args.name}.md"
-    if args.render:
-        res = json.loads(args.render.read_text())
-        if args.interpretation:
-            res["interpretation"] = args.interpretation.read_text().rstrip("\n")
-            args.render.write_text(json.dumps(res, indent=1))
-        out_md.write_text(render(res))
+    args = _common.parse_or_render(ap, argv, lambda a: a.name, render, indent=1)
+    if args is None:
         return
-    import hdid
-
-    hdid.configure()  # float64 and the program cache, as the CLI
+    out_json, out_md = RESULTS / f"{args.name}.json", RESULTS / f"{args.name}.md"
     from hdid.reference import logs as gen
 
     res = {"generated": _dt.datetime.now().isoformat(timespec="seconds"), "load_start": _common.loads(),
-           "options": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()
-                       if k not in ("render", "out_dir")},
+           "options": {k: v for k, v in vars(args).items() if k != "render"},
            "logs": []}
     sched = []
     for i in range(max(args.paper_logs, args.rich_logs)):

@@ -89,11 +89,8 @@ def runs_from_dataframe(df) -> list[dict]:
 
 
 def guess_offsets(runs: Sequence[Mapping]) -> dict[str, float]:
-    """Crude per-set-up encoder offset: the midpoint between rest readings of opposite releases.
-
-    For a set-up whose runs all move the same way, the mean rest reading is used (error up to
-    the stick band's half-width).
-    """
+    """Crude per-set-up encoder offset: the midpoint between rest readings of opposite
+    releases (one direction only: their mean, off by up to the stick band's half-width)."""
     out: dict[str, float] = {}
     for setup in dict.fromkeys(str(r["setup"]) for r in runs):
         rs = [r for r in runs if str(r["setup"]) == setup]
@@ -118,22 +115,12 @@ DIFF_STEP = 1e-4
 
 def fit_scipy(runs: list[dict], x0: dict, inertia: float, ratio: float = 100.0, *,
               eps: float = 1e-4, max_nfev: int | None = 200) -> dict:
-    """Fit the free-motion model to all runs of a log with scipy only.
-
-    ``runs``: one dict per release with ``"time"`` [s] and ``"theta"`` [encoder rad] arrays,
-    ``"setup"``, and the starting guesses ``"t_release0"`` [s] and ``"theta0_enc"`` (the held
-    reading) [rad], as :func:`runs_from_dataframe` makes them. ``x0``: strictly positive
-    starting values of ``k1, k2, tau_c, tau_s, v_s, delta, c_v`` (fitted as logarithms;
-    bounds :data:`DEFAULT_BOUNDS`); the offsets start at :func:`guess_offsets`. Starts
-    should be "good": ``k1`` and ``tau_c`` within a few tens of percent (a wrong number of
-    reversals is a local minimum), release times within a sample. ``inertia`` [kg m²] is
-    fixed; ``eps`` is the ``tanh`` smoothing velocity [rad/s] (module docstring).
-
-    Returns ``params`` (fitted, and the fixed ``inertia``), ``runs`` (per run: ``t_release``,
-    physical ``theta0``, ``theta0_enc``), ``offsets`` (by set-up), ``nfev`` (residual
-    evaluations, Jacobian ones excluded), ``n_simulations`` (single-run ODE solves),
-    ``wall_s``, ``rms`` (rad) and ``success``.
-    """
+    """Fit the free-motion model to all ``runs`` of a log (:func:`runs_from_dataframe`) with
+    scipy only, from ``x0`` (positive ``k1, k2, tau_c, tau_s, v_s, delta, c_v``, fitted as
+    logarithms; ``k1`` and ``tau_c`` should be within a few tens of percent: a wrong number
+    of reversals is a local minimum), ``inertia`` [kg m²] fixed, ``eps`` the ``tanh``
+    smoothing velocity [rad/s]. Returns ``params``, ``runs`` (``t_release``, ``theta0``,
+    ``theta0_enc``), ``offsets``, ``nfev``, ``n_simulations``, ``wall_s``, ``rms`` [rad], ``success``."""
     t_start = time.perf_counter()
     missing = [n for n in PARAM_NAMES if n not in x0]
     if missing:
