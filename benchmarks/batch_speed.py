@@ -40,13 +40,12 @@ DESIGNS = {
 }
 
 
-def truth_of(i: int, gen=None) -> dict:
+def truth_of(i: int) -> dict:
     """The truth of log ``i`` (seed 1000+i)."""
     import numpy as np
 
-    gen = gen or logs
     rng = np.random.default_rng(1000 + i)
-    truth = dict(gen.TRUTH_CSF8)
+    truth = dict(logs.TRUTH_CSF8)
     for k in ("k1", "tau_c", "tau_s", "c_v"):
         truth[k] *= float(np.exp(rng.normal(0.0, 0.15)))
     truth["tau_s"] = max(truth["tau_s"], 1.2 * truth["tau_c"])
@@ -55,7 +54,6 @@ def truth_of(i: int, gen=None) -> dict:
 
 def make_logs(design: str, n: int, log_dir: Path) -> list[str]:
     """``n`` logs of a design (cached): truths around the CSF-8 values, seeds 1000+i."""
-    gen = logs
     amps, fs, duration = DESIGNS[design]
     d = log_dir / design.replace(" ", "_").replace(".", "p")
     d.mkdir(parents=True, exist_ok=True)
@@ -63,8 +61,7 @@ def make_logs(design: str, n: int, log_dir: Path) -> list[str]:
     for i in range(n):
         p = d / f"log{i:04d}.csv"
         if not p.exists():
-            truth = truth_of(i, gen)
-            df = gen.make_log(truth, amplitudes=amps, fs=fs, duration=duration, hold=0.04,
+            df = logs.make_log(truth_of(i), amplitudes=amps, fs=fs, duration=duration, hold=0.04,
                               offsets_by_setup={"A": 0.012, "B": -0.020}, seed=1000 + i)
             tmp = p.with_suffix(".tmp")
             df.to_csv(tmp, index=False)

@@ -159,14 +159,7 @@ FAMILY = {"ripple": "position-periodic", "kinematic_error": "position-periodic"}
 
 
 def _grade(r) -> str:
-    """``right``: adequate on nothing hidden; the hidden effect named alone; no confident
-    name for the outside effect (``unexplained``/``ambiguous``/``adequate``, or a stand-in
-    that truly brings the residual to the floor). ``honest``: not the truth's name but
-    nothing false claimed — ``adequate`` where the base model is already at the floor
-    (RMS ≤ 1.3×: the log cannot show the effect), ``ambiguous`` between candidates that
-    include the truth, or its look-alike of the same family named with the tie noted.
-    ``wrong``: anything else (a false alarm, a confident wrong name, ``unexplained`` for a
-    library effect that a candidate fixes, a missed detectable effect)."""
+    """``right`` / ``honest`` / ``wrong``, as the result's preamble (``render``) defines them."""
     v, named, exp = r["verdict"], r["named"], r["expected"]
     if r["hidden"] == "none":
         return "right" if v == "adequate" else "wrong"

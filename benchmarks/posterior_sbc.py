@@ -94,68 +94,55 @@ def draw_log(gen, design_name, seed):
 
 
 def run_one(gen, design_name, seed, max_steps, method="emcee,smc"):
+    """One log: fit once, seek its optima once, then each sampler of ``method`` from them."""
+    import numpy as np
+
     import hdid
+    from hdid._posterior.density import posterior_density
+    from hdid._posterior.modes import sampled_modes
 
     truth, df, info, notes = draw_log(gen, design_name, seed)
     design = gen.RICH_DESIGN if design_name == "rich" else gen.PAPER_DESIGN
     prior = nominal_default_prior(gen, design_name, design)
-    out = {"design": design_name, "seed": seed, "truth_params": truth, "load_start": _common.loads(),
-           "prior": "default", "band_rejects": notes["band_rejects"], "truth_notes": notes}
+    base = {"design": design_name, "seed": seed, "truth_params": truth, "load_start": _common.loads(),
+            "prior": "default", "band_rejects": notes["band_rejects"], "truth_notes": notes}
     t0 = time.perf_counter()
     fit = hdid.fit(df, inertia=truth["inertia"])
-    out["fit_s"] = time.perf_counter() - t0
-    # the optima are sought once and given to every sampler (same start for all)
-    from hdid._posterior.density import posterior_density
-    from hdid._posterior.modes import sampled_modes
-
+    base["fit_s"] = time.perf_counter() - t0
     t1 = time.perf_counter()
     dens = posterior_density(fit, prior=prior)
     modes = sampled_modes(fit, "auto", seed % 1000, dens.u_fit, dens.lin, dens.lp.gauss_prior)
-    shared_modes_s = time.perf_counter() - t1
-    outs = []
-    for m in method.split(","):
-        o = dict(out)
-        o["load_start"] = _common.loads()
-        outs.append(_sample_one(hdid, fit, modes, shared_modes_s, m, seed, max_steps, prior,
-                                truth, info, o, t0))
-    return outs
-
-
-def _sample_one(hdid, fit, modes, modes_s, method, seed, max_steps, prior, truth, info, out,
-                t0):
-    import numpy as np
-
-    t1 = time.perf_counter()
-    kw = {} if method == "smc" else {"max_steps": max_steps}
-    post = hdid.sample_posterior(fit, seed=seed % 1000, method=method, prior=prior,
-                                 modes=modes, **kw)
-    out["posterior_s"] = time.perf_counter() - t1 + modes_s
-    out["load_end"] = _common.loads()
-    diag = post.to_dict()["posterior_diagnostics"]
-    out.update(steps=int(post.chain.shape[0]), converged=bool(post.converged),
-               rhat_max=diag["convergence"]["rhat_max"],
-               met_by=diag["convergence"].get("met_by"),
-               ess_bulk_min=diag["convergence"]["ess_bulk_min"],
-               ess_tail_min=diag["convergence"]["ess_tail_min"],
-               tau_max=diag["tau_max"], compile_s=post.compile_s, stage_s=post.stage_s,
-               mode_search_s=modes_s, n_modes=len(post.modes),
-               move_acceptance=diag["move_acceptance"], warnings=list(post.warnings),
-               widths=post.to_dict()["posterior_width"], method=post.method,
-               smc={k: v for k, v in post.smc.items() if k != "betas"})
+    modes_s = time.perf_counter() - t1
     tv = {n: float(truth[n]) for n in REPORTED if n in truth}
     tv["stick_band_halfwidth_rad"] = float(info["stick_band_halfwidth"])
-    values = {**post.samples, **post.derived}
-    summ = post.summary()
-    q = {}
-    for n in REPORTED:
-        v, s, tr = np.asarray(values[n]), summ[n], tv[n]
-        q[n] = {"truth": tr, "median": s["median"], "ci95": s["ci95"], "ci68": s["ci68"],
-                "cover95": bool(s["ci95"][0] <= tr <= s["ci95"][1]),
-                "cover68": bool(s["ci68"][0] <= tr <= s["ci68"][1]),
-                "rank": float(np.mean(v < tr)), "n_draws": int(v.size)}
-    out["quantities"] = q
-    out["total_s"] = time.perf_counter() - t0
-    return out
+    outs = []
+    for m in method.split(","):
+        out = dict(base, load_start=_common.loads())
+        t1 = time.perf_counter()
+        kw = {} if m == "smc" else {"max_steps": max_steps}
+        post = hdid.sample_posterior(fit, seed=seed % 1000, method=m, prior=prior, modes=modes, **kw)
+        out["posterior_s"] = time.perf_counter() - t1 + modes_s
+        out["load_end"] = _common.loads()
+        diag = post.to_dict()["posterior_diagnostics"]
+        out.update(steps=int(post.chain.shape[0]), converged=bool(post.converged),
+                   rhat_max=diag["convergence"]["rhat_max"],
+                   met_by=diag["convergence"].get("met_by"),
+                   ess_bulk_min=diag["convergence"]["ess_bulk_min"],
+                   ess_tail_min=diag["convergence"]["ess_tail_min"],
+                   tau_max=diag["tau_max"], compile_s=post.compile_s, stage_s=post.stage_s,
+                   mode_search_s=modes_s, n_modes=len(post.modes),
+                   move_acceptance=diag["move_acceptance"], warnings=list(post.warnings),
+                   widths=post.to_dict()["posterior_width"], method=post.method,
+                   smc={k: v for k, v in post.smc.items() if k != "betas"})
+        values, summ, q = {**post.samples, **post.derived}, post.summary(), {}
+        for n in REPORTED:
+            v, s, tr = np.asarray(values[n]), summ[n], tv[n]
+            q[n] = {"truth": tr, "median": s["median"], "ci95": s["ci95"], "ci68": s["ci68"],
+                    "cover95": bool(s["ci95"][0] <= tr <= s["ci95"][1]),
+                    "cover68": bool(s["ci68"][0] <= tr <= s["ci68"][1]),
+                    "rank": float(np.mean(v < tr)), "n_draws": int(v.size)}
+        outs.append(out | {"quantities": q, "total_s": time.perf_counter() - t0})
+    return outs
 
 
 def _wilson(k, n, z=1.959963984540054):
@@ -177,11 +164,8 @@ def _steps(r):
 
 
 def render(res):
-    methods = []
-    for r in res["logs"]:
-        m = r.get("method") or res["options"].get("method", "emcee")
-        if m not in methods:
-            methods.append(m)
+    methods = list(dict.fromkeys(r.get("method") or res["options"].get("method", "emcee")
+                                 for r in res["logs"]))
     if len(methods) <= 1:
         return _render(res, res["logs"])
     head = (f"# Posterior calibration, samplers side by side: {', '.join(methods)}\n\n"
@@ -211,10 +195,9 @@ def _render(res, all_logs, method=None):
     L.append(f"**Converged (bulk/tail ESS ≥ 400 and R-hat ≤ 1.01 or a chain ≥ 50 τ, on every "
              f"sampled quantity and the band): {len(conv)} of {len(logs)}** (by R-hat "
              f"{by_rule['R-hat']}, by 50 τ {by_rule['50 tau']}).\n")
-    L.append("## Coverage of the central intervals (truth inside)\n")
-    L.append("| quantity | 95 % paper | 95 % rich | 95 % pooled [Wilson 95 %] | 68 % pooled |")
-    L.append("|---|---|---|---|---|")
-    tot = {"k": 0, "n": 0}
+    L += ["## Coverage of the central intervals (truth inside)\n",
+          "| quantity | 95 % paper | 95 % rich | 95 % pooled [Wilson 95 %] | 68 % pooled |", "|---|---|---|---|---|"]
+    tot_k = tot_n = 0
     for n in REPORTED:
         cells = []
         for des in ("paper", "rich"):
@@ -225,14 +208,13 @@ def _render(res, all_logs, method=None):
         k68 = sum(r["quantities"][n]["cover68"] for r in logs)
         lo, hi = _wilson(k, len(logs))
         if n in CHECKED:
-            tot["k"] += k
-            tot["n"] += len(logs)
+            tot_k, tot_n = tot_k + k, tot_n + len(logs)
         L.append(f"| {n}{'' if n in CHECKED else ' (not in the pooled figure)'} | {cells[0]} | "
                  f"{cells[1]} | {k}/{len(logs)} = {k / len(logs):.0%} [{lo:.0%}, {hi:.0%}] | "
                  f"{k68 / len(logs):.0%} |")
-    lo, hi = _wilson(tot["k"], tot["n"])
+    lo, hi = _wilson(tot_k, tot_n)
     L.append(f"\nPooled 95 % coverage over k1, k2, tau_c, tau_s, c_v and the band: "
-             f"{tot['k']}/{tot['n']} = {tot['k'] / tot['n']:.1%} [{lo:.1%}, {hi:.1%}].\n")
+             f"{tot_k}/{tot_n} = {tot_k / tot_n:.1%} [{lo:.1%}, {hi:.1%}].\n")
     for des in ("paper", "rich", None):
         rs = [r for r in conv if des in (None, r["design"])]
         k = sum(r["quantities"][n]["cover95"] for r in rs for n in CHECKED)
@@ -242,9 +224,8 @@ def _render(res, all_logs, method=None):
                      f"= {k / (len(rs) * len(CHECKED)):.1%} [{lo:.1%}, {hi:.1%}].")
     basin = sum(any(w.startswith("WRONG BASIN") for w in r.get("warnings", [])) for r in logs)
     L.append(f"\nLogs with the WRONG BASIN statement: {basin} of {len(logs)}.\n")
-    L.append(f"## Rank of the truth among the draws ({BINS} bins, counts; uniform if calibrated)\n")
-    L.append("| quantity | " + " | ".join(f"{i / BINS:.1f}" for i in range(BINS)) + " |")
-    L.append("|---|" + "---|" * BINS)
+    L += [f"## Rank of the truth among the draws ({BINS} bins, counts; uniform if calibrated)\n",
+          "| quantity | " + " | ".join(f"{i / BINS:.1f}" for i in range(BINS)) + " |", "|---|" + "---|" * BINS]
     for n in REPORTED:
         h = [0] * BINS
         for r in logs:
@@ -255,20 +236,20 @@ def _render(res, all_logs, method=None):
         for n, w in (r.get("widths") or {}).items():
             wr.setdefault(n, []).append(w["posterior_over_prior_width"])
     if wr:
-        L.append("\n## What the data narrowed: posterior sd / prior sd (transformed space)\n")
-        L.append("Median over the logs [min, max]; ≤ 0.71 'measured' (the data carry at least "
-                 "half the precision), > 0.89 'assumed' (the prior sets the interval).\n")
-        L.append("| parameter | median | min | max |")
-        L.append("|---|---|---|---|")
+        L += ["\n## What the data narrowed: posterior sd / prior sd (transformed space)\n",
+              "Median over the logs [min, max]; ≤ 0.71 'measured' (the data carry at least "
+              "half the precision), > 0.89 'assumed' (the prior sets the interval).\n",
+              "| parameter | median | min | max |", "|---|---|---|---|"]
         for n, v in wr.items():
             L.append(f"| {n} | {statistics.median(v):.2f} | {min(v):.2f} | {max(v):.2f} |")
-    L.append("\n## Convergence and time per log\n")
-    L.append("| design | seed | converged | steps | R-hat max | ESS bulk min | ESS tail min | "
-             "fit s | posterior s (compile, mode search) | load start → end | misses (95 %) |")
-    L.append("|---|---|---|---|---|---|---|---|---|---|---|")
+    L += ["\n## Convergence and time per log\n",
+          "| design | seed | converged | steps | R-hat max | ESS bulk min | ESS tail min | "
+          "fit s | posterior s (compile, mode search) | load start → end | misses (95 %) |",
+          "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in logs:
         miss = [n for n in REPORTED if not r["quantities"][n]["cover95"]]
-        L.append(f"| {r['design']} | {r['seed']} | {_verdict(r)} | "
+        conv_ = f"yes ({r['met_by']})" if r["converged"] else "NO"
+        L.append(f"| {r['design']} | {r['seed']} | {conv_} | "
                  f"{_steps(r)} | {r['rhat_max']:.3f} | {r['ess_bulk_min']:.0f} | "
                  f"{r['ess_tail_min']:.0f} | {r['fit_s']:.0f} | {r['posterior_s']:.0f} "
                  f"({r['compile_s']:.1f}, {r['mode_search_s']:.0f}) | {r['load_start'][0]} → "
@@ -279,11 +260,6 @@ def _render(res, all_logs, method=None):
             L.append(f"\nMedian `sample_posterior` time, {des}: {statistics.median(ts):.0f} s "
                      f"(one core of a shared 2-core machine, see loads).")
     return "\n".join(L) + "\n"
-
-
-def _verdict(r):
-    """yes (the rule that passed: R-hat or 50 tau) or NO."""
-    return f"yes ({r['met_by']})" if r["converged"] else "NO"
 
 
 def main(argv=None):
