@@ -63,12 +63,10 @@ def main(argv=None) -> int:
     res["report"] = d.report()
     res["ranking"] = [{"candidate": d.predictions[i].experiment.name, "score_ratio": math.exp(s)
                        if math.isfinite(s) else None} for i, s in d.ranking]
-    best = d.best
+    best, keys = d.best, ("tau_c", "tau_s", "v_s", "stick_band_halfwidth_rad")
     res["top"] = {"name": best.experiment.name, "describe": best.experiment.describe(),
-                  "std": {k: _rank.std_of(best, k) for k in ("tau_c", "tau_s", "v_s",
-                                                            "stick_band_halfwidth_rad")},
-                  "std_this_log": {k: _rank.std_of(d.current, k) for k in
-                                   ("tau_c", "tau_s", "v_s", "stick_band_halfwidth_rad")},
+                  "std": {k: _rank.std_of(best, k) for k in keys},
+                  "std_this_log": {k: _rank.std_of(d.current, k) for k in keys},
                   "linearisation": best.honesty}
     res["checks"] = []
     for p in (best, d.current):

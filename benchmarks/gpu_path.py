@@ -137,11 +137,10 @@ def render(results: dict) -> str:
                  f"x64 {m['x64']}, src {m['src_fingerprint']}, load {m['load_start']:.1f} → "
                  f"{r.get('load_end', float('nan')):.1f}.")
     L += ["", "## 1. Fit of the shipped paper log", "",
-          "| | " + " | ".join(t for t, _ in cols) + " |",
-          "|---|" + "---|" * len(cols)]
-    L.append("| first call (compile) | " + " | ".join(f"{r['fit']['first_s']:.1f} s" for _, r in cols) + " |")
-    L.append("| warm call | " + " | ".join(f"{r['fit']['warm_s']:.2f} s" for _, r in cols) + " |")
-    L.append("| cost | " + " | ".join(f"{r['fit']['cost']:.6f}" for _, r in cols) + " |")
+          "| | " + " | ".join(t for t, _ in cols) + " |", "|---|" + "---|" * len(cols),
+          "| first call (compile) | " + " | ".join(f"{r['fit']['first_s']:.1f} s" for _, r in cols) + " |",
+          "| warm call | " + " | ".join(f"{r['fit']['warm_s']:.2f} s" for _, r in cols) + " |",
+          "| cost | " + " | ".join(f"{r['fit']['cost']:.6f}" for _, r in cols) + " |"]
     for k in PARAMS:
         L.append(f"| {k} | " + " | ".join(f"{r['fit']['params'][k]:.10g}" for _, r in cols) + " |")
     if gpu and "max_rel_diff_vs_reference" in gpu["fit"]:

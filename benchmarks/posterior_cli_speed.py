@@ -39,7 +39,8 @@ def run_cli(sampler, log, out, timeout):
     wall = time.perf_counter() - t0
     r = {"process_s": wall, "rc": rc, "load_start": la0, "load_end": _common.loads()}
     if rc == 0:
-        d = json.loads(Path(out).read_text())["posterior_diagnostics"]
+        full = json.loads(Path(out).read_text())
+        d = full["posterior_diagnostics"]
         conv = d.get("convergence") or {}
         r.update(posterior_s=d["wall_time_s"], compile_s=d.get("compile_s"),
                  mode_search_s=d.get("mode_search_s"), converged=d["converged"],
@@ -49,7 +50,7 @@ def run_cli(sampler, log, out, timeout):
                  chain_in_tau=d.get("chain_in_tau_max"), rhat_max=conv.get("rhat_max"),
                  ess_bulk_min=conv.get("ess_bulk_min"), ess_tail_min=conv.get("ess_tail_min"),
                  met_by=conv.get("met_by"),
-                 band95=json.loads(Path(out).read_text())["posterior"]["stick_band_halfwidth_rad"]["ci95"])
+                 band95=full["posterior"]["stick_band_halfwidth_rad"]["ci95"])
     else:
         r["stderr"] = err
     return r
