@@ -122,8 +122,12 @@ STALE_DAYS = 7.0
 
 def _store() -> Path | None:
     """The store's folder for this source and JAX (``<cache>/programs/<salt>``), or
-    ``None`` (``HDID_NO_CACHE=1`` or ``HDID_PROGRAM_STORE=0``)."""
+    ``None`` (``HDID_NO_CACHE=1``, ``HDID_PROGRAM_STORE=0``, or a process whose JAX
+    persistent compilation cache is off: without :func:`hdid.configure` the library
+    writes nothing to disk, and a stored program would be compiled again anyway)."""
     if os.environ.get("HDID_NO_CACHE") or os.environ.get("HDID_PROGRAM_STORE") == "0":
+        return None
+    if jax.config.jax_compilation_cache_dir is None:
         return None
     root = _config._cache_dir() / "programs"
     path = root / _salt()[:16]
