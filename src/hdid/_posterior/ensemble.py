@@ -25,7 +25,7 @@ from .diagnostics import (
     width_ratios,
 )
 from .limits import assess_limits, limit_proposal_weights, limit_shares
-from .modes import found_limits, sampled_modes
+from .modes import found_limits, mode_shares, sampled_modes
 from .moves import (
     START_SCALE,
     MixtureProposal,
@@ -227,17 +227,12 @@ class _Ensemble:
         found, D, out = self.found, self.D, []
         # Share of the kept draws in each mode: the mode whose (weighted) Laplace density is
         # highest at the draw (the adapted mixture's components drift, so not those).
-        comp = np.argmax(self.start_mix.component_logpdf(chain_s.reshape(-1, D)), axis=1)
-        share = np.bincount(comp, minlength=len(found)) / comp.size
-        optima = [i for i, m in enumerate(found) if m.kind == "optimum"]
-        if len(optima) > 1:
-            out.append(
-                f"MULTIMODAL: {len(optima)} separate optima of the fit's cost (Laplace weights "
-                + ", ".join(f"{found[i].weight:.2f}" for i in optima)
-                + "; share of the draws " + ", ".join(f"{share[i]:.2f}" for i in optima)
-                + "); the walkers started in all of them and the independence move lets them "
-                "change mode — see `modes` for their parameters"
-            )
+        share, multi = mode_shares(found, self.start_mix, chain_s.reshape(-1, D), "draws",
+                                   "the walkers started in all of them and the independence "
+                                   "move lets them change mode — see `modes` for their "
+                                   "parameters")
+        if multi:
+            out.append(multi)
         # A chain that climbs well above the best mode found has found yet another one.
         lp = self.lp
         grid = np.linspace(self.log_lo, max(self.log_rms, self.log_lo + math.log(2.0)) + 1.0, 25)

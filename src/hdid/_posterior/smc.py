@@ -330,6 +330,7 @@ def sample_smc(fit, *, n_particles: int = N_PARTICLES, n_runs: int = N_RUNS,
     from .density import PRIOR_HALF_WIDTH, derived_np, to_physical
     from .diagnostics import width_ratios
     from .limits import assess_limits, limit_shares
+    from .modes import mode_shares
     from .result import BAND, _RunNames
     from .result import PosteriorResult
 
@@ -404,15 +405,10 @@ def sample_smc(fit, *, n_particles: int = N_PARTICLES, n_runs: int = N_RUNS,
     phys = {n: phys[n] for n in values}
     der = derived_np(prob, U)
     der["noise_sigma_rad"] = np.exp(U[:, -1])
-    comp = np.argmax(ref.component_logpdf(C.reshape(-1, D)), axis=1)
-    share = np.bincount(comp, minlength=len(found)) / comp.size
-    optima = [i for i, m in enumerate(found) if m.kind == "optimum"]
-    if len(optima) > 1:
-        warnings.append(
-            f"MULTIMODAL: {len(optima)} separate optima of the fit's cost (Laplace weights "
-            + ", ".join(f"{found[i].weight:.2f}" for i in optima)
-            + "; share of the particles " + ", ".join(f"{share[i]:.2f}" for i in optima)
-            + "); SMC weighs them by their posterior mass — see `modes`")
+    share, multi = mode_shares(found, ref, C.reshape(-1, D), "particles",
+                               "SMC weighs them by their posterior mass — see `modes`")
+    if multi:
+        warnings.append(multi)
     q = float(prob.step)
     log_lo = math.log(lp.sigma_bounds[0] * q)
     warnings += assess_limits(
