@@ -1,21 +1,11 @@
-"""Fit speed: cold ``hdid fit`` CLI, warm in-process ``hdid.fit`` and the scipy way, side by side.
+"""Fit speed: cold ``hdid fit`` CLI, warm in-process ``hdid.fit`` and the scipy way, side by side,
+and both fits' accuracy against the exact reference; ``--profile``: where a warm fit's time
+goes, per tree; ``--cold``: the cold command alone, per tree.
 
     python benchmarks/fit_speed.py [--quick]     # ≈ 5 min on 2 busy cores (--quick ≈ 2)
     python benchmarks/fit_speed.py --render      # results/fit_speed.md from its JSON
     python benchmarks/fit_speed.py --profile [--before TREE]   # ≈ 3 min (+ 3 with TREE)
     python benchmarks/fit_speed.py --cold N [--before TREE]    # the cold command alone
-
-``--profile``: where a warm ``hdid.fit`` of the shipped paper log spends its time, pinned
-to one core in a subprocess per tree (``--before``: a checkout of an older commit, run
-alternately with this one in the same run; the ratio is the robust figure on a shared
-machine), with the load recorded; the other sections of the result are kept as they were.
-
-On ``data/synthetic/csf8_paper.csv`` and 3 more paper-design logs: (1) the cold CLI as a
-subprocess with an empty compilation cache (``HDID_CACHE_DIR=<tmp>``), then populated, and
-the imports alone; (2) the warm ``hdid.fit`` in-process, after a warm-up, also with
-``n_starts=1``; (3) ``scipy_way.fit_scipy`` from the CSF-8 catalog values (a more generous
-start than hdid's data-driven grid); (4) both fits re-simulated with the exact reference
-(:func:`hdid.reference.reference_trajectory`) against the readings.
 """
 
 from __future__ import annotations
@@ -23,7 +13,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import resource
 import shutil
 import statistics
@@ -66,13 +55,18 @@ def _timed(cmd, env, cpu_out=None):
     return dt
 
 
+def _hdid() -> str:
+    """The ``hdid`` command of this environment."""
+    return shutil.which("hdid", path=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
+
+
 def _cache_stats(path: Path):
     files = [f for f in path.rglob("*") if f.is_file()]
     return {"files": len(files), "bytes": sum(f.stat().st_size for f in files)}
 
 
 def bench_cli(cache: Path, reps: dict) -> dict:
-    hdid = shutil.which("hdid", path=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
+    hdid = _hdid()
     env = {k: v for k, v in os.environ.items() if k != "HDID_NO_CACHE"} | {"HDID_CACHE_DIR": str(cache)}
     fit_cmd = [hdid, "fit", str(LOG), "-q", "--json", str(cache.parent / "fit_out.json")]
     res = {"command": "hdid fit data/synthetic/csf8_paper.csv -q --json OUT",
@@ -414,7 +408,8 @@ def child_profile(reps: int) -> dict:
 
 def bench_profile(trees: dict, reps: int, rounds: int) -> dict:
     """:func:`child_profile` in a fresh process per tree, pinned to one core, the trees
-    alternating for ``rounds`` rounds; load (``uptime``) recorded around each."""
+    alternating for ``rounds`` rounds; load (``uptime``) recorded around each (the cold
+    command per tree: :func:`bench_cold`)."""
     res = {"trees": {}, "rounds": [], "core": 1, "reps": reps}
     for k in range(rounds):
         for label, src in trees.items():
@@ -430,18 +425,6 @@ def bench_profile(trees: dict, reps: int, rounds: int) -> dict:
             res["rounds"].append({"tree": label, **got})
             print(f"  {label} round {k}: " + ", ".join(f"{r['wall_s'] * 1e3:.0f}" for r in got["rows"])
                   + f" ms (load {before['load1']:.1f})", flush=True)
-    hdid = shutil.which("hdid", path=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
-    cli = {label: {"wall": [], "cpu": [], "load": []} for label in trees}
-    for k in range(rounds + 1):  # the cold CLI (fresh process, the persistent cache warm)
-        for label, src in trees.items():
-            env = os.environ | {"PYTHONPATH": str(src)}
-            cpu = []
-            cmd = ["taskset", "-c", "1", hdid, "fit", str(LOG), "-q"]
-            wall = _timed(cmd, env, cpu)
-            if k:  # (round 0 fills the program store of that tree's source)
-                cli[label]["wall"].append(wall)
-                cli[label]["cpu"].append(cpu[0])
-                cli[label]["load"].append(os.getloadavg()[0])
     for label in trees:
         rows = [r for x in res["rounds"] if x["tree"] == label for r in x["rows"]]
         res["trees"][label] = {
@@ -449,9 +432,7 @@ def bench_profile(trees: dict, reps: int, rounds: int) -> dict:
             "cpu_s": _stats(r["cpu_s"] for r in rows),
             "phases_s": {ph: statistics.median(r["phases"].get(ph, 0.0) for r in rows) for ph in PHASES},
             "nested_false_s": statistics.median(x["nested_false_s"] for x in res["rounds"]
-                                                if x["tree"] == label),
-            "cold_cli_s": _stats(cli[label]["wall"]), "cold_cli_cpu_s": _stats(cli[label]["cpu"]),
-            "cold_cli_load": cli[label]["load"]}
+                                                if x["tree"] == label)}
     return res
 
 
@@ -463,7 +444,7 @@ def bench_cold(trees: dict, rounds: int) -> dict:
     (``wall_time_s`` left out) are the same for every tree."""
     import re
 
-    hdid = shutil.which("hdid", path=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
+    hdid = _hdid()
     out = {label: {"wall": [], "cpu": [], "load": [], "empty": None} for label in trees}
     same = {}
     with tempfile.TemporaryDirectory(prefix="hdid_cold_") as tmpd:
@@ -559,15 +540,6 @@ def render_profile(pr: dict) -> list[str]:
     return L + [""]
 
 
-def _machine() -> dict:
-    import importlib
-
-    return {"date": time.strftime("%Y-%m-%dT%H:%M:%S"), "nproc": os.cpu_count(),
-            "cpu": _common.cpu_model(), "python": platform.python_version(), "platform": platform.platform(),
-            **{m: importlib.import_module(m).__version__
-               for m in ("jax", "jaxlib", "numpy", "scipy", "equinox", "optimistix", "hdid")}}
-
-
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="fewer repetitions (≈ 2 min)")
@@ -583,23 +555,16 @@ def main(argv=None) -> None:
     if args.child:
         print(json.dumps(child_profile(args.child)))
         return
-    if args.cold:
+    if args.cold or args.profile:  # one section re-measured, the others kept
         trees = {"before": args.before.resolve() / "src"} if args.before else {}
         trees["now"] = ROOT / "src"
         res = json.loads((_common.RESULTS / f"{NAME}.json").read_text())
-        res["cold"] = bench_cold(trees, args.cold) | {"date": time.strftime("%Y-%m-%d %H:%M")}
+        key = "cold" if args.cold else "profile"
+        res[key] = (bench_cold(trees, args.cold) if args.cold else
+                    bench_profile(trees, reps=5, rounds=2 if args.before else 1)) | {
+            "date": time.strftime("%Y-%m-%d %H:%M"), "src_fingerprint": _common.src_fingerprint()}
         _common.write_result(NAME, res, render)
-        print("\n".join(render_cold(res["cold"])))
-        return
-    if args.profile:
-        trees = {"before": args.before.resolve() / "src"} if args.before else {}
-        trees["now"] = ROOT / "src"
-        res = json.loads((_common.RESULTS / f"{NAME}.json").read_text())
-        res["profile"] = bench_profile(trees, reps=5, rounds=2 if args.before else 1)
-        res["profile"] |= {"date": time.strftime("%Y-%m-%d %H:%M"),
-                           "src_fingerprint": _common.src_fingerprint()}
-        _common.write_result(NAME, res, render)
-        print("\n".join(render_profile(res["profile"])))
+        print("\n".join((render_cold if args.cold else render_profile)(res[key])))
         return
     t_script = time.perf_counter()
     reps = (dict(cold=1, cli=2, small=3, warm=5, warm_n1=5, scipy=1, scipy_logs=1) if args.quick
@@ -628,7 +593,7 @@ def main(argv=None) -> None:
             if i < len(res["scipy"]["per_log"]):
                 entry["scipy way"] = judge(log, res["scipy"]["per_log"][i]["result"])
             res["accuracy"].append(entry)
-        res |= {"machine": _machine(), "load_end": load("script end"), "cache_at_end": _cache_stats(cache)}
+        res |= {"machine": _common.machine(), "load_end": load("script end"), "cache_at_end": _cache_stats(cache)}
     res |= {"src_fingerprint_end": _common.src_fingerprint(), "script_s": time.perf_counter() - t_script}
     res["notes"] = _notes(res)
     _common.write_result(NAME, res, render)
