@@ -424,3 +424,15 @@ def posterior_density(fit, sigma_floor=None, linear_prior=None,
                       gauss_prior=None if G is None else jnp.asarray(G),
                       order=None if order is None else jnp.asarray(order))
     return PosteriorDensity(lp, warnings, temper, rho1, lin, bounds, u_fit)
+
+
+def physical_draws(problem: Problem, model, phys: dict, U: np.ndarray):
+    """The draws ``U`` (rows of the fit's unknowns + log σ_n) as the result holds them:
+    every parameter of ``model`` by name in physical units (``phys``, from
+    :func:`to_physical`; a fixed one at its constant value, so every name is present), and
+    the derived quantities with the noise scale ``noise_sigma_rad``."""
+    values = model.float_values()
+    phys = {n: phys[n] if n in phys else np.full(U.shape[0], values[n]) for n in values}
+    der = derived_np(problem, U)
+    der["noise_sigma_rad"] = np.exp(U[:, -1])
+    return phys, der

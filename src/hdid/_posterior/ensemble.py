@@ -12,6 +12,7 @@ from .._fitting._identifiability import unknown_labels
 from .density import (
     PRIOR_HALF_WIDTH,
     derived_np,
+    physical_draws,
     posterior_density,
     to_physical,
 )
@@ -268,14 +269,7 @@ class _Ensemble:
                                   [m.u for m in self.found if m.kind == "optimum"] or [self.u_fit],
                                   self.log_prob, (self.log_lo, self.log_rms), phys, fit.values,
                                   limit_shares(self.found, share))
-        # Fixed parameters appear with their constant value so every name is present.
-        values = fit.model.float_values()
-        for n in values:
-            if n not in phys:
-                phys[n] = np.full(draws.shape[0], values[n])
-        phys = {n: phys[n] for n in values}
-        der = derived_np(prob, draws)
-        der["noise_sigma_rad"] = np.exp(draws[:, -1])
+        phys, der = physical_draws(prob, fit.model, phys, draws)
         widths = width_ratios(prob, chain.reshape(-1, D), self.u_fit, PRIOR_HALF_WIDTH, self.lin,
                               lp.gauss_prior)
         return PosteriorResult(

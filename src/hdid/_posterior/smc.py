@@ -327,7 +327,7 @@ def sample_smc(fit, *, n_particles: int = N_PARTICLES, n_runs: int = N_RUNS,
     """Tempered SMC posterior of ``fit`` (see the module docstring); a
     :class:`PosteriorResult` whose ``chain`` is ``(n_particles, n_runs, D)``."""
     from .._fitting._identifiability import unknown_labels
-    from .density import PRIOR_HALF_WIDTH, derived_np, to_physical
+    from .density import PRIOR_HALF_WIDTH, physical_draws, to_physical
     from .diagnostics import width_ratios
     from .limits import assess_limits, limit_shares
     from .modes import mode_shares
@@ -398,13 +398,7 @@ def sample_smc(fit, *, n_particles: int = N_PARTICLES, n_runs: int = N_RUNS,
     U = lp.from_sampled_np(C.reshape(-1, D))
     chain = U.reshape(C.shape)
     phys = to_physical(prob, U)
-    values = fit.model.float_values()
-    for n in values:
-        if n not in phys:
-            phys[n] = np.full(U.shape[0], values[n])
-    phys = {n: phys[n] for n in values}
-    der = derived_np(prob, U)
-    der["noise_sigma_rad"] = np.exp(U[:, -1])
+    phys, der = physical_draws(prob, fit.model, phys, U)
     share, multi = mode_shares(found, ref, C.reshape(-1, D), "particles",
                                "SMC weighs them by their posterior mass — see `modes`")
     if multi:
