@@ -1,9 +1,13 @@
-"""``hdid diagnose`` on a hidden-effect suite whose plants, designs and effect sizes are drawn
-per log (never tuned on): verdicts graded right / honest / wrong, confusion per design;
-``--floor-rule``: the stored logs the floor-level rule can change, diagnosed again.
+"""``hdid diagnose`` on hidden-effect suites, verdicts graded right / honest / wrong with the
+confusion per design: plants, designs and effect sizes drawn per log (never tuned on);
+``--fixed-plant``: the shipped plant with each effect hidden in turn (``--removed``: a base
+piece switched off in the model instead); ``--floor-rule``: the stored logs the floor-level
+rule can change, diagnosed again. All three are sections of one result.
 
-    taskset -c 1 python benchmarks/diagnose_independent.py [rich|paper ...] [--per N] [--render]
-    taskset -c 1 python benchmarks/diagnose_independent.py --floor-rule [--seeds 8801,9803] [--render]
+    taskset -c 1 python benchmarks/diagnose_independent.py [rich|paper ...] [--per N]
+    taskset -c 1 python benchmarks/diagnose_independent.py --fixed-plant [--removed] [rich|paper ...]
+    taskset -c 1 python benchmarks/diagnose_independent.py --floor-rule [--seeds 8801,9803]
+    python benchmarks/diagnose_independent.py --render
 """
 
 from __future__ import annotations
@@ -20,12 +24,19 @@ from _common import RESULTS, Clock, load_text, parse_or_render, run_meta, write_
 from hdid.reference import logs
 
 NAME = "diagnose_independent"
-FLOOR_RULE = "diagnose_independent_floor_rule"  # the --floor-rule mode's result
 HIDDEN = ("none", "backlash", "hysteresis", "asymmetric_friction", "load_friction", "ripple",
           "soft_windup", "kinematic_error", "quadratic_drag")
 N = 100.0
 SAMPLES = 300  # per run, rich design (hold 40 samples): the calibration's rich shape
 SEED0 = {"rich": 8800, "paper": 9800}
+#: ``--fixed-plant``: the shipped plant (``logs.TRUTH_CSF8``) with each effect at its
+#: ``logs.HIDDEN`` size; seeds 7100+ (7500+ with ``--removed``). The rich design's smallest
+#: release is 0.07 rad, not the shipped rich log's 0.05: with a hidden 0.02 rad dead zone
+#: (or load-dependent friction) a 0.05 rad release does not overcome static friction.
+FIXED_SEED0 = {"rich": 7100, "paper": 7200}
+RICH = dict(amplitudes=[0.157, -0.157, 0.13, -0.13, 0.10, -0.10, 0.07, -0.07], fs=1000.0,
+            duration=0.3, hold=0.04, offsets_by_setup={"A": 0.005})
+REMOVED = ("viscous", "stribeck", "stiffness")  # nothing hidden, the model lacks the piece
 
 
 def draw(design: str, seed: int) -> tuple[dict, dict]:
@@ -99,31 +110,44 @@ def make_log(truth: dict, des: dict, hp: dict, seed: int, name: str):
                          seed=seed, hidden=kw)
 
 
-def run_design(design: str, records: list, meta: dict, per: int, seed0: int,
-               only: set | None = None) -> None:
+def fixed_log(design: str) -> tuple[dict, dict, dict]:
+    """``--fixed-plant``: the shipped plant and design (the hidden effect at its default size)."""
+    des = RICH if design == "rich" else {k: v for k, v in logs.PAPER_DESIGN.items() if k != "seed"}
+    return {k: v for k, v in logs.TRUTH_CSF8.items() if k != "ratio"}, {**des, "gear_factor": 1.0}, {}
+
+
+def _model_without(piece: str):
+    import hdid
+    from hdid.effects import LinearStiffness
+
+    if piece == "stiffness":  # the cubic term off: a linear spring
+        return hdid.Model.default().with_effect(LinearStiffness(k1=940.0))
+    return hdid.Model.default().without(piece)
+
+
+def run_design(design: str, records: list, meta: dict, save, jobs) -> None:
+    """Diagnose each ``(name, seed, (truth, design, hidden params))`` of ``jobs`` (``name``
+    ``removed:P``: nothing hidden, the model without base piece P), ``save()`` after each."""
     import hdid
 
-    for i in range(per * len(HIDDEN)):
-        name, seed = HIDDEN[i % len(HIDDEN)], seed0 + i
-        if only and name not in only:
-            continue
-        truth, des, hp = suite_log(design, seed, name)
+    for name, seed, (truth, des, hp) in jobs:
+        piece = name.split(":")[1] if name.startswith("removed:") else None
         rec = {"design": design, "hidden": name, "seed": seed,
-               "expected": None if name == "quadratic_drag" else name,
+               "expected": piece or (None if name == "quadratic_drag" else name),
                "truth": truth, "hidden_params": hp, "design_params": dict(des),
                "load1_before": os.getloadavg()[0],
                # which code ran it (rows of several runs share the results file)
                "code": os.environ.get("HDID_BENCH_CODE", meta.get("src", ""))}
         records.append(rec)
         try:
-            df = make_log(truth, des, hp, seed, name)
+            df = make_log(truth, des, hp, seed, "none" if piece else name)
             rec["min_run_span_rad"] = float(min(np.ptp(g["theta"].to_numpy()) for _, g in df.groupby("run")))
             with Clock() as clock:
-                d = hdid.diagnose(df)
+                d = hdid.diagnose(df, _model_without(piece) if piece else None)
         except Exception as exc:  # a failure is a result too
             rec["error"] = repr(exc)
             print(f"{design} {name:20s} FAILED {exc!r}", flush=True)
-            write(records, meta)
+            save()
             continue
         cands = [c for c in d.candidates if c.error is None]
         rec.update({
@@ -138,7 +162,7 @@ def run_design(design: str, records: list, meta: dict, per: int, seed0: int,
             "wall_s": clock.wall, "cpu_s": clock.cpu,
             "compile_s": d.timing.get("compile_s"), "load1_after": os.getloadavg()[0],
         })
-        write(records, meta)
+        save()
         c0s = ", ".join(f"{c['effect']} {c['delta_bic']:.0f}" for c in rec["candidates"][:3])
         print(f"{design} {name:20s} {d.verdict:15s} named {rec['named']} RMS {rec['rms_before_floor']:.2f} "
               f"[{c0s}] {rec['wall_s']:.0f}s (load {rec['load1_after']:.1f})", flush=True)
@@ -217,16 +241,25 @@ def floor_rule(seeds: set | None) -> None:
                       for c in d.candidates if c.error is None],
             "wall_s": clock.wall, "load1": os.getloadavg()[0]})
         print(design, seed, name, rec["named"], "->", _named(d), flush=True)
-        write_result(FLOOR_RULE, res, render_floor_rule, indent=1)
+        store("floor_rule", res)
 
 
-def render_floor_rule(res: dict) -> str:
+def store(key: str | None, part: dict) -> None:
+    """Write one section of the result (``None``: the drawn suite's ``meta`` and ``records``,
+    at the top level where the calibrations read them), keeping the others."""
+    path = RESULTS / f"{NAME}.json"
+    res = json.loads(path.read_text()) if path.exists() else {}
+    res.update(part if key is None else {key: part})
+    write_result(NAME, res, render)
+
+
+def _floor_rule_lines(res: dict) -> list[str]:
     m = res["meta"]
-    L = ["# The floor-level rule on the independent suite (affected logs only)", "",
+    L = ["# The floor-level rule on the drawn suite (affected logs only, `--floor-rule`)", "",
          f"{m.get('cpu', '')}; src {m.get('src', '')}; `{m.get('command', '')}`. "
-         "Before: the stored full-suite verdict (benchmarks/results/diagnose_independent.md); "
-         "after: diagnose with the candidates listed, design=False. "
-         "Every other log of the suite cannot change verdict (module docstring).", "",
+         "Before: the drawn suite's stored verdict (above); after: diagnose with the "
+         "candidates listed, design=False. Every other log of the suite cannot change "
+         "verdict (`floor_rule`'s docstring).", "",
          *([m["note"], ""] if m.get("note") else []),
          "| design | seed | hidden | candidates | before | after | ΔBIC (RMS/floor) after | s | load |",
          "|---|---|---|---|---|---|---|---|---|"]
@@ -235,37 +268,22 @@ def render_floor_rule(res: dict) -> str:
         L.append(f"| {r['design']} | {r['seed']} | {r['hidden']} | {', '.join(r['candidates'])} "
                  f"| {r['before']['named']} | {r['after']['named']} | {tab} | "
                  f"{r['wall_s']:.0f} | {r['load1']:.1f} |")
-    return "\n".join(L) + "\n"
+    return [*L, ""]
 
 
-def write(records: list, meta: dict) -> None:
-    write_result(NAME, {"meta": meta, "records": records}, render)
+def _f(x, spec: str) -> str:
+    return "" if x is None else format(x, spec)
 
 
-def render(res: dict) -> str:
-    records, meta = res["records"], res["meta"]
-    lines = [f"# `diagnose` on an independent-parameter hidden-effect suite", "",
-             f"Run {meta['date']} on {meta['cpu']} ({meta['cores']} cores, shared), pinned to "
-             f"core 0; load at start {meta['load']}" + (f", at end {meta['load_end']}"
-                                                       if meta.get("load_end") else "")
-             + f"; src {meta['src']}. `{meta.get('cmd', '')}`", "",
-             *([f"Note: {meta['note']}. Column `code`: the branch each row was run on.", ""]
-               if meta.get("note") else []),
-             "Each log draws its plant, design and hidden-effect magnitude (see the script's "
-             "docstring; seeds 8800+). `named` = what the verdict names (`A|B` = ambiguous "
-             "between them). RMS in quantization floors (step/√12); `after` = the first "
-             "candidate's refit. Grade: ✓ = right (adequate on nothing hidden, the hidden "
-             "effect named alone, no confident name for the outside effect unless its "
-             "stand-in reaches the floor); ~ = honest but not the name (adequate where the "
-             "base is already at the floor, so the log cannot show the effect; ambiguous "
-             "between candidates including the truth; the same-family look-alike named with "
-             "the tie noted); ✗ = wrong.", ""]
+def _suite_lines(records: list, title: str) -> list[str]:
+    """Per design: a row per log, the totals and the confusion (hidden → named)."""
+    lines = []
     for design in ("rich", "paper"):
         rows = [r for r in records if r["design"] == design]
         if not rows:
             continue
         ok = [r for r in rows if "error" not in r]
-        lines += [f"## {design} design", "",
+        lines += [f"## {title}{design} design", "",
                   "| hidden | seed | g | rate Hz | v_s | δ | verdict | named | first (ΔBIC) | "
                   "RMS before → after | ✓ | s | load | code |",
                   "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -282,10 +300,12 @@ def render(res: dict) -> str:
                 f"{c0.get('variant', '')} ({c0.get('delta_bic', math.nan):.0f}) | "
                 f"{r['rms_before_floor']:.2f} → {c0.get('rms_after_floor', math.nan):.2f} | "
                 f"{ {'right': '✓', 'honest': '~', 'wrong': '✗'}[_grade(r)]} | {r['wall_s']:.0f} | "
-                f"{r['load1_after']:.1f} | {r.get('code', '')} |")
-        lib = [r for r in ok if r["expected"] not in (None, "none")]
+                f"{_f(r.get('load1_after'), '.1f')} | {r.get('code', '')} |")
+        removed = [r for r in ok if r["hidden"].startswith("removed:")]
+        lib = [r for r in ok if r["expected"] not in (None, "none") and r not in removed]
         first = [r for r in lib if r["top"] == r["expected"]]
         floor = [r for r in first if r["candidates"][0]["rms_after_floor"] <= 1.3]
+        cpu = [r["cpu_s"] for r in ok if "cpu_s" in r]
         lines += ["",
                   f"- verdict follows the truth: {sum(_grade(r) == 'right' for r in ok)}/{len(ok)} right, "
                   f"{sum(_grade(r) == 'honest' for r in ok)} honest, "
@@ -299,22 +319,55 @@ def render(res: dict) -> str:
                   "- nothing hidden: " + ", ".join(r["verdict"] for r in ok if r["hidden"] == "none"),
                   "- outside effect (ω|ω| drag): " + ", ".join(
                       f"{r['verdict']} ({r['named']})" for r in ok if r["expected"] is None),
-                  f"- median diagnose wall s {np.median([r['wall_s'] for r in ok]):.0f} "
-                  f"(CPU {np.median([r['cpu_s'] for r in ok]):.0f})" if ok else "",
-                  "", "Confusion (hidden → what the verdict names):", "",
-                  "| hidden | " + " | ".join(HIDDEN[1:-1]) + " | ambiguous | unexplained | adequate |",
-                  "|---" * (len(HIDDEN) + 2) + "|"]
-        cols = list(HIDDEN[1:-1])
-        for h in HIDDEN:
-            rs = [r for r in ok if r["hidden"] == h]
-            if not rs:
+                  *([f"- base piece switched off in the model, named: "
+                     + ", ".join(f"{r['expected']} → {r['named']}" for r in removed)] if removed else []),
+                  f"- median diagnose wall s {np.median([r['wall_s'] for r in ok]):.0f}"
+                  + (f" (CPU {np.median(cpu):.0f})" if cpu else "") if ok else "",
+                  "", "Confusion (hidden → what the verdict names):", ""]
+        named = [r["named"] if r["verdict"] == "missing_effect" else r["verdict"] for r in ok]
+        cols = list(dict.fromkeys([*HIDDEN[1:-1], *sorted(set(named) - set(HIDDEN) - {
+            "ambiguous", "unexplained", "adequate"}), "ambiguous", "unexplained", "adequate"]))
+        lines += ["| hidden | " + " | ".join(cols) + " |", "|---" * (len(cols) + 1) + "|"]
+        for h in dict.fromkeys([*HIDDEN, *(r["hidden"] for r in ok)]):
+            if not any(r["hidden"] == h for r in ok):
                 continue
-            cnt = {c: 0 for c in cols + ["ambiguous", "unexplained", "adequate"]}
-            for r in rs:
-                key = r["named"] if r["verdict"] == "missing_effect" else r["verdict"]
-                cnt[key] = cnt.get(key, 0) + 1
-            lines.append(f"| {h} | " + " | ".join(str(cnt[c] or "") for c in cnt) + " |")
+            cnt = {c: sum(n == c for n, r in zip(named, ok) if r["hidden"] == h) for c in cols}
+            lines.append(f"| {h} | " + " | ".join(str(cnt[c] or "") for c in cols) + " |")
         lines.append("")
+    return lines
+
+
+def render(res: dict) -> str:
+    meta = res["meta"]
+    lines = [f"# `diagnose` on an independent-parameter hidden-effect suite", "",
+             f"Run {meta['date']} on {meta['cpu']} ({meta['cores']} cores, shared), pinned to "
+             f"core 0; load at start {meta['load']}" + (f", at end {meta['load_end']}"
+                                                       if meta.get("load_end") else "")
+             + f"; src {meta['src']}. `{meta.get('cmd', '')}`", "",
+             *([f"Note: {meta['note']}. Column `code`: the branch each row was run on.", ""]
+               if meta.get("note") else []),
+             "Each log draws its plant, design and hidden-effect magnitude (see the script's "
+             "docstring; seeds 8800+). `named` = what the verdict names (`A|B` = ambiguous "
+             "between them). RMS in quantization floors (step/√12); `after` = the first "
+             "candidate's refit. Grade: ✓ = right (adequate on nothing hidden, the hidden "
+             "effect named alone, no confident name for the outside effect unless its "
+             "stand-in reaches the floor); ~ = honest but not the name (adequate where the "
+             "base is already at the floor, so the log cannot show the effect; ambiguous "
+             "between candidates including the truth; the same-family look-alike named with "
+             "the tie noted); ✗ = wrong.", "", *_suite_lines(res["records"], "")]
+    if "fixed_plant" in res:
+        m = res["fixed_plant"]["meta"]
+        lines += ["# The shipped plant, each effect hidden in turn (`--fixed-plant`)", "",
+                  f"Run {m['date']} on {m['cpu']} ({m['cores']} cores), load {m['load']} → "
+                  f"{m.get('load_end', '?')}; src {m['src']}. `{m.get('cmd', '')}`", "",
+                  *([f"Note: {m['note']}", ""] if m.get("note") else []),
+                  "The CSF-8 plant of the shipped logs (`hdid.reference.logs.TRUTH_CSF8`), each "
+                  "effect of `hdid.reference.logs.HIDDEN` at its default size; `removed:P` = "
+                  "nothing hidden, base piece P switched off in the model (`stiffness`: a "
+                  "linear spring). Columns and grades as above.", "",
+                  *_suite_lines(res["fixed_plant"]["records"], "fixed plant, ")]
+    if "floor_rule" in res:
+        lines += _floor_rule_lines(res["floor_rule"])
     return "\n".join(lines) + "\n"
 
 
@@ -327,11 +380,14 @@ def main(argv=None) -> None:
                     help="a further batch (seeds S, S+1, …) added to the earlier records")
     ap.add_argument("--only", help="EFFECT,…: rerun those logs, every other record kept")
     ap.add_argument("--fresh", action="store_true", help="drop the earlier records")
+    ap.add_argument("--fixed-plant", action="store_true",
+                    help="the shipped plant, each effect hidden in turn (its own section)")
+    ap.add_argument("--removed", action="store_true",
+                    help="with --fixed-plant: base pieces switched off in the model instead")
     ap.add_argument("--floor-rule", action="store_true",
                     help="re-diagnose the stored logs the floor-level rule can change")
     ap.add_argument("--seeds", help="with --floor-rule: only these seeds (comma-separated)")
-    args = parse_or_render(ap, argv, lambda a: FLOOR_RULE if a.floor_rule else NAME,
-                           lambda res: (render_floor_rule if "rows" in res else render)(res))
+    args = parse_or_render(ap, argv, NAME, render)
     if args is None:
         return
     if args.floor_rule:
@@ -343,24 +399,41 @@ def main(argv=None) -> None:
     cores = ",".join(map(str, sorted(os.sched_getaffinity(0))))  # the cores it ran on
     meta = run_meta(cmd=f"taskset -c {cores} python benchmarks/diagnose_independent.py "
                         + " ".join(argv if argv is not None else sys.argv[1:]))
-    records: list = []
-    if (RESULTS / f"{NAME}.json").exists() and not args.fresh:
-        prev = json.loads((RESULTS / f"{NAME}.json").read_text())
-        if only:
-            rerun = {(d, (seed0 or SEED0[d]) + p * len(HIDDEN) + j) for d in designs
-                     for p in range(args.per) for j, name in enumerate(HIDDEN) if name in only}
-            records = [r for r in prev["records"] if (r["design"], r["seed"]) not in rerun]
-        else:
-            records = [r for r in prev["records"] if r["design"] not in designs
-                       or (seed0 is not None and not seed0 <= r["seed"] < seed0 + 100)]
-        meta["earlier"] = {k: prev["meta"].get(k) for k in ("date", "load", "load_end", "src")}
-        if prev["meta"].get("note"):
-            meta["note"] = prev["meta"]["note"]
+    prev = json.loads((RESULTS / f"{NAME}.json").read_text()) if (RESULTS / f"{NAME}.json").exists() else {}
+    if args.fixed_plant:
+        records = [r for r in prev.get("fixed_plant", {}).get("records", []) if not args.fresh
+                   and (r["design"] not in designs or r["hidden"].startswith("removed:") != args.removed)]
+        save = lambda: store("fixed_plant", {"meta": meta, "records": records})  # noqa: E731
+        names = [f"removed:{p}" for p in REMOVED] if args.removed else HIDDEN
+        jobs = {d: [(n, FIXED_SEED0[d] + 400 * args.removed + i, fixed_log(d))
+                    for i, n in enumerate(names)] for d in designs}
+    else:
+        records = []
+        if prev.get("records") and not args.fresh:
+            if only:
+                rerun = {(d, (seed0 or SEED0[d]) + p * len(HIDDEN) + j) for d in designs
+                         for p in range(args.per) for j, name in enumerate(HIDDEN) if name in only}
+                records = [r for r in prev["records"] if (r["design"], r["seed"]) not in rerun]
+            else:
+                records = [r for r in prev["records"] if r["design"] not in designs
+                           or (seed0 is not None and not seed0 <= r["seed"] < seed0 + 100)]
+            meta["earlier"] = {k: prev["meta"].get(k) for k in ("date", "load", "load_end", "src")}
+            if prev["meta"].get("note"):
+                meta["note"] = prev["meta"]["note"]
+        save = lambda: store(None, {"meta": meta, "records": records})  # noqa: E731
+        first = {d: SEED0[d] if seed0 is None else seed0 for d in designs}
+        jobs = {d: [(HIDDEN[i % len(HIDDEN)], first[d] + i, suite_log(d, first[d] + i, HIDDEN[i % len(HIDDEN)]))
+                    for i in range(args.per * len(HIDDEN)) if not only or HIDDEN[i % len(HIDDEN)] in only]
+                for d in designs}
     for design in designs:
-        run_design(design, records, meta, args.per, seed0=SEED0[design] if seed0 is None else seed0,
-                   only=only)
+        import jax
+
+        # Programs of the previous design are not needed again; a long process that kept
+        # them all ran out of memory mappings (LLVM "Cannot allocate memory").
+        jax.clear_caches()
+        run_design(design, records, meta, save, jobs[design])
     meta["load_end"] = load_text()
-    write(records, meta)
+    save()
 
 
 if __name__ == "__main__":

@@ -1,8 +1,10 @@
-"""The JAX GPU path: the same fit, log-posterior, sampler and batch fit on CPU and on a GPU.
+"""The JAX GPU path: the same fit, log-posterior, sampler and batch fit on CPU and on a GPU,
+one result (``gpu_path.json``: a ``cpu`` and a ``gpu`` run; the GPU run is checked against
+the stored CPU run's walker positions and numbers).
 
-    python benchmarks/gpu_path.py --tag cpu                 # JAX_PLATFORMS=cpu forces the CPU
-    python benchmarks/gpu_path.py --tag gpu --reference benchmarks/results/gpu_path_cpu.json
-    python benchmarks/gpu_path.py --render                  # gpu_path.md from both JSONs
+    python benchmarks/gpu_path.py --tag cpu      # JAX_PLATFORMS=cpu forces the CPU
+    python benchmarks/gpu_path.py --tag gpu      # on a machine with a GPU, after the CPU run
+    python benchmarks/gpu_path.py --render       # gpu_path.md from gpu_path.json
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import time
 from pathlib import Path
 
 import _common
-from _common import RESULTS, Clock
+from _common import RESULTS, Clock, parse_or_render, write_result
 
 LOG = _common.DATA / "csf8_paper.csv"
 WALKERS = (1, 18, 36, 144, 1024, 8192)
@@ -36,9 +38,9 @@ def _per_call(fn, reps=20, min_time=1.0):
     return {"median_s": walls[len(walls) // 2], "min_s": walls[0], "n": len(walls)}
 
 
-def measure(args, save) -> dict:
-    """Run the four measurements, calling ``save(res)`` after each (a run cut short by a
-    time limit keeps what it measured)."""
+def measure(args, ref, save) -> dict:
+    """Run the four measurements (checked against the run ``ref``, if any), calling
+    ``save(res)`` after each (a run cut short by a time limit keeps what it measured)."""
     import jax
     import jax.numpy as jnp
     import numpy as np
@@ -48,7 +50,6 @@ def measure(args, save) -> dict:
 
     res: dict = {"generated": time.strftime("%Y-%m-%dT%H:%M:%S"), "tag": args.tag, "machine": _common.machine()}
     print(res["machine"], flush=True)
-    ref = json.loads(Path(args.reference).read_text()) if args.reference else None
 
     # 1. fit: first call (compile), then warm
     with Clock() as c1:
@@ -173,35 +174,27 @@ def render(results: dict) -> str:
             L.append(f"| {t} | {q['n_logs']} | {q['wall_s']:.1f} s | {q['logs_per_s']:.1f} | "
                      f"{q['errors']} | {q['k1_median']:.1f} |")
     L.append("")
-    L += _common.interpretation_section(results.get("gpu") or results.get("cpu") or {})
+    L += _common.interpretation_section(results)
     return "\n".join(L)
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--tag", default="cpu", help="results/gpu_path_<tag>.json")
-    ap.add_argument("--reference", help="a CPU run's JSON: its walker positions and numbers")
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--tag", choices=("cpu", "gpu"), default="cpu",
+                    help="the run it replaces in gpu_path.json (gpu: checked against the cpu run)")
     ap.add_argument("--log-dir", default=str(_common.ROOT / "benchmarks" / "_cache" / "batch_logs"))
     ap.add_argument("--n-logs", type=int, nargs="+", default=[100, 1000])
-    ap.add_argument("--render", action="store_true", help="write gpu_path.md from the JSONs")
-    ap.add_argument("--interpretation", metavar="FILE",
-                    help="with --render: markdown stored in the GPU JSON as its Interpretation")
-    args = ap.parse_args(argv)
-    if args.render:
-        results = {t: json.loads((RESULTS / f"gpu_path_{t}.json").read_text())
-                   for t in ("cpu", "gpu") if (RESULTS / f"gpu_path_{t}.json").exists()}
-        if args.interpretation:
-            key = "gpu" if "gpu" in results else "cpu"
-            results[key]["interpretation"] = Path(args.interpretation).read_text()
-            (RESULTS / f"gpu_path_{key}.json").write_text(json.dumps(results[key], indent=1) + "\n")
-        (RESULTS / "gpu_path.md").write_text(render(results))
+    args = parse_or_render(ap, argv, "gpu_path", render, indent=1)
+    if args is None:
         return 0
-    path = RESULTS / f"gpu_path_{args.tag}.json"
+    path = RESULTS / "gpu_path.json"
+    results = json.loads(path.read_text()) if path.exists() else {}
+    ref = results.get("cpu") if args.tag == "gpu" else None
 
     def save(res):
-        path.write_text(json.dumps(res, indent=1) + "\n")
+        write_result("gpu_path", results | {args.tag: res}, render, indent=1)
 
-    measure(args, save)
+    measure(args, ref, save)
     print(f"wrote {path}")
     return 0
 

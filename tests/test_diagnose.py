@@ -1,7 +1,7 @@
 """``hdid diagnose`` on logs with a hidden effect, nothing hidden, and an effect outside
 the library. The logs come from the independent reference simulator with the effect
 written in numpy (``hdid.reference.logs.HIDDEN``). The full suite (every effect, both
-designs, all candidates) is ``benchmarks/diagnose_suite.py``; here a reduced candidate
+designs, all candidates) is ``benchmarks/diagnose_independent.py``; here a reduced candidate
 set keeps the compile count (one per model structure) small.
 """
 
