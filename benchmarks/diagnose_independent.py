@@ -399,32 +399,27 @@ def main(argv=None) -> None:
     cores = ",".join(map(str, sorted(os.sched_getaffinity(0))))  # the cores it ran on
     meta = run_meta(cmd=f"taskset -c {cores} python benchmarks/diagnose_independent.py "
                         + " ".join(argv if argv is not None else sys.argv[1:]))
-    prev = json.loads((RESULTS / f"{NAME}.json").read_text()) if (RESULTS / f"{NAME}.json").exists() else {}
+    path = RESULTS / f"{NAME}.json"
+    prev = json.loads(path.read_text()) if path.exists() else {}
+    part = prev.get("fixed_plant", {}) if args.fixed_plant else prev  # the section replaced
     if args.fixed_plant:
-        records = [r for r in prev.get("fixed_plant", {}).get("records", []) if not args.fresh
-                   and (r["design"] not in designs or r["hidden"].startswith("removed:") != args.removed)]
-        save = lambda: store("fixed_plant", {"meta": meta, "records": records})  # noqa: E731
         names = [f"removed:{p}" for p in REMOVED] if args.removed else HIDDEN
         jobs = {d: [(n, FIXED_SEED0[d] + 400 * args.removed + i, fixed_log(d))
                     for i, n in enumerate(names)] for d in designs}
     else:
-        records = []
-        if prev.get("records") and not args.fresh:
-            if only:
-                rerun = {(d, (seed0 or SEED0[d]) + p * len(HIDDEN) + j) for d in designs
-                         for p in range(args.per) for j, name in enumerate(HIDDEN) if name in only}
-                records = [r for r in prev["records"] if (r["design"], r["seed"]) not in rerun]
-            else:
-                records = [r for r in prev["records"] if r["design"] not in designs
-                           or (seed0 is not None and not seed0 <= r["seed"] < seed0 + 100)]
-            meta["earlier"] = {k: prev["meta"].get(k) for k in ("date", "load", "load_end", "src")}
-            if prev["meta"].get("note"):
-                meta["note"] = prev["meta"]["note"]
-        save = lambda: store(None, {"meta": meta, "records": records})  # noqa: E731
         first = {d: SEED0[d] if seed0 is None else seed0 for d in designs}
-        jobs = {d: [(HIDDEN[i % len(HIDDEN)], first[d] + i, suite_log(d, first[d] + i, HIDDEN[i % len(HIDDEN)]))
-                    for i in range(args.per * len(HIDDEN)) if not only or HIDDEN[i % len(HIDDEN)] in only]
-                for d in designs}
+        names = [HIDDEN[i % len(HIDDEN)] for i in range(args.per * len(HIDDEN))]
+        jobs = {d: [(n, first[d] + i, suite_log(d, first[d] + i, n)) for i, n in enumerate(names)
+                    if not only or n in only] for d in designs}
+    rerun = {(d, seed) for d in designs for _, seed, _ in jobs[d]}
+    # the earlier records kept: all but the rerun logs (all of a design unless --only or --seed0)
+    records = [r for r in part.get("records", []) if not args.fresh and (r["design"], r["seed"])
+               not in rerun and (only or seed0 is not None or args.fixed_plant or r["design"] not in designs)]
+    if part.get("meta") and not args.fresh:
+        meta["earlier"] = {k: part["meta"].get(k) for k in ("date", "load", "load_end", "src")}
+        meta["note"] = part["meta"].get("note")
+    save = lambda: store("fixed_plant" if args.fixed_plant else None,  # noqa: E731
+                         {"meta": meta, "records": records})
     for design in designs:
         import jax
 
