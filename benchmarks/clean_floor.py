@@ -18,13 +18,12 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import RESULTS, ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 import independent as ind  # noqa: E402  (pure numpy/scipy, no hdid)
 
-RESULTS = ROOT / "benchmarks" / "results"
-NAME = "clean_floor"
+OUT = RESULTS / "clean_floor.json"
 #: a fit above this multiple of the quantization floor has not reached the floor
 ABOVE = 1.5
 K2_CATALOG = 6.5e7
@@ -83,9 +82,6 @@ def fit_one(design: str, seed: int) -> dict:
     return row
 
 
-OUT = RESULTS / f"{NAME}.json"
-
-
 #: Rows at or below this ratio keep no truth or fitted values in the results file (the
 #: truth is redrawn from the seed; the fit is at the floor): the file stays small.
 KEEP_DETAIL_ABOVE = 1.2
@@ -103,11 +99,10 @@ def _slim(row: dict) -> dict:
     return out
 
 
-def _save(rows: list[dict], path: Path) -> None:
-    path.parent.mkdir(exist_ok=True)
+def _save(rows: list[dict]) -> None:
     body = ",\n".join(json.dumps(_slim(r), default=float) for r in rows)
-    path.write_text('{"rows": [\n' + body + "\n]}\n")
-    path.with_suffix(".md").write_text(render(rows))
+    OUT.write_text('{"rows": [\n' + body + "\n]}\n")
+    OUT.with_suffix(".md").write_text(render(rows))
 
 
 def render(rows: list[dict]) -> str:
@@ -156,16 +151,14 @@ def main(argv=None) -> int:
     ap.add_argument("--append", action="store_true", help="keep the rows already stored")
     ap.add_argument("--report", action="store_true", help="only rewrite the .md")
     a = ap.parse_args(argv)
-    out = OUT
-    rows = json.loads(out.read_text())["rows"] if out.exists() else []
+    rows = json.loads(OUT.read_text())["rows"] if OUT.exists() else []
     if a.report:
-        _save(rows, out)
+        _save(rows)
         return 0
     if not a.append:
         rows = [r for r in rows if r.get("label") != a.label]
     import hdid
 
-    hdid.configure()
     head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=Path(hdid.__file__).parent,
                           capture_output=True, text=True).stdout.strip()
     lo, hi = (int(x) for x in a.seeds.split(":"))
@@ -182,8 +175,8 @@ def main(argv=None) -> int:
             print(f"{a.label} {design} {seed}: ratio {row['ratio']:.3f} "
                   f"{row['wall_s']:.1f} s load {row['load1']:.2f} "
                   f"{row.get('restarted_from') or ''} {row.get('error', '')}", flush=True)
-            _save(rows, out)
-    _save(rows, out)
+            _save(rows)
+    _save(rows)
     return 0
 
 

@@ -271,10 +271,6 @@ def _floor_rule_lines(res: dict) -> list[str]:
     return [*L, ""]
 
 
-def _f(x, spec: str) -> str:
-    return "" if x is None else format(x, spec)
-
-
 def _suite_lines(records: list, title: str) -> list[str]:
     """Per design: a row per log, the totals and the confusion (hidden → named)."""
     lines = []
@@ -300,7 +296,7 @@ def _suite_lines(records: list, title: str) -> list[str]:
                 f"{c0.get('variant', '')} ({c0.get('delta_bic', math.nan):.0f}) | "
                 f"{r['rms_before_floor']:.2f} → {c0.get('rms_after_floor', math.nan):.2f} | "
                 f"{ {'right': '✓', 'honest': '~', 'wrong': '✗'}[_grade(r)]} | {r['wall_s']:.0f} | "
-                f"{_f(r.get('load1_after'), '.1f')} | {r.get('code', '')} |")
+                f"{format(r['load1_after'], '.1f') if 'load1_after' in r else ''} | {r.get('code', '')} |")
         removed = [r for r in ok if r["hidden"].startswith("removed:")]
         lib = [r for r in ok if r["expected"] not in (None, "none") and r not in removed]
         first = [r for r in lib if r["top"] == r["expected"]]

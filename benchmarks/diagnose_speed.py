@@ -18,6 +18,7 @@ from pathlib import Path
 
 from _common import DATA, ROOT, interpretation_section, load_text, parse_or_render, run_meta, write_result
 
+NAME = "diagnose_speed"
 LOG = DATA / "hidden_hysteresis_1khz.csv"
 
 CHILD = r"""
@@ -115,8 +116,7 @@ def main(argv=None) -> int:
     ap.add_argument("--core", type=int, default=1)
     ap.add_argument("--log", default=str(LOG))
     ap.add_argument("--runs", default="cold,warm", help="cache states, in order")
-    ap.add_argument("--out", default="diagnose_speed")
-    args = parse_or_render(ap, argv, lambda a: a.out, render)
+    args = parse_or_render(ap, argv, NAME, render)
     if args is None:
         return 0
     res = {"meta": run_meta(), "log": args.log, "core": args.core, "rows": []}
@@ -128,9 +128,9 @@ def main(argv=None) -> int:
                 res["rows"].append({**rec, "code": label, "cache": state, "src": src})
                 print(f"{label} {state}: {rec['process_wall_s']:.1f} s (load {rec['load_start']} "
                       f"→ {rec['load_end']}) {rec.get('verdict', rec.get('error', '')[-300:])}")
-                write_result(args.out, res, render)
+                write_result(NAME, res, render)
     res["meta"]["load_end"] = load_text()
-    write_result(args.out, res, render)
+    write_result(NAME, res, render)
     return 0
 
 
