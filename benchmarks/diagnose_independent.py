@@ -206,14 +206,10 @@ def _grade(r) -> str:
 
 
 def floor_rule(seeds: set | None) -> None:
-    """``--floor-rule``: the floor-level rule's effect on the stored suite's verdicts.
-
-    The rule (:func:`hdid._diagnosis._verdict._rivals`) makes a strong candidate of another
-    family that also reaches the floor a rival unless the likelihood alone favours the best
-    by 10, so only logs whose best is strong and at the floor, with such a candidate more
-    than ΔBIC 10 behind, can change verdict (and no ``adequate`` one: the false-alarm rates
-    of ``calibration/diagnose_rates.py`` stand). Those logs are made again and diagnosed with
-    every strong candidate of their record, ``design=False``; the record is the "before"."""
+    """``--floor-rule``: the stored drawn logs the floor-level rule
+    (:func:`hdid._diagnosis._verdict._rivals`) can change (the best strong and at the floor,
+    a strong candidate of another family at the floor more than ΔBIC 10 behind), diagnosed
+    again with every strong candidate of their record, ``design=False``."""
     import hdid
 
     todo = []
@@ -259,7 +255,7 @@ def _floor_rule_lines(res: dict) -> list[str]:
          f"{m.get('cpu', '')}; src {m.get('src', '')}; `{m.get('command', '')}`. "
          "Before: the drawn suite's stored verdict (above); after: diagnose with the "
          "candidates listed, design=False. Every other log of the suite cannot change "
-         "verdict (`floor_rule`'s docstring).", "",
+         "verdict (the notes of benchmarks/README.md).", "",
          *([m["note"], ""] if m.get("note") else []),
          "| design | seed | hidden | candidates | before | after | ΔBIC (RMS/floor) after | s | load |",
          "|---|---|---|---|---|---|---|---|---|"]
