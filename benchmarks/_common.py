@@ -129,12 +129,3 @@ def interpretation_section(res: dict) -> list[str]:
     text = res.get("interpretation")
     return ["## Interpretation", "", text, ""] if text else []
 
-
-def run_designs(designs, run, write, records: list, meta: dict) -> None:
-    """``run(k, design)`` for each design, writing the records after each and at the end
-    (with the end load): a long benchmark leaves its partial results if stopped."""
-    for k, design in enumerate(designs):
-        run(k, design)
-        write(records, meta)
-    meta["load_end"] = load_text()
-    write(records, meta)
