@@ -19,7 +19,7 @@ from .._problems import _programs
 from ._identifiability import MOVED_COUNTS, analyse
 from .._log import Log, read_log
 from .._models._model import Model
-from . import _limits
+from . import _first_reading, _limits
 from .._simulation._prepare import Prepared, offset_guess, prepare
 from .._problems._problem import OFFSET_SCALE_REL, Problem, build_problem
 from .._results._result import FitResult
@@ -120,6 +120,10 @@ def fit(
     elif resolution is not None:  # the log carries it (also into the nested refits)
         log = dataclasses.replace(log, resolution=float(resolution), resolution_source="given")
     counts_per_rev = resolution = None
+    given = dict(model=model, inertia=inertia, fix=fix, free_inertia=free_inertia,
+                 inertia_prior=inertia_prior, release_time=release_time, ratio=ratio,
+                 n_starts=n_starts, max_substep=max_substep, max_steps=max_steps,
+                 start_from_model=start_from_model, nested=nested)
     setup = _setup(
         log, model, inertia=inertia, fix=fix, free_inertia=free_inertia,
         inertia_prior=inertia_prior, release_time=release_time,
@@ -142,6 +146,11 @@ def fit(
                           inertia_prior=inertia_prior, release_time=release_time,
                           max_substep=max_substep, n_starts=n_starts, max_steps=max_steps,
                           solutions=(U, costs, ok, steps), lanes=len(U0))
+    # runs that move from their second sample: is their first reading the hold?
+    held = _first_reading.candidates(log, prep, release_time)
+    if held:
+        result = _first_reading.choose(
+            result, fit(dataclasses.replace(log, first_reading_held=held), **given), held)
     result.wall_time_s = time.perf_counter() - t_start
     return result
 

@@ -149,6 +149,11 @@ class Log:
     resolution_note : str or None
         Why no encoder step was found in the readings (``resolution`` is ``None``), or
         ``None``.
+    first_reading_held : tuple of str
+        Runs whose readings move from their second sample on but whose first reading is
+        the hold (a logger that starts at the servo-off, the release falling in the first
+        interval): set by :func:`hdid.fit` when that fits the log better than a run
+        already moving at its first sample (:mod:`hdid._fitting._first_reading`).
 
     Raises
     ------
@@ -168,10 +173,12 @@ class Log:
     notes: tuple[str, ...] = ()
     print_unit: float | None = None
     resolution_note: str | None = None
+    first_reading_held: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "runs", tuple(self.runs))
         object.__setattr__(self, "notes", tuple(str(n) for n in self.notes))
+        object.__setattr__(self, "first_reading_held", tuple(self.first_reading_held))
         kinds = {run.is_driven for run in self.runs}
         if len(kinds) > 1:
             free = next(run.name for run in self.runs if not run.is_driven)

@@ -256,10 +256,17 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
         times[i, :n], times[i, n:] = t, t[-1]
         theta[i, :n], theta[i, n:] = th, th[-1]
         # A hold: the first readings agree (within the flicker/noise). Otherwise the run
-        # starts in motion (a ring-down, a log cut after the release).
-        held = n >= 3 and abs(th[1] - th[0]) <= still and abs(th[2] - th[0]) <= still
+        # starts in motion (a ring-down, a log cut after the release) — unless the fit found
+        # that its first reading is a hold, the release falling in the first interval
+        # (:mod:`hdid._fitting._first_reading`).
+        held = (n >= 3 and abs(th[1] - th[0]) <= still and abs(th[2] - th[0]) <= still
+                ) or run.name in log.first_reading_held
         if held:
-            head = th[: max(3, min(10, n // 10))]
+            # the hold's level from its own readings: the leading stretch within the
+            # flicker of the first (a short pre-trigger hold has fewer than 10 samples)
+            off_hold = np.flatnonzero(np.abs(th - th[0]) > still)
+            n_lead = int(off_hold[0]) if off_hold.size else n
+            head = th[: min(max(3, min(10, n // 10)), n_lead)]
             h = float(np.median(head))
             noise = 1.4826 * float(np.median(np.abs(head - h)))
             thr = max(1.5 * step, 5.0 * noise) if quantized else max(6.0 * sigma, 5.0 * noise)

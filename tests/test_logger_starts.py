@@ -1,0 +1,84 @@
+"""How a logger starts a run: a short pre-trigger hold, a logger started at the servo-off
+(the first reading is the hold, the release falls in the first interval), and a log cut
+after the release (a run already moving at its first sample). Each must fit to the
+quantization floor, whatever the gear.
+
+Logs from the independent reference simulator (:mod:`hdid.reference.logs`, numpy/scipy
+only), written as a logger writes them: degrees with fixed decimals, milliseconds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import hdid
+from hdid._fitting._limits import above_floor
+from hdid.reference.logs import TRUTH_CSF8, make_log
+
+#: A stiffer, heavier gear than the shipped CSF-8 (about 60 Hz, wider stick band) and a
+#: 14-bit encoder: the starts must come from the log, not from the catalog.
+TRUTH = dict(TRUTH_CSF8, k1=3100.0, k2=9e7, tau_c=0.011, tau_s=0.016, v_s=3.0, c_v=6e-5,
+             inertia=2.1e-6)
+COUNTS = 16384
+AMPLITUDES = [0.157, -0.157, 0.12, -0.09]
+
+
+def _log(hold: float, seed: int, cut: int = 0) -> pd.DataFrame:
+    """A log written in degrees (4 decimals, finer than the 0.022° step) and whole
+    milliseconds; ``cut`` samples dropped from the start of every run."""
+    df = make_log(TRUTH, amplitudes=AMPLITUDES, fs=250.0, duration=0.5, hold=hold,
+                  offsets_by_setup={"A": 0.03}, seed=seed, counts_per_rev=COUNTS)
+    df = df[df.groupby("run", sort=False).cumcount().to_numpy() >= cut]
+    return pd.DataFrame({
+        "run": df["run"].to_numpy(), "setup": df["setup"].to_numpy(),
+        "time [ms]": [f"{v:.0f}" for v in df["time"] * 1e3],
+        "theta (deg)": [f"{v:.4f}" for v in np.degrees(df["theta"])],
+    })
+
+
+def _at_floor(res) -> bool:
+    # At the floor the residuals are rounding errors: RMS ≤ floor·√(χ²_ν/ν) at its upper
+    # tail point for the log's effective samples (the fit's own criterion, above_floor).
+    return res.rms_residual_rad <= above_floor(res.n_effective) * res.quantization_floor_rad
+
+
+def _fit(df, tmp_path, name):
+    path = tmp_path / name
+    df.to_csv(path, index=False)
+    return hdid.fit(path, inertia=TRUTH["inertia"])
+
+
+def _held_note(res) -> str | None:
+    return next((w for w in res.warnings if "first reading is taken as the hold" in w), None)
+
+
+def test_short_pre_trigger_hold_reaches_the_floor(tmp_path):
+    # 0.012 s of hold at 250 Hz: 3 held samples, fewer than the 10 the hold's level was
+    # read from (that level then mixed in moving readings: tens of times the floor)
+    res = _fit(_log(hold=0.012, seed=3), tmp_path, "short_hold.csv")
+    assert _at_floor(res), res.report()
+    assert _held_note(res) is None
+    assert res.values["k1"] == pytest.approx(TRUTH["k1"], rel=0.1), res.report()
+
+
+def test_logger_started_at_servo_off_reaches_the_floor(tmp_path):
+    # hold 0: each run's first reading is the hold, the release falls in the first
+    # interval; read as runs already moving, the fit is tens of times the floor
+    res = _fit(_log(hold=0.0, seed=5), tmp_path, "servo_off.csv")
+    assert _at_floor(res), res.report()
+    note = _held_note(res)
+    assert note is not None and "run(s) 1, 2, 3, 4" in note, res.warnings
+    assert res.values["k1"] == pytest.approx(TRUTH["k1"], rel=0.1), res.report()
+
+
+def test_log_cut_after_the_release_stays_moving(tmp_path):
+    # the shipped CSF-8 plant at 250 Hz, 10 held samples, the release in the 11th
+    # interval; the first 12 samples dropped: every run starts mid-swing, already moving
+    # (where its first reading is also its extreme, the held story is fitted too and loses)
+    df = make_log(TRUTH_CSF8, amplitudes=AMPLITUDES, fs=250.0, duration=0.5, hold=0.04,
+                  offsets_by_setup={"A": 0.03}, seed=11, counts_per_rev=4000)
+    df = df[df.groupby("run", sort=False).cumcount().to_numpy() >= 12]
+    res = _fit(df, tmp_path, "cut.csv")
+    assert _held_note(res) is None, res.warnings
+    assert _at_floor(res), res.report()
