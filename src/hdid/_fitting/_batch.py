@@ -12,7 +12,7 @@ from .._config import float64
 from ._fit import fit
 from ._vfit import DEFAULT_LANES, LOG_ERRORS, error_text, fit_batch
 
-#: Logs per dask task (each worker runs the vectorised batch fit on its chunk).
+#: Logs per dask task (each worker runs the batch fit on its chunk).
 DASK_CHUNK = 64
 #: ``workers=N``: the logs are cut into about this many chunks per worker process.
 CHUNKS_PER_WORKER = 8
@@ -41,39 +41,43 @@ def fit_many(
     progress:
         Show a progress bar (tqdm).
     vectorize:
-        Run the multi-start fits of many logs as lanes of shared vmapped programs
-        (default). ``False``: one :func:`hdid.fit` after another (the reference).
+        Fit the logs as a batch (default): each log through :func:`hdid.fit`'s own
+        multi-start driver, the logs of one model structure and length bucket (runs
+        padded to a multiple of 16 samples) sharing its compiled programs
+        (:mod:`hdid._fitting._vfit`), no limit checks and no band bracket by default (below).
+        ``False``: one :func:`hdid.fit` after another (the reference).
     band_bracket:
         Compute each log's model-free stick-band bracket (``stick_band_bracket_*``
-        columns) with the event-driven reference simulator. Default: ``False`` when
-        vectorised (per-log SciPy work: ≈ 90 ms of CPU per log measured, about half of
-        the vectorised fit's CPU),
+        columns) with the event-driven reference simulator. Default: ``False`` for the
+        batch (per-log SciPy work: ≈ 90 ms of CPU per log measured, about as much as
+        the fit itself),
         ``True`` for ``vectorize=False`` (as :func:`hdid.fit`). Without it the bracket
         columns are empty and ``band_bracket`` says so.
     lanes, threads:
-        Vectorised path: (log, start) lanes per compiled call (default 1) and threads
-        issuing calls (default 1: JAX runs one CPU program at a time per process, so
-        more threads do not add cores — measured in ``benchmarks/results/batch_speed.md``;
-        use ``workers`` for that).
+        Batch path: starts per call of the Levenberg–Marquardt program (default 1, as
+        :func:`hdid.fit`: wider calls are vmapped, and a vmapped simulator runs its
+        event branch as a select) and threads fitting logs (default 1: JAX runs one CPU
+        program at a time per process, so more threads do not add cores; use ``workers``
+        for that).
     workers:
         Local worker processes, one thread each (a ``dask.distributed.LocalCluster``
         started and closed by this call; needs ``pip install "hdid[dask]"``): the way to
         use several cores. Each worker traces and compiles once (or reads the persistent
-        cache, ``HDID_CACHE_DIR``) before its first chunk — tens of seconds — so it pays
-        off from a few hundred logs. Default 1 (in this process). Ignored with ``client``.
+        cache, ``HDID_CACHE_DIR``) before its first chunk — seconds to tens of seconds — so
+        it pays off from a few hundred logs. Default 1 (in this process). Ignored with ``client``.
     client:
         A ``dask.distributed.Client``: the logs are split into chunks of ``chunk_size``
-        (default 64) and each worker runs the vectorised fit on its chunks. Paths must be
+        (default 64) and each worker runs the batch fit on its chunks. Paths must be
         readable on the workers (or pass DataFrames). The same as
         ``executor=client.get_executor()``.
     executor:
         Any :class:`concurrent.futures.Executor` (parallelism passed in, like emcee's
         ``pool=``): a ``ProcessPoolExecutor``, a dask or MPI executor. The logs are cut
-        into chunks of ``chunk_size`` (default 64) and each chunk's vectorised fit is one
+        into chunks of ``chunk_size`` (default 64) and each chunk's batch fit is one
         task. The caller owns the executor (this call neither starts nor shuts it down).
     **options:
         Passed to :func:`hdid.fit` (``inertia``, ``fix``, ``counts_per_rev``, ``n_starts``,
-        …). Vectorised, ``nested`` defaults to ``None``: a fit with a symptom of a poorer
+        …). In the batch, ``nested`` defaults to ``None``: a fit with a symptom of a poorer
         optimum gets a warning instead of :func:`hdid.fit`'s check against the nested
         Coulomb case, which runs one log at a time (``nested="auto"``: check them).
 
@@ -89,9 +93,11 @@ def fit_many(
 
     Notes
     -----
-    Vectorised, every log gets the same schedule as :func:`hdid.fit` (grid, all starts a
-    few iterations, the best ones to convergence); logs whose problems have the same
-    shape share one compiled program. A log whose fit diverges gets an error in its row.
+    In the batch every log runs :func:`hdid.fit`'s own driver (grid, all starts a few
+    iterations, the best ones to convergence, the restart of an optimum that holds moving
+    runs), so its numbers are :func:`hdid.fit`'s up to rounding (the padding reorders sums);
+    logs whose problems have the same structure and padded shape share one compiled
+    program per step. A log whose fit diverges gets an error in its row.
     """
     import pandas as pd
 
@@ -189,7 +195,7 @@ def _local_client(workers: int):
 
 @float64  # a worker process: hdid's arithmetic, whatever its JAX settings
 def _fit_chunk(items, names, options):
-    """One task: the vectorised fit of a chunk of logs (runs on a worker)."""
+    """One task: the batch fit of a chunk of logs (runs on a worker)."""
     opts = dict(options)
     band_bracket = opts.pop("band_bracket")
     lanes, threads = opts.pop("lanes"), opts.pop("threads")

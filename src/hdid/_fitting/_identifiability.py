@@ -55,8 +55,9 @@ def analyse(
 
     ``bracket=False`` skips the band bracket (the event-driven reference simulation of
     every run, the slowest part); ``precomputed`` holds the JAX parts evaluated elsewhere
-    (:func:`hdid._fitting._vfit` does them for many logs at once): ``"jacobian"`` ``(J, r)``,
-    ``"dense"`` ``(theta, omega, stuck)`` and ``"derived"`` ``(values, jacobian)``.
+    (:func:`hdid.fit` and the batch, :mod:`hdid._fitting._vfit`, from stored programs):
+    ``"jacobian"`` ``(J, r)``, ``"dense"`` ``(theta, omega, stuck)`` and ``"derived"``
+    ``(values, jacobian)``.
 
     The steps, in order (each a function below, each adding its warnings in this order):
     the noise scale (:func:`_noise`), the covariance with and without the priors

@@ -55,8 +55,8 @@ def residuals_and_jacobian(problem: Problem, u) -> tuple[np.ndarray, np.ndarray]
 
 
 def _analysis_parts(p: Problem, u, fine):
-    """The JAX parts of :func:`hdid._fitting._identifiability.analyse` at ``u`` (as
-    :func:`hdid._fitting._vfit._lane_analysis` computes them for one lane), and the simulation on
+    """The JAX parts of :func:`hdid._fitting._identifiability.analyse` at ``u`` (its
+    ``precomputed`` parts), and the simulation on
     :func:`hdid._results._residuals.stick_times`'s grid ``fine`` (one program for both)."""
     r, J = p.data_residuals_and_jacobian(u)
     dense = p.simulate(u, full_output=True)
