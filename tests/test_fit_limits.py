@@ -108,3 +108,65 @@ def test_diagnose_refits_start_from_a_drops_swings(tmp_path):
                                _packer(s.problem, s.model.parameter_specs()))
     U = _refit.grid(s, 6)
     assert drop and np.array_equal(U[:len(drop)], np.array(drop))
+
+
+def _at_floor_check(dchi2_coulomb: float, switch: bool):
+    # check() on a stand-in fit (chi2 20, no prior rows) whose Coulomb limit lies
+    # dchi2_coulomb above it: which limits does it fit, and what does it record?
+    from types import SimpleNamespace
+
+    from hdid._fitting import _limits
+
+    limits = _limits.limits_of(hdid.Model.default(), frozenset())
+    assert [lim.key for lim in limits] == ["coulomb", "no_friction", "no_cubic"]
+    problem = SimpleNamespace(n_physical=1, prior_mean=np.zeros(1), prior_sd=np.ones(1),
+                              prior_on=np.zeros(1, bool))
+    u = np.zeros(1)
+    result = SimpleNamespace(problem=problem, u=u, warnings=[])
+    chi2 = {"coulomb": 20.0 + dchi2_coulomb, "no_friction": 20.0 + dchi2_coulomb + 1.0,
+            "no_cubic": 30.0}
+    fitted = []
+
+    def fit_limit(lim):
+        fitted.append(lim.key)
+        return _limits.LimitOutcome(lim, chi2[lim.key], {}, u)
+
+    out = _limits.check(result, (u[None, :], np.array([20.0]), np.ones(1, bool), np.ones(1)),
+                        limits, fit_limit, lambda lim, o: (np.zeros((0, 1)),) + (np.zeros(0),) * 3,
+                        None, switch)
+    return fitted, {r["limit"]: r for r in out.limits}
+
+
+def test_at_the_floor_a_limit_inside_a_poorer_one_is_not_fitted():
+    # The viscous-only model (no_friction, 4 dof: bound 9.49) is the Coulomb limit at
+    # tau_s -> 0: its chi2 can never be below the Coulomb limit's. At the floor (a verdict
+    # only) a Coulomb limit 495 above the fit decides it without a fit of its own.
+    fitted, rows = _at_floor_check(495.0, switch=False)
+    assert fitted == ["coulomb", "no_cubic"]
+    nf = rows["no_friction"]
+    assert nf["implied_by"] == "coulomb" and nf["chi2"] is None
+    assert nf["chi2_at_least"] == 515.0 and not nf["fits_as_well"] and not nf["fits_better"]
+    # below that bound (5 < 9.49) the nested limit may still fit as well: it is fitted
+    fitted, rows = _at_floor_check(5.0, switch=False)
+    assert fitted == ["coulomb", "no_friction", "no_cubic"]
+    assert "implied_by" not in rows["no_friction"]
+    # above the floor each limit's optimum is a restart of the full model: all fitted
+    fitted, _ = _at_floor_check(495.0, switch=True)
+    assert fitted == ["coulomb", "no_friction", "no_cubic"]
+
+
+def test_the_paper_logs_skipped_limit_fits_no_better_than_its_bound(paper_fits, monkeypatch):
+    # The shipped paper log (at the floor, every term may vanish) skips its viscous-only
+    # limit on the Coulomb limit's chi2; fitted anyway, that limit lies at or above it
+    # (1e-3 relative: the LM's stopping tolerance, as above) and gets the same verdict.
+    from hdid._fitting import _limits
+
+    full, _ = paper_fits
+    rows = {d["limit"]: d for d in full.limits}
+    nf = rows["no_friction"]
+    assert nf["implied_by"] == "coulomb" and nf["chi2"] is None
+    assert nf["chi2_at_least"] == rows["coulomb"]["chi2"]
+    monkeypatch.setattr(_limits, "implied", lambda *a: None)
+    fitted = {d["limit"]: d for d in hdid.fit(PAPER).limits}["no_friction"]
+    assert fitted["chi2"] >= nf["chi2_at_least"] * (1 - 1e-3), (fitted, nf)
+    assert (fitted["fits_as_well"], fitted["fits_better"]) == (False, False)

@@ -34,6 +34,12 @@ of clean logs put the damping into the Stribeck shape (``c_v → 0``) or into a 
 (``tau_s ≪ tau_c``), which no limit undoes (clean paper logs 49, 103, 129 of
 ``benchmarks/clean_floor.py``: 2.24, 2.28, 1.56× → 0.82, 0.98, 0.88× the floor).
 
+At the floor a limit nested in another that already fits worse by its own bound is not
+fitted (:func:`implied`: the viscous-only model is the Coulomb limit at ``tau_s → 0``; its
+row has ``chi2_at_least``): on the shipped paper log the Coulomb limit lies Δχ² 495 above
+the fit, and the frictionless fit (a model that rings to the end of every run, three
+times the cost of a sticking one a step) was 60 % of the limit checks' time.
+
 When (:func:`wanted`): a residual above :func:`above_floor` × the floor (the fit has not
 reached it: every limit), or a symptom that a term may vanish — the parameter a limit
 removes has a relative sd above ``VANISH_REL_SD`` or none finite, or ``tau_s ≤ tau_c``
@@ -159,6 +165,8 @@ class Limit:
     restarts: Callable[[dict, object], list]
     #: values a start of the limit's fit takes from its own (e.g. the Coulomb level)
     start: Callable[[dict], dict] = lambda v: {}
+    #: keys of limits whose model contains this one's (:func:`implied`)
+    within: tuple[str, ...] = ()
 
 
 def limits_of(model, fixed) -> list[Limit]:
@@ -206,10 +214,12 @@ def limits_of(model, fixed) -> list[Limit]:
                 eps = NUDGE * scales.k_wg * scales.amplitude
                 return {n: eps * (RESTART_RATIO if n == "tau_s" else 1.0) for n in torques}
 
+            # the Coulomb limit at tau_s → NUDGE (tau_c there too) is this limit
+            within = tuple(lim.key for lim in out if lim.key == "coulomb")
             out.append(Limit("no_friction", what.removeprefix("the "),
                              tuple(p.name for p in law.parameters if p.name not in fixed),
                              f"friction not supported: {what} fits as well", off_pins,
-                             lambda v, scales: [{}]))
+                             lambda v, scales: [{}], within=within))
     if type(model.spring) is CubicStiffness and "k2" not in fixed:
         def k2_pins(v, scales, spec=model.parameter_specs()["k2"]):
             return {"k2": NUDGE * spec.start(scales)}
@@ -349,17 +359,42 @@ class LimitOutcome:
     chi2: float
     values: dict
     #: its unknowns (the full model's, the limit's parameters held)
-    u: np.ndarray
+    u: np.ndarray | None
+    #: not fitted: ``chi2`` is then a lower bound, the χ² of this enclosing limit
+    #: (:func:`implied`)
+    implied_by: str | None = None
 
     def to_dict(self, chi2_fit: float) -> dict:
         q = len(self.limit.removed)
         d = self.chi2 - chi2_fit
         bound = _chi2_ppf(LIMIT_LEVEL, q)
-        return {"limit": self.limit.key, "label": self.limit.label,
-                "removed": list(self.limit.removed), "chi2": self.chi2,
-                "chi2_fit": chi2_fit, "dchi2": d, "dof": q, "dchi2_bound": bound,
-                "fits_as_well": bool(d < bound),
-                "fits_better": bool(d < -SAME_MARGIN * max(abs(chi2_fit), 1.0))}
+        row = {"limit": self.limit.key, "label": self.limit.label,
+               "removed": list(self.limit.removed), "chi2": self.chi2,
+               "chi2_fit": chi2_fit, "dchi2": d, "dof": q, "dchi2_bound": bound,
+               "fits_as_well": bool(d < bound),
+               "fits_better": bool(d < -SAME_MARGIN * max(abs(chi2_fit), 1.0))}
+        if self.implied_by is not None:  # a bound, not a fit: no χ² of its own
+            row.update(chi2=None, dchi2=None, chi2_at_least=self.chi2, dchi2_at_least=d,
+                       implied_by=self.implied_by)
+        return row
+
+
+def implied(limit: Limit, outcomes: list, chi2_fit: float) -> LimitOutcome | None:
+    """``limit``'s verdict without fitting it, or ``None``: when a limit whose model
+    contains ``limit``'s (``limit.within``; the Coulomb limit at ``tau_s`` → 0 has no
+    friction) was fitted and already lies ``limit``'s bound or more above the fit
+    (Δχ² ≥ the ``LIMIT_LEVEL`` point of χ² with ``limit``'s degrees of freedom), the
+    nested limit's χ², never below the enclosing one's (its multi-start optimum standing
+    for its minimum, as everywhere here), cannot fit as well. Its row then
+    carries that χ² as ``chi2_at_least`` (``implied_by`` the enclosing limit's key).
+    Only for a fit at the floor, where a limit is a verdict; above it each limit's own
+    optimum is also a restart of the full model (:func:`check`)."""
+    bound = _chi2_ppf(LIMIT_LEVEL, len(limit.removed))
+    for o in outcomes:
+        if (o.limit.key in limit.within and o.implied_by is None
+                and o.chi2 - chi2_fit >= bound):
+            return LimitOutcome(limit, o.chi2, {}, None, implied_by=o.limit.key)
+    return None
 
 
 def check(result, solutions, limits, fit_limit, restart, finish, switch: bool = True,
@@ -374,11 +409,14 @@ def check(result, solutions, limits, fit_limit, restart, finish, switch: bool = 
     cost)`` → ``(U, costs, ok, steps)`` or ``None``: more full-model restarts from the best
     optimum so far (:func:`stribeck_restarts`, key ``"stribeck"``). Returns the
     result (a new one when a restart won) with ``limits`` (list of dicts) and
-    ``restarted_from`` (the limit key, or ``None``) set, and the warnings."""
+    ``restarted_from`` (the limit key, or ``None``) set, and the warnings. With ``switch``
+    False a limit :func:`implied` by one fitted before it is not fitted."""
     U, costs, ok, steps = (np.asarray(a) for a in solutions)
     outcomes, won = [], None
+    chi2_now = data_chi2(result.problem, result.u, _cost_of(result, U, costs))
     for lim in limits:
-        out = fit_limit(lim)
+        out = None if switch else implied(lim, outcomes, chi2_now)
+        out = fit_limit(lim) if out is None else out
         if out is None:
             continue
         outcomes.append(out)
