@@ -195,7 +195,7 @@ def test_refitted_separation_reaches_what_the_rival_can_absorb(case):
     then credible. Fails if the Levenberg–Marquardt steps are not applied to the rival's
     parameters and nuisances, or if the refit cannot move them. (The refit is local: from
     30 % off it does not find the way through the stick–slip changes and stays at χ² ~4e4,
-    an upper bound — why a separation is confirmed by simulation, benchmarks/design_check.py.)"""
+    an upper bound — the global refit's test below.)"""
     import dataclasses
 
     from hdid._design._candidates import baseline
@@ -218,6 +218,71 @@ def test_refitted_separation_reaches_what_the_rival_can_absorb(case):
     small = separations(fit, moved(0.01, True), e)[0]
     assert small.refitted[0] == pytest.approx(small.linear[0], rel=0.1)
     assert small.credible and small.value == min(small.refitted)
+
+
+def test_rival_fitted_globally_makes_the_separation_a_value(case):
+    """The rival fitted by hdid.fit's own multi-start driver to the other form's noise-free
+    readings (:mod:`hdid._design._best_rival`). With tau_c 30 % off but free, the local
+    refit stays behind the stick–slip changes (χ² > 1e3, an upper bound) while the
+    global fit finds the truth, which the rival contains (χ² below 0.1 quantization
+    variances: the noise-free log's frame, offsets and weights are the simulator's). With
+    tau_c held 30 % off, the global fit can only improve on the local one and still
+    cannot reach the readings (> 1). Fails without the global fit (no ``best``: the value
+    would be the local 4e4)."""
+    import dataclasses
+
+    from hdid._design._candidates import baseline
+    from hdid._design._separate import separations
+
+    _, fit = case
+
+    def moved(frac, fixed):
+        tc = fit.parameters["tau_c"]
+        params = {**fit.parameters, "tau_c": dataclasses.replace(
+            tc, value=tc.value * (1 + frac), fixed=fixed)}
+        return dataclasses.replace(fit, model=fit.model.replace(tau_c=tc.value * (1 + frac)),
+                                   parameters=params, problem=None)
+
+    e = [baseline(fit)]
+    free = separations(fit, moved(0.3, False), e, include=(0,))[0]
+    assert free.refitted[0] > 1e3, free
+    assert free.fitted and free.value < 0.1, free
+    held = separations(fit, moved(0.3, True), e, include=(0,))[0]
+    assert 1.0 < held.best[0] <= held.refitted[0], held
+    # k: tau_c and k1 free in A, k1 alone in the held rival → a noisy log's mean adds 1
+    (mean, sd), _ = held.expected()
+    assert held.k == (2, 1) and mean == pytest.approx(held.best[0] + 1.0)
+    assert sd >= 2.0 * math.sqrt(held.best[0])
+    assert held.to_dict()["value_kind"] == "rival fitted globally"
+
+
+def test_expected_2lnlr_of_a_noisy_log_from_the_noise_free_separation():
+    """E[2 ln LR] ≈ λ + (k_A − k_B), sd ≈ √(4λ + 2 tr((P_A − P_B)²)) (:func:`expected`),
+    checked on linear models where it is exact: two non-nested designs (3 and 2 columns
+    sharing one), A's mean μ, 4000 Gaussian noise draws. The mean of 4000 draws has a
+    standard error sd/√4000 (≈ 0.06 here): 5 of them is the tolerance; the sample sd of
+    4000 values is within 5 % (its relative error 1/√(2·3999) ≈ 1.1 %, ×4.5)."""
+    from hdid._design._best_rival import expected, projection_trace
+
+    rng = np.random.default_rng(5)
+    n = 200
+    shared = rng.standard_normal((n, 1))
+    XA = np.hstack([shared, rng.standard_normal((n, 2))])
+    XB = np.hstack([shared, rng.standard_normal((n, 1))])
+    mu = XA @ np.array([1.0, 0.1, -0.05])
+    Ua, Ub = np.linalg.qr(XA)[0], np.linalg.qr(XB)[0]
+    lam = float(np.sum((mu - Ub @ (Ub.T @ mu)) ** 2))
+    y = mu[None, :] + rng.standard_normal((4000, n))
+
+    def chi2(U):
+        return np.sum((y - (y @ U) @ U.T) ** 2, axis=1)
+
+    d = chi2(Ub) - chi2(Ua)
+    mean, sd = expected(lam, 3, 2, projection_trace(Ua, Ub))
+    assert abs(d.mean() - mean) < 5 * sd / math.sqrt(d.size), (d.mean(), mean, lam)
+    assert d.std(ddof=1) == pytest.approx(sd, rel=0.05)
+    # without the parameter-count term the mean is off by 1 (20 standard errors)
+    assert abs(d.mean() - lam) > 5 * sd / math.sqrt(d.size)
 
 
 def test_bad_candidates_and_targets(case, tmp_path):

@@ -21,10 +21,14 @@ parameters and nuisances are moved by Levenberg–Marquardt steps on the exact s
 χ² stops falling; the refitted χ² is the computed ``2·ln LR``. Where the refit did not
 converge within ``REFIT_STEPS`` it is an upper bound, and where it differs from the
 linearised value by more than ``CREDIBLE_FACTOR`` the linearisation is not credible
-there (:attr:`Separation.credible`). The refit is local (no multi-start): a rival optimum
-behind a change of the stick–slip sequence may not be reached, so even a refitted value
-is an upper bound on the noncentrality. Noisy logs of the design, fitted by ``hdid.fit``,
-confirm it (``benchmarks/design_check.py``).
+there (:attr:`Separation.credible`). The local refit has no multi-start: a rival optimum
+behind a change of the stick–slip sequence may not be reached, so a locally refitted value
+is an upper bound on the noncentrality (3–25× the realised 2·ln LR on the confusable pairs
+of ``benchmarks/design_check.py``). The ``best_of`` experiments with the largest local
+values (and ``include``, the log's own design) are then fitted *globally*: the rival by
+:func:`hdid.fit`'s own multi-start driver on the other form's noise-free readings
+(:mod:`._best_rival`), which makes the separation a value, not a bound, and gives the mean
+and spread a noisy log's ``2·ln LR`` has around it (:meth:`Separation.expected`).
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ import numpy as np
 
 from .._config import float64
 from . import _stack
+from . import _best_rival
 from ._candidates import Experiment
 from ._fisher import as_log, max_substep, parameter_names, readings
 
@@ -60,12 +65,35 @@ class Separation:
     refitted: tuple[float, float] = (math.nan, math.nan)
     #: whether each refit stopped (its χ² no longer falling)
     converged: tuple[bool, bool] = (False, False)
+    #: the rival's global fit (:mod:`._best_rival`): ``min χ²`` ``(A true, B true)``, the
+    #: smaller of it and the local refit's (NaN: not fitted globally)
+    best: tuple[float, float] = (math.nan, math.nan)
+    #: physical parameters each form fits ``(k_A, k_B)``, and ``tr((P_A − P_B)²)`` at the
+    #: design (the spread of a noisy log's 2·ln LR, :func:`._best_rival.expected`)
+    k: tuple[int, int] = (0, 0)
+    trace: float | None = None
+
+    @property
+    def fitted(self) -> bool:
+        """Whether the rival was fitted globally in both directions (a value, not a bound)."""
+        return all(math.isfinite(x) for x in self.best)
 
     @property
     def value(self) -> float:
-        """The separation: the smaller direction, refitted where refitted."""
+        """The separation ``λ`` (noise-free): the smaller direction, globally fitted where
+        fitted, else refitted locally (an upper bound), else linearised."""
+        if self.fitted:
+            return min(self.best)
         ref = min(self.refitted)
         return ref if math.isfinite(ref) else min(self.linear)
+
+    def expected(self) -> tuple[tuple[float, float], tuple[float, float]]:
+        """``((mean, sd) with A true, (mean, sd) with B true)`` of a noisy log's 2·ln LR
+        (:func:`._best_rival.expected`; from the local refit where not fitted globally)."""
+        lam = self.best if self.fitted else self.refitted
+        ka, kb = self.k
+        return (_best_rival.expected(lam[0], ka, kb, self.trace),
+                _best_rival.expected(lam[1], kb, ka, self.trace))
 
     @property
     def credible(self) -> bool:
@@ -78,9 +106,14 @@ class Separation:
                    for lin, ref in zip(self.linear, self.refitted))
 
     def to_dict(self) -> dict:
+        (ma, sa), (mb, sb) = self.expected()
+        lam = self.best if self.fitted else self.refitted
         return {"experiment": self.experiment.name, "description": self.experiment.describe(),
                 "expected_2lnlr": self.value,
-                "a_true": self.refitted[0], "b_true": self.refitted[1],
+                "value_kind": "rival fitted globally" if self.fitted else "upper bound",
+                "a_true": lam[0], "b_true": lam[1],
+                "noisy_log": {"a_true": {"mean": ma, "sd": sa}, "b_true": {"mean": mb, "sd": sb}},
+                "locally_refitted": {"a_true": self.refitted[0], "b_true": self.refitted[1]},
                 "linearised": {"a_true": self.linear[0], "b_true": self.linear[1]},
                 "refit_converged": list(self.converged),
                 "linearisation_credible": self.credible}
@@ -96,19 +129,43 @@ def separation(fit_a, fit_b, experiments: list[Experiment]) -> list[tuple[float,
 
 
 @float64
-def separations(fit_a, fit_b, experiments: list[Experiment],
-                steps: int = REFIT_STEPS) -> list[Separation]:
-    """Linearised and refitted separation of every experiment (module docstring)."""
+def separations(fit_a, fit_b, experiments: list[Experiment], steps: int = REFIT_STEPS,
+                best_of: int = 0, include: tuple[int, ...] = ()) -> list[Separation]:
+    """Linearised and locally refitted separation of every experiment; the ``best_of``
+    largest local values and the experiments at positions ``include`` then with the rival
+    fitted globally (module docstring)."""
     ma, mb = _Model(fit_a, experiments), _Model(fit_b, experiments)
     ab = [_Direction(ma, mb, i, e) for i, e in enumerate(experiments)]  # A true, B fitted
     ba = [_Direction(mb, ma, i, e) for i, e in enumerate(experiments)]
     out = [Separation(e, (d1.linear, d2.linear)) for e, d1, d2 in zip(experiments, ab, ba)]
     _refit(mb, ab, steps)
     _refit(ma, ba, steps)
+    k = (_best_rival.n_physical(fit_a), _best_rival.n_physical(fit_b))
     for s, d1, d2 in zip(out, ab, ba):
         s.refitted = (d1.chi2, d2.chi2)
         s.converged = (d1.converged, d2.converged)
+        s.k = k
+    order = sorted((i for i, s in enumerate(out)
+                    if i not in include and math.isfinite(s.value)),
+                   key=lambda i: -out[i].value)
+    for i in (*include, *order[:best_of]):
+        if ab[i].ok and ba[i].ok:
+            _fit_globally(out[i], fit_a, fit_b, ab[i], ba[i])
     return out
+
+
+def _fit_globally(s: Separation, fit_a, fit_b, ab: "_Direction", ba: "_Direction") -> None:
+    """``s.best``: each rival fitted by :func:`hdid.fit` to the other's noise-free
+    readings (:func:`._best_rival.rival_chi2`), the smaller of it and the local refit;
+    ``s.trace``: ``tr((P_A − P_B)²)`` from both forms' Jacobians at the design."""
+    e = s.experiment
+    lam_a = _best_rival.rival_chi2(fit_b, e, ab.y)   # A true: B fitted to A's readings
+    lam_b = _best_rival.rival_chi2(fit_a, e, ba.y)
+    s.best = (float(np.nanmin([lam_a, ab.chi2])) if math.isfinite(lam_a) else math.nan,
+              float(np.nanmin([lam_b, ba.chi2])) if math.isfinite(lam_b) else math.nan)
+    Ub, Ua = ab._svd(ab.system()[0])[0], ba._svd(ba.system()[0])[0]
+    if Ua.shape[0] == Ub.shape[0]:
+        s.trace = _best_rival.projection_trace(Ua, Ub)
 
 
 class _Model:

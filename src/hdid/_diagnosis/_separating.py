@@ -6,15 +6,16 @@ The two candidates' refits to the log are the two hypotheses. For each of
 :func:`hdid.design`'s default candidate experiments (the log's design varied one knob at a
 time, both fits' models: a position-periodic term adds releases at other wave-generator
 angles) the expected ``2·ln LR`` between them is computed from the exact simulator —
-linearised, then with the rival *refitted* to the noise-free readings of the other
-(:func:`hdid._design._separate.separations`). The experiment named is the one with the
-largest separation whose linearisation the refit confirms (within a factor 2) and whose
-refit stopped; else the largest confirmed one (its refit still falling: an upper bound);
-where no candidate's is confirmed, the largest refitted one, with a line saying the
-linearised value is not credible there. A separation is noncentrality in units of the candidate's
-quantization variance: the mean ``2·ln LR`` a log of that design gives the true form over
-the other — ``MIN_SEPARATION`` (10) is "very strong" on Kass & Raftery's scale.
-Simulated logs of the proposed experiment confirm it (``benchmarks/design_check.py``).
+linearised, then with the rival refitted locally to the noise-free readings of the other
+(:func:`hdid._design._separate.separations`; an upper bound). The ``BEST_OF`` experiments
+with the largest local values, and the log's own design, are then computed with the rival
+fitted *globally* — :func:`hdid.fit`'s multi-start driver on the other form's noise-free
+readings (:mod:`hdid._design._best_rival`) — and the experiment named is the one of those
+with the largest separation. A separation ``λ`` is the noise-free χ² of the rival in units
+of the candidate's quantization variance; a noisy log of that design gives the true form
+``2·ln LR ≈ λ + (k_true − k_rival)`` on average, spread ``≈ 2√λ`` — ``MIN_SEPARATION``
+(10) is "very strong" on Kass & Raftery's scale. Simulated logs of the proposed
+experiment confirm it (``benchmarks/design_check.py``).
 """
 
 from __future__ import annotations
@@ -25,6 +26,9 @@ import math
 MIN_SEPARATION = 10.0
 #: Other experiments listed beside the one named (the JSON's ``alternatives``).
 ALTERNATIVES = 3
+#: Experiments (the largest local separations) whose rival is fitted globally, beside the
+#: log's own design: each costs two :func:`hdid.fit` calls on a log of that design.
+BEST_OF = 2
 
 
 def experiments_for(fit_a, fit_b):
@@ -51,18 +55,21 @@ def separating(a, b) -> dict:
     try:
         fa = a.result if a.result is not None else a.fit.result()
         fb = b.result if b.result is not None else b.fit.result()
-        seps = separations(fa, fb, experiments_for(fa, fb))
+        seps = separations(fa, fb, experiments_for(fa, fb), best_of=BEST_OF, include=(0,))
     except (HdidError, ValueError, FloatingPointError, RuntimeError) as exc:
         rec["error"] = f"{type(exc).__name__}: {exc}"
         rec["text"] = (f"{a.key} vs {b.key}: the separating experiment could not be "
                        f"computed ({rec['error']})")
         return rec
     this, others = seps[0], [s for s in seps[1:] if math.isfinite(s.value)]
-    # a number the refit confirms first: converged and credible, then credible (the refit
-    # still falling: an upper bound), then the rest; the largest separation in each tier
-    ranked = sorted(others, key=lambda s: (not (s.credible and all(s.converged)),
+    # values (the rival fitted globally) first, then the local upper bounds a refit
+    # confirms (converged and credible), then the rest; the largest separation in each tier
+    ranked = sorted(others, key=lambda s: (not s.fitted, not (s.credible and all(s.converged)),
                                            not s.credible, -s.value))
     rec["this_log_2lnlr"] = this.value
+    tl = this.to_dict()
+    rec["this_log"] = {"lambda": {"a_true": tl["a_true"], "b_true": tl["b_true"]},
+                       "value_kind": tl["value_kind"], **tl["noisy_log"]}
     if not ranked:
         rec["error"] = "no candidate experiment gave a usable simulated log"
         rec["text"] = f"{a.key} vs {b.key}: {rec['error']}"
@@ -71,6 +78,7 @@ def separating(a, b) -> dict:
     rec.update(top.to_dict())
     rec["reaches_min_separation"] = bool(top.value >= MIN_SEPARATION)
     rec["alternatives"] = [{"experiment": s.experiment.name, "expected_2lnlr": s.value,
+                            "value_kind": "rival fitted globally" if s.fitted else "upper bound",
                             "linearisation_credible": s.credible}
                            for s in ranked[1:1 + ALTERNATIVES]]
     rec["text"] = _text(a, b, top, this)
@@ -78,18 +86,16 @@ def separating(a, b) -> dict:
 
 
 def _text(a, b, s, this) -> str:
-    ra, rb = s.refitted
+    (ma, sa), (mb, sb) = s.expected()
     head = (f"to separate {a.key} from {b.key}: {s.experiment.name} "
             f"({s.experiment.describe()}), expected 2·ln LR {s.value:.3g} "
-            f"({ra:.3g} if {a.key} is true, {rb:.3g} if {b.key} is; this log: "
-            f"{this.value:.2g}), computed by hdid.design from the two fits")
-    if not all(s.converged):
-        head += " (the rival's refit had not stopped: an upper bound)"
-    if not s.credible:
-        la, lb = s.linear
-        head += (f"; the linearised value ({min(la, lb):.3g}) is not credible here — no "
-                 "candidate's linearisation was confirmed by refitting, so treat the number "
-                 "as the size, not the value, and confirm by simulation")
+            f"({ma:.3g} ± {sa:.2g} on a log if {a.key} is true, {mb:.3g} ± {sb:.2g} if "
+            f"{b.key} is; this log: {this.value:.2g}), computed by hdid.design from the two "
+            "fits")
+    if not s.fitted:
+        head += (" (the rival refitted locally only: an upper bound"
+                 + ("" if s.credible else "; the linearisation is not credible here")
+                 + ", confirm by simulation)")
     if s.value < MIN_SEPARATION:
         head += (f"; no default candidate reaches 2·ln LR {MIN_SEPARATION:g}: a longer "
                  "campaign (several of them together) is needed")
