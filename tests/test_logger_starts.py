@@ -69,6 +69,7 @@ def test_logger_started_at_servo_off_reaches_the_floor(tmp_path):
     assert _at_floor(res), res.report()
     note = _held_note(res)
     assert note is not None and "run(s) 1, 2, 3, 4" in note, res.warnings
+    assert res.first_reading_held == ("1", "2", "3", "4")
     assert res.values["k1"] == pytest.approx(TRUTH["k1"], rel=0.1), res.report()
 
 

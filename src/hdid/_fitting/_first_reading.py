@@ -64,4 +64,5 @@ def choose(moving, held, names: tuple[str, ...]):
         f"taken as the hold, the release falling in the first interval (χ² {b / floor2:.4g} "
         f"in quantization-floor units, against {a / floor2:.4g} for runs already moving at "
         "their first sample)"))
+    held.first_reading_held = tuple(names)
     return held

@@ -24,6 +24,7 @@ the user with nothing, the statement keeps the intervals from being read as the 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 from dataclasses import dataclass
@@ -125,6 +126,11 @@ def _rerun_limits(fit, log):
         return fit, ("no limit checks (the log is not at hand: pass log= to "
                      "sample_posterior, or fit with nested=True)")
     try:
+        if getattr(fit, "first_reading_held", ()):  # the fit's story of its first readings
+            from .._log import Log, read_log
+
+            log = dataclasses.replace(log if isinstance(log, Log) else read_log(log),
+                                      first_reading_held=tuple(fit.first_reading_held))
         setup = _fit._setup(log, fit.model, fix=sorted(_fixed(fit)),
                             free_inertia="inertia" in prob.free,
                             max_substep=float(prob.max_substep))

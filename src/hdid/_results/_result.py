@@ -60,6 +60,9 @@ class FitResult:
     #: no encoder step was found in them (:attr:`hdid.Log.print_unit`, ``resolution_note``)
     print_unit: float | None = None
     resolution_note: str | None = None
+    #: runs whose first reading was taken as the hold, the release in the first interval
+    #: (:attr:`hdid.Log.first_reading_held`, :mod:`hdid._fitting._first_reading`)
+    first_reading_held: tuple[str, ...] = ()
 
     # -- accessors --------------------------------------------------------------------
     @property
