@@ -1,8 +1,6 @@
 """The free-motion fit done "the way a user would without hdid": scipy only (``solve_ivp``
 LSODA, tanh-smoothed friction, ``least_squares``); ``fit_scipy`` is the baseline of
-``fit_speed.py`` and ``batch_speed.py``.
-
-    python benchmarks/scipy_way.py [LOG.csv]   # one demo fit of a log of data/synthetic
+``fit_speed.py`` and ``batch_speed.py``, which import it (run alone it prints this).
 """
 
 from __future__ import annotations
@@ -10,7 +8,6 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -192,26 +189,6 @@ def fit_scipy(runs: list[dict], x0: dict, inertia: float, ratio: float = 100.0, 
     }
 
 
-def _demo(path: Path) -> None:
-    """Fit ``path`` (a log of data/synthetic, truth in its truth.json) from a start 10–50 % off."""
-    import json
-
-    import pandas as pd
-
-    truth = json.loads((path.parent / "truth.json").read_text())[path.name]
-    p_true = truth["params"]
-    factors = {"k1": 1.1, "k2": 0.7, "tau_c": 1.2, "tau_s": 0.85, "v_s": 1.5, "delta": 1.3, "c_v": 1.4}
-    x0 = {n: p_true[n] * factors[n] for n in PARAM_NAMES}
-    fit = fit_scipy(runs_from_dataframe(pd.read_csv(path)), x0, inertia=p_true["inertia"], ratio=truth["ratio"])
-    print(f"scipy way on {path.name}: wall {fit['wall_s']:.2f} s, nfev {fit['nfev']}, ODE solves "
-          f"{fit['n_simulations']}, success {fit['success']}; rms {fit['rms'] / truth['step_rad']:.3f} counts")
-    for n in PARAM_NAMES:
-        print(f"{n:>8} start {x0[n]:11.5g} fit {fit['params'][n]:11.5g} truth {p_true[n]:11.5g}")
-
 
 if __name__ == "__main__":
-    import sys
-
-    if {"-h", "--help"} & set(sys.argv[1:]):
-        sys.exit(print(__doc__))
-    _demo(Path(sys.argv[1] if len(sys.argv) > 1 else Path(__file__).parents[1] / "data" / "synthetic" / "csf8_paper.csv"))
+    print(__doc__)
