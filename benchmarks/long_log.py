@@ -42,23 +42,19 @@ def one(n: int, timeout: float, tmp: Path) -> dict:
     t = time.perf_counter()
     synthesize(path, amplitudes=AMPLITUDES, rate=RATE, duration=n / RATE, hold=0.01,
                counts_per_rev=4000, seed=1, overwrite=True)
-    sim_s = time.perf_counter() - t
-    rows = len(AMPLITUDES) * n
+    row = {"samples_per_run": n, "rows": len(AMPLITUDES) * n, "mb": path.stat().st_size / 1e6,
+           "simulate_s": time.perf_counter() - t}
     env = {**os.environ, "HDID_NO_CACHE": "1", "JAX_PLATFORMS": "cpu"}
     t = time.perf_counter()
     try:
         out = subprocess.run([sys.executable, "-c", CHILD, str(path)], capture_output=True,
                              text=True, timeout=timeout, env=env)
     except subprocess.TimeoutExpired:
-        return {"samples_per_run": n, "rows": rows, "mb": path.stat().st_size / 1e6,
-                "simulate_s": sim_s, "status": f"stopped after {timeout:.0f} s"}
-    wall = time.perf_counter() - t
+        return {**row, "status": f"stopped after {timeout:.0f} s"}
     if out.returncode != 0:
-        return {"samples_per_run": n, "rows": rows, "status": "failed",
-                "stderr": out.stderr.strip().splitlines()[-1:]}
-    res = json.loads(out.stdout.strip().splitlines()[-1])
-    return {"samples_per_run": n, "rows": rows, "mb": path.stat().st_size / 1e6,
-            "simulate_s": sim_s, "process_s": wall, **res, "status": "ok"}
+        return {**row, "status": "failed", "stderr": out.stderr.strip().splitlines()[-1:]}
+    return {**row, "process_s": time.perf_counter() - t,
+            **json.loads(out.stdout.strip().splitlines()[-1]), "status": "ok"}
 
 
 def render(res: dict) -> str:
