@@ -188,9 +188,7 @@ def _grade(r) -> str:
     if r["hidden"] == "none":
         return "right" if v == "adequate" else "wrong"
     if exp is None:
-        if v != "missing_effect" or r["candidates"][0]["adequate_after"]:
-            return "right"
-        return "wrong"
+        return "right" if v != "missing_effect" or r["candidates"][0]["adequate_after"] else "wrong"
     if v == "missing_effect" and named == exp:
         return "right"
     if v == "adequate" and r["rms_before_floor"] <= 1.3:
