@@ -1,9 +1,12 @@
 """Simulation-based calibration of the posterior under its default priors: coverage, rank
-histograms, convergence and time per log, emcee and SMC on the same fits.
+histograms, convergence and time per log, emcee and SMC on the same fits; with ``--cli``,
+the time of ``hdid fit LOG --posterior`` as a whole process (the shipped paper log, then
+drawn paper logs), emcee and SMC alternating (results/posterior_cli_speed.*).
 
     taskset -c 1 python benchmarks/posterior_sbc.py [--paper-logs 20 --rich-logs 20] [--seed0 34000]
         [--max-steps 20000] [--budget-min 600] [--method emcee,smc]
-    python benchmarks/posterior_sbc.py --render [--interpretation FILE]
+    taskset -c 1 python benchmarks/posterior_sbc.py --cli [--logs 1] [--repeats 3]
+    python benchmarks/posterior_sbc.py [--cli] --render [--interpretation FILE]
 """
 
 from __future__ import annotations
@@ -12,13 +15,17 @@ import argparse
 import datetime as _dt
 import json
 import math
+import os
 import statistics
+import subprocess
 import sys
+import tempfile
 import time
 import traceback
+from pathlib import Path
 
 import _common
-from _common import RESULTS
+from _common import DATA, RESULTS, ROOT
 
 CHECKED = ("k1", "k2", "tau_c", "tau_s", "c_v", "stick_band_halfwidth_rad")
 REPORTED = CHECKED + ("v_s", "delta")
@@ -81,6 +88,18 @@ def draw_default(gen, rng, design_name, design):
     raise RuntimeError("no truth with a band inside the design's smallest amplitude")
 
 
+def inside_cut(values, ratio, design):
+    """Draws (``values``: k1, k2, tau_s arrays) whose stick band is below ``BAND_MARGIN`` ×
+    the design's smallest release, the cut :func:`draw_default` makes: the band ``θ_b``
+    solves ``k1·(θ_b/N) + k2·(θ_b/N)³ = N·tau_s`` (``reference.stick_band_halfwidth``),
+    monotone for ``k2 ≥ 0``, so ``θ_b < B`` is ``k1·x + k2·x³ > N·tau_s`` at ``x = B/N``."""
+    import numpy as np
+
+    x = BAND_MARGIN * min(abs(a) for a in design["amplitudes"]) / ratio
+    k1, k2, ts = (np.asarray(values[n], dtype=float) for n in ("k1", "k2", "tau_s"))
+    return k1 * x + k2 * x**3 > ratio * ts
+
+
 def draw_log(gen, design_name, seed):
     """The calibration's log ``seed`` of a design (``"paper"`` / ``"rich"``): ``(truth, log,
     generator info, notes)``, the truth drawn by :func:`draw_default` from ``rng(seed)``."""
@@ -134,12 +153,16 @@ def run_one(gen, design_name, seed, max_steps, method="emcee,smc"):
                    move_acceptance=diag["move_acceptance"], warnings=list(post.warnings),
                    widths=post.to_dict()["posterior_width"], method=post.method,
                    smc={k: v for k, v in post.smc.items() if k != "betas"})
-        values, summ, q = {**post.samples, **post.derived}, post.summary(), {}
+        values, q = {**post.samples, **post.derived}, {}
+        # the truths' prior is the sampler's cut to bands below BAND_MARGIN × the smallest
+        # release: the draws are conditioned on the same cut (else SBC is biased by construction)
+        keep = inside_cut(values, truth.get("ratio", 100.0), design)
+        out["cut_share"] = float(1.0 - keep.mean())
         for n in REPORTED:
-            v, s, tr = np.asarray(values[n]), summ[n], tv[n]
-            q[n] = {"truth": tr, "median": s["median"], "ci95": s["ci95"], "ci68": s["ci68"],
-                    "cover95": bool(s["ci95"][0] <= tr <= s["ci95"][1]),
-                    "cover68": bool(s["ci68"][0] <= tr <= s["ci68"][1]),
+            v, tr = np.asarray(values[n])[keep], tv[n]
+            lo95, lo68, med, hi68, hi95 = np.percentile(v, [2.5, 16, 50, 84, 97.5])
+            q[n] = {"truth": tr, "median": med, "ci95": [lo95, hi95], "ci68": [lo68, hi68],
+                    "cover95": bool(lo95 <= tr <= hi95), "cover68": bool(lo68 <= tr <= hi68),
                     "rank": float(np.mean(v < tr)), "n_draws": int(v.size)}
         outs.append(out | {"quantities": q, "total_s": time.perf_counter() - t0})
     return outs
@@ -164,6 +187,8 @@ def _steps(r):
 
 
 def render(res):
+    if "rows" in res:
+        return render_cli(res)
     methods = list(dict.fromkeys(r.get("method") or res["options"].get("method", "emcee")
                                  for r in res["logs"]))
     if len(methods) <= 1:
@@ -262,6 +287,95 @@ def _render(res, all_logs, method=None):
     return "\n".join(L) + "\n"
 
 
+SAMPLERS = ("emcee", "smc")
+CLI_NAME = "posterior_cli_speed"
+
+
+def run_cli(sampler, log, out, timeout):
+    """One ``hdid fit LOG --posterior --sampler SAMPLER`` process: its wall time, the
+    posterior's own (``sample_posterior``) and its convergence, from the JSON it writes."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+    t0, r = time.perf_counter(), {"load_start": _common.loads()}
+    try:
+        p = subprocess.run([sys.executable, "-c", "from hdid.cli import main; main()", "fit",
+                            str(log), "--posterior", "--sampler", sampler, "-q", "--json",
+                            str(out)], env=env, capture_output=True, text=True, timeout=timeout)
+        rc, err = p.returncode, p.stderr[-2000:]
+    except subprocess.TimeoutExpired:
+        rc, err = "timeout", ""
+    r.update(process_s=time.perf_counter() - t0, rc=rc, load_end=_common.loads())
+    if rc != 0:
+        return r | {"stderr": err}
+    full = json.loads(Path(out).read_text())
+    d = full["posterior_diagnostics"]
+    c = d.get("convergence") or {}
+    return r | {"posterior_s": d["wall_time_s"], "compile_s": d.get("compile_s"),
+                "mode_search_s": d.get("mode_search_s"), "converged": d["converged"],
+                "steps": d.get("n_steps"), "burn_in": d.get("burn_in"),
+                "chain_in_tau": d.get("chain_in_tau_max"), "met_by": c.get("met_by"),
+                "rhat_max": c.get("rhat_max"), "ess_bulk_min": c.get("ess_bulk_min"),
+                "ess_tail_min": c.get("ess_tail_min"),
+                "band95": full["posterior"]["stick_band_halfwidth_rad"]["ci95"]}
+
+
+def render_cli(res):
+    f = lambda v, spec: "" if v is None else format(v, spec)  # noqa: E731
+    L = ["# `hdid fit LOG --posterior`: emcee and SMC side by side, 4-run paper logs\n",
+         f"Generated by `python benchmarks/posterior_sbc.py --cli` on {res['generated']} "
+         f"(src {res.get('src')}). One core of a 2-core machine shared with other work "
+         "(loads per run below: the times are as noisy as those loads).\n",
+         *_common.interpretation_section(res),
+         "| log | sampler | process s | posterior s | compile s | mode search s | converged "
+         "(rule) | steps (+burn-in) | R-hat max | ESS bulk/tail min | chain / τ_max | "
+         "band 95 % [mrad] | load start → end |", "|---" * 13 + "|"]
+    for row in res["rows"]:
+        for k, r in ((k, row[k]) for k in SAMPLERS if k in row):
+            if r.get("rc") != 0:
+                L.append(f"| {row['log']} | {k} | {r['process_s']:.0f} | failed ({r['rc']}) |"
+                         + " |" * 9)
+                continue
+            emcee = k == "emcee"
+            steps = f"{r['steps']} (+{r['burn_in']})" if emcee else "–"
+            L.append(
+                f"| {row['log']} | {k} | {r['process_s']:.0f} | {r['posterior_s']:.0f} | "
+                f"{f(r['compile_s'], '.1f')} | {f(r['mode_search_s'], '.1f')} | "
+                f"{'yes' if r['converged'] else 'NO'} ({r.get('met_by') or '–'}) | "
+                f"{steps} | "
+                f"{f(r['rhat_max'], '.3f')} | {f(r['ess_bulk_min'], '.0f')}/"
+                f"{f(r['ess_tail_min'], '.0f')} | {f(r['chain_in_tau'], '.1f') if emcee else '–'} | "
+                f"{1e3 * r['band95'][0]:.1f}–{1e3 * r['band95'][1]:.1f} | "
+                f"{r['load_start'][0]} → {r['load_end'][0]} |")
+    for k in SAMPLERS:
+        ok = [row[k] for row in res["rows"] if row.get(k, {}).get("rc") == 0]
+        if ok:
+            L.append(f"\n{k}: median process {statistics.median(r['process_s'] for r in ok):.0f} s, "
+                     f"median posterior {statistics.median(r['posterior_s'] for r in ok):.0f} s, "
+                     f"converged {sum(r['converged'] for r in ok)}/{len(ok)}.")
+    return "\n".join(L) + "\n"
+
+
+def main_cli(args, gen):
+    """``--cli``: the shipped paper log and ``--logs``−1 drawn ones, ``--repeats`` processes
+    each per sampler, alternating."""
+    tmp = Path(tempfile.mkdtemp())
+    logs = [("csf8_paper.csv", DATA / "csf8_paper.csv")]
+    for seed in range(args.seed0, args.seed0 + args.logs - 1):
+        logs.append((f"paper_{seed}.csv", tmp / f"paper_{seed}.csv"))
+        draw_log(gen, "paper", seed)[1].to_csv(logs[-1][1], index=False)
+    res = {"generated": time.strftime("%Y-%m-%dT%H:%M:%S"), "src": _common.src_fingerprint(),
+           "rows": []}
+    for name, path in logs:
+        for _ in range(args.repeats):
+            row = {"log": name}
+            for k in SAMPLERS:
+                row[k] = run_cli(k, path, tmp / f"{k}.json", args.timeout)
+                print(name, k, {x: row[k].get(x) for x in ("process_s", "posterior_s",
+                                                           "converged", "rc")},
+                      _common.loads(), flush=True)
+            res["rows"].append(row)
+            _common.write_result(CLI_NAME, res, render, indent=1)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--paper-logs", type=int, default=20)
@@ -272,11 +386,20 @@ def main(argv=None):
     ap.add_argument("--name", default="posterior_sbc", help="results/NAME.{json,md}")
     ap.add_argument("--method", default="emcee,smc",
                     help="samplers, comma-separated (each log's fit and optima shared)")
-    args = _common.parse_or_render(ap, argv, lambda a: a.name, render, indent=1)
+    ap.add_argument("--cli", action="store_true", help="time the CLI process instead (results/"
+                    f"{CLI_NAME}.*): --logs, --repeats, --timeout")
+    ap.add_argument("--logs", type=int, default=1, help="--cli: the shipped log and N-1 drawn ones")
+    ap.add_argument("--repeats", type=int, default=3, help="--cli: runs per log and sampler")
+    ap.add_argument("--timeout", type=float, default=900, help="--cli: per process [s]")
+    args = _common.parse_or_render(ap, argv, lambda a: CLI_NAME if a.cli else a.name, render,
+                                   indent=1)
     if args is None:
         return
-    out_json, out_md = RESULTS / f"{args.name}.json", RESULTS / f"{args.name}.md"
     from hdid.reference import logs as gen
+
+    if args.cli:
+        return main_cli(args, gen)
+    out_json, out_md = RESULTS / f"{args.name}.json", RESULTS / f"{args.name}.md"
 
     res = {"generated": _dt.datetime.now().isoformat(timespec="seconds"), "load_start": _common.loads(),
            "options": {k: v for k, v in vars(args).items() if k != "render"},
