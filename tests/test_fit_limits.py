@@ -170,3 +170,30 @@ def test_the_paper_logs_skipped_limit_fits_no_better_than_its_bound(paper_fits, 
     fitted = {d["limit"]: d for d in hdid.fit(PAPER).limits}["no_friction"]
     assert fitted["chi2"] >= nf["chi2_at_least"] * (1 - 1e-3), (fitted, nf)
     assert (fitted["fits_as_well"], fitted["fits_better"]) == (False, False)
+
+
+def test_a_limits_verdict_stops_its_fit_once_an_optimum_decides_it():
+    # At the floor a limit only says whether it fits better than the fit (and so as well):
+    # once one start has converged below the fit's chi2 (_limits.verdict_cost) further
+    # iterations can lower the limit's chi2 but not change the verdict, so the schedule
+    # stops every lane; without a threshold the unconverged lanes go on as before.
+    from hdid._fitting._lm import CONTINUED_STARTS, _Schedule
+
+    def second_check(stop):
+        s = _Schedule(4, 300, stop) if stop is not None else _Schedule(4, 300)
+        s.next()
+        s.update(np.array([40.0, 30.0, 20.0, 900.0]), np.zeros(4, bool), np.full(4, 12))
+        active, _, _ = s.next()
+        assert active.sum() == CONTINUED_STARTS
+        # lane 2 converges at chi2 12, lanes 0, 1 still descend (within DROP_DCHI2)
+        s.update(np.array([38.0, 26.0, 12.0, np.inf]), np.array([False, False, True, False]),
+                 np.array([25, 25, 22, 0]))
+        return s.next(), s
+
+    task, s = second_check(23.9)
+    assert task is None and s.ok[2] and not s.ok[0] and s.costs[2] == 12.0
+    task, _ = second_check(None)
+    assert task is not None and list(task[0]) == [True, True, False, False]
+    # a converged optimum above the threshold decides nothing: the others go on
+    task, _ = second_check(11.0)
+    assert task is not None and list(task[0]) == [True, True, False, False]

@@ -189,10 +189,15 @@ def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", f
     # The limits are prior rows on the fit's own problem: they share its programs (the
     # one-lane LM program, one compile per model structure, kept in the program store).
 
-    def local_fits(p, U0):
+    def local_fits(p, U0, stop=-np.inf):
         # ``lanes`` rows a schedule (the fit's former ``lanes``-wide program: a short group
         # padded with copies of its first row, computed once), else one schedule for all
-        return _one_lane(p, np.asarray(U0, dtype=float), max_steps, group=lanes or None)[:4]
+        return _one_lane(p, np.asarray(U0, dtype=float), max_steps, group=lanes or None,
+                         stop_below=stop)[:4]
+
+    switch = _limits.KEEP_BETTER_AT_FLOOR or not _limits.reached_floor(result)
+    # at the floor a limit is a verdict: its fit stops once an optimum decides it
+    stop = -np.inf if switch else _limits.verdict_cost(result, solutions)
 
     model, prep = setup.model, setup.prep
     scales = log_scales(prep, model, np.asarray(problem.offset0))
@@ -209,7 +214,7 @@ def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", f
         n_grid = max(lanes - 1, 1) if lanes else _limits.LIMIT_GRID_STARTS
         U0, _ = _choose_starts(U[1:], cost, grid_keys, n_grid, False)
         U0 = np.concatenate([U[:1], np.asarray(U0)])
-        Un, cn, _, _ = local_fits(p, U0)
+        Un, cn, _, _ = local_fits(p, U0, stop)
         cn = np.where(np.isfinite(cn), cn, np.inf)
         b = int(np.argmin(cn))
         retry = _untrapped(p, prep, Un[b]) if np.isfinite(cn[b]) else None
@@ -242,7 +247,6 @@ def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", f
                 for r in _limits.stribeck_restarts(v, scales, setup.fixed)]
         return local_fits(problem, np.asarray(rows)) if rows else None
 
-    switch = _limits.KEEP_BETTER_AT_FLOOR or not _limits.reached_floor(result)
     return _limits.check(result, solutions, wanted, fit_limit, restart, finish, switch, again)
 
 

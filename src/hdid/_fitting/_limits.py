@@ -397,6 +397,17 @@ def implied(limit: Limit, outcomes: list, chi2_fit: float) -> LimitOutcome | Non
     return None
 
 
+def verdict_cost(result, solutions) -> float:
+    """The cost below which a limit's optimum fits better than ``result`` (and so as
+    well: :meth:`LimitOutcome.to_dict`), ``solutions`` ``(U, costs, …)`` holding its
+    optimum: a fit at the floor, where a limit is only a verdict, stops a limit's fit
+    once one of its starts converges below it (:class:`hdid._fitting._lm._Schedule`'s
+    ``stop_below``; a cost, data χ² plus prior rows, is never below its data χ²)."""
+    U, costs = np.asarray(solutions[0]), np.asarray(solutions[1])
+    chi2_fit = data_chi2(result.problem, result.u, _cost_of(result, U, costs))
+    return chi2_fit - SAME_MARGIN * max(abs(chi2_fit), 1.0)
+
+
 def check(result, solutions, limits, fit_limit, restart, finish, switch: bool = True,
           again=None) -> object:
     """Fit ``limits`` for ``result``, restart the full model from each, keep the best.

@@ -65,9 +65,15 @@ class _Schedule:
     every 5 iterations instead of 25 (7 of 40 logs ended in a worse basin), stopping
     phase-1 starts early by their χ² (1 in 80 worse, 7 % fewer iterations), a looser
     stall (0.03: 22 of 80 logs worse by > 0.1).
+
+    ``stop_below``: every lane stops at a check once one has converged below this cost —
+    for a fit whose only question is whether some optimum lies below it (a limit's
+    verdict at the floor, :func:`hdid._fitting._limits.verdict_cost`); further iterations
+    could only lower the answer's χ², not change it.
     """
 
-    def __init__(self, n: int, max_steps: int):
+    def __init__(self, n: int, max_steps: int, stop_below: float = -np.inf):
+        self.stop_below = float(stop_below)
         self.max_steps = int(max_steps)
         self.phase = 1
         self.used = 0
@@ -102,6 +108,8 @@ class _Schedule:
             self.ok[a] = done[a]
             best = finite.min()  # inf when every lane diverged: none goes on
             self.active = a & ~done & (finite - best < DROP_DCHI2) if np.isfinite(best) else a & False
+            if np.any(self.ok & (finite < self.stop_below)):  # the question is answered
+                self.active[:] = False
 
 
 # ------------------------------------------------------------------ hand-stepped LM

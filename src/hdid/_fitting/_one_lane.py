@@ -42,7 +42,7 @@ def _call_args(U, on, k, state: LMState):
 
 
 def _local_fits(problem: Problem, U0, max_steps: int, lanes: int = LANES, solve=None,
-                group: int | None = None):
+                group: int | None = None, stop_below: float = -np.inf):
     """:func:`hdid._fitting._lm._local_fits` (the same schedule, :class:`hdid._fitting._lm._Schedule`,
     and, lanes not interacting, the same iterates for every start up to rounding: a
     vmapped simulator selects where a one-lane one branches) run as calls of one
@@ -57,6 +57,8 @@ def _local_fits(problem: Problem, U0, max_steps: int, lanes: int = LANES, solve=
     unknowns and state are identical (such copies) are computed once: a one-lane program
     gives them identical results.
 
+    ``stop_below``: the schedule's (:class:`hdid._fitting._lm._Schedule`).
+
     Returns ``(U, costs, ok, steps, residuals)``, the residuals at each row of ``U`` (NaN
     where none were computed)."""
     U0 = np.asarray(U0, dtype=float)
@@ -66,12 +68,13 @@ def _local_fits(problem: Problem, U0, max_steps: int, lanes: int = LANES, solve=
             rows = U0[i:i + group]
             pad = np.concatenate([rows, np.repeat(rows[:1], group - len(rows), axis=0)])
             outs.append([np.asarray(x)[:len(rows)]
-                         for x in _local_fits(problem, pad, max_steps, lanes, solve)])
+                         for x in _local_fits(problem, pad, max_steps, lanes, solve,
+                                              stop_below=stop_below)])
         return tuple(np.concatenate(parts) for parts in zip(*outs))
     solve = _stored_solve if solve is None else solve
     U = np.array(U0, dtype=float)
     N, n = U.shape
-    sched = _Schedule(N, max_steps)
+    sched = _Schedule(N, max_steps, stop_below)
     m = int(np.prod(problem.times.shape)) + problem.n_physical
     state = [np.asarray(f) for f in LMState.empty(N, m, n)]
     while (task := sched.next()) is not None:
