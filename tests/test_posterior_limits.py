@@ -168,3 +168,27 @@ def test_limit_fits_are_made_once_per_fit(fit, monkeypatch):
     short = limit_fits(fit, ["tau_c"], best, MODE_LANES, stop=-1.0)
     assert short[0].path == [] and np.array_equal(short[0].u, first[0].path[0][0])
 
+
+
+def test_ridge_starts_under_the_default_prior(fit):
+    """Under the weak default priors (nothing flat in value: no limit fits, no limit
+    warning) the optima the samplers start from still include points down the ridges of
+    the vanishing terms (``ridge:NAME``, the limit continuation under the sampled priors):
+    on the shipped log the Coulomb ridge — tau_c below the fit's, c_v above it — within
+    ``MODE_DCHI2_MAX`` (the default prior's cost of going down it is (s/1.2)² at exp(−s)).
+    Before them, every start sat on the fit's side of that ridge and the calibration's
+    tau_c ranks piled low (benchmarks/results/posterior_sbc.md)."""
+    from hdid._posterior.density import posterior_density
+    from hdid._posterior.modes import found_limits, ridge_names, sampled_modes
+
+    dens = posterior_density(fit)
+    assert not np.any(dens.lin)
+    assert ridge_names(fit.problem, dens.lin, fit.covariance) == ["k2", "tau_c", "c_v"]
+    assert ridge_names(fit.problem, posterior_density(fit, default_prior="flat").lin) == []
+    found = sampled_modes(fit, "auto", 0, dens.u_fit, dens.lin, dens.lp.gauss_prior)
+    ridge = [m for m in found if m.kind == "ridge:tau_c"]
+    assert len(ridge) >= 2
+    assert all(m.values["tau_c"] < fit.values["tau_c"] for m in ridge)
+    assert max(m.values["c_v"] for m in ridge) > fit.values["c_v"]
+    assert all(m.limit is None for m in found if m.kind.startswith("ridge:"))
+    assert found_limits(fit, found, "auto", dens.lin, dens.lp.gauss_prior) == []
