@@ -537,7 +537,7 @@ def render_profile(pr: dict) -> list[str]:
               f"({x['unknowns']} unknowns) {x['jacobian_ms']:.2f} ms, the LM's linear algebra "
               f"(normal equations, Cholesky) {x['lm_linear_algebra_ms']:.3f} ms. The rest of "
               "each phase is host work (schedule, NumPy, dispatch)."]
-    return L + [""]
+    return L + [""] + [f"- {n}" for n in pr.get("notes", [])] + ([""] if pr.get("notes") else [])
 
 
 def main(argv=None) -> None:
