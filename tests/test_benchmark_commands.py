@@ -92,6 +92,18 @@ def test_shown_benchmark_commands_name_real_scripts_and_options():
     assert not wrong, "commands that cannot be typed as shown:\n" + "\n".join(wrong)
 
 
+#: Options of other programs the two READMEs show (``git worktree add --detach``).
+OTHER_PROGRAMS = {"--detach"}
+
+
+def test_every_option_the_readmes_name_is_a_script_s():
+    # prose names options without the script too ("both trees in one run: `--before TREE`")
+    known = set().union(*(options(p) for f in FOLDERS for p in (ROOT / f).glob("*.py")))
+    wrong = [f"{f}/README.md: {o}" for f in FOLDERS for o in sorted(set(_OPTION.findall(
+        (ROOT / f / "README.md").read_text(encoding="utf-8"))) - known - OTHER_PROGRAMS)]
+    assert not wrong, "options no benchmark or calibration script takes:\n" + "\n".join(wrong)
+
+
 def test_a_retired_script_or_option_is_caught(tmp_path):
     # the checker itself: a command of a script that is gone, and an option a script lost
     (tmp_path / "benchmarks").mkdir()
