@@ -4,6 +4,14 @@
 swaps in a richer law for a base piece), refits, and ranks the candidates by the change
 of the Bayesian information criterion.
 
+The driver reads as the method, one function a step: the base fit (:func:`_base_fit`);
+the ladder of candidates (:func:`_ladder_of_candidates`), each round refitting them,
+giving the current model their optima and tabulating them (:mod:`hdid._diagnosis._search`),
+with the rival test for forms the BIC holds at the floor (:mod:`hdid._diagnosis._rival`);
+the verdict (:func:`_verdict`); the separating experiments
+(:mod:`hdid._diagnosis._separating`); the assembly of the :class:`Diagnosis`
+(:func:`_assemble`).
+
 Refits (:mod:`hdid._fitting._refit`)
     Every candidate starts from the current optimum — every shared parameter at the
     current fit's value (:func:`_at_optimum`), release instants, start angles and offsets
@@ -67,14 +75,14 @@ Verdicts (the only four; :func:`_verdict`)
         never choose between forms that both reach the floor): "ambiguous between A, B" —
         never a single confident name (a warning says when none of them brings the
         residual to the floor).
+    ``unexplained``
+        the residual is above the floor and either no candidate has strong evidence or
+        the best leaves it above the floor (and ``steps`` > 1 did not reach it).
 Separating experiments (``design=True``, ``Diagnosis.separating_experiments``)
     for an ``ambiguous`` verdict (the best against each rival) and a same-mark pair, the
     experiment that separates the two forms, *computed* by :mod:`hdid._design` from the
     two refits with its expected ``2·ln LR``, linearised and with the rival refitted, and
     whether the linearisation is credible (:mod:`hdid._diagnosis._separating`).
-    ``unexplained``
-        the residual is above the floor and either no candidate has strong evidence or
-        the best leaves it above the floor (and ``steps`` > 1 did not reach it).
 Warnings (:func:`_warnings`, ``Diagnosis.warnings``)
     what is known against trusting the verdict: no false-alarm rate measured near this
     design, or one whose one-sided 95 % upper bound is above the 5 % target; the current model's
@@ -88,11 +96,8 @@ Warnings (:func:`_warnings`, ``Diagnosis.warnings``)
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterable
 from typing import Any
-
-import numpy as np
 
 from ._candidates import (  # noqa: F401  (re-exported: tests, CLI)
     KINEMATIC_ORDERS,
@@ -137,27 +142,24 @@ from ._wrong_step import readings_step
 from ._refits import (  # noqa: F401 (re-exported)
     _base_starts, _cand_bic, _candidate_fits, _own_optimum, _record, sf_key)
 from ._separating import MAX_SEPARATED_PAIRS, for_verdict as _separating_experiments  # noqa: F401
-
-#: A current fit with RMS above this many quantization floors is a poor warm start ...
-FAR_FROM_FLOOR = 3.0
-#: ... so its candidates get as many grid starts as the base fit always gets.
-FULL_GRID_STARTS = 6
-#: Strong candidates whose residual is analysed (covariance, whiteness) per round: the
-#: verdict needs only the best one's (each analysis compiles programs of its own).
-MAX_ANALYSED = 1
-#: Passes of "current model from the candidates' optima, then the candidates from the
-#: current model's new optimum" when the first finds the current model a better basin.
-BASIN_PASSES = 2
-#: A restart of the current model counts as a better optimum (a note, a warning, the
-#: candidates started again) when it lowers the current model's BIC by more than this:
-#: where "positive" evidence starts on Kass & Raftery's (1995) scale. (The old 1-χ² rule
-#: also fired below the quantization floor, e.g. χ² 15.0 → 13.4 on a clean 250 Hz log
-#: with n = 35, k = 17, where the BIC does not move; above it, 21.7 → 20.2 is ΔBIC 2.5:
-#: a better basin found late, real, not noise.) The better optimum is kept either way.
-BASE_IMPROVED_DBIC = 2.0
+from ._search import (  # noqa: F401 (re-exported: tests, calibration)
+    BASE_IMPROVED_DBIC,
+    BASIN_PASSES,
+    FAR_FROM_FLOOR,
+    FULL_GRID_STARTS,
+    MAX_ANALYSED,
+    Search,
+    analyse_strong,
+    candidate_table,
+    current_from_candidates,
+    grid_points,
+    hints_from,
+    look_at,
+    refit_candidates,
+)
 
 
-# -- the driver -----------------------------------------------------------------------
+# -- the driver: the method's steps in order ------------------------------------------
 
 
 def diagnose(
@@ -205,12 +207,34 @@ def diagnose(
         ``verdict`` and its rules: see the module docstring.
     """
     from .._problems import _programs
+
+    say, clock = _programs.phase_reporter(progress)
+    log, model, fit_options, all_cands, wanted = _inputs(log, model, candidates, fit_options)
+    # 1. the base fit (refitted with the readings' spacing where its step is wrong)
+    search, current, step_warning = _base_fit(log, model, fit_options, all_cands, say)
+    # 2-3. the ladder of candidates, each round judged by the rival test; the rounding
+    #      floor measured on the first round's settled base
+    rounds, ladder, fcheck = _ladder_of_candidates(search, current, wanted, steps, n_starts)
+    # 4. the verdict
+    verdict, summary, vnotes = _verdict(rounds, all_cands)
+    search.notes += vnotes
+    # 5. the experiment that would separate what this log cannot
+    separating = _separating_experiments(verdict, rounds, all_cands, say) if design else []
+    summary += _separating_summary(verdict, separating)
+    # 6. the assembly: notes, warnings, the measured false-alarm rate
+    return _assemble(search, rounds, ladder, fcheck, verdict, summary, separating,
+                     step_warning, clock)
+
+
+def _inputs(log, model, candidates, fit_options):
+    """The log read (its encoder options taken from ``fit_options``), the fit options
+    checked (a ``TypeError`` naming any unknown one; only the set-up's are kept), the
+    model (default :meth:`Model.default`) and the candidates to try (a ``KeyError``
+    naming unknown keys). Returns ``(log, model, fit_options, all_cands, wanted)``."""
     from .._fitting import _refit
     from .._log import Log, read_log
     from .._models._model import Model
-    from .._results._residuals import residual_features, residual_frame, whiteness
 
-    say, clock = _programs.phase_reporter(progress)
     if not isinstance(log, Log):
         log = read_log(log, counts_per_rev=fit_options.pop("counts_per_rev", None),
                        resolution=fit_options.pop("resolution", None))
@@ -229,6 +253,17 @@ def diagnose(
             )
     else:
         wanted = list(all_cands)
+    return log, model, fit_options, all_cands, wanted
+
+
+def _base_fit(log, model, fit_options, all_cands, say):
+    """The current model fitted from ``FULL_GRID_STARTS`` data-driven grid starts (more
+    than any candidate gets: the base must not lose by having fewer starts). A fit whose
+    every start diverged is a ``FitError`` naming the usual causes. A base far above its
+    step's floor but at the readings' own spacing was given a wrong step and is refitted
+    with the spacing (:func:`hdid._diagnosis._wrong_step.readings_step`, a warning).
+    Returns the :class:`Search` the rounds share, the base fit and the warning."""
+    from .._fitting import _refit
 
     say(f"fitting the base model ({' + '.join(model.effect_names)})")
     base_setup = _refit.setup(log, model, fit_options)
@@ -244,172 +279,88 @@ def diagnose(
         )
     base_setup, base_grid, current, step_warning = readings_step(
         log, model, fit_options, base_setup, base_grid, current, say, FULL_GRID_STARTS)
-    notes: list[str] = []
-    local_base: list[tuple[float, float, str]] = []
+    search = Search(log, fit_options, all_cands, say, base_setup, base_grid)
+    return search, current, step_warning
+
+
+def _ladder_of_candidates(s: Search, current, wanted, steps, n_starts):
+    """The rounds of the search (:mod:`hdid._diagnosis._search`): each refits the
+    candidates from the current fit, gives the current model their optima, tabulates
+    them, ranks forms of one family that the BIC holds at the floor by their χ² under
+    the rounding (the rival test, :func:`~hdid._diagnosis._rival.rank_within_families`)
+    and analyses the strong best. With ``steps`` > 1 the best is added and the next round
+    starts from it, until it reaches the floor, has rivals, or the steps run out (the
+    model ladder). The rounding floor a correct model leaves on the log
+    (:func:`~hdid._diagnosis._excess.floor_check`) is measured on the first round's
+    settled base: reported, never used by the rules. Returns ``(rounds, ladder, fcheck)``."""
     ladder: list[dict[str, Any]] = []
     rounds: list[dict[str, Any]] = []
-    scans: dict[str, dict[str, float]] = {}
-    refitted: dict[str, list[str]] = {}
+    fcheck = None
     for step in range(max(1, steps)):
-        base_result = current.result()
-        white = whiteness(base_result)
-        frame = residual_frame(base_result)
-        feat = residual_features(frame)
-        moving = frame.loc[frame["phase"] == "moving", "theta_wg"]
-        swing = float(np.ptp(moving)) if len(moving) else math.inf
-        hints = {"ripple_orders": _ripple_orders(frame), "swing_rad": swing}
-        floor = base_result.quantization_floor_rad
-        # Far from the floor, the current fit is no trustworthy warm start (e.g. a model
-        # without static friction that never sticks): candidates get the full grid too.
-        far = current.rms_rad() > FAR_FROM_FLOOR * floor
-        n_grid = max(n_starts, FULL_GRID_STARTS) if far else n_starts
-        p0 = base_setup.problem
-        grid_points = [({k: float(v) for k, v in p0.unpack_np(u)[0].items()},
-                        _refit.tail_of(p0, u)) for u in base_grid[:n_grid]]
-        by_key: dict[str, list] = {}
-        # every candidate's set-ups first, and their programs read from the store in the
-        # background while the first candidates are refitted (_programs.prefetch)
-        prepared: dict[str, Any] = {}
-        for key in wanted:
-            cand = all_cands[key]
-            if not cand.applies(current.model):
-                continue
-            try:
-                prepared[key] = _candidate_setups(log, cand, current, hints, fit_options)
-            except Exception as exc:  # one candidate failing must not stop the others
-                by_key[key] = exc
-                continue
-            for setup in prepared[key][1].values():
-                _refit.prefetch(setup)
-        for key, prep in prepared.items():
-            try:
-                by_key[key] = _candidate_fits(log, all_cands[key], current, hints, fit_options,
-                                              grid_points, say, scans, refitted, prepared=prep)
-            except Exception as exc:  # one candidate failing must not stop the others
-                by_key[key] = exc
-        # The current model gets every start a candidate got: from each candidate's
-        # optimum with the effect removed, and from the catalog friction shape. A
-        # candidate is credited only with what the current model cannot reach.
-        # (each candidate's own optimum — its best refit — wherever it would be credited
-        # with anything, ΔBIC < 0: a strong claim and its possible rivals alike; one start
-        # each, ~0.1–0.5 s with one-lane programs)
-        tried: set[int] = set()
-        for basin in range(BASIN_PASSES):
-            bic_now = bic_value(current.cost, current.n_effective, current.n_unknowns)
-            cand_fits = sorted(
-                (sf for sf in (_own_optimum(v) for v in by_key.values()) if sf is not None
-                 and id(sf) not in tried
-                 and _cand_bic(sf, all_cands[sf_key(by_key, sf)]) - bic_now < 0),
-                key=lambda sf: sf.cost)
-            tried.update(id(sf) for sf in cand_fits)
-            values = current.values()
-            reset = (_shape_reset(values) if basin == 0 and _shape_is_unusual(values)
-                     else {})
-            back = _base_starts(current.setup, current, cand_fits, reset)
-            if not back:
-                break
-            say(f"  current model from {len(back)} candidate optima (effect removed)")
-            again = _refit.run(current.label, current.setup, back)
-            if not (again.finite and bic_value(again.cost, again.n_effective, again.n_unknowns)
-                    < bic_now - BASE_IMPROVED_DBIC):
-                current = _merge(current, again)
-                current._result = base_result
-                break
-            best_origin = again.origins[again.best].split(":")[-1]
-            local_base.append((current.cost, again.cost, best_origin))
-            notes.append(
-                f"the current model improved from a start at {best_origin}'s optimum (χ² "
-                f"{current.cost:.1f} → {again.cost:.1f}): its first optimum was a local one, "
-                "and no candidate is credited with the difference"
-            )
-            current = _merge(current, again)
-            base_result = current.result()
-            white = whiteness(base_result)
-            frame = residual_frame(base_result)
-            feat = residual_features(frame)
-            if basin + 1 < BASIN_PASSES:
-                # The candidates started from the first, local optimum: start them again
-                # from the new one (warm starts only; the grid's are the same), so each is
-                # at its own optimum next to the current model's, and the current model
-                # gets a start from every new candidate optimum in the next pass.
-                say("  candidates again from the current model's new optimum")
-                for key in list(by_key):
-                    if isinstance(by_key[key], Exception):
-                        continue
-                    try:
-                        by_key[key] = by_key[key] + _candidate_fits(
-                            log, all_cands[key], current, hints, fit_options, [], say, scans,
-                            refitted)
-                    except Exception:  # the first pass's refits stand
-                        pass
+        look = look_at(current)
+        hints = hints_from(look.frame)
+        floor = look.result.quantization_floor_rad
+        points = grid_points(s, current, floor, n_starts)
+        by_key = refit_candidates(s, current, wanted, hints, points)
+        current, look = current_from_candidates(s, current, look, by_key, hints)
         if step == 0:
             ladder.append(_ladder_step(" + ".join(current.model.effect_names), current, None))
-            prep = base_setup.prep  # the floor a correct model leaves: reported (_excess)
+            prep = s.base_setup.prep
             fcheck = floor_check(current, 1.0 / float(prep.sample_period), len(prep.lengths))
-        results: list[CandidateResult] = []
-        k_base = current.n_unknowns
-        for key, fits in by_key.items():
-            cand = all_cands[key]
-            if isinstance(fits, Exception) or not fits or not any(f.finite for f in fits):
-                err = fits if isinstance(fits, Exception) else RuntimeError("no finite refit")
-                results.append(CandidateResult(key, key, math.nan, math.nan, math.inf, 0, None,
-                                               "", {}, None, f"{type(err).__name__}: {err}"))
-                continue
-            best_sf = min((f for f in fits if f.finite), key=lambda f: f.cost)
-            results.append(_record(cand, best_sf, current, k_base))
-        rms_before = current.rms_rad()
+        results = candidate_table(s, by_key, current, fcheck)
+        s.notes += rank_within_families(results, s.all_cands, STRONG_DBIC, AMBIGUOUS_DBIC)
+        strong = analyse_strong(results, STRONG_DBIC)
         for c in results:
-            c.rms_before_rad = rms_before
-            if fcheck is not None and c.fit is not None:  # against the base's F
-                c.chi2_over_floor = float(c.fit.cost) / fcheck.floor
-        results.sort(key=lambda c: (c.error is not None, c.delta_bic))
-        # same-family ties the BIC holds at the floor: the χ² difference decides (_rival)
-        notes += rank_within_families(results, all_cands, STRONG_DBIC, AMBIGUOUS_DBIC)
-        strong = [c for c in results if c.error is None and c.delta_bic < STRONG_DBIC]
-        for c in strong[:MAX_ANALYSED]:
-            c.result = c.fit.result()
-            w = whiteness(c.result)
-            c.white_after = bool(w.white)
-            c.moving_ratio_after = float(w.rms_ratio)
-            c.adequate_after = bool(w.at_floor)
-        for c in results:
-            c.reason = _reason(c, all_cands[c.key], feat, floor)
-        rounds.append({"current": current, "results": results, "white": white,
-                       "floor": floor, "result": base_result})
+            c.reason = _reason(c, s.all_cands[c.key], look.features, floor)
+        rounds.append({"current": current, "results": results, "white": look.white,
+                       "floor": floor, "result": look.result})
         best = strong[0] if strong else None
         if best is None:
             break
-        ladder.append(_ladder_step(f"+ {best.label}", best.fit, all_cands[best.key]))
+        ladder.append(_ladder_step(f"+ {best.label}", best.fit, s.all_cands[best.key]))
         if (best.adequate_after or step + 1 >= steps
-                or _rivals(best, results, all_cands, floor)):
+                or _rivals(best, results, s.all_cands, floor)):
             break
         current = best.fit
         wanted = [k for k in wanted if k != best.key]
+    return rounds, ladder, fcheck
 
-    first = rounds[0]
-    verdict, summary, vnotes = _verdict(rounds, all_cands)
-    notes += vnotes
-    separating = _separating_experiments(verdict, rounds, all_cands, say) if design else []
-    if separating and verdict == "ambiguous":
-        summary += ". Separating experiment (computed): " + "; ".join(
-            f"{x['forms'][0]} vs {x['forms'][1]}: {x['experiment']}, expected 2·ln LR "
-            f"{x['expected_2lnlr']:.3g}" if "experiment" in x else x["text"]
-            for x in separating)
-    results = first["results"]
-    if any(c.error for c in results):
-        notes.append("some candidate fits failed: " + ", ".join(c.key for c in results if c.error))
-    for key, table in scans.items():
-        notes.append(_scan_note(key, table, refitted.get(key, [])))
+
+def _separating_summary(verdict, separating) -> str:
+    """An ``ambiguous`` verdict's summary names the computed separating experiments (the
+    same-mark pair of a named effect is in the notes and the report's section)."""
+    if not (separating and verdict == "ambiguous"):
+        return ""
+    return ". Separating experiment (computed): " + "; ".join(
+        f"{x['forms'][0]} vs {x['forms'][1]}: {x['experiment']}, expected 2·ln LR "
+        f"{x['expected_2lnlr']:.3g}" if "experiment" in x else x["text"]
+        for x in separating)
+
+
+def _assemble(s: Search, rounds, ladder, fcheck, verdict, summary, separating,
+              step_warning, clock) -> Diagnosis:
+    """The :class:`Diagnosis` of the first round: its candidates, the notes (failed
+    refits, the scans, the rounding floor), the warnings (a wrong step, the rules'
+    measured false-alarm rate for the nearest design, what else is known against the
+    verdict) and the timing."""
     from ._rates import false_alarm
 
+    first = rounds[0]
+    results = first["results"]
+    notes = s.notes
+    if any(c.error for c in results):
+        notes.append("some candidate fits failed: " + ", ".join(c.key for c in results if c.error))
+    for key, table in s.scans.items():
+        notes.append(_scan_note(key, table, s.refitted.get(key, [])))
+    prep = s.base_setup.prep
     fa = false_alarm(1.0 / float(prep.sample_period), len(prep.lengths))
     warns = ([step_warning] if step_warning else []) + _warnings(
-        verdict, rounds, all_cands, local_base, fa)
+        verdict, rounds, s.all_cands, s.local_base, fa)
     if fcheck is not None:
         warns += fcheck.warnings(verdict)
         notes += fcheck.notes()
     t = clock()
-    say("done")
+    s.say("done")
     return Diagnosis(
         source=first["result"].source,
         verdict=verdict,
@@ -421,8 +372,8 @@ def diagnose(
         ladder=ladder,
         floor_rad=first["floor"],
         timing=t,
-        scanned={k: list(v) for k, v in scans.items()},
-        refitted={k: list(v) for k, v in refitted.items()},
+        scanned={k: list(v) for k, v in s.scans.items()},
+        refitted={k: list(v) for k, v in s.refitted.items()},
         warnings=warns,
         false_alarm=fa.to_dict() if fa is not None else None,
         rounding_floor=fcheck.to_dict() if fcheck is not None else None,
