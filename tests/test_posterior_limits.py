@@ -175,11 +175,12 @@ def test_ridge_starts_under_the_default_prior(fit):
     warning) the optima the samplers start from still include points down the ridges of
     the vanishing terms (``ridge:NAME``, the limit continuation under the sampled priors):
     on the shipped log the Coulomb ridge — tau_c below the fit's, c_v above it — within
-    ``MODE_DCHI2_MAX`` (the default prior's cost of going down it is (s/1.2)² at exp(−s)).
+    ``RIDGE_DCHI2`` (the default prior's cost of going down it is (s/1.2)² at exp(−s)).
     Before them, every start sat on the fit's side of that ridge and the calibration's
     tau_c ranks piled low (benchmarks/results/posterior_sbc.md)."""
     from hdid._posterior.density import posterior_density
-    from hdid._posterior.modes import found_limits, ridge_names, sampled_modes
+    from hdid._posterior.modes import (RIDGE_DCHI2, RIDGE_SHARE, found_limits, ridge_names,
+                                       sampled_modes)
 
     dens = posterior_density(fit)
     assert not np.any(dens.lin)
@@ -191,4 +192,7 @@ def test_ridge_starts_under_the_default_prior(fit):
     assert all(m.values["tau_c"] < fit.values["tau_c"] for m in ridge)
     assert max(m.values["c_v"] for m in ridge) > fit.values["c_v"]
     assert all(m.limit is None for m in found if m.kind.startswith("ridge:"))
+    assert all(m.cost - found[0].cost < RIDGE_DCHI2 for m in ridge)
+    # starts, not masses: together at most RIDGE_SHARE of the walkers and the proposals
+    assert sum(m.weight for m in found if m.kind.startswith("ridge:")) <= RIDGE_SHARE + 1e-12
     assert found_limits(fit, found, "auto", dens.lin, dens.lp.gauss_prior) == []

@@ -287,20 +287,33 @@ def ridge_names(problem, lin, covariance=None) -> list[str]:
     return limit_names(problem, mask, covariance) if mask.any() else []
 
 
-def seek_ridges(fit, lin, best_cost: float, dchi2_max: float = MODE_DCHI2_MAX) -> list[Mode]:
-    """More optima along the ridge on which a vanishing term trades off against the others
+#: Ridge points kept as starts: within this of the best optimum in −2 log p (the 99 % point
+#: of χ²₂; mass e⁻⁴·⁶ of the best's per unit volume). The shipped paper log's 15 points
+#: within MODE_DCHI2_MAX took half the walkers at their Laplace weights, and its SMC, which
+#: had converged, no longer did.
+RIDGE_DCHI2 = 9.21
+#: Share of the walkers, of SMC's reference and of the independence proposal that the
+#: ridge points hold together at most: their Laplace weights (at points that are not
+#: optima) are not their mass; they are starts, and the samplers weigh them.
+RIDGE_SHARE = 0.1
+
+
+def seek_ridges(fit, lin, best_cost: float) -> list[Mode]:
+    """Starts down the ridge on which a vanishing term trades off against the others
     (Coulomb against viscous friction and the Stribeck shape: ``tau_c`` down, ``c_v``,
-    ``v_s`` up, ``delta`` down), for the parameters :func:`ridge_names` gives: every point
+    ``v_s`` up, ``delta`` down), for the parameters :func:`ridge_names` gives: the points
     of the limit continuation (:func:`~hdid._posterior.limits.limit_fits`, the parameter
     held at ``exp(−s)`` of its least-squares value, the rest refitted) whose cost under
-    the sampled priors is within ``dchi2_max`` of the best, as ``kind="ridge:NAME"``
-    (never merged, no limit warning: the prior is not flat in value).
+    the sampled priors is within ``RIDGE_DCHI2`` of the best, as ``kind="ridge:NAME"``
+    (never merged, no limit warning: the prior is not flat in value; together at most
+    ``RIDGE_SHARE`` of the weight, :func:`sampled_modes`); a point more than
+    ``MODE_BARRIER`` *below* the best is a better basin: refitted from there, it is an
+    optimum.
 
     Under the weak log-normal priors (issue 34) the limit fits were no longer sought, and
-    the optima of the mode search all lay on the fit's side of the ridge: on the default-
-    prior calibration tau_c's ranks piled low and c_v's high (8 and 7 of 13 logs beyond
-    the quartiles), the truths down the ridge within χ²₇ of the best fit.
+    the optima of the mode search all lay on the fit's side of the ridge.
     """
+    from .._fitting._lm import PHASE1_STEPS, PHASE2_CHUNK
     from .basin import BASIN_FACTOR, rms_over_floor
     from .limits import limit_fits
 
@@ -310,13 +323,29 @@ def seek_ridges(fit, lin, best_cost: float, dchi2_max: float = MODE_DCHI2_MAX) -
     # of the mode search, where the screen (tau_c measured to < 20 %) had skipped it
     at_floor = rms_over_floor(fit) <= BASIN_FACTOR
     names = ridge_names(prob, lin, getattr(fit, "covariance", None) if at_floor else None)
-    out = []
-    for lim in limit_fits(fit, names, best_cost, MODE_LANES, dchi2_max):
+    out, better = [], []
+    for lim in limit_fits(fit, names, best_cost, MODE_LANES, RIDGE_DCHI2):
         for u, c in lim.path + [(lim.u, lim.dchi2_lsq)]:
-            if c < dchi2_max:
+            if c < -MODE_BARRIER:
+                better.append(u)
+            elif c < RIDGE_DCHI2:
                 cost, cov, logz = _laplace(prob, u)
                 out.append(Mode(u=u, cost=cost, cov=cov, log_evidence=logz,
                                 values=prob.values_np(u), kind=f"ridge:{lim.name}"))
+    if better:
+        U, costs, ok = _solve_in_lanes(solve_fresh, prob, np.array(better),
+                                       np.ones(len(better), dtype=bool), PHASE1_STEPS)
+        for _ in range(8):
+            act = ~ok & np.isfinite(costs)
+            if not act.any():
+                break
+            U2, c2, d2 = _solve_in_lanes(solve_fresh, prob, U, act, PHASE2_CHUNK)
+            U[act], costs[act], ok[act] = U2[act], c2[act], d2[act]
+        if np.isfinite(costs).any():
+            i = int(np.nanargmin(np.where(np.isfinite(costs), costs, np.nan)))
+            cost, cov, logz = _laplace(prob, U[i])
+            out.append(Mode(u=U[i], cost=cost, cov=cov, log_evidence=logz,
+                            values=prob.values_np(U[i])))
     return out
 
 
@@ -382,7 +411,12 @@ def sampled_modes(fit, modes, seed: int, u_fit: np.ndarray, lin: np.ndarray,
         found = [m]
     lz = np.array([m.log_evidence + float(lin @ (m.u[:P] - u_fit[:P])) for m in found])
     wz = np.exp(lz - lz.max())
-    for m, wi in zip(found, wz / wz.sum()):
+    wz /= wz.sum()
+    ridge = np.array([m.kind.startswith("ridge:") for m in found])
+    if ridge.any() and (~ridge).any() and wz[ridge].sum() > RIDGE_SHARE:
+        wz = np.where(ridge, wz * RIDGE_SHARE / wz[ridge].sum(),
+                      wz * (1 - RIDGE_SHARE) / wz[~ridge].sum())
+    for m, wi in zip(found, wz):
         m.weight = float(wi)
     return found
 
