@@ -63,6 +63,25 @@ def test_no_false_alarm_on_a_log_with_nothing_hidden(hysteresis_diagnosis):
     d = hdid.diagnose(_log(None, 12), candidates=CANDIDATES)
     assert d.verdict == "adequate", d.report()
     assert all(c.delta_bic > STRONG_DBIC for c in d.candidates)
+    # every candidate is "not detectable in this design": the best ones (ΔBIC order) get
+    # the experiment that would detect each, computed by hdid.design, in report and JSON
+    from hdid._diagnosis._detecting import BASE, MAX_DETECTED
+
+    named = [c.key for c in d.candidates if c.error is None][:MAX_DETECTED]
+    detect = [x for x in d.to_dict()["separating_experiments"] if x.get("purpose") == "detect"]
+    assert [x["forms"] for x in detect] == [[k, BASE] for k in named], d.report()
+    assert any(n.startswith("not detectable in this design: ") for n in d.notes)
+    report = d.report()
+    import jsonschema
+    from hdid._results._saved import schema
+
+    items = schema("diagnose")["properties"]["separating_experiments"]["items"]
+    for x in detect:
+        jsonschema.validate(x, items)  # "purpose" is declared, every number typed
+        assert x["computed_by"] == "hdid.design" and x["text"] in report
+        assert "error" not in x, x["error"]
+        assert x["experiment"] and np.isfinite(x["expected_2lnlr"])
+        assert f"expected 2·ln LR {x['expected_2lnlr']:.3g}" in x["text"]
 
 
 def test_verdict_reports_its_warnings_and_false_alarm_rate(hysteresis_diagnosis):

@@ -156,6 +156,80 @@ def test_no_strong_candidate():
     assert D._verdict(_round([_cand("ripple", -3)], at_floor=False), CANDS)[0] == "unexplained"
 
 
+def test_an_unexplained_verdict_s_same_mark_pair_is_separated_too():
+    """The note "leave the same mark … (the experiment that separates them:
+    separating_experiments)" is written for every verdict with a same-mark pair; an
+    ``unexplained`` one (the best strong but above the floor) gets the pair as well."""
+    from hdid._diagnosis._verdict import pairs_to_separate
+
+    rounds = _round([_cand("ripple", -230, at_floor=False, rms=1.6),
+                     _cand("kinematic_error", -222, at_floor=False, rms=1.6)])
+    verdict, _, notes = D._verdict(rounds, CANDS)
+    assert verdict == "unexplained" and any("same mark" in n for n in notes)
+    assert [(a.key, b.key) for a, b in pairs_to_separate(verdict, rounds, CANDS)] == [
+        ("ripple", "kinematic_error")]
+
+
+# -- experiments that would detect what an adequate verdict cannot ----------------------
+def _separation(name, a_true, b_true, *, linear=None, converged=(True, True)):
+    """A separation as :func:`hdid._design._separate.separations` returns it (A: the
+    candidate, B: the base)."""
+    exp = SimpleNamespace(name=name, describe=lambda: f"{name} (runs, rate, encoder)")
+    lin = linear or (a_true, b_true)
+    return SimpleNamespace(experiment=exp, linear=lin, refitted=(a_true, b_true),
+                           converged=converged, value=min(a_true, b_true),
+                           to_dict=lambda: {"experiment": name, "expected_2lnlr": min(a_true, b_true),
+                                            "a_true": a_true, "b_true": b_true})
+
+
+def test_the_detecting_experiment_is_ranked_with_the_effect_as_the_truth(monkeypatch):
+    """Base and candidate are nested: with the base as the truth the candidate fits its
+    readings too (2·ln LR ≈ 0 on any design), so the smaller direction — the separation of
+    two rival forms — would rank nothing. The experiment named maximises the 2·ln LR with
+    the effect there (``a_true``): here "rate x4" (40), not "more amplitudes" (the larger
+    smaller-direction value, 0.3); one whose linearisation the refit contradicts (200 vs
+    600) comes after the confirmed ones."""
+    import hdid._design._separate as S
+    from hdid._diagnosis import _detecting, _separating
+
+    seps = [_separation("this log", 0.5, 0.0), _separation("more amplitudes", 12.0, 0.3),
+            _separation("rate x4", 40.0, 0.0),
+            _separation("encoder x8", 200.0, 0.0, linear=(600.0, 0.0))]
+    monkeypatch.setattr(S, "separations", lambda fa, fb, exps: seps)
+    monkeypatch.setattr(_separating, "experiments_for", lambda fa, fb: [])
+    cand = SimpleNamespace(key="backlash", label="backlash", result=object(), fit=None)
+    base = SimpleNamespace(model=SimpleNamespace(effect_names=("spring", "friction")))
+    rec = _detecting.detecting(cand, base)
+    assert rec["purpose"] == "detect" and rec["forms"] == ["backlash", _detecting.BASE]
+    assert rec["experiment"] == "rate x4" and rec["expected_2lnlr"] == 40.0
+    assert rec["this_log_2lnlr"] == 0.5 and rec["reaches_min_separation"]
+    assert [a["experiment"] for a in rec["alternatives"]] == ["more amplitudes", "encoder x8"]
+    assert "to detect backlash" in rec["text"] and "rate x4" in rec["text"]
+    assert "expected 2·ln LR 40" in rec["text"]
+    # an effect fitted at almost no size: no default experiment reaches 10, and it says so
+    seps[:] = [_separation("this log", 0.01, 0.0), _separation("rate x4", 0.4, 0.0)]
+    rec = _detecting.detecting(cand, base)
+    assert not rec["reaches_min_separation"] and "no default candidate reaches" in rec["text"]
+
+
+def test_only_an_adequate_verdict_s_candidates_are_not_detectable_and_the_best_first():
+    from hdid._diagnosis import _detecting
+
+    cands = [_cand(k, d) for k, d in (("ripple", -6), ("backlash", -3), ("hysteresis", 1),
+                                       ("load_friction", 2))]
+    for c in cands:
+        c.fit = _fit(100.0)
+    cands.append(D.CandidateResult("soft_windup", "soft_windup", math.nan, math.nan, math.inf,
+                                   0, None, "", {}, None, "RuntimeError: no finite refit"))
+    rounds = _round(cands, at_floor=True, white=True)
+    assert D._verdict(rounds, CANDS)[0] == "adequate"
+    named = _detecting.undetected("adequate", rounds)
+    assert [c.key for c in named] == ["ripple", "backlash", "hysteresis"][:_detecting.MAX_DETECTED]
+    assert "not detectable in this design: ripple (ΔBIC -6.0)" in _detecting.note(named)
+    for verdict in ("missing_effect", "ambiguous", "unexplained"):
+        assert _detecting.undetected(verdict, rounds) == []
+
+
 # -- order scans ------------------------------------------------------------------------
 def test_order_scan_includes_orders_below_one_period_in_the_swing():
     """The issue's miss: ripple of order 12 over a ±0.24 rad swing (0.46 periods) was

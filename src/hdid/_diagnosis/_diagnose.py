@@ -83,6 +83,10 @@ Separating experiments (``design=True``, ``Diagnosis.separating_experiments``)
     experiment that separates the two forms, *computed* by :mod:`hdid._design` from the
     two refits with its expected ``2·ln LR``, linearised and with the rival refitted, and
     whether the linearisation is credible (:mod:`hdid._diagnosis._separating`).
+    For an ``adequate`` verdict every candidate is "not detectable in this design": the
+    best ``MAX_DETECTED`` by ΔBIC get the experiment that would detect each at the size
+    its refit gives it, the expected ``2·ln LR`` with the effect as the truth and the
+    base refitted (:mod:`hdid._diagnosis._detecting`; ``purpose`` ``"detect"``).
 Warnings (:func:`_warnings`, ``Diagnosis.warnings``)
     what is known against trusting the verdict: no false-alarm rate measured near this
     design, or one whose one-sided 95 % upper bound is above the 5 % target; the current model's
@@ -142,6 +146,7 @@ from ._wrong_step import readings_step
 from ._refits import (  # noqa: F401 (re-exported)
     _base_starts, _cand_bic, _candidate_fits, _own_optimum, _record, sf_key)
 from ._separating import MAX_SEPARATED_PAIRS, for_verdict as _separating_experiments  # noqa: F401
+from . import _detecting
 from ._search import (  # noqa: F401 (re-exported: tests, calibration)
     BASE_IMPROVED_DBIC,
     BASIN_PASSES,
@@ -196,8 +201,10 @@ def diagnose(
     design:
         For an ``ambiguous`` verdict and a same-mark pair, compute the experiment that
         separates the two forms (:mod:`hdid._diagnosis._separating`, by
-        :mod:`hdid._design`: ``Diagnosis.separating_experiments``). ``False`` skips it
-        (its programs cost a compile per model structure on a cold store).
+        :mod:`hdid._design`: ``Diagnosis.separating_experiments``); for an ``adequate``
+        one, the experiment that would detect each of the best ``MAX_DETECTED``
+        candidates (:mod:`hdid._diagnosis._detecting`). ``False`` skips it (its programs
+        cost a compile per model structure on a cold store).
     **fit_options:
         Passed to :func:`hdid.fit` (``inertia``, ``fix``, ``counts_per_rev``, …).
 
@@ -218,8 +225,8 @@ def diagnose(
     # 4. the verdict
     verdict, summary, vnotes = _verdict(rounds, all_cands)
     search.notes += vnotes
-    # 5. the experiment that would separate what this log cannot
-    separating = _separating_experiments(verdict, rounds, all_cands, say) if design else []
+    # 5. the experiment that would separate (or detect) what this log cannot
+    separating = _experiments(verdict, rounds, all_cands, say, search.notes) if design else []
     summary += _separating_summary(verdict, separating)
     # 6. the assembly: notes, warnings, the measured false-alarm rate
     return _assemble(search, rounds, ladder, fcheck, verdict, summary, separating,
@@ -324,6 +331,21 @@ def _ladder_of_candidates(s: Search, current, wanted, steps, n_starts):
         current = best.fit
         wanted = [k for k in wanted if k != best.key]
     return rounds, ladder, fcheck
+
+
+def _experiments(verdict, rounds, all_cands, say, notes) -> list[dict]:
+    """The experiments this log calls for, computed by :mod:`hdid._design` from the
+    refits: for an ``ambiguous`` verdict the one separating the best from each rival, for
+    a same-mark pair the one separating the two forms (:mod:`hdid._diagnosis._separating`);
+    for an ``adequate`` verdict the one that would detect each candidate — not detectable
+    in this design — at the size this log's refit gives it, against the base
+    (:mod:`hdid._diagnosis._detecting`; a note names them)."""
+    out = _separating_experiments(verdict, rounds, all_cands, say)
+    undetected = _detecting.undetected(verdict, rounds)
+    if undetected:
+        notes.append(_detecting.note(undetected))
+        out += _detecting.for_verdict(verdict, rounds, say)
+    return out
 
 
 def _separating_summary(verdict, separating) -> str:

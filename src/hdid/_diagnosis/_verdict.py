@@ -127,9 +127,11 @@ def _contenders(first, all_cands):
 
 def pairs_to_separate(verdict: str, rounds, all_cands) -> list[tuple]:
     """The candidate pairs a separating experiment is computed for: an ``ambiguous``
-    verdict's best against each rival; a named effect against each same-mark one."""
+    verdict's best against each rival; otherwise the strong best against each same-mark
+    one (a named effect's look-alike, and an ``unexplained`` verdict's too: its note names
+    the pair)."""
     best, rivals, same = _contenders(rounds[0], all_cands)
-    if best is None or verdict not in ("ambiguous", "missing_effect"):
+    if best is None:
         return []
     return [(best, c) for c in (rivals if verdict == "ambiguous" else same)]
 
