@@ -260,9 +260,10 @@ def render(res) -> str:
                         pred = (f"λ {_fmt(s_.get(key))}: {_fmt(mean)} ± {_fmt(nl.get('sd'))} "
                                 f"({_fmt(s_.get('locally_refitted', {}).get(key))})")
                     else:
-                        mean = s_.get("this_log", {}).get(key, {}).get("mean")
-                        pred = (f"λ {_fmt(s_.get('this_log', {}).get('lambda', {}).get(key))}: "
-                                f"{_fmt(mean)}" if s_.get("this_log") else
+                        tl = s_.get("this_log", {})
+                        mean = tl.get(key, {}).get("mean")
+                        pred = (f"λ {_fmt(tl.get('lambda', {}).get(key))}: {_fmt(mean)} ± "
+                                f"{_fmt(tl.get(key, {}).get('sd'))}" if tl else
                                 f"{_fmt(s_.get('this_log_2lnlr'))}")
                     med = q.get("median")
                     ratio = (mean / med if isinstance(mean, (int, float)) and med
