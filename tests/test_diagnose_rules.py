@@ -212,7 +212,8 @@ def test_the_detecting_experiment_is_ranked_with_the_effect_as_the_truth(monkeyp
     assert not rec["reaches_min_separation"] and "no default candidate reaches" in rec["text"]
 
 
-def test_only_an_adequate_verdict_s_candidates_are_not_detectable_and_the_best_first():
+def test_only_an_adequate_verdict_s_candidates_are_not_detectable_and_the_best_first(
+        monkeypatch):
     from hdid._diagnosis import _detecting
 
     cands = [_cand(k, d) for k, d in (("ripple", -6), ("backlash", -3), ("hysteresis", 1),
@@ -223,9 +224,17 @@ def test_only_an_adequate_verdict_s_candidates_are_not_detectable_and_the_best_f
                                    0, None, "", {}, None, "RuntimeError: no finite refit"))
     rounds = _round(cands, at_floor=True, white=True)
     assert D._verdict(rounds, CANDS)[0] == "adequate"
+    monkeypatch.setattr(_detecting, "MAX_DETECTED", 3)
     named = _detecting.undetected("adequate", rounds)
-    assert [c.key for c in named] == ["ripple", "backlash", "hysteresis"][:_detecting.MAX_DETECTED]
-    assert "not detectable in this design: ripple (ΔBIC -6.0)" in _detecting.note(named)
+    assert [c.key for c in named] == ["ripple", "backlash", "hysteresis", "load_friction"]
+    text = _detecting.note(named)
+    assert text.startswith("not detectable in this design: ripple (ΔBIC -6.0), backlash")
+    assert "load_friction (ΔBIC 2.0)" in text and "each of the first 3" in text
+    computed = []
+    monkeypatch.setattr(_detecting, "detecting", lambda c, base: computed.append(c.key) or {})
+    rounds[0]["result"] = None
+    assert len(_detecting.for_verdict("adequate", rounds, lambda m: None)) == 3
+    assert computed == ["ripple", "backlash", "hysteresis"]  # the best 3, ΔBIC order
     for verdict in ("missing_effect", "ambiguous", "unexplained"):
         assert _detecting.undetected(verdict, rounds) == []
 

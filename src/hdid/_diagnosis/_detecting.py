@@ -36,26 +36,30 @@ BASE = "base model"
 
 def undetected(verdict: str, rounds) -> list:
     """The candidates "not detectable in this design": for an ``adequate`` verdict, those
-    refitted without error (best ΔBIC first), at most ``MAX_DETECTED``; none otherwise."""
+    refitted without error (best ΔBIC first); none otherwise."""
     if verdict != "adequate":
         return []
-    return [c for c in rounds[0]["results"] if c.error is None and c.fit is not None
-            ][:MAX_DETECTED]
+    return [c for c in rounds[0]["results"] if c.error is None and c.fit is not None]
 
 
 def note(cands) -> str:
-    """The notes' line naming the undetected candidates."""
+    """The notes' line naming the undetected candidates (and those whose detecting
+    experiment is computed: the best ``MAX_DETECTED``)."""
+    first = cands[:MAX_DETECTED]
     return ("not detectable in this design: " + ", ".join(
         f"{c.label} (ΔBIC {c.delta_bic:.1f})" for c in cands)
-        + " — the experiment that would detect each at the size this log's refit gives it: "
-        "separating_experiments")
+        + " — the experiment that would detect "
+        + ("it" if len(cands) == 1 else "each" if len(first) == len(cands)
+           else f"each of the first {len(first)}")
+        + " at the size this log's refit gives it: separating_experiments")
 
 
 def for_verdict(verdict: str, rounds, say) -> list[dict]:
-    """:func:`detecting` for each of :func:`undetected`'s candidates against the base."""
+    """:func:`detecting` for the best ``MAX_DETECTED`` of :func:`undetected`'s candidates
+    against the base."""
     out = []
     base = rounds[0]["result"]
-    for c in undetected(verdict, rounds):
+    for c in undetected(verdict, rounds)[:MAX_DETECTED]:
         say(f"  experiment that would detect {c.key} (hdid.design)")
         out.append(detecting(c, base))
     return out
