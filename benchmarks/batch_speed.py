@@ -3,10 +3,6 @@ vs the scipy way, for 1–1000 paper-design logs; cost vs design; compile time.
 
     python benchmarks/batch_speed.py [--quick] [--n N] [--before TREE] [--only LABEL…] [--skip LABEL…]
     python benchmarks/batch_speed.py --render    # results/batch_speed.md from its JSON
-
-``--n``: the largest batch (default 1000; the 1000-log figures are then extrapolated);
-``--before TREE``: the same N logs also through another checkout's ``src`` (a detached
-worktree of an older commit), for a before/after table in the same run.
 """
 
 from __future__ import annotations
@@ -218,8 +214,10 @@ def measure(args) -> dict:
         paths = paths or make_logs(design, WARMUP + n, log_dir)
         cfg = {"label": label, "mode": mode, "design": design, "paths": paths[: WARMUP + n],
                **extra}
-        if extra.get("tree"):
-            res["before"] = {"tree": extra["tree"], "commit": _commit(extra["tree"])}
+        if extra.get("tree"):  # the older checkout's commit
+            res["before"] = {"tree": extra["tree"], "commit": subprocess.run(
+                ["git", "-C", extra["tree"], "log", "-1", "--format=%h %s"],
+                capture_output=True, text=True).stdout.strip()[:100]}
         print(f"{label} ...", flush=True)
         r = run_worker(cfg, cache)
         r["config"].pop("paths")
@@ -251,12 +249,6 @@ def measure(args) -> dict:
     res["load_end"] = load("script end")
     shutil.rmtree(cache, ignore_errors=True)
     return res
-
-
-def _commit(tree: str) -> str:
-    p = subprocess.run(["git", "-C", tree, "log", "-1", "--format=%h %s"], capture_output=True,
-                       text=True)
-    return p.stdout.strip()[:100]
 
 
 def _find(res, label):
@@ -409,6 +401,7 @@ def render(res: dict) -> str:
             if z := sorted(abs(x[f"z_{k}"]) for x in rows if f"z_{k}" in x):
                 L.append(f"| {k} | {z[len(z) // 2]:.2f} | {sum(v < 2 for v in z) / len(z):.0%} | "
                          f"{sum(v < 3 for v in z) / len(z):.0%} |")
+    L += [""] + _common.interpretation_section(res)
     L += _before_after(res, big)
     L += ["", "## Where the vectorised time goes\n",
           "Wall seconds, and CPU seconds (process time, both threads) in brackets.\n",
@@ -489,11 +482,10 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="fewer and smaller runs (≈ 6 min)")
     ap.add_argument("--log-dir", default=str(Path(tempfile.gettempdir()) / "hdid_batch_logs"),
                     help="where the generated logs are cached")
-    ap.add_argument("--n", type=int, default=1000,
-                    help="the largest batch (default 1000)")
-    ap.add_argument("--before", metavar="TREE",
-                    help="also fit the largest batch with TREE's src (a checkout of an older "
-                         "commit): a before/after table")
+    ap.add_argument("--n", type=int, default=1000, help="the largest batch (default 1000; "
+                    "the 1000-log figures are then extrapolated)")
+    ap.add_argument("--before", metavar="TREE", help="also the largest batch with TREE's src "
+                    "(a worktree of an older commit): a before/after table in the same run")
     ap.add_argument("--worker", help=argparse.SUPPRESS)  # one configuration, in a subprocess
     ap.add_argument("--only", nargs="+", metavar="LABEL",
                     help="measure only the configurations whose label starts with one of "

@@ -192,18 +192,38 @@ def test_the_batch_checks_the_nested_case_like_fit(monkeypatch, nested, symptom,
         return res
 
     monkeypatch.setattr(V, "needs_check", lambda res, fixed: symptom)
-    monkeypatch.setattr(V, "CHECK_ABOVE_FLOOR", 0.0)  # the example's fit is at its floor
+    monkeypatch.setattr(V, "reached_floor", lambda res: False)  # (the example's fit is)
     monkeypatch.setattr(V, "nested_check", check)
     tab = hdid.fit_many([EXAMPLE], nested=nested, n_starts=2, fix={"delta": 1.0})
     assert tab.error.isna().all()
     assert len(seen) == int(checked)
     warned = any("nested Coulomb case" in w for w in tab.result.iloc[0].warnings)
-    # (the default warns on a residual above CHECK_ABOVE_FLOOR × the floor, zeroed here)
+    # (the default warns on a residual above the floor, as if it were here)
     assert warned == (nested is None and symptom)
     if checked:
         log, kw = seen[0]
         assert isinstance(log, hdid.Log) and kw["nested"] == nested
         assert kw["fix"] == {"delta": 1.0} and kw["n_starts"] == 2
+
+
+def test_the_batch_warns_where_fit_would_check_its_limits():
+    # nested=None: the batch does not run hdid.fit's limit checks but says so wherever
+    # hdid.fit would run them all — a residual that has not reached the floor
+    # (_limits.reached_floor: the 99.9 % point of √(χ²_ν/ν), 1.38× for this log's ν = 35).
+    # A residual of 1.5× the floor is such a fit (a paper log of batch_speed's sat there,
+    # Δχ² = 80 above hdid.fit's optimum, under the former 2× trigger without a word).
+    import hdid._fitting._vfit as V
+    from hdid._fitting._limits import above_floor
+
+    res = hdid.fit_many([EXAMPLE], n_starts=2).result[0]
+    setup = V._setup(EXAMPLE)
+    floor, trigger = res.quantization_floor_rad, above_floor(res.n_effective)
+    assert 1.2 <= trigger < 1.5
+    for ratio, warned in ((1.0, False), (0.99 * trigger, False), (1.5, True)):
+        res.warnings = []
+        res.rms_residual_rad = ratio * floor
+        V._nested(res, EXAMPLE, setup, {}, 2, 300)
+        assert any("poorer optimum" in w for w in res.warnings) == warned, ratio
 
 
 def test_fit_many_takes_an_executor_like_emcees_pool(tmp_path):

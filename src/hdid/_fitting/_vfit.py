@@ -45,8 +45,7 @@ from .._log import Log, read_log
 from .._problems import _programs
 from .._problems._problem import Problem
 from ._fit import _finish, _setup, _stored_analysis, _untrapped, nested_check
-from ._limits import needs_check
-from ._nested import CHECK_ABOVE_FLOOR
+from ._limits import above_floor, needs_check, reached_floor
 from ._one_lane import LANES
 from ._one_lane import _local_fits as _one_lane
 from ._starts import _grid_starts
@@ -283,20 +282,23 @@ def _nested(res, item, setup, options: dict, n_starts: int, max_steps: int):
     """fit()'s check against its model's limits (:mod:`hdid._fitting._limits`: the nested
     Coulomb case, no friction, the linear spring), one log at a time: ``nested="auto"``
     when the residual is above the floor or a term may vanish, ``True`` always,
-    ``False`` never. The batch's default (``None``) only warns on a residual above
-    ``CHECK_ABOVE_FLOOR`` × the floor: 1000 paper logs took 538 s in one process with the
-    check (6 % of them showed a symptom) against 228 s before it existed (load 2.4–3.9);
-    in 200 it rescued 2 of the 5 logs above 2× the floor."""
+    ``False`` never. The batch's default (``None``) only warns where :func:`hdid.fit`
+    would check every limit: a residual that has not reached the floor
+    (:func:`hdid._fitting._limits.reached_floor`, the 99.9 % point of the floor's χ²_ν,
+    at least 1.2×); 1000 paper logs took 538 s in one process with the check against
+    228 s without it (load 2.4–3.9). (The warning's former trigger, 2× the floor, let a
+    paper log at 1.51× the floor pass silently in a basin Δχ² = 80 above hdid.fit's.)"""
     nested = options.get("nested")
     if nested is None:
-        ratio = res.rms_residual_rad / res.quantization_floor_rad
-        if needs_check(res, setup.fixed) and not ratio <= CHECK_ABOVE_FLOOR:
-            # (a degenerate law at the floor is named by the trust warnings already)
+        # (a degenerate law at the floor is named by the trust warnings already)
+        if needs_check(res, setup.fixed) and not reached_floor(res):
+            ratio = res.rms_residual_rad / res.quantization_floor_rad
             res.warnings.append(
-                f"the RMS residual is {ratio:.3g}× the floor, a symptom of a poorer optimum; "
-                "the batch did not check it against its limits (nested Coulomb case, no "
-                "friction, linear spring): refit this log "
-                "with hdid.fit, or the batch with nested='auto'")
+                f"the RMS residual is {ratio:.3g}× the floor, a symptom of a poorer optimum "
+                f"(above {above_floor(res.n_effective):.3g}×, where hdid.fit checks its "
+                "limits); the batch did not check it against its limits (nested Coulomb "
+                "case, no friction, linear spring): refit this log with hdid.fit, or the "
+                "batch with nested='auto'")
         return res
     if nested is False or nested == "auto" and not needs_check(res, setup.fixed):
         return res
