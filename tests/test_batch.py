@@ -104,6 +104,24 @@ def test_vectorized_matches_single_fits(batch_logs, tmp_path):
         assert len(vec.runs) == len(single.runs) and vec.runs[0].n_samples == single.runs[0].n_samples
 
 
+def test_a_new_length_in_the_bucket_prepares_no_program(batch_logs, tmp_path):
+    # One program per model structure and length bucket: after the module's batch (125
+    # and 115 samples per run, bucket 128), a log of 120 samples per run reuses the
+    # bucket's stored programs (LM, grid, trajectory, derived quantities): none is traced,
+    # compiled or read again.
+    from hdid._problems import _programs
+    from hdid.reference import logs
+
+    hdid.fit_many(batch_logs[:1], n_starts=2)
+    path = tmp_path / "joint120.csv"
+    logs.make_log(dict(logs.TRUTH_CSF8), **dict(logs.PAPER_DESIGN, seed=13, duration=0.48)
+                  ).to_csv(path, index=False)
+    before = len(_programs.STATS)
+    table = hdid.fit_many([path], n_starts=2)
+    assert table.result[0].runs[0].n_samples == 120
+    assert len(_programs.STATS) == before, _programs.STATS[before:]
+
+
 def test_vectorized_band_bracket_and_diverged_rows(batch_logs, monkeypatch):
     table = hdid.fit_many(batch_logs[:1], band_bracket=True, n_starts=2, max_steps=25)
     assert table.loc[0, "band_bracket"] == "computed"
