@@ -272,3 +272,24 @@ def test_every_optimum_out_of_order_falls_back_to_the_fits_own_inside_the_order(
     for i, j in ordered_pairs(prob):
         assert found[0].u[j] >= found[0].u[i]
     np.testing.assert_array_equal(np.asarray(fit.u, dtype=float), before)
+
+
+def test_the_box_filters_only_optima_beyond_a_flat_prior(fit):
+    """An optimum far from the fit (k2 at e⁸ × the fit's: a better basin, as on SBC log
+    36001 where k2 was 10⁶ × the fit's) is sampled under the default log-normal prior of k2,
+    which has no box; under the flat option (a box of ±PRIOR_HALF_WIDTH in log around the
+    fit) it is outside the prior and dropped."""
+    from dataclasses import replace
+
+    from hdid._posterior.density import PRIOR_HALF_WIDTH
+    from hdid._posterior.modes import _fit_mode, sampled_modes
+
+    j = list(fit.problem.free).index("k2")
+    far = _fit_mode(fit)
+    far = replace(far, u=far.u.copy())
+    far.u[j] += PRIOR_HALF_WIDTH + 1.0
+    near = _fit_mode(fit)
+    for default, kept in (("weak", 2), ("flat", 1)):
+        dens = posterior_density(fit, default_prior=default)
+        found = sampled_modes(fit, [near, far], 0, dens.u_fit, dens.lin, dens.lp.gauss_prior)
+        assert len(found) == kept, default

@@ -399,8 +399,12 @@ def sampled_modes(fit, modes, seed: int, u_fit: np.ndarray, lin: np.ndarray,
     def in_order(u):
         return pairs is None or bool(np.all(u[pairs[:, 1]] >= u[pairs[:, 0]]))
 
-    found = [m for m in found if np.all(np.abs(m.u[:P] - u_fit[:P]) < PRIOR_HALF_WIDTH)
-             and in_order(m.u)]
+    # the box is the prior of the parameters without a Gaussian one only: a better basin
+    # far from the fit (SBC log 36001: k2 ×10⁶ the fit's) is inside a log-normal prior
+    boxed = (np.ones(P, dtype=bool) if gauss_prior is None
+             else np.asarray(gauss_prior, dtype=float)[2] <= 0)
+    found = [m for m in found if in_order(m.u)
+             and np.all(np.abs(m.u[:P] - u_fit[:P])[boxed] < PRIOR_HALF_WIDTH)]
     if not found:
         # every optimum breaks an order the prior imposes (e.g. tau_s < tau_c): start from
         # the fit's, each such pair put just inside the allowed side
