@@ -9,6 +9,7 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
+from .._covariance import scaled_covariance, undetermined_scaled
 from .._results._summaries import ParameterEstimate
 from .._models._transforms import derivative
 from .._problems._driven_evaluate import _predict, _res_jac, _simulate
@@ -27,8 +28,6 @@ def analyse_driven(
     problem, u, *, data, notes, order_bic=None, free_preps=(), extra_names=(),
 ) -> DrivenFitResult:
     """Covariance (Gauss–Newton, null directions undetermined), estimates, RMS, flags."""
-    from .._covariance import _covariance
-
     u = np.asarray(u, dtype=float)
     joint_problem = hasattr(problem, "parts")
     dproblem = problem.parts[0] if joint_problem else problem
@@ -38,7 +37,7 @@ def analyse_driven(
     n_rows = int(np.sum(np.abs(r) > 0))
     dof = max(n_rows - u.size, 1)
     chi2_red = float(r @ r) / dof
-    cov, null_s, scale = _scaled_covariance(J.T @ J, _covariance)
+    cov, null_s, scale = scaled_covariance(J.T @ J)
     inflate = max(1.0, chi2_red)
     tau_int = _residual_correlation_time(dproblem, r)
     inflate *= tau_int
@@ -54,7 +53,7 @@ def analyse_driven(
         g = np.zeros(u.size)
         g[k] = float(derivative(specs[n], u[k]))
         grads[n] = g
-        stds[n] = (math.inf if _undetermined_scaled(g, null_s, scale)
+        stds[n] = (math.inf if undetermined_scaled(g, null_s, scale)
                    else math.sqrt(max(g @ cov @ g, 0.0) * inflate))
     params = {}
     for n, spec in specs.items():
@@ -193,31 +192,6 @@ def _parameter_flags(params, specs, u, where, dproblem) -> list[str]:
             if min(p.value - lo, hi - p.value) < 0.01 * (hi - lo):
                 out.append(f"{n} = {p.value:.4g} is at a bound of its range [{lo}, {hi}]")
     return out
-
-
-def _scaled_covariance(fisher: np.ndarray, covariance):
-    """:func:`hdid._covariance._covariance` after Jacobi scaling.
-
-    The unknowns of a driven or joint fit differ in sensitivity by ~10 orders (the
-    inertia of a driven log against an output-friction sign flip), so an eigenvalue cut
-    relative to the largest would call well-measured directions null. Scaling by the
-    diagonal first makes the cut about correlation, not units; unknowns the data do not
-    touch at all (the velocity of a window that starts at rest) stay exactly null.
-    """
-    d = np.sqrt(np.clip(np.diag(fisher), 0.0, None))
-    d = np.where(d > 0, d, 1.0)
-    cov_s, null_s = covariance(fisher / np.outer(d, d))
-    return cov_s / np.outer(d, d), null_s, d
-
-
-def _undetermined_scaled(g: np.ndarray, null_s: np.ndarray, d: np.ndarray) -> bool:
-    """Whether a quantity with gradient ``g`` (optimiser space) has a component along a
-    null direction — tested in the scaled space, where the null basis is orthonormal
-    (in the original space a null direction's physical components can be 1e-5 of its
-    nuisance components and would slip under any threshold)."""
-    from .._covariance import _undetermined
-
-    return _undetermined(g / d, null_s)
 
 
 def _extra_values(problem, u, extra_names):

@@ -239,10 +239,11 @@ def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", f
 
     floor = _limits.above_floor(result.n_effective) * result.quantization_floor_rad
 
-    def again(u, cost):  # still above the floor: regular Stribeck restarts from the best
-        if not _data_rms(problem, u, cost) > floor:
-            return None
+    def again(u, cost):  # still above the floor (or c_v → 0): regular Stribeck restarts
         v = {**model.float_values(), **problem.values_np(u)}
+        if not (_data_rms(problem, u, cost) > floor
+                or _limits.viscous_gone(v, scales, setup.fixed)):
+            return None
         rows = [_limits.with_values(problem, model, u, r)
                 for r in _limits.stribeck_restarts(v, scales, setup.fixed)]
         return local_fits(problem, np.asarray(rows)) if rows else None

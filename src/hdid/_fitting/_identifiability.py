@@ -7,7 +7,7 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from .._covariance import _covariance, _undetermined
+from .._covariance import null_in_u, scaled_covariance, undetermined_scaled
 from .._log._resolution import step_against_readings
 from .._problems._evaluate import dense as _dense
 from .._problems._evaluate import jacobian as _jacobian
@@ -154,25 +154,29 @@ def _noise(problem: Problem, prep: Prepared, r, warnings: list[str]):
 def _uncertainty(problem: Problem, J, s2_used: float):
     """The Fisher information of the data ``JᵀJ/s²``, the covariance of the unknowns with
     the prior rows and its null space, and the standard deviations of the unknowns with
-    and without the priors (∞ along an undetermined direction)."""
+    and without the priors (∞ along an undetermined direction). The null space is decided
+    after Jacobi scaling (:func:`hdid._covariance.scaled_covariance`): a log-parameter run
+    towards 0 has a column ~its value, and an unscaled cut would hold it fixed and give the
+    parameters it trades with their conditional variance."""
     P = problem.n_physical
     fisher_data = J.T @ J / s2_used
     prior_prec = np.zeros(problem.n_unknowns)
     prior_on = np.asarray(problem.prior_on)
     prior_sd = np.asarray(problem.prior_sd)
     prior_prec[:P] = np.where(prior_on, 1.0 / prior_sd**2, 0.0)
-    cov, null = _covariance(fisher_data + np.diag(prior_prec))
-    cov_data, null_data = _covariance(fisher_data)
+    cov, null_s, d = scaled_covariance(fisher_data + np.diag(prior_prec))
+    cov_data, null_data, d_data = scaled_covariance(fisher_data)
     eye = np.eye(problem.n_unknowns)
     std_u = np.array([
-        math.inf if _undetermined(eye[i], null) else math.sqrt(max(cov[i, i], 0.0))
+        math.inf if undetermined_scaled(eye[i], null_s, d) else math.sqrt(max(cov[i, i], 0.0))
         for i in range(problem.n_unknowns)
     ])
     std_u_data = np.array([
-        math.inf if _undetermined(eye[i], null_data) else math.sqrt(max(cov_data[i, i], 0.0))
+        math.inf if undetermined_scaled(eye[i], null_data, d_data)
+        else math.sqrt(max(cov_data[i, i], 0.0))
         for i in range(problem.n_unknowns)
     ])
-    return fisher_data, cov, null, std_u, std_u_data
+    return fisher_data, cov, null_in_u(null_s, d), std_u, std_u_data
 
 
 def _identifiability(problem: Problem, labels, J, fisher_data, std_u, std_u_data,
@@ -254,7 +258,9 @@ def _parameters(problem: Problem, u, std_u, flags: dict[str, str]):
     for name, spec in specs.items():
         if name in problem.free:
             i = problem.free.index(name)
-            std = float(abs(derivative(spec, u[i])) * std_u[i])
+            # undetermined stays ∞ (not 0·∞ = NaN where a log-parameter's value underflowed)
+            std = (math.inf if not math.isfinite(std_u[i])
+                   else float(abs(derivative(spec, u[i])) * std_u[i]))
         else:
             std = 0.0
         params[name] = ParameterEstimate(

@@ -253,6 +253,27 @@ def stribeck_restarts(values: dict, scales, fixed) -> list[dict]:
     return rows
 
 
+#: ``c_v`` below this fraction of critical damping ``2·√(k_wg·I)`` has run towards 0, the
+#: symptom of the poorer basin that put the damping into the Stribeck shape (module doc):
+#: at damping ratio 5e-8 the viscous loss of a 0.157 rad swing over 100 cycles is
+#: 2π·5e-8·100·0.157 = 5e-6 rad, 0.1 of the finest step a test station logs (131072
+#: counts a turn), so no log can ask for it; grease damps 1–10 % of critical.
+VISCOUS_GONE = 1e-7
+
+
+def viscous_gone(values: dict, scales, fixed) -> bool:
+    """Whether a free ``c_v`` has run towards 0 (``VISCOUS_GONE``): then the
+    :func:`stribeck_restarts` run although the fit is at the floor. A sweep log (500 Hz,
+    16384 counts, true ``c_v`` 0.5 % of critical) fitted at 1.07× the floor (under
+    :func:`above_floor`'s 1.2×, yet Δχ² 65 above its truth) with ``c_v`` 1e-9 of
+    critical and ``tau_c`` +21 % from its truth; restarted, 0.93× and ``tau_c`` within
+    0.3 %."""
+    if "c_v" in fixed or "c_v" not in values:
+        return False
+    critical = 2.0 * math.sqrt(scales.k_wg * scales.inertia)
+    return bool(values["c_v"] < VISCOUS_GONE * critical)
+
+
 def vanishing(result, limit: Limit) -> bool:
     """Whether ``result`` shows a symptom that ``limit``'s term may vanish (module doc)."""
     if limit.key == "coulomb":

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+
 import jax.numpy as jnp
 import numpy as np
 
@@ -23,26 +25,39 @@ def to_unconstrained(spec: Parameter, value):
 
 
 def from_unconstrained(spec: Parameter, u, xp=jnp):
-    """Physical value at ``u``; ``xp=numpy`` evaluates outside JAX (no dispatch)."""
+    """Physical value at ``u``; ``xp=numpy`` evaluates outside JAX (no dispatch).
+
+    A start that ran off (``u`` beyond ±709) maps to the limit its value ran to — ∞ or 0
+    for a log-parameter, an end of an interval — without NumPy's overflow warning (the
+    records of every start, :class:`~hdid._results._summaries.StartSummary`, hold
+    diverged ones)."""
     t = spec.transform
-    if t == "log":
-        return xp.exp(u)
     if t == "identity":
         return spec.scale * u
-    _, lo, hi = t
-    return lo + (hi - lo) / (1.0 + xp.exp(-u))
+    with _quiet_overflow(xp):
+        if t == "log":
+            return xp.exp(u)
+        _, lo, hi = t
+        return lo + (hi - lo) / (1.0 + xp.exp(-u))
+
+
+def _quiet_overflow(xp):
+    """``exp`` overflowing to ∞ is the limit the maps need (module doc); JAX never warns."""
+    return np.errstate(over="ignore") if xp is np else contextlib.nullcontext()
 
 
 def derivative(spec: Parameter, u) -> np.ndarray:
-    """``d value / d u`` at ``u`` (for standard errors by the delta method)."""
+    """``d value / d u`` at ``u`` (for standard errors by the delta method): ∞ for a
+    log-parameter run to ∞, 0 at an interval's end (overflow quiet, as above)."""
     t = spec.transform
     u = np.asarray(u, dtype=float)
-    if t == "log":
-        return np.exp(u)
     if t == "identity":
         return np.full_like(u, spec.scale)
-    _, lo, hi = t
-    s = 1.0 / (1.0 + np.exp(-u))
+    with np.errstate(over="ignore"):
+        if t == "log":
+            return np.exp(u)
+        _, lo, hi = t
+        s = 1.0 / (1.0 + np.exp(-u))
     return (hi - lo) * s * (1 - s)
 
 
