@@ -61,8 +61,11 @@ def sample_posterior(
     parameters whose prior is flat in value (each held near zero, the rest refitted:
     :mod:`~hdid._posterior.limits`), which keep a share of the independence proposal, and
     the result warns ``LOWER END NOT MEASURED`` when the data allow values below a chain's
-    95 % interval (``BOUNDED ABOVE ONLY`` when the chain reaches the vanishing end).
-    ``modes="fit"`` uses the fit's optimum only (the limit fits are still sought, for the
+    95 % interval (``BOUNDED ABOVE ONLY`` when the chain reaches the vanishing end); under
+    the weak default priors (nothing flat in value) the same continuations give starts down
+    those ridges instead (``ridge:NAME``, at most 10 % of the weight;
+    :func:`~hdid._posterior.modes.seek_ridges`), and a continuation that finds a better
+    basin adds its optimum. ``modes="fit"`` uses the fit's optimum only (the limit fits are still sought, for the
     warning); a list of :class:`Mode` is used as given.
 
     Burn-in (discarded): ``burn_in`` steps of differential evolution plus independence
