@@ -84,6 +84,8 @@ def test_no_false_alarm_on_a_log_with_nothing_hidden(hysteresis_diagnosis, monke
         assert x["computed_by"] == "hdid.design" and x["text"] in report
         assert "error" not in x, x["error"]
         assert x["experiment"] and np.isfinite(x["expected_2lnlr"])
+        # the design's simulation reproduces the two fits on the log's own design
+        assert x["consistent_with_log"], x["text"]
         assert f"expected 2·ln LR {x['expected_2lnlr']:.3g}" in x["text"]
 
 

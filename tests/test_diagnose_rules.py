@@ -206,6 +206,16 @@ def test_the_detecting_experiment_is_ranked_with_the_effect_as_the_truth(monkeyp
     assert [a["experiment"] for a in rec["alternatives"]] == ["more amplitudes", "encoder x8"]
     assert "to detect backlash" in rec["text"] and "rate x4" in rec["text"]
     assert "expected 2·ln LR 40" in rec["text"]
+    # the log's own design computed far beyond what the two fits to the log allow
+    # ((√24 + √25)² ≈ 98, held within a factor 2): the simulation is not the fit's
+    cand.fit = SimpleNamespace(cost=24.0)
+    base.starts = SimpleNamespace(costs=[25.0], best=0)
+    assert _detecting.log_bound(cand, base) == pytest.approx((24**0.5 + 25**0.5) ** 2)
+    rec = _detecting.detecting(cand, base)
+    assert rec["consistent_with_log"] and "NOT CREDIBLE" not in rec["text"]
+    seps[0] = _separation("this log", 4.1e4, 0.0)
+    rec = _detecting.detecting(cand, base)
+    assert not rec["consistent_with_log"] and "NOT CREDIBLE" in rec["text"]
     # an effect fitted at almost no size: no default experiment reaches 10, and it says so
     seps[:] = [_separation("this log", 0.01, 0.0), _separation("rate x4", 0.4, 0.0)]
     rec = _detecting.detecting(cand, base)

@@ -122,8 +122,45 @@ def detecting(c, base) -> dict:
     rec["alternatives"] = [{"experiment": s.experiment.name, "expected_2lnlr": _a_true(s),
                             "linearisation_credible": _credible(s)}
                            for s in ranked[1:1 + ALTERNATIVES]]
+    bound = log_bound(c, base)
+    rec["this_log_bound"] = bound
+    rec["consistent_with_log"] = consistent(rec["this_log_2lnlr"], bound)
     rec["text"] = _text(c, top, value, rec["this_log_2lnlr"], MIN_SEPARATION)
+    if not rec["consistent_with_log"]:
+        rec["text"] += (f"; NOT CREDIBLE: on this log's own design the computation gives "
+                        f"{rec['this_log_2lnlr']:.3g}, where the two fits to the log bound "
+                        f"it by {bound:.3g} — the design's simulation does not reproduce "
+                        f"this log's fits with {c.key}, so no number here can be trusted")
     return rec
+
+
+def log_bound(c, base) -> float:
+    """What the two fits to the log allow on the log's own design: ``(√χ²_A + √χ²_B)²``.
+
+    With ``y`` the log's readings and ``μ_A``, ``μ_B`` the candidate's and the base's
+    fitted trajectories (``χ²`` in units of the quantization variance, the fits'
+    weights), the triangle inequality gives ``|μ_A − μ_B| ≤ |μ_A − y| + |y − μ_B|``; the
+    base started at its fit to the log and refitted to ``μ_A`` (or linearised there) can
+    only lower its χ², so every value the computation gives for the log's own design is
+    at most this."""
+    from ._ladder import _chi2
+
+    if c.fit is None or getattr(base, "starts", None) is None:
+        return math.nan  # no refit or no analysed base fit: nothing to bound with
+    chi2_a = float(c.fit.cost)
+    return (math.sqrt(max(chi2_a, 0.0)) + math.sqrt(max(_chi2(base), 0.0))) ** 2
+
+
+def consistent(this: float, bound: float) -> bool:
+    """The log's own value within ``CREDIBLE_FACTOR`` of :func:`log_bound` (plus one
+    quantization variance): the design's baseline only approximates the log (its runs'
+    amplitudes and lengths read from the fit), so the bound is held loosely; beyond it
+    the design's simulation of the candidate is not the fit's."""
+    from .._design._separate import CREDIBLE_FACTOR
+
+    if not (math.isfinite(this) and math.isfinite(bound)):
+        return True  # nothing to compare (no value, or a loaded fit)
+    return this <= CREDIBLE_FACTOR * bound + 1.0
 
 
 def _text(c, s, value, this, min_separation) -> str:
