@@ -62,10 +62,17 @@ def test_short_pre_trigger_hold_reaches_the_floor(tmp_path):
     assert res.values["k1"] == pytest.approx(TRUTH["k1"], rel=0.1), res.report()
 
 
-def test_logger_started_at_servo_off_reaches_the_floor(tmp_path):
+@pytest.fixture(scope="module")
+def servo_off(tmp_path_factory):
     # hold 0: each run's first reading is the hold, the release falls in the first
     # interval; read as runs already moving, the fit is tens of times the floor
-    res = _fit(_log(hold=0.0, seed=5), tmp_path, "servo_off.csv")
+    path = tmp_path_factory.mktemp("servo_off") / "servo_off.csv"
+    _log(hold=0.0, seed=5).to_csv(path, index=False)
+    return path
+
+
+def test_logger_started_at_servo_off_reaches_the_floor(servo_off):
+    res = hdid.fit(servo_off, inertia=TRUTH["inertia"])
     assert _at_floor(res), res.report()
     note = _held_note(res)
     assert note is not None and "run(s) 1, 2, 3, 4" in note, res.warnings
@@ -83,3 +90,16 @@ def test_log_cut_after_the_release_stays_moving(tmp_path):
     res = _fit(df, tmp_path, "cut.csv")
     assert _held_note(res) is None, res.warnings
     assert _at_floor(res), res.report()
+
+
+def test_batch_and_diagnose_take_the_fits_story(servo_off):
+    # fit_many: such a log goes through hdid.fit (its own driver would fit the moving story)
+    row = hdid.fit_many([servo_off], inertia=TRUTH["inertia"]).iloc[0]
+    assert row["error"] is None and _at_floor(row["result"]), row["warnings"]
+    assert row["result"].first_reading_held == ("1", "2", "3", "4")
+    # diagnose fits the log its own way, from the log hdid.fit's story marks (with its note)
+    from hdid._fitting._first_reading import story
+
+    log = story(hdid.read_log(servo_off), None, {"inertia": TRUTH["inertia"]})
+    assert log.first_reading_held == ("1", "2", "3", "4")
+    assert any("first reading is taken as the hold" in n for n in log.notes)

@@ -97,7 +97,9 @@ def fit_many(
     iterations, the best ones to convergence, the restart of an optimum that holds moving
     runs), so its numbers are :func:`hdid.fit`'s up to rounding (the padding reorders sums);
     logs whose problems have the same structure and padded shape share one compiled
-    program per step. A log whose fit diverges gets an error in its row.
+    program per step. A log whose fit diverges gets an error in its row. A log with runs
+    that move from their first samples is fitted by :func:`hdid.fit` itself, which weighs
+    both stories of their first readings (:mod:`hdid._fitting._first_reading`).
     """
     import pandas as pd
 

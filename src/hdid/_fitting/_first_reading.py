@@ -23,6 +23,8 @@ it is tried for all such runs together (one story for the logger).
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 #: A first reading within this many sensor steps of its run's largest (smallest) reading
@@ -34,7 +36,8 @@ def candidates(log, prep, release_time) -> tuple[str, ...]:
     """Runs of ``prep`` that start moving and whose first reading is their run's largest or
     smallest (within ``EXTREME_STEPS`` sensor steps): the held story is worth a fit. None
     when the log already carries that story, or a release instant is given."""
-    if log.first_reading_held or release_time is not None or prep.moving_start is None:
+    if (getattr(log, "first_reading_held", ()) or release_time is not None
+            or prep.moving_start is None):
         return ()
     tol = EXTREME_STEPS * float(prep.resolution)
     out = []
@@ -66,3 +69,23 @@ def choose(moving, held, names: tuple[str, ...]):
         "their first sample)"))
     held.first_reading_held = tuple(names)
     return held
+
+
+def story(log, model, options: dict):
+    """``log`` carrying :func:`hdid.fit`'s story of its runs' first readings (and its note),
+    for callers that fit it in their own way (:func:`hdid.diagnose`): two full fits, only
+    where a run's first reading could be a hold; ``log`` itself otherwise."""
+    from .._simulation._prepare import prepare
+    from ._fit import fit
+
+    if not candidates(log, prepare(log), options.get("release_time")):
+        return log
+    res = fit(log, model, **{k: v for k, v in options.items() if k in _FIT_KEYS})
+    if not res.first_reading_held:
+        return log
+    return dataclasses.replace(log, first_reading_held=tuple(res.first_reading_held),
+                               notes=log.notes + (res.warnings[0],))
+
+
+_FIT_KEYS = ("inertia", "fix", "free_inertia", "inertia_prior", "release_time",
+             "max_substep", "ratio", "n_starts", "max_steps")

@@ -44,7 +44,8 @@ from .._errors import HdidError
 from .._log import Log, read_log
 from .._problems import _programs
 from .._problems._problem import Problem
-from ._fit import _finish, _setup, _stored_analysis, _untrapped, nested_check
+from . import _first_reading
+from ._fit import _finish, _setup, _stored_analysis, _untrapped, fit, nested_check
 from ._limits import above_floor, needs_check, reached_floor
 from ._one_lane import LANES
 from ._one_lane import _local_fits as _one_lane
@@ -216,6 +217,18 @@ def _fit_wave(items, idx, outcomes, pool, buckets: set, timing, lanes, bracket, 
                 setups[i] = _setup(items[i], **setup_opts)
             except LOG_ERRORS as exc:
                 done(i, exc)
+                continue
+            # runs that move from their first samples: hdid.fit weighs both stories of
+            # their first readings (:mod:`hdid._fitting._first_reading`)
+            if _first_reading.candidates(items[i], setups[i].prep,
+                                         setup_opts.get("release_time")):
+                del setups[i]
+                nested = options.get("nested")
+                fit_opts = {**options, "nested": "auto" if nested is None else nested}
+                try:
+                    done(i, fit(items[i], **fit_opts))
+                except LOG_ERRORS as exc:
+                    done(i, exc)
         if setup_opts.get("max_substep") is None:
             _share_substeps(items, setups, setup_opts)
         padded = {i: pad_to_bucket(s.problem) for i, s in setups.items()}
