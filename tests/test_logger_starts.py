@@ -98,8 +98,8 @@ def test_batch_and_diagnose_take_the_fits_story(servo_off):
     assert row["error"] is None and _at_floor(row["result"]), row["warnings"]
     assert row["result"].first_reading_held == ("1", "2", "3", "4")
     # diagnose fits the log its own way, from the log hdid.fit's story marks (with its note)
-    from hdid._fitting._first_reading import story
+    from hdid._fitting._fit import first_reading_story
 
-    log = story(hdid.read_log(servo_off), None, {"inertia": TRUTH["inertia"]})
+    log = first_reading_story(hdid.read_log(servo_off), None, {"inertia": TRUTH["inertia"]})
     assert log.first_reading_held == ("1", "2", "3", "4")
     assert any("first reading is taken as the hold" in n for n in log.notes)

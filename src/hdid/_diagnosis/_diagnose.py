@@ -218,9 +218,9 @@ def diagnose(
     say, clock = _programs.phase_reporter(progress)
     log, model, fit_options, all_cands, wanted = _inputs(log, model, candidates, fit_options)
     # 0. runs that move from their first samples: hdid.fit's story of their first readings
-    from .._fitting import _first_reading
+    from .._fitting._fit import first_reading_story
 
-    log = _first_reading.story(log, model, fit_options)
+    log = first_reading_story(log, model, fit_options)
     # 1. the base fit (refitted with the readings' spacing where its step is wrong)
     search, current, step_warning = _base_fit(log, model, fit_options, all_cands, say)
     # 2-3. the ladder of candidates, each round judged by the rival test; the rounding

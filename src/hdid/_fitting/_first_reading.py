@@ -23,13 +23,13 @@ it is tried for all such runs together (one story for the logger).
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 
 #: A first reading within this many sensor steps of its run's largest (smallest) reading
 #: counts as the run's extreme: the readings' own rounding.
 EXTREME_STEPS = 2.0
+#: What the held story's warning says (and callers find it by).
+NOTE_MARK = "first reading is taken as the hold"
 
 
 def candidates(log, prep, release_time) -> tuple[str, ...]:
@@ -63,29 +63,10 @@ def choose(moving, held, names: tuple[str, ...]):
         return moving
     floor2 = float(held.quantization_floor_rad) ** 2
     held.warnings.insert(0, (
-        f"run(s) {', '.join(names)} move from their first samples: their first reading is "
-        f"taken as the hold, the release falling in the first interval (χ² {b / floor2:.4g} "
+        f"run(s) {', '.join(names)} move from their first samples: their {NOTE_MARK}, "
+        f"the release falling in the first interval (χ² {b / floor2:.4g} "
         f"in quantization-floor units, against {a / floor2:.4g} for runs already moving at "
         "their first sample)"))
     held.first_reading_held = tuple(names)
     return held
 
-
-def story(log, model, options: dict):
-    """``log`` carrying :func:`hdid.fit`'s story of its runs' first readings (and its note),
-    for callers that fit it in their own way (:func:`hdid.diagnose`): two full fits, only
-    where a run's first reading could be a hold; ``log`` itself otherwise."""
-    from .._simulation._prepare import prepare
-    from ._fit import fit
-
-    if not candidates(log, prepare(log), options.get("release_time")):
-        return log
-    res = fit(log, model, **{k: v for k, v in options.items() if k in _FIT_KEYS})
-    if not res.first_reading_held:
-        return log
-    return dataclasses.replace(log, first_reading_held=tuple(res.first_reading_held),
-                               notes=log.notes + (res.warnings[0],))
-
-
-_FIT_KEYS = ("inertia", "fix", "free_inertia", "inertia_prior", "release_time",
-             "max_substep", "ratio", "n_starts", "max_steps")

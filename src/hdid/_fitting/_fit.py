@@ -472,3 +472,21 @@ def _fixed_values(model: Model, fix) -> dict[str, float]:
             raise KeyError(f"fix: unknown parameter {name!r}; choose from {list(specs)}")
         out[name] = current[name] if value is None else float(value)
     return out
+
+
+def first_reading_story(log, model, options: dict):
+    """``log`` carrying :func:`fit`'s story of its runs' first readings (and its note),
+    for callers that fit it in their own way (:func:`hdid.diagnose`): two full fits, only
+    where a run's first reading could be a hold; ``log`` itself otherwise."""
+    if not _first_reading.candidates(log, prepare(log), options.get("release_time")):
+        return log
+    res = fit(log, model, **{k: v for k, v in options.items() if k in _STORY_KEYS})
+    if not res.first_reading_held:
+        return log
+    note = next(w for w in res.warnings if _first_reading.NOTE_MARK in w)
+    return dataclasses.replace(log, first_reading_held=tuple(res.first_reading_held),
+                               notes=log.notes + (note,))
+
+
+_STORY_KEYS = ("inertia", "fix", "free_inertia", "inertia_prior", "release_time",
+               "max_substep", "ratio", "n_starts", "max_steps")
