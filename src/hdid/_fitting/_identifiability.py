@@ -29,8 +29,6 @@ PRIOR_DOMINATED = 0.7
 HIGH_CORRELATION = 0.95
 #: Stribeck shape is only visible when the motion goes well past the Stribeck velocity.
 STRIBECK_VISIBLE = 5.0
-
-
 #: A run whose rest reading differs from its hold reading by more than this many encoder
 #: counts moved (one count of flicker is not motion).
 MOVED_COUNTS = 1.5
@@ -165,18 +163,14 @@ def _uncertainty(problem: Problem, J, s2_used: float):
     prior_sd = np.asarray(problem.prior_sd)
     prior_prec[:P] = np.where(prior_on, 1.0 / prior_sd**2, 0.0)
     cov, null_s, d = scaled_covariance(fisher_data + np.diag(prior_prec))
-    cov_data, null_data, d_data = scaled_covariance(fisher_data)
-    eye = np.eye(problem.n_unknowns)
-    std_u = np.array([
-        math.inf if undetermined_scaled(eye[i], null_s, d) else math.sqrt(max(cov[i, i], 0.0))
-        for i in range(problem.n_unknowns)
-    ])
-    std_u_data = np.array([
-        math.inf if undetermined_scaled(eye[i], null_data, d_data)
-        else math.sqrt(max(cov_data[i, i], 0.0))
-        for i in range(problem.n_unknowns)
-    ])
-    return fisher_data, cov, null_in_u(null_s, d), std_u, std_u_data
+    (cov_data, null_data, d_data), eye = scaled_covariance(fisher_data), np.eye(len(prior_prec))
+
+    def std(c, null, scale):  # ∞ along an undetermined direction
+        return np.array([math.inf if undetermined_scaled(eye[i], null, scale)
+                         else math.sqrt(max(c[i, i], 0.0)) for i in range(len(eye))])
+
+    return fisher_data, cov, null_in_u(null_s, d), std(cov, null_s, d), std(
+        cov_data, null_data, d_data)
 
 
 def _identifiability(problem: Problem, labels, J, fisher_data, std_u, std_u_data,

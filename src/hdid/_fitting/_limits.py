@@ -27,8 +27,8 @@ limit's degrees of freedom) is named in a warning ("friction not supported: the
 viscous-only model fits as well"); a limit that still fits better than the reported fit
 is never silent.
 
-A fit still above the floor after its limits restarts once more from its best optimum
-with a regular Stribeck law at its sliding level and the viscous share spanned
+A fit still above the floor after its limits, or with ``c_v`` gone to 0
+(:func:`viscous_gone`), restarts once more from its best optimum with a regular Stribeck law at its sliding level and the viscous share spanned
 (:func:`stribeck_restarts`; ``restarted_from`` ``"stribeck"`` when one wins): poorer basins
 of clean logs put the damping into the Stribeck shape (``c_v → 0``) or into a creeping law
 (``tau_s ≪ tau_c``), which no limit undoes (clean paper logs 49, 103, 129 of
@@ -36,9 +36,7 @@ of clean logs put the damping into the Stribeck shape (``c_v → 0``) or into a 
 
 At the floor a limit nested in another that already fits worse by its own bound is not
 fitted (:func:`implied`: the viscous-only model is the Coulomb limit at ``tau_s → 0``; its
-row has ``chi2_at_least``): on the shipped paper log the Coulomb limit lies Δχ² 495 above
-the fit, and the frictionless fit (a model that rings to the end of every run, three
-times the cost of a sticking one a step) was 60 % of the limit checks' time.
+row has ``chi2_at_least``): that ringing fit was 60 % of the shipped paper log's checks.
 
 When (:func:`wanted`): a residual above :func:`above_floor` × the floor (the fit has not
 reached it: every limit), or a symptom that a term may vanish — the parameter a limit
@@ -126,10 +124,9 @@ LIMIT_GRID_STARTS = 2
 #: a stick band 0.093 +- 0.001 rad against the true 0.047 (the data bracket it to
 #: [0.036, 0.094]): adopting it would trade honest wide errors for confident wrong ones.
 KEEP_BETTER_AT_FLOOR = False
-#: Tail probability of the floor test (:func:`above_floor`).
-FLOOR_TAIL = 1e-3
-#: Smallest trigger multiple of the floor: exact models leave 0.4–1.0× the floor (less
-#: where the gear sticks); the simulator's own error is ≤ 0.04× of it.
+FLOOR_TAIL = 1e-3  # tail probability of the floor test (:func:`above_floor`)
+#: Smallest trigger multiple of the floor: exact models leave 0.4–1.0× it (less where the
+#: gear sticks); the simulator's own error is ≤ 0.04× of it.
 FLOOR_MIN = 1.2
 
 
@@ -253,21 +250,16 @@ def stribeck_restarts(values: dict, scales, fixed) -> list[dict]:
     return rows
 
 
-#: ``c_v`` below this fraction of critical damping ``2·√(k_wg·I)`` has run towards 0, the
-#: symptom of the poorer basin that put the damping into the Stribeck shape (module doc):
-#: at damping ratio 5e-8 the viscous loss of a 0.157 rad swing over 100 cycles is
-#: 2π·5e-8·100·0.157 = 5e-6 rad, 0.1 of the finest step a test station logs (131072
-#: counts a turn), so no log can ask for it; grease damps 1–10 % of critical.
+#: ``c_v`` below this fraction of critical damping ``2·√(k_wg·I)`` has run towards 0 (the
+#: poorer basin that put the damping into the Stribeck shape): a 0.157 rad swing then loses
+#: 2π·5e-8·100·0.157 = 5e-6 rad in 100 cycles, 0.1 of a 131072-count step.
 VISCOUS_GONE = 1e-7
 
 
 def viscous_gone(values: dict, scales, fixed) -> bool:
     """Whether a free ``c_v`` has run towards 0 (``VISCOUS_GONE``): then the
-    :func:`stribeck_restarts` run although the fit is at the floor. A sweep log (500 Hz,
-    16384 counts, true ``c_v`` 0.5 % of critical) fitted at 1.07× the floor (under
-    :func:`above_floor`'s 1.2×, yet Δχ² 65 above its truth) with ``c_v`` 1e-9 of
-    critical and ``tau_c`` +21 % from its truth; restarted, 0.93× and ``tau_c`` within
-    0.3 %."""
+    :func:`stribeck_restarts` run although the fit is at the floor (a 500 Hz sweep log at
+    1.07× the floor, Δχ² 65 above its truth, ``tau_c`` +21 %; restarted: +0.3 %)."""
     if "c_v" in fixed or "c_v" not in values:
         return False
     critical = 2.0 * math.sqrt(scales.k_wg * scales.inertia)
