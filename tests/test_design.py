@@ -196,19 +196,13 @@ def test_refitted_separation_reaches_what_the_rival_can_absorb(case):
     parameters and nuisances, or if the refit cannot move them. (The refit is local: from
     30 % off it does not find the way through the stick–slip changes and stays at χ² ~4e4,
     an upper bound — the global refit's test below.)"""
-    import dataclasses
-
     from hdid._design._candidates import baseline
     from hdid._design._separate import separations
 
     _, fit = case
 
     def moved(frac, fixed):
-        tc = fit.parameters["tau_c"]
-        params = {**fit.parameters, "tau_c": dataclasses.replace(
-            tc, value=tc.value * (1 + frac), fixed=fixed)}
-        return dataclasses.replace(fit, model=fit.model.replace(tau_c=tc.value * (1 + frac)),
-                                   parameters=params, problem=None)
+        return _tau_c_moved(fit, frac, fixed)
 
     e = [baseline(fit)]
     held = separations(fit, moved(0.1, True), e)[0]
@@ -229,19 +223,13 @@ def test_rival_fitted_globally_makes_the_separation_a_value(case):
     tau_c held 30 % off, the global fit can only improve on the local one and still
     cannot reach the readings (> 1). Fails without the global fit (no ``best``: the value
     would be the local 4e4)."""
-    import dataclasses
-
     from hdid._design._candidates import baseline
     from hdid._design._separate import separations
 
     _, fit = case
 
     def moved(frac, fixed):
-        tc = fit.parameters["tau_c"]
-        params = {**fit.parameters, "tau_c": dataclasses.replace(
-            tc, value=tc.value * (1 + frac), fixed=fixed)}
-        return dataclasses.replace(fit, model=fit.model.replace(tau_c=tc.value * (1 + frac)),
-                                   parameters=params, problem=None)
+        return _tau_c_moved(fit, frac, fixed)
 
     e = [baseline(fit)]
     free = separations(fit, moved(0.3, False), e, include=(0,))[0]
@@ -342,3 +330,15 @@ def test_cli(case, tmp_path):
         lines = [x for x in r.output.splitlines() if x.strip()]
         assert len(lines) == 1 and words in lines[0], (args, r.output)
         assert "Traceback" not in r.output
+
+
+def _tau_c_moved(fit, frac: float, fixed: bool):
+    """``fit`` with its tau_c moved by ``frac`` (held or free): a rival form for
+    :func:`hdid._design._separate.separations`."""
+    import dataclasses
+
+    tc = fit.parameters["tau_c"]
+    params = {**fit.parameters, "tau_c": dataclasses.replace(
+        tc, value=tc.value * (1 + frac), fixed=fixed)}
+    return dataclasses.replace(fit, model=fit.model.replace(tau_c=tc.value * (1 + frac)),
+                               parameters=params, problem=None)
