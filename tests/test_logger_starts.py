@@ -71,8 +71,11 @@ def servo_off(tmp_path_factory):
     return path
 
 
-def test_logger_started_at_servo_off_reaches_the_floor(servo_off):
+def test_logger_started_at_servo_off_reaches_the_floor(servo_off, tmp_path):
     res = hdid.fit(servo_off, inertia=TRUTH["inertia"])
+    res.save(tmp_path / "fit.json")  # the story travels with the saved fit
+    assert hdid.FitResult.load(tmp_path / "fit.json").first_reading_held == (
+        "1", "2", "3", "4")
     assert _at_floor(res), res.report()
     note = _held_note(res)
     assert note is not None and "run(s) 1, 2, 3, 4" in note, res.warnings

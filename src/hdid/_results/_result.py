@@ -156,6 +156,7 @@ class FitResult:
             "resolution_source": self.resolution_source,
             "print_unit": self.print_unit,
             "resolution_note": self.resolution_note,
+            "first_reading_held": list(self.first_reading_held),
             "quantization_floor_rad": self.quantization_floor_rad,
             "stick_band_halfwidth_rad": self.stick_band_halfwidth_rad,
             "stick_band_halfwidth_std_rad": self.derived["stick_band_halfwidth_rad"][1],

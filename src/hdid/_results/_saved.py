@@ -288,6 +288,7 @@ def _load(path, effects, FitResult):
         if f.name not in kwargs and f.name in d:
             kwargs[f.name] = d[f.name]
     kwargs = {k: v for k, v in kwargs.items() if k in {f.name for f in dataclasses.fields(FitResult)}}
+    kwargs["first_reading_held"] = tuple(kwargs.get("first_reading_held") or ())
     result = FitResult(**kwargs)
     # the limit checks are attributes the fit sets (hdid._fitting._fit.nested_check)
     result.limits, result.restarted_from = list(d.get("limits") or []), d.get("restarted_from")
