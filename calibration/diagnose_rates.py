@@ -218,23 +218,42 @@ def _stamp(records: list, meta: dict) -> None:
         r.setdefault("src", src.get("src"))
 
 
+def _arguments(argv: list[str]):
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("words", nargs="*", metavar="[N] [paper|rich ...]",
+                    help="logs per design (default 10) and the designs (default both)")
+    ap.add_argument("--measured", action="store_true",
+                    help="regenerate _diagnosis/_rates.py's MEASURED block from the results")
+    ap.add_argument("--from", dest="first", type=int, default=0, metavar="K",
+                    help="logs K … N−1 only, added to the design's earlier records")
+    ap.add_argument("--fresh", action="store_true", help="drop the other designs' records")
+    a = ap.parse_args(argv)
+    bad = [w for w in a.words if not w.isdigit() and w not in ("paper", "rich")]
+    if bad:
+        ap.error(f"unknown argument(s) {bad}: give N and the designs paper, rich")
+    return a
+
+
 def main(argv: list[str]) -> None:
-    if "--measured" in argv:  # the module from the committed results, nothing run
+    args = _arguments(argv)
+    if args.measured:  # the module from the committed results, nothing run
         prev = json.loads((OUT / f"{NAME}.json").read_text())
         _stamp(prev["records"], prev["meta"])
         write(prev["records"], prev["meta"])
         print(write_measured(prev["records"]))
         return
-    n = int(argv[0]) if argv and argv[0].isdigit() else 10
-    designs = [a for a in argv if a in ("paper", "rich")] or ["paper", "rich"]
+    n = next((int(w) for w in args.words if w.isdigit()), 10)
+    designs = [w for w in args.words if w in ("paper", "rich")] or ["paper", "rich"]
     gen = logs
     meta = run_meta(n_per_design=n, cmd="taskset -c 0 python calibration/diagnose_rates.py "
                     + " ".join(argv))
     records: list = []
     old = OUT / f"{NAME}.json"
     # --from K: logs K … N−1 only, adding to this design's earlier records (seeds 1000+i)
-    first = int(argv[argv.index("--from") + 1]) if "--from" in argv else 0
-    if old.exists() and "--fresh" not in argv:  # keep the other designs' records
+    first = args.first
+    if old.exists() and not args.fresh:  # keep the other designs' records
         prev = json.loads(old.read_text())
         records = [r for r in prev["records"] if r["design"] not in designs
                    or (first and r["i"] < first)]
