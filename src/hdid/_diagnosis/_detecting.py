@@ -92,27 +92,23 @@ def detecting(c, base) -> dict:
     ``base`` (a FitResult): a JSON-ready record like :func:`._separating.separating`'s,
     ``purpose`` ``"detect"``, ``text`` its report line."""
     from .._design._separate import separations
-    from .._errors import HdidError
-    from ._separating import ALTERNATIVES, MIN_SEPARATION, experiments_for
+    from ._separating import ALTERNATIVES, MIN_SEPARATION, computed, experiments_for, unusable
 
     rec = {"forms": [c.key, BASE], "variants": [c.label, " + ".join(base.model.effect_names)],
            "purpose": "detect", "computed_by": "hdid.design"}
-    try:
+    def compute():
         fa = c.result if c.result is not None else c.fit.result()
-        seps = separations(fa, base, experiments_for(fa, base))
-    except (HdidError, ValueError, FloatingPointError, RuntimeError) as exc:
-        rec["error"] = f"{type(exc).__name__}: {exc}"
-        rec["text"] = (f"{c.key}: the experiment that would detect it could not be computed "
-                       f"({rec['error']})")
+        return separations(fa, base, experiments_for(fa, base))
+
+    seps = computed(rec, c.key, "the experiment that would detect it", compute)
+    if seps is None:
         return rec
     this, others = seps[0], [s for s in seps[1:] if math.isfinite(_a_true(s))]
     ranked = sorted(others, key=lambda s: (not (_credible(s) and s.converged[0]),
                                            not _credible(s), -_a_true(s)))
     rec["this_log_2lnlr"] = _a_true(this)
     if not ranked:
-        rec["error"] = "no candidate experiment gave a usable simulated log"
-        rec["text"] = f"{c.key}: {rec['error']}"
-        return rec
+        return unusable(rec, c.key)
     top = ranked[0]
     rec.update(top.to_dict())
     value = _a_true(top)

@@ -53,18 +53,18 @@ def separating(a, b, best_of: int = BEST_OF, include: tuple[int, ...] = (0,)) ->
     record, ``text`` its report line. ``best_of``, ``include``: the experiments whose rival
     is fitted globally (:func:`hdid._design._separate.separations`)."""
     from .._design._separate import separations
-    from .._errors import HdidError
 
     rec = {"forms": [a.key, b.key], "variants": [a.label, b.label],
            "computed_by": "hdid.design"}
-    try:
+    label = f"{a.key} vs {b.key}"
+
+    def compute():
         fa = a.result if a.result is not None else a.fit.result()
         fb = b.result if b.result is not None else b.fit.result()
-        seps = separations(fa, fb, experiments_for(fa, fb), best_of=best_of, include=include)
-    except (HdidError, ValueError, FloatingPointError, RuntimeError) as exc:
-        rec["error"] = f"{type(exc).__name__}: {exc}"
-        rec["text"] = (f"{a.key} vs {b.key}: the separating experiment could not be "
-                       f"computed ({rec['error']})")
+        return separations(fa, fb, experiments_for(fa, fb), best_of=best_of, include=include)
+
+    seps = computed(rec, label, "the separating experiment", compute)
+    if seps is None:
         return rec
     this, others = seps[0], [s for s in seps[1:] if math.isfinite(s.value)]
     # values (the rival fitted globally) first, then the local upper bounds a refit
@@ -76,9 +76,7 @@ def separating(a, b, best_of: int = BEST_OF, include: tuple[int, ...] = (0,)) ->
     rec["this_log"] = {"lambda": {"a_true": tl["a_true"], "b_true": tl["b_true"]},
                        "value_kind": tl["value_kind"], **tl["noisy_log"]}
     if not ranked:
-        rec["error"] = "no candidate experiment gave a usable simulated log"
-        rec["text"] = f"{a.key} vs {b.key}: {rec['error']}"
-        return rec
+        return unusable(rec, label)
     top = ranked[0]
     rec.update(top.to_dict())
     rec["reaches_min_separation"] = bool(top.value >= MIN_SEPARATION)
@@ -87,6 +85,26 @@ def separating(a, b, best_of: int = BEST_OF, include: tuple[int, ...] = (0,)) ->
                             "linearisation_credible": s.credible}
                            for s in ranked[1:1 + ALTERNATIVES]]
     rec["text"] = _text(a, b, top, this)
+    return rec
+
+
+def computed(rec: dict, label: str, what: str, compute):
+    """``compute()``'s separations, or ``None`` with ``rec`` saying why ``what`` (for
+    ``label``) could not be computed."""
+    from .._errors import HdidError
+
+    try:
+        return compute()
+    except (HdidError, ValueError, FloatingPointError, RuntimeError) as exc:
+        rec["error"] = f"{type(exc).__name__}: {exc}"
+        rec["text"] = f"{label}: {what} could not be computed ({rec['error']})"
+        return None
+
+
+def unusable(rec: dict, label: str) -> dict:
+    """``rec`` saying that no candidate experiment gave a usable simulated log."""
+    rec["error"] = "no candidate experiment gave a usable simulated log"
+    rec["text"] = f"{label}: {rec['error']}"
     return rec
 
 
