@@ -15,7 +15,7 @@ import re
 _WITH_UNIT = re.compile(r"^\s*(?P<name>[^\[\(]*?)\s*[\[\(]\s*(?P<unit>[^\]\)]*?)\s*[\]\)]\s*$")
 
 _TIME = {"s": 1.0, "sec": 1.0, "second": 1.0, "seconds": 1.0, "ms": 1e-3, "msec": 1e-3,
-         "us": 1e-6, "µs": 1e-6, "μs": 1e-6, "min": 60.0}
+         "us": 1e-6, "µs": 1e-6, "μs": 1e-6, "ns": 1e-9, "min": 60.0}
 _ANGLE = {"rad": 1.0, "mrad": 1e-3, "urad": 1e-6, "µrad": 1e-6, "μrad": 1e-6,
           "deg": math.pi / 180.0, "°": math.pi / 180.0, "degree": math.pi / 180.0,
           "degrees": math.pi / 180.0, "arcmin": math.pi / 10800.0,

@@ -9,6 +9,7 @@ import pandas as pd
 
 from .. import _units
 from .._errors import LogError
+from ._headers import header_key
 from ._names import (
     _COUNTS, _COUNTS_HINT, _COUNTS_LOOKING_MAX, _EXPECTED_COLUMNS, _INTEGER_TOL,
     _KNOWN_COLUMNS, _LOAD_TORQUE, _MOTOR, _MOTOR_CURRENT, _MOTOR_HINT, _MOTOR_TORQUE,
@@ -79,7 +80,7 @@ def _find_columns(
     path = table.path
     index: dict[str, int] = {}
     for i, name in enumerate(table.names):
-        key = _units.split(name)[0].lower()
+        key = header_key(name)[0]
         if key not in _KNOWN_COLUMNS:
             continue
         if key in index:
@@ -131,13 +132,13 @@ def _column_scales(table: _Table, cols: dict[str, int]) -> dict[str, float]:
     out = {}
     for key, i in cols.items():
         header = table.names[i]
-        base, unit = _units.split(header)
-        f = _units.scale(base.lower(), unit)
+        base, unit = header_key(header)
+        f = _units.scale(base, unit)
         if f is None:
             raise LogError(
-                f"unknown unit {unit!r} for {base.lower()!r}: use one of "
-                f"{_units.known(base.lower())}, or drop the unit from the header and give the "
-                f"column in {_units.SI.get(base.lower(), 'consistent units')}",
+                f"unknown unit {unit!r} for {base!r}: use one of "
+                f"{_units.known(base)}, or drop the unit from the header and give the "
+                f"column in {_units.SI.get(base, 'consistent units')}",
                 path=table.path, column=header,
             )
         out[key] = f

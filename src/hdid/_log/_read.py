@@ -16,6 +16,8 @@ from ._names import (
     _THETA_OUT, _TIME,
 )
 from ._dropouts import find_dropouts
+from ._rollover import unwrap_rollover
+from ._timestamps import timestamp_seconds
 from ._types import Log, Run
 from ._resolution import column_print_units, find_step
 from ._table import _Cells, _Table, _load_csv, _load_frame, _show
@@ -164,7 +166,14 @@ def read_log(
     cells = _Cells(table)
     run_labels = cells.labels(cols[_RUN]) if _RUN in cols else None
     setups = cells.labels(cols[_SETUP]) if _SETUP in cols else None
-    time = cells.numbers(cols[_TIME])
+    # date-times (ISO 8601) in the time column are seconds after the first row
+    # (hdid._log._timestamps)
+    time = timestamp_seconds(table.columns[cols[_TIME]],
+                             lambda m, pos: fail(m, _TIME, pos))
+    if time is None:
+        time = cells.numbers(cols[_TIME])
+    else:
+        unit_scale[_TIME] = 1.0
     theta = cells.numbers(cols[_THETA])
     inertia = cells.numbers(cols[_INERTIA]) if _INERTIA in cols else None
     motor = cells.numbers(cols[_MOTOR]) if driven else None
@@ -185,7 +194,14 @@ def read_log(
     if motor is not None and kt is not None:
         motor = motor * kt
 
-    # -- counts vs. radians ------------------------------------------------
+    # -- counts vs. radians (a count register that rolls over is unwrapped first) ------
+    rollover_notes = []
+    if cpr is not None:
+        theta, note = unwrap_rollover(theta, table.lines, name(_THETA))
+        rollover_notes += [note] if note else []
+    if theta_out is not None and out_cpr is not None:
+        theta_out, note = unwrap_rollover(theta_out, table.lines, name(_THETA_OUT))
+        rollover_notes += [note] if note else []
     theta, resolution = _to_radians(
         theta, cpr, fail, _THETA, "encoder", "--counts-per-rev", _COUNTS_HINT
     )
@@ -220,6 +236,7 @@ def read_log(
     period = sample_period(time, within, fail)
     starts, ends, names, notes = split_at_breaks(time, theta, starts, ends, names,
                                                  min_samples_per_run)
+    notes = list(table.notes) + rollover_notes + notes  # a cut last line, a rollover
     # one-sample read dropouts (a bus servo's -pi) leave before the step is sought
     # (hdid._log._dropouts)
     dropped, dropout_notes = find_dropouts(time, theta, starts, ends, names, table.lines, fail)

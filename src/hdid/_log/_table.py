@@ -2,15 +2,18 @@
 
 from __future__ import annotations
 
+import io
 import os
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from .._errors import LogError
+from . import _layout
+from ._mat import load_mat_frame
 from ._names import _NA_TOKENS
 
 
@@ -30,6 +33,8 @@ class _Table:
     names: list[str]
     columns: list[np.ndarray | pd.Series]
     lines: np.ndarray
+    #: What the reader made of lines that are not rows (a cut last line), for the log's notes.
+    notes: list[str] = field(default_factory=list)
 
 
 def _show(text: object, limit: int = 20) -> str:
@@ -46,20 +51,12 @@ _SNIFF_BYTES = 65536
 _DECIMAL_COMMA = re.compile(r"^\s*[-+]?\d*,\d+(?:[eE][-+]?\d+)?\s*$")
 
 
-def _sniff(path, err) -> str:
-    """Recognise what the file is from its first bytes; return the cell delimiter.
+def _sniff(head: bytes, err) -> None:
+    """Recognise what the file is from its first bytes.
 
     Spreadsheets renamed ``.csv``, UTF-16 text, other 8-bit encodings and binary
-    files get a one-line error naming what the file is. The delimiter is ``;`` (a
-    European export, possibly with decimal commas) or a tab when the header line
-    has one of those and no comma; else ``,``. Errors opening the file are left to
-    the reader, whose messages already name them.
+    files get a one-line error naming what the file is.
     """
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(_SNIFF_BYTES)
-    except (OSError, ValueError):
-        return ","
     if head.startswith(b"PK\x03\x04") or head.startswith(b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1"):
         raise err(
             "this is a spreadsheet (Excel/OpenDocument) file, not CSV text — in the "
@@ -69,6 +66,9 @@ def _sniff(path, err) -> str:
         len(head) >= 4 and head[1::2].count(0) > len(head) // 4 and head[0::2].count(0) == 0
     ) or (len(head) >= 4 and head[0::2].count(0) > len(head) // 4 and head[1::2].count(0) == 0):
         raise err("this is UTF-16 text — save the log as a UTF-8 CSV file (comma-separated)")
+    if head.startswith(b"MATLAB 5.0 MAT-file") or head.startswith(b"\x89HDF\r\n"):
+        raise err("this is a MATLAB .mat file, not CSV text — give it the .mat extension "
+                  "(hdid reads its vectors by name) or export a CSV file")
     if b"\x00" in head:
         raise err("this is a binary file, not a CSV text file — give the exported CSV log")
     try:
@@ -87,13 +87,30 @@ def _sniff(path, err) -> str:
             ) from None
     if sum(ord(c) < 9 or 13 < ord(c) < 32 for c in text) > len(text) // 100:
         raise err("this is a binary file, not a CSV text file — give the exported CSV log")
-    header = next((line for line in text.splitlines() if line.strip()), "")
-    if "," not in header:
-        if ";" in header:
-            return ";"
-        if "\t" in header:
-            return "\t"
-    return ","
+
+
+def _read_text(path, err) -> str:
+    """The file's text (UTF-8, a byte-order mark dropped), or a LogError naming why not."""
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read()
+    except FileNotFoundError:
+        raise err("file not found — check the path") from None
+    except IsADirectoryError:
+        raise err("is a directory, not a CSV file — give the path of the log file") from None
+    except PermissionError:
+        raise err("cannot read the file (permission denied) — check its permissions") from None
+    except OSError as exc:
+        raise err(f"cannot read the file ({exc.strerror or exc}) — check the path") from None
+    _sniff(data[:_SNIFF_BYTES], err)
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        row = data[: exc.start].count(b"\n") + 1
+        raise err(
+            f"line {row} is not UTF-8 text (Latin-1 or Windows-1252?) — save the log as a "
+            "UTF-8 CSV file (comma-separated)"
+        ) from None
 
 
 def _decimal_commas(values: np.ndarray) -> np.ndarray:
@@ -112,42 +129,44 @@ def _load_csv(path: str | os.PathLike[str]) -> _Table:
     source = os.fspath(path)
     err = lambda message, **kw: LogError(message, path=path, **kw)  # noqa: E731
     suffix = Path(source).suffix.lower()
+    if suffix == ".mat":  # MATLAB vectors named like the columns (hdid._log._mat)
+        return _load_frame(load_mat_frame(path), source=source, path=path)
     if suffix in {".xlsx", ".xlsm", ".xls", ".ods"}:
         raise err("this is a spreadsheet, not a CSV file — export it as CSV (comma-separated)")
-    sep = _sniff(source, err)
+    text = _read_text(source, err)
+    if not text:
+        raise err("file is empty — expected a CSV file with a header line such as 'time,theta'")
+    if not text.strip():
+        raise err("file holds only blank lines — expected a header line such as 'time,theta'")
+    # the header below any preamble; comment, preamble and whitespace-only lines emptied,
+    # a cut last line dropped (hdid._log._layout); every row keeps its file line number
+    lines = text.split("\n")
+    header_at, sep = _layout.find_header(lines)
+    notes = []
+    cut = _layout.cut_last_line(text, lines, header_at, sep)
+    if cut is not None:
+        notes.append(cut)
+    _layout.blank_non_rows(lines, header_at)
     try:
         # header=None: the header line is handled here, so that names are not
         # mangled by pandas and frame row i is exactly file line i + 1.
         frame = pd.read_csv(
-            source,
+            io.StringIO("\n".join(lines)),
             header=None,
+            skiprows=header_at,  # the preamble (pandas cannot start at a blank line)
             sep=sep,
             dtype=object,
             keep_default_na=False,
             na_filter=False,
             skip_blank_lines=False,
-            encoding="utf-8-sig",
             engine="c",
         )
-    except FileNotFoundError:
-        raise err("file not found — check the path") from None
-    except IsADirectoryError:
-        raise err("is a directory, not a CSV file — give the path of the log file") from None
-    except PermissionError:
-        raise err("cannot read the file (permission denied) — check its permissions") from None
-    except UnicodeDecodeError:
-        raise err(
-            "not a text CSV file (cannot decode it as UTF-8) — export the log as a "
-            "UTF-8 CSV file with a header line"
-        ) from None
     except pd.errors.EmptyDataError:
         raise err(
             "file is empty — expected a CSV file with a header line such as 'time,theta'"
         ) from None
     except pd.errors.ParserError as exc:
         raise _parser_error(exc, path) from None
-    except OSError as exc:
-        raise err(f"cannot read the file ({exc.strerror or exc}) — check the path") from None
     except Exception as exc:  # pandas may raise assorted errors on garbage input
         raise err(
             f"cannot parse the file as CSV ({type(exc).__name__}: {_show(exc, 80)}) — "
@@ -163,11 +182,11 @@ def _load_csv(path: str | os.PathLike[str]) -> _Table:
     nonblank = np.flatnonzero(~blank)
     if nonblank.size == 0:
         raise err("file holds only blank lines — expected a header line such as 'time,theta'")
-    header_at = int(nonblank[0])
-    names = [str(values[header_at]).strip() for values in raw]
-    keep = nonblank[1:]
-    lines = keep.astype(np.int64) + 1
-    return _Table(source, path, names, [values[keep] for values in raw], lines)
+    first = int(nonblank[0])  # the header line (frame row 0 is file line header_at + 1)
+    names = [str(values[first]).strip() for values in raw]
+    names, keep = _layout.units_row(names, raw, nonblank[1:])
+    rows = keep.astype(np.int64) + 1 + header_at
+    return _Table(source, path, names, [values[keep] for values in raw], rows, notes)
 
 
 def _parser_error(exc: Exception, path) -> LogError:
@@ -195,11 +214,11 @@ def _parser_error(exc: Exception, path) -> LogError:
     )
 
 
-def _load_frame(frame: pd.DataFrame) -> _Table:
+def _load_frame(frame: pd.DataFrame, source: str = "<DataFrame>", path=None) -> _Table:
     names = [str(c).strip() for c in frame.columns]
     columns = [frame.iloc[:, i] for i in range(frame.shape[1])]
     lines = np.arange(2, len(frame) + 2, dtype=np.int64)
-    return _Table("<DataFrame>", None, names, columns, lines)
+    return _Table(source, path, names, columns, lines)
 
 
 # ---------------------------------------------------------------------- parsing

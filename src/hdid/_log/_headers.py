@@ -1,0 +1,47 @@
+"""A header cell to its canonical column and unit: ``Theta (deg)``, ``time [ms]``,
+``time_ms``, ``t[s]``, ``Motor Torque [mNm]``.
+
+Loggers, spreadsheets and controllers name their columns in their own way. A header is
+read as a known column name (case-insensitive; spaces and hyphens count as ``_``, and a
+bare ``t`` is ``time``) followed by an optional unit: in brackets or parentheses
+(``theta [deg]``, ``t(s)``) or, when the name alone is not a known column, as a
+``_unit`` suffix (``time_ms``, ``theta_deg``) where the suffix is a unit the column knows
+(:mod:`hdid._units`). Anything else is not one of hdid's columns and is ignored.
+"""
+
+from __future__ import annotations
+
+import re
+
+from .. import _units
+from ._names import _KNOWN_COLUMNS, _TIME
+
+#: Short names loggers give a known column.
+_ALIASES = {"t": _TIME}
+
+
+def _canonical(base: str) -> str:
+    """``Motor Torque`` → ``motor_torque``; aliases (``t``) to their column."""
+    key = re.sub(r"[\s\-]+", "_", base.strip().lower())
+    return _ALIASES.get(key, key)
+
+
+def header_key(name: str) -> tuple[str, str | None]:
+    """``(key, unit)`` of a header cell: ``key`` is a canonical column name when the
+    header names one (else the lower-cased header), ``unit`` the unit written with it
+    (``None`` when none is)."""
+    base, unit = _units.split(name)
+    key = _canonical(base)
+    if key in _KNOWN_COLUMNS or unit is not None:
+        return key, unit
+    head, sep, tail = key.rpartition("_")
+    if sep and head:
+        head = _ALIASES.get(head, head)
+        if head in _KNOWN_COLUMNS and _units.scale(head, tail) is not None:
+            return head, tail
+    return key, None
+
+
+def is_known(name: str) -> bool:
+    """Whether a header cell names one of hdid's columns."""
+    return header_key(name)[0] in _KNOWN_COLUMNS

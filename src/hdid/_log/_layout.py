@@ -1,0 +1,157 @@
+"""Where the table lies in a logger's text file.
+
+Loggers, controllers and spreadsheets put more than the table in a log file: a preamble
+before the header (``# station 4, 2026-11-27``, ``Date: …``), comment lines (``#``) and
+whitespace-only lines among the rows or as a footer, a units row under the header
+(``,,s,rad``), and — when the logger was stopped mid-write — a last line cut short. This
+module finds the header line and the delimiter, empties the lines that are not rows (so
+that every row keeps its file line number for the messages), reads a units row into the
+header names, and drops a cut last line with a note. It only reads text: the numbers are
+parsed by :mod:`._table`.
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from .. import _units
+from ._headers import header_key
+from ._names import _COUNTS, _THETA, _TIME
+
+#: Lines searched for the header below a preamble.
+_HEADER_SEARCH_LINES = 200
+#: A cell that reads as a number (a units row has none).
+_NUMBER = re.compile(r"^\s*[-+]?(\d+[.,]?\d*|[.,]\d+)([eE][-+]?\d+)?\s*$")
+
+
+def _line_sep(line: str) -> str:
+    """The delimiter of a header line: ``;`` or a tab when it has one of those and no
+    comma (a European export), else ``,``."""
+    if "," not in line:
+        if ";" in line:
+            return ";"
+        if "\t" in line:
+            return "\t"
+    return ","
+
+
+def _cells(line: str, sep: str) -> list[str]:
+    return [c.strip().strip('"').strip() for c in line.split(sep)]
+
+
+def _is_comment(line: str) -> bool:
+    return line.lstrip().startswith("#")
+
+
+def _names_time_and_angle(line: str) -> bool:
+    keys = {header_key(c)[0] for c in _cells(line, _line_sep(line))}
+    return _TIME in keys and (_THETA in keys or _COUNTS in keys)
+
+
+def find_header(lines: list[str]) -> tuple[int, str]:
+    """Index of the header line and the delimiter.
+
+    The header is the first line (not blank, not a ``#`` comment) that names both a time
+    and an angle column; the lines above it are a preamble. When no line among the first
+    :data:`_HEADER_SEARCH_LINES` does, it is the first line that is not blank or a comment
+    (so that a header lacking a required column is named in the error as it is).
+    """
+    first = None
+    for i, line in enumerate(lines[:_HEADER_SEARCH_LINES]):
+        if not line.strip() or _is_comment(line):
+            continue
+        if first is None:
+            first = i
+        if _names_time_and_angle(line):
+            return i, _line_sep(line)
+    if first is None:  # only blank or comment lines: the caller says so
+        first = next((i for i, line in enumerate(lines) if line.strip()), 0)
+    return first, _line_sep(lines[first]) if lines else ","
+
+
+def blank_non_rows(lines: list[str], header_at: int) -> int:
+    """Empty (in place) the preamble above the header, every ``#`` comment line and every
+    whitespace-only line below it; return how many preamble and comment lines there were."""
+    dropped = 0
+    for i, line in enumerate(lines):
+        if i == header_at or not line:
+            continue
+        if i < header_at or _is_comment(line):
+            dropped += bool(line.strip())
+            lines[i] = ""
+        elif not line.strip():
+            lines[i] = ""
+    return dropped
+
+
+def _decimals(cell: str) -> int | None:
+    cell = cell.strip()
+    if not _NUMBER.match(cell) or "e" in cell.lower():
+        return None
+    for mark in ".,":
+        if mark in cell:
+            return len(cell) - cell.index(mark) - 1
+    return 0
+
+
+def cut_last_line(text: str, lines: list[str], header_at: int, sep: str) -> str | None:
+    """Empty a last line that a logger stopped mid-write and return a note, else None.
+
+    Only a last line without a line end can be cut. It is cut when it has fewer cells than
+    the header, an empty last cell, or a last cell printed to fewer decimals than every one
+    of the (up to 20) rows above it, which all print the same number of decimals.
+    """
+    if text.endswith(("\n", "\r")):
+        return None
+    last = max((i for i, line in enumerate(lines) if line.strip()), default=-1)
+    if last <= header_at or last != len(lines) - 1:
+        return None
+    n_header = len(_cells(lines[header_at], sep))
+    cells = _cells(lines[last], sep)
+    why = None
+    if len(cells) < n_header:
+        why = f"{len(cells)} of the header's {n_header} cells"
+    elif cells[-1] == "":
+        why = "an empty last cell"
+    else:
+        above = [_cells(line, sep) for line in lines[header_at + 1 : last] if line.strip()][-20:]
+        d_above = {_decimals(c[-1]) for c in above if len(c) == len(cells)}
+        d_last = _decimals(cells[-1])
+        if (len(d_above) == 1 and None not in d_above and d_last is not None
+                and d_last < next(iter(d_above))):
+            why = (f"its last cell {cells[-1]!r} printed to {d_last} decimals where the rows "
+                   f"above print {next(iter(d_above))}")
+    if why is None:
+        return None
+    lines[last] = ""
+    return (f"the last line (row {last + 1}) has no line end and {why}: the logger stopped "
+            "while writing it — dropped")
+
+
+def units_row(names: list[str], raw: list[np.ndarray], keep: np.ndarray
+              ) -> tuple[list[str], np.ndarray]:
+    """Read a units row under the header (``,,s,rad``, ``[s];[deg]``) into the names.
+
+    The first row below the header is a units row when none of its cells is a number and
+    the time or the angle column's cell is a unit that column knows. Its units are written
+    into the header names (``time`` → ``time [s]``) where the header gives none, and the
+    row is dropped. An unknown unit there becomes the header's unit, so that the column's
+    unknown-unit error names it.
+    """
+    if keep.size == 0:
+        return names, keep
+    row = [str(values[keep[0]]).strip() for values in raw]
+    if any(_NUMBER.match(c) for c in row if c):
+        return names, keep
+    units = [c[1:-1].strip() if c[:1] in "[(" and c[-1:] in "])" else c for c in row]
+    keys = [header_key(n) for n in names]
+    if not any(k in (_TIME, _THETA) and unit is None and u and _units.scale(k, u) is not None
+               for (k, unit), u in zip(keys, units)):
+        return names, keep
+    out = list(names)
+    for i, ((key, unit), u) in enumerate(zip(keys, units)):
+        if unit is None and u and key in _units.UNITS:
+            out[i] = f"{names[i]} [{u}]"
+    return out, keep[1:]

@@ -1,0 +1,63 @@
+"""Encoder counters that roll over: a 16-, 24- or 32-bit count register wraps from its
+largest value to its smallest (or back) in one sample.
+
+A controller logs an incremental encoder's count register as it stands. Past the end of
+its range the register wraps: a 16-bit signed counter steps from 32 767 to −32 768, an
+unsigned one from 65 535 to 0. Read as they stand, the counts after a wrap are
+2**bits counts (many revolutions) away from those before it — a motion no encoder
+makes between two samples. The register's width is told by the readings themselves: the
+smallest of 16, 24 and 32 bits whose signed or unsigned range holds every reading, and a
+wrap is a step between consecutive rows (in file order: the counter runs on between
+runs) larger than half that range. Each wrap is undone by adding ±2**bits to every
+reading after it, the readings are moved by whole register turns to lie nearest zero,
+and the log's notes say so.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Widths [bits] of the count registers that loggers write.
+REGISTER_BITS = (16, 24, 32)
+
+
+def _width(counts: np.ndarray) -> int | None:
+    """The narrowest register whose signed or unsigned range holds every reading."""
+    lo, hi = float(np.min(counts)), float(np.max(counts))
+    for bits in REGISTER_BITS:
+        half = 2.0 ** (bits - 1)
+        if (lo >= -half and hi < half) or (lo >= 0 and hi < 2 * half):
+            return bits
+    return None
+
+
+def unwrap_rollover(counts: np.ndarray, rows: np.ndarray, column: str
+                    ) -> tuple[np.ndarray, str | None]:
+    """Counts with every register wrap undone, and a note naming the wraps (None if none).
+
+    ``counts`` are whole-number readings in file order, ``rows`` their file line numbers
+    (for the note), ``column`` the column's header name.
+    """
+    if counts.size < 2 or not np.all(np.isfinite(counts)):
+        return counts, None
+    bits = _width(counts)
+    if bits is None:
+        return counts, None
+    span = 2.0 ** bits
+    steps = np.diff(counts)
+    wraps = np.flatnonzero(np.abs(steps) > span / 2)
+    if wraps.size == 0:
+        return counts, None
+    turns = np.zeros_like(counts)
+    turns[wraps + 1] = -np.rint(steps[wraps] / span)
+    out = counts + span * np.cumsum(turns)
+    # whole register turns are the same reading: keep the readings nearest zero (an
+    # unsigned counter just below its end reads as just below zero, not as 2**bits)
+    out = out - span * np.rint(np.median(out) / span)
+    shown = ", ".join(str(int(rows[i + 1])) for i in wraps[:5])
+    more = f" and {wraps.size - 5} more" if wraps.size > 5 else ""
+    return out, (
+        f"column {column!r}: the {bits}-bit count register rolls over at row(s) {shown}{more} "
+        f"(a step of more than {int(span // 2)} counts between two samples, which no encoder "
+        f"moves): unwrapped by ±{int(span)} counts"
+    )

@@ -1,0 +1,329 @@
+"""Logs written the way real loggers, spreadsheets and controllers write them.
+
+Each variant is written from a shipped log (``data/synthetic``) as a test station would
+write it: a preamble above the header, ``#`` comments and a footer, a units row under the
+header, unit suffixes in the names (``time_ms``, ``t[s]``, ``time [ns]``), a 16- or 32-bit
+count register that rolls over, ISO 8601 date-times, a last line cut mid-write, a MATLAB
+``.mat`` file. Either it reads to the same log as the original — the same runs, samples,
+readings and encoder step, so the fit (a deterministic function of the log) is the same
+physics, which one end-to-end ``hdid fit`` checks — or it ends with one line naming the
+file, the row or column, and the fix.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from hdid import LogError, read_log
+from synthetic import ROOT, SYNTH
+
+PAPER = SYNTH / "csf8_paper.csv"
+COUNTS = SYNTH / "csf8_paper_counts.csv"
+RICH = SYNTH / "csf8_rich_1khz.csv"
+CPR = 4000  # the shipped counts log's encoder (data/synthetic/truth.json)
+
+
+def assert_same_log(log, ref, *, time_tol: float = 1e-12, theta_offset: bool = False):
+    """Same runs, samples, readings (up to one constant, for ``theta_offset``: a counter's
+    other zero) and encoder step; each run's time may start elsewhere (only differences
+    enter the fit)."""
+    assert [r.n_samples for r in log.runs] == [r.n_samples for r in ref.runs]
+    assert [r.setup for r in log.runs] == [r.setup for r in ref.runs]
+    shift = log.runs[0].theta[0] - ref.runs[0].theta[0] if theta_offset else 0.0
+    for a, b in zip(log.runs, ref.runs):
+        np.testing.assert_allclose(a.time - a.time[0], b.time - b.time[0], rtol=0,
+                                   atol=time_tol)
+        # float64 rounding of the unit conversions (degrees, ms) and of readings far from
+        # zero (a 32-bit counter's 3e6 rad): a few units in the last place of the largest
+        atol = 8 * np.finfo(float).eps * max(1.0, float(np.max(np.abs(a.theta))))
+        np.testing.assert_allclose(a.theta - shift, b.theta, rtol=1e-12, atol=atol)
+    assert log.resolution == pytest.approx(ref.resolution, rel=1e-9)
+
+
+@pytest.fixture(scope="module")
+def paper():
+    return PAPER.read_text(), pd.read_csv(PAPER), read_log(PAPER)
+
+
+@pytest.fixture(scope="module")
+def counts():
+    return pd.read_csv(COUNTS), read_log(COUNTS, counts_per_rev=CPR)
+
+
+def _lines(text: str, sep: str = ",") -> str:
+    return text.replace(",", sep)
+
+
+def _write(path, text: str, *, bom: bool = False, crlf: bool = False):
+    if crlf:
+        text = text.replace("\n", "\r\n")
+    path.write_bytes((("\ufeff" if bom else "") + text).encode())
+    return path
+
+
+# ------------------------------------------------------------ the table in the text
+
+#: (name, the original text → the variant's text, write options). Each of these failed on
+#: the reader before this file: a preamble was taken as the header, a units row as a row
+#: of empty cells, a whitespace-only line as a row, a footer comment as a row.
+LAYOUTS = {
+    "hash preamble": (lambda t: "# station 4, 2026-11-27\n# operator: kb\n" + t, {}),
+    "text preamble, CRLF, BOM": (lambda t: "Station 4\nDate: 2026-11-27\n\n" + t,
+                                 dict(bom=True, crlf=True)),
+    "preamble, ';' and decimal commas": (
+        lambda t: "# station 4; bench B\n" + t.replace(",", ";").replace(".", ","), {}),
+    "units row": (lambda t: t.replace("theta\n", "theta\n,,s,rad\n", 1), {}),
+    "units row in brackets, tab": (
+        lambda t: t.replace("theta\n", "theta\n\t\t[s]\t[rad]\n", 1).replace(",", "\t"), {}),
+    "comments, whitespace lines and a footer": (
+        lambda t: t.replace("\n2,", "\n# run 2 follows\n  \n2,").replace("\n3,", "\n\t\n3,")
+        + "# end of log, 500 samples\n", {}),
+}
+
+
+@pytest.mark.parametrize("variant", LAYOUTS)
+def test_layout_variants_read_to_the_same_log(tmp_path, paper, variant):
+    text, _, ref = paper
+    change, options = LAYOUTS[variant]
+    log = read_log(_write(tmp_path / "log.csv", change(text), **options))
+    assert_same_log(log, ref)
+    assert log.notes == ref.notes
+
+
+def test_rows_are_numbered_in_the_file_below_a_preamble(tmp_path, paper):
+    """Messages name the row as the file numbers it: 2 preamble lines move row 101 to 103."""
+    text = paper[0]
+    lines = text.splitlines()
+    lines[100] = lines[100].rsplit(",", 1)[0] + ","  # file row 101: theta empty
+    path = _write(tmp_path / "hole.csv", "# station 4\nDate: x\n" + "\n".join(lines) + "\n")
+    with pytest.raises(LogError) as err:
+        read_log(path)
+    assert err.value.row == 103 and err.value.column == "theta"
+    lines = text.splitlines()
+    lines[100] += ",9"  # an extra cell
+    path = _write(tmp_path / "extra.csv", "# station 4\nDate: x\n" + "\n".join(lines) + "\n")
+    with pytest.raises(LogError) as err:
+        read_log(path)
+    assert err.value.row == 103
+
+
+def test_a_units_row_converts_its_column(tmp_path, paper):
+    """``;;ms;deg`` under the header reads time in ms and theta in degrees."""
+    _, frame, ref = paper
+    d = frame.copy()
+    d["time"] = (d["time"] * 1e3).round(6)
+    d["theta"] = np.degrees(d["theta"])
+    text = d.to_csv(index=False, sep=";", float_format="%.15g")
+    text = text.replace("theta\n", "theta\n;;ms;deg\n", 1)
+    assert_same_log(read_log(_write(tmp_path / "units.csv", text)), ref)
+
+
+def test_an_unknown_unit_in_a_units_row_is_named(tmp_path, paper):
+    text = paper[0].replace("theta\n", "theta\n,,s,furlong\n", 1)
+    with pytest.raises(LogError) as err:
+        read_log(_write(tmp_path / "u.csv", text))
+    assert "furlong" in str(err.value) and "theta" in err.value.column
+
+
+# ------------------------------------------------------------ names and units
+
+#: header of the time column, factor from seconds to its unit, printed decimals
+TIME_NAMES = {
+    "time_ms": (1e3, 6),
+    "t[s]": (1.0, 6),
+    "t": (1.0, 6),
+    "Time_us": (1e6, 0),
+    "time [ns]": (1e9, 0),
+}
+
+
+@pytest.mark.parametrize("header", TIME_NAMES)
+def test_time_column_names_and_units(tmp_path, paper, header):
+    _, frame, ref = paper
+    factor, decimals = TIME_NAMES[header]
+    d = frame.copy()
+    d["time"] = (d["time"] * factor).round(decimals)
+    if decimals == 0:
+        d["time"] = d["time"].astype(np.int64)
+    d = d.rename(columns={"time": header, "theta": "THETA_deg"})
+    d["THETA_deg"] = np.degrees(d["THETA_deg"])
+    path = tmp_path / "names.csv"
+    d.to_csv(path, index=False, float_format="%.15g")
+    assert_same_log(read_log(path), ref)
+
+
+# ------------------------------------------------------------ time as loggers write it
+
+
+@pytest.mark.parametrize("variant", ["iso", "iso with offset"])
+def test_date_times(tmp_path, paper, variant):
+    """Each run 2 s after the last; date-times read as seconds after the first row."""
+    _, frame, ref = paper
+    d = frame.copy()
+    seconds = d["time"] + 2.0 * (d["run"] - 1)
+    stamps = pd.Timestamp("2026-11-27T10:00:00") + pd.to_timedelta(seconds, unit="s")
+    d["time"] = stamps.dt.strftime("%Y-%m-%dT%H:%M:%S.%f")
+    if variant == "iso with offset":
+        d["time"] = d["time"] + "+01:00"
+    path = tmp_path / "stamps.csv"
+    d.to_csv(path, index=False)
+    # microsecond printing of multiples of 4 ms: exact to the nanosecond
+    assert_same_log(read_log(path), ref, time_tol=1e-9)
+
+
+def test_a_cell_that_is_no_date_time_is_named(tmp_path, paper):
+    _, frame, _ = paper
+    d = frame.copy()
+    stamps = pd.Timestamp("2026-11-27T10:00:00") + pd.to_timedelta(d["time"], unit="s")
+    d["time"] = stamps.dt.strftime("%Y-%m-%d %H:%M:%S.%f")
+    d.loc[40, "time"] = "overflow"
+    path = tmp_path / "stamps.csv"
+    d.to_csv(path, index=False)
+    with pytest.raises(LogError) as err:
+        read_log(path)
+    assert err.value.row == 42 and err.value.column == "time" and "overflow" in str(err.value)
+
+
+# ------------------------------------------------------------ count registers
+
+
+#: (register offset added to the counts, how the register wraps) — offsets chosen so the
+#: runs cross the register's end several times
+ROLLOVERS = {
+    "16-bit unsigned": (65_500, lambda c: c % 65_536),
+    "16-bit signed": (32_700, lambda c: (c + 32_768) % 65_536 - 32_768),
+    "32-bit signed": (2**31 - 50, lambda c: (c + 2**31) % 2**32 - 2**31),
+    "16-bit signed, counting down": (-32_700, lambda c: (-c + 32_768) % 65_536 - 32_768),
+}
+
+
+@pytest.mark.parametrize("variant", ROLLOVERS)
+def test_a_count_register_that_rolls_over_is_unwrapped(tmp_path, counts, variant):
+    """Read as they stand, the counts after a wrap were 2**bits counts (16 or 2**20
+    revolutions) away; unwrapped, every run keeps the set-up's one offset (the readings
+    differ from the original by one constant across all runs) and a note names the wrap."""
+    frame, ref = counts
+    offset, wrap = ROLLOVERS[variant]
+    d = frame.copy()
+    raw = wrap(d["theta"].to_numpy(np.int64) + offset)
+    assert np.any(np.abs(np.diff(raw)) > 30_000)  # the variant does wrap
+    d["theta"] = raw
+    path = tmp_path / "wrap.csv"
+    d.to_csv(path, index=False)
+    log = read_log(path, counts_per_rev=CPR)
+    if "down" in variant:  # the counter counts the other way: the mirror image
+        log_theta = [-r.theta for r in log.runs]
+        shift = log_theta[0][0] - ref.runs[0].theta[0]
+        for theta, r in zip(log_theta, ref.runs):
+            np.testing.assert_allclose(theta - shift, r.theta, rtol=0, atol=1e-12)
+    else:
+        assert_same_log(log, ref, theta_offset=True)
+    bits = variant.split("-")[0]
+    assert any(f"{bits}-bit count register rolls over" in n for n in log.notes), log.notes
+
+
+# ------------------------------------------------------------ a last line cut mid-write
+
+
+@pytest.mark.parametrize("cut", ["cell cut", "cells missing", "empty last cell"])
+def test_a_last_line_cut_mid_write_is_dropped(tmp_path, paper, cut):
+    """A logger stopped mid-write leaves its last line without a line end and short: it is
+    dropped with a note (the other rows read as before). A whole last line without a line
+    end is kept."""
+    text, _, ref = paper
+    body = text.rstrip("\n")
+    whole = read_log(_write(tmp_path / "whole.csv", body))
+    assert_same_log(whole, ref)
+    assert whole.notes == ref.notes
+    last = body.rsplit("\n", 1)[1]
+    variant = {"cell cut": body[:-6], "cells missing": body.rsplit(",", 1)[0],
+               "empty last cell": body.rsplit(",", 1)[0] + ","}[cut]
+    log = read_log(_write(tmp_path / "cut.csv", variant))
+    assert [r.n_samples for r in log.runs] == [125, 125, 125, 124]
+    np.testing.assert_array_equal(log.runs[3].theta, ref.runs[3].theta[:-1])
+    assert any("row 501" in n and "dropped" in n for n in log.notes), (last, log.notes)
+
+
+# ------------------------------------------------------------ MATLAB files
+
+
+def test_a_mat_file_reads_its_vectors_by_name(tmp_path, paper):
+    from scipy import io as sio
+
+    _, frame, ref = paper
+    path = tmp_path / "log.mat"
+    sio.savemat(path, {"run": frame["run"].to_numpy()[:, None],  # a column vector
+                       "setup": frame["setup"].to_numpy().astype(str),
+                       "t": frame["time"].to_numpy(),
+                       "theta_deg": np.degrees(frame["theta"].to_numpy()),
+                       "temperature": 21.5})
+    assert_same_log(read_log(path), ref)
+
+
+def test_mat_file_errors_name_the_file_and_the_fix(tmp_path, paper):
+    from scipy import io as sio
+
+    _, frame, _ = paper
+    path = tmp_path / "other.mat"
+    sio.savemat(path, {"t": frame["time"].to_numpy(), "qm": frame["theta"].to_numpy()})
+    with pytest.raises(LogError, match=r"other\.mat: missing column 'theta'.*'qm'"):
+        read_log(path)
+    renamed = tmp_path / "renamed.csv"
+    renamed.write_bytes(path.read_bytes())
+    with pytest.raises(LogError, match=r"renamed\.csv: this is a MATLAB \.mat file"):
+        read_log(renamed)
+
+
+# ------------------------------------------------------------ end to end: hdid fit
+
+
+def _station_rich_log(tmp_path):
+    """The rich log as a station writes it: BOM, preamble, ';' with decimal commas, CRLF,
+    a units row (time in ms), upper-case names."""
+    d = pd.read_csv(RICH)
+    d["time"] = (d["time"] * 1000).round(6)
+    text = d.to_csv(index=False, sep=";", float_format="%.12g").replace(".", ",")
+    text = text.replace("run;setup;time;theta\n", "Run;Setup;Time;Theta\n;;[ms];[rad]\n")
+    return _write(tmp_path / "station.csv", "# station 4, 2026-11-27\n" + text,
+                  bom=True, crlf=True)
+
+
+def _hdid_fit(log, out, *options):
+    proc = subprocess.run(
+        [sys.executable, "-m", "hdid.cli", "fit", str(log), *options, "--json", str(out), "-q"],
+        capture_output=True, text=True, cwd=ROOT,
+    )
+    return proc, (json.loads(out.read_text()) if proc.returncode == 0 else None)
+
+
+def test_hdid_fit_reads_a_station_log_to_the_same_physics(tmp_path):
+    """One fit of the station-written rich log against the original's: the same log, so
+    the same numbers (to the optimiser's run-to-run reproducibility, far inside the std)."""
+    station = _station_rich_log(tmp_path)
+    assert_same_log(read_log(station), read_log(RICH))
+    proc, fit = _hdid_fit(station, tmp_path / "station.json")
+    assert proc.returncode == 0, proc.stderr
+    _, ref = _hdid_fit(RICH, tmp_path / "ref.json")
+    for name, p in ref["parameters"].items():
+        q = fit["parameters"][name]
+        if p["std"]:
+            # the same log fits to the same optimum: a hundredth of its std at most
+            assert abs(q["value"] - p["value"]) <= 0.01 * p["std"], name
+
+
+def test_hdid_fit_error_is_one_line_exit_2(tmp_path, paper):
+    """A units row with a unit the column does not know: exit 2, one line naming the file,
+    the column and the fix, no traceback."""
+    text = paper[0].replace("theta\n", "theta\n,,s,furlong\n", 1)
+    path = _write(tmp_path / "bad.csv", text)
+    proc, _ = _hdid_fit(path, tmp_path / "bad.json")
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "bad.csv" in lines[0] and "furlong" in lines[0], proc.stderr
+    assert "Traceback" not in proc.stderr
