@@ -63,8 +63,8 @@ def sample_posterior(
     the result warns ``LOWER END NOT MEASURED`` when the data allow values below a chain's
     95 % interval (``BOUNDED ABOVE ONLY`` when the chain reaches the vanishing end); under
     the weak default priors (nothing flat in value) the same continuations give starts down
-    those ridges instead (``ridge:NAME``, at most 10 % of the weight;
-    :func:`~hdid._posterior.modes.seek_ridges`), and a continuation that finds a better
+    those ridges instead (``ridge:NAME``, at most 10 % of the weight, SMC's only: emcee's
+    walkers stall there, ``modes.RIDGE_SAMPLERS``; :func:`~hdid._posterior.modes.seek_ridges`), and a continuation that finds a better
     basin adds its optimum. ``modes="fit"`` uses the fit's optimum only (the limit fits are still sought, for the
     warning); a list of :class:`Mode` is used as given.
 

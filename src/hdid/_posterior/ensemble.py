@@ -26,7 +26,7 @@ from .diagnostics import (
     width_ratios,
 )
 from .limits import assess_limits, limit_proposal_weights, limit_shares
-from .modes import found_limits, mode_shares, sampled_modes
+from .modes import RIDGE_SAMPLERS, found_limits, mode_shares, sampled_modes
 from .moves import (
     START_SCALE,
     MixtureProposal,
@@ -91,7 +91,8 @@ class _Ensemble:
         self.rng = np.random.default_rng(seed)
         q = float(prob.step)
         t_modes = time.perf_counter()
-        self.found = found = sampled_modes(fit, modes, seed, self.u_fit, self.lin, lp.gauss_prior)
+        self.found = found = sampled_modes(fit, modes, seed, self.u_fit, self.lin, lp.gauss_prior,
+                                                 ridges="emcee" in RIDGE_SAMPLERS)
         self.limits = found_limits(fit, found, modes, self.lin, lp.gauss_prior, seed)
         self.t_modes = time.perf_counter() - t_modes
         self.log_lo = log_lo = math.log(bounds[0] * q)

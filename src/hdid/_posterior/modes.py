@@ -292,6 +292,11 @@ def ridge_names(problem, lin, covariance=None) -> list[str]:
 #: within MODE_DCHI2_MAX took half the walkers at their Laplace weights, and its SMC, which
 #: had converged, no longer did.
 RIDGE_DCHI2 = 9.21
+#: The samplers given the ridge starts: SMC's particles are reweighted at every temperature
+#: and a start of little mass dies out; emcee's walkers keep their starts, and the 10 %
+#: started down the Coulomb ridge stall there — on the shipped paper log its R-hat after
+#: 20 000 steps rose from 1.058 to 1.116 with them (benchmarks/results/posterior_sbc.md).
+RIDGE_SAMPLERS = ("smc",)
 #: Share of the walkers, of SMC's reference and of the independence proposal that the
 #: ridge points hold together at most: their Laplace weights (at points that are not
 #: optima) are not their mass; they are starts, and the samplers weigh them.
@@ -364,14 +369,16 @@ def found_limits(fit, found, modes, lin, gauss_prior=None, seed: int = 0) -> lis
 
 
 def sampled_modes(fit, modes, seed: int, u_fit: np.ndarray, lin: np.ndarray,
-                  gauss_prior=None) -> list[Mode]:
+                  gauss_prior=None, ridges: bool = True) -> list[Mode]:
     """The optima a sampler starts from: ``modes`` ``"auto"`` (:func:`find_modes`, and the
     limit fits of the parameters whose prior is flat in value, :mod:`.limits`),
     ``"fit"`` or a list of :class:`Mode` (copied: their weights are re-set), kept inside
     the prior box around the fit (±``PRIOR_HALF_WIDTH``) and on the allowed side of the
     orders the prior imposes (``tau_s ≥ tau_c``), else they cannot be sampled (the fit's
     own, moved inside, if none is), with Laplace weights under the sampled prior (the fit's cost
-    has the log-flat one; ``lin`` marks the parameters whose prior is flat in value)."""
+    has the log-flat one; ``lin`` marks the parameters whose prior is flat in value).
+    ``ridges=False`` leaves out the starts down the ridges (:func:`seek_ridges`; emcee's:
+    ``RIDGE_SAMPLERS``)."""
     from dataclasses import replace
 
     if isinstance(modes, str):
@@ -388,9 +395,10 @@ def sampled_modes(fit, modes, seed: int, u_fit: np.ndarray, lin: np.ndarray,
                  if modes == "auto" else [_fit_mode(view)])
         if modes == "auto":
             best = min(m.cost for m in found)
-            found += seek_limits(view, lin, best) + seek_ridges(view, lin, best)
+            found += seek_limits(view, lin, best) + (seek_ridges(view, lin, best) if ridges else [])
     else:
-        found = [replace(m) for m in modes]
+        found = [replace(m) for m in modes if ridges or not m.kind.startswith("ridge:")]
+        found = found or [replace(m) for m in modes]
     from .density import ordered_pairs
 
     P = fit.problem.n_physical
