@@ -228,6 +228,61 @@ def test_a_count_register_that_rolls_over_is_unwrapped(tmp_path, counts, variant
     assert any(f"{bits}-bit count register rolls over" in n for n in log.notes), log.notes
 
 
+def test_an_output_count_register_that_rolls_over_is_unwrapped(tmp_path):
+    """A driven log's output counts (2**19 per revolution) in a 32-bit register near its
+    end: unwrapped like the input's, the output angle is the original's plus one constant."""
+    out_cpr = 2**19
+    d = pd.read_csv(SYNTH / "driven_csf8.csv")
+    d["output_counts"] = np.rint(d.pop("theta_out") * out_cpr / (2 * np.pi)).astype(np.int64)
+    plain = tmp_path / "plain.csv"
+    d.to_csv(plain, index=False)
+    d["output_counts"] = (d["output_counts"] + 2**31 - 5_000 + 2**31) % 2**32 - 2**31
+    wrapped = tmp_path / "wrapped.csv"
+    d.to_csv(wrapped, index=False)
+    ref, log = (read_log(p, output_counts_per_rev=out_cpr) for p in (plain, wrapped))
+    shift = log.runs[0].theta_out[0] - ref.runs[0].theta_out[0]
+    for a, b in zip(log.runs, ref.runs):
+        # readings near 2**31 counts (2.6e4 rad): a few units in the last place
+        np.testing.assert_allclose(a.theta_out - shift, b.theta_out, rtol=0, atol=1e-10)
+    assert any("'output_counts': the 32-bit count register" in n for n in log.notes)
+
+
+def test_a_counter_zeroed_at_each_release_is_named(tmp_path, counts):
+    """Every run starts at count 0 (the controller zeroed the counter at each release):
+    runs 1 and 2 of set-up A are held at the same reading and move off it in opposite
+    directions, which no spring does — one shared offset would fit nonsense (k1 came out
+    at 3e-5 N m/rad instead of 940). The error names both runs and the fix; with each run
+    its own set-up the log reads."""
+    frame, _ = counts
+    d = frame.copy()
+    d["theta"] = d["theta"] - d.groupby("run")["theta"].transform("first")
+    path = tmp_path / "zeroed.csv"
+    d.to_csv(path, index=False)
+    with pytest.raises(LogError) as err:
+        read_log(path, counts_per_rev=CPR)
+    assert "'1' and '2'" in str(err.value) and "own set-up" in str(err.value)
+    assert err.value.row == 127  # run 2's first row
+    d["setup"] = d["run"].astype(str)
+    d.to_csv(path, index=False)
+    assert len(read_log(path, counts_per_rev=CPR).runs) == 4
+
+
+def test_a_fast_swing_is_no_wrap():
+    """Only a step that the motion around it does not continue is a wrap: a fine encoder's
+    fast swing whose readings happen to fit a 16-bit register, in steps of 34 000 counts
+    between steps of 8 000 and 16 000, stays as read; a wrap between steps of 5 is undone."""
+    from hdid._log._rollover import unwrap_rollover
+
+    rows = np.arange(2, 8)
+    swing = np.array([-30_000.0, -28_000, -20_000, 14_000, 30_000, 30_100])
+    out, note = unwrap_rollover(swing, rows, "theta")
+    assert note is None and np.array_equal(out, swing)
+    wrapped = np.array([32_755.0, 32_760, 32_765, -32_766, -32_761, -32_756])
+    out, note = unwrap_rollover(wrapped, rows, "theta")
+    np.testing.assert_array_equal(np.diff(out), 5.0)
+    assert "row(s) 5" in note
+
+
 # ------------------------------------------------------------ a last line cut mid-write
 
 

@@ -26,7 +26,8 @@ from ._columns import (
     _to_radians,
 )
 from ._validate import (
-    check_lengths, check_motion, check_within_runs, run_blocks, sample_period, split_at_breaks,
+    check_lengths, check_motion, check_shared_zero, check_within_runs, run_blocks,
+    sample_period, split_at_breaks,
 )
 
 
@@ -234,6 +235,8 @@ def read_log(
     lengths = ends - starts
     check_lengths(lengths, starts, names, min_samples_per_run, _RUN in cols, fail)
     period = sample_period(time, within, fail)
+    if not driven:  # a driven run's motor may push either way from any angle
+        check_shared_zero(theta, starts, ends, names, setups, fail)
     starts, ends, names, notes = split_at_breaks(time, theta, starts, ends, names,
                                                  min_samples_per_run)
     notes = list(table.notes) + rollover_notes + notes  # a cut last line, a rollover

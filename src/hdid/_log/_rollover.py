@@ -8,7 +8,8 @@ unsigned one from 65 535 to 0. Read as they stand, the counts after a wrap are
 makes between two samples. The register's width is told by the readings themselves: the
 smallest of 16, 24 and 32 bits whose signed or unsigned range holds every reading, and a
 wrap is a step between consecutive rows (in file order: the counter runs on between
-runs) larger than half that range. Each wrap is undone by adding ±2**bits to every
+runs) larger than half that range which, undone, is nearer the steps around it (the
+gear's speed) than as read. Each wrap is undone by adding ±2**bits to every
 reading after it, the readings are moved by whole register turns to lie nearest zero,
 and the log's notes say so.
 """
@@ -45,7 +46,21 @@ def unwrap_rollover(counts: np.ndarray, rows: np.ndarray, column: str
         return counts, None
     span = 2.0 ** bits
     steps = np.diff(counts)
-    wraps = np.flatnonzero(np.abs(steps) > span / 2)
+    wide = np.abs(steps) > span / 2
+    wraps = np.flatnonzero(wide)
+    if wraps.size:
+        # a wrap breaks the motion's continuity: undone, the step is nearer the steps
+        # around it (the speed) than as read — a fast swing of a fine encoder whose
+        # readings happen to fit the register, with steps of half of it, is no wrap
+        ok = np.flatnonzero(~wide)
+        if ok.size:
+            left = ok[np.clip(np.searchsorted(ok, wraps) - 1, 0, None)]
+            right = ok[np.clip(np.searchsorted(ok, wraps), None, ok.size - 1)]
+            speed = 0.5 * (steps[left] + steps[right])
+        else:
+            speed = np.zeros(wraps.size)
+        undone = steps[wraps] - span * np.rint(steps[wraps] / span)
+        wraps = wraps[np.abs(undone - speed) < np.abs(steps[wraps] - speed)]
     if wraps.size == 0:
         return counts, None
     turns = np.zeros_like(counts)
@@ -58,6 +73,6 @@ def unwrap_rollover(counts: np.ndarray, rows: np.ndarray, column: str
     more = f" and {wraps.size - 5} more" if wraps.size > 5 else ""
     return out, (
         f"column {column!r}: the {bits}-bit count register rolls over at row(s) {shown}{more} "
-        f"(a step of more than {int(span // 2)} counts between two samples, which no encoder "
-        f"moves): unwrapped by ±{int(span)} counts"
+        f"(a step of more than {int(span // 2)} counts between two samples that the steps "
+        f"around it do not continue): unwrapped by ±{int(span)} counts"
     )

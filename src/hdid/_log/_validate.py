@@ -219,3 +219,32 @@ def check_motion(theta, starts, ends, names, resolution: float | None, fail: Fai
     label = ", ".join(_show(names[r]) for r in still)
     return [f"run(s) {label} never move ({why}): kept as rest points inside the stick band "
             "(released from inside it, they stay stuck)"]
+
+
+def check_shared_zero(theta, starts, ends, names, setups, fail: Fail) -> None:
+    """Runs of one set-up share the encoder's zero (the fit gives each set-up one offset).
+    Two of its runs held at the very same reading that move off it in opposite directions
+    contradict that: from one held angle the spring (or gravity) pushes one way. That is
+    the signature of a counter zeroed at each release (every run starts at 0); it is an
+    error naming both runs, with the fix, rather than a fit of one spring to two zeros."""
+    first_move: dict[tuple[str, float], tuple[int, float]] = {}
+    for k, (a, b) in enumerate(zip(starts, ends)):
+        held = theta[a:b]
+        if held.size < 3 or held[1] != held[0]:
+            continue  # a run already moving at its first reading says nothing here
+        moved = np.flatnonzero(held != held[0])
+        if moved.size == 0:
+            continue  # never moves: a rest point inside the stick band
+        direction = float(np.sign(held[moved[0]] - held[0]))
+        setup = "1" if setups is None else str(setups[a])
+        key = (setup, float(held[0]))
+        if key in first_move and first_move[key][1] != direction:
+            other = first_move[key][0]
+            raise fail(
+                f"runs {_show(names[other])} and {_show(names[k])} of set-up {_show(setup)} are "
+                f"both held at the reading {held[0]:.6g} but move off it in opposite "
+                "directions — one spring cannot push both ways from one angle: the encoder "
+                "was zeroed at each release; give each run its own set-up (a 'setup' column "
+                "holding the run's label)",
+                _THETA, int(a))
+        first_move.setdefault(key, (k, direction))
