@@ -19,7 +19,7 @@ from .._problems import _programs
 from ._identifiability import MOVED_COUNTS, analyse
 from .._log import Log, read_log
 from .._models._model import Model
-from . import _first_reading, _limits
+from . import _first_reading, _limits, _polish
 from .._simulation._prepare import Prepared, offset_guess, prepare
 from .._problems._problem import OFFSET_SCALE_REL, Problem, build_problem
 from .._results._result import FitResult
@@ -130,7 +130,10 @@ def fit(
         counts_per_rev=counts_per_rev, max_substep=max_substep, ratio=ratio,
         resolution=resolution,
     )
-    problem, prep, model = setup.problem, setup.prep, setup.model
+    # the search's weights (a noisy log's stuck tails as one observation each), then the
+    # optimum polished in the likelihood's own (:mod:`._polish`)
+    search = _polish.searching(setup)
+    problem, prep, model = search.problem, search.prep, search.model
     _prefetch(problem)
 
     U0, grid_cost = _grid_starts(problem, prep, model, n_starts, start_from_model)
@@ -141,11 +144,16 @@ def fit(
         U1, c1, ok1, s1 = _local_fits(problem, retry[None, :], max_steps)
         U, costs = np.concatenate([U, U1]), np.concatenate([costs, c1])
         ok, steps = np.concatenate([ok, ok1]), np.concatenate([steps, s1])
-    result = _finish(setup, U, costs, ok, steps, t_start)
-    result = nested_check(result, log, setup, nested=nested, fix=fix,
-                          inertia_prior=inertia_prior, release_time=release_time,
-                          max_substep=max_substep, n_starts=n_starts, max_steps=max_steps,
-                          solutions=(U, costs, ok, steps), lanes=len(U0))
+    result = _finish(search, U, costs, ok, steps, t_start)
+    checks = dict(nested=nested, fix=fix, inertia_prior=inertia_prior,
+                  release_time=release_time, max_substep=max_substep, n_starts=n_starts,
+                  max_steps=max_steps, lanes=len(U0))
+    result = nested_check(result, log, search, solutions=(U, costs, ok, steps), **checks)
+    if search is not setup:
+        result = _polish.polished(
+            result, setup.problem, (U, costs, ok, steps), lambda U0: _local_fits(
+                setup.problem, U0, max_steps), lambda *sol: _finish(setup, *sol, t_start),
+            lambda res, sol: nested_check(res, log, setup, solutions=sol, **checks))
     # runs that move from their second sample: is their first reading the hold?
     held = _first_reading.candidates(log, prep, release_time)
     if held:
