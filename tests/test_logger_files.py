@@ -131,6 +131,31 @@ def test_an_unknown_unit_in_a_units_row_is_named(tmp_path, paper):
     assert "furlong" in str(err.value) and "theta" in err.value.column
 
 
+@pytest.mark.parametrize("with_run", [False, True])
+def test_logs_written_one_after_another(tmp_path, paper, with_run):
+    """``cat run1.csv run2.csv …``: each log brings its header (and byte-order mark).
+    Without a run column each log is a run (time restarts in each); with one, the rows keep
+    their labels. A note names the repeated headers."""
+    _, frame, ref = paper
+    parts = [frame[frame.run == r] if with_run else frame[frame.run == r].drop(columns="run")
+             for r in (1, 2, 3, 4)]
+    text = "".join(("\ufeff" if i else "") + p.to_csv(index=False) for i, p in enumerate(parts))
+    log = read_log(_write(tmp_path / "cat.csv", text, bom=True, crlf=True))
+    assert_same_log(log, ref)
+    assert [r.name for r in log.runs] == ["1", "2", "3", "4"]
+    assert [r.first_row for r in log.runs] == [2, 128, 254, 380]
+    assert any("header repeats at row(s) 127, 253, 379" in n for n in log.notes), log.notes
+
+
+def test_space_separated_dat_file(tmp_path, paper):
+    """A ``.dat`` export: cells separated by runs of spaces, lines indented, units in the
+    header after a space (``time [s]``)."""
+    _, frame, ref = paper
+    text = frame.to_csv(index=False, sep=" ").replace("time theta", "time [s] theta (rad)")
+    text = "   " + text.replace("\n", "\n   ")
+    assert_same_log(read_log(_write(tmp_path / "log.dat", text)), ref)
+
+
 # ------------------------------------------------------------ names and units
 
 #: header of the time column, factor from seconds to its unit, printed decimals
@@ -138,6 +163,8 @@ TIME_NAMES = {
     "time_ms": (1e3, 6),
     "t[s]": (1.0, 6),
     "t": (1.0, 6),
+    "t/s": (1.0, 6),
+    "Time / ms": (1e3, 6),
     "Time_us": (1e6, 0),
     "time [ns]": (1e9, 0),
 }
@@ -161,14 +188,15 @@ def test_time_column_names_and_units(tmp_path, paper, header):
 # ------------------------------------------------------------ time as loggers write it
 
 
-@pytest.mark.parametrize("variant", ["iso", "iso with offset"])
+@pytest.mark.parametrize("variant", ["iso", "iso with offset", "time of day"])
 def test_date_times(tmp_path, paper, variant):
     """Each run 2 s after the last; date-times read as seconds after the first row."""
     _, frame, ref = paper
     d = frame.copy()
     seconds = d["time"] + 2.0 * (d["run"] - 1)
     stamps = pd.Timestamp("2026-11-27T10:00:00") + pd.to_timedelta(seconds, unit="s")
-    d["time"] = stamps.dt.strftime("%Y-%m-%dT%H:%M:%S.%f")
+    form = "%H:%M:%S.%f" if variant == "time of day" else "%Y-%m-%dT%H:%M:%S.%f"
+    d["time"] = stamps.dt.strftime(form)
     if variant == "iso with offset":
         d["time"] = d["time"] + "+01:00"
     path = tmp_path / "stamps.csv"

@@ -4,7 +4,7 @@
 Loggers, spreadsheets and controllers name their columns in their own way. A header is
 read as a known column name (case-insensitive; spaces and hyphens count as ``_``, and a
 bare ``t`` is ``time``) followed by an optional unit: in brackets or parentheses
-(``theta [deg]``, ``t(s)``) or, when the name alone is not a known column, as a
+(``theta [deg]``, ``t(s)``), after a slash (``t/s``, ``Theta / deg``) or, when the name alone is not a known column, as a
 ``_unit`` suffix (``time_ms``, ``theta_deg``) where the suffix is a unit the column knows
 (:mod:`hdid._units`). Anything else is not one of hdid's columns and is ignored.
 """
@@ -31,6 +31,10 @@ def header_key(name: str) -> tuple[str, str | None]:
     header names one (else the lower-cased header), ``unit`` the unit written with it
     (``None`` when none is)."""
     base, unit = _units.split(name)
+    if unit is None and "/" in base:  # ``t/s``, ``Theta / deg`` (quantity / unit)
+        head, _, tail = base.rpartition("/")
+        if _canonical(head) in _KNOWN_COLUMNS or _canonical(head) in _ALIASES:
+            base, unit = head, tail.strip()
     key = _canonical(base)
     if key in _KNOWN_COLUMNS or unit is not None:
         return key, unit

@@ -3,7 +3,7 @@
 Loggers, controllers and spreadsheets put more than the table in a log file: a preamble
 before the header (``# station 4, 2026-11-27``, ``Date: …``), comment lines (``#``) and
 whitespace-only lines among the rows or as a footer, a units row under the header
-(``,,s,rad``), and — when the logger was stopped mid-write — a last line cut short. This
+(``,,s,rad``), the header repeated where logs were written one after another, and — when the logger was stopped mid-write — a last line cut short. This
 module finds the header line and the delimiter, empties the lines that are not rows (so
 that every row keeps its file line number for the messages), reads a units row into the
 header names, and drops a cut last line with a note. It only reads text: the numbers are
@@ -26,19 +26,34 @@ _HEADER_SEARCH_LINES = 200
 _NUMBER = re.compile(r"^\s*[-+]?(\d+[.,]?\d*|[.,]\d+)([eE][-+]?\d+)?\s*$")
 
 
+#: The delimiter of a file whose cells are separated by spaces (``.dat``/``.txt`` exports).
+WHITESPACE = r"\s+"
+
+
 def _line_sep(line: str) -> str:
     """The delimiter of a header line: ``;`` or a tab when it has one of those and no
-    comma (a European export), else ``,``."""
+    comma (a European export), runs of spaces when it has none of the three but two or
+    more names, else ``,``."""
     if "," not in line:
         if ";" in line:
             return ";"
         if "\t" in line:
             return "\t"
+        if len(_glued_units(line).split()) >= 2:
+            return WHITESPACE
     return ","
 
 
+def _glued_units(line: str) -> str:
+    """A space-separated header with its units glued to the names: ``time [s] theta (deg)``
+    → ``time[s] theta(deg)`` (spaces inside the brackets dropped too)."""
+    line = re.sub(r"\s+([\[(])", r"\1", line)
+    return re.sub(r"[\[(][^\])]*[\])]", lambda m: re.sub(r"\s+", "", m.group(0)), line)
+
+
 def _cells(line: str, sep: str) -> list[str]:
-    return [c.strip().strip('"').strip() for c in line.split(sep)]
+    parts = _glued_units(line).split() if sep == WHITESPACE else line.split(sep)
+    return [c.strip().strip('"').strip() for c in parts]
 
 
 def _is_comment(line: str) -> bool:
@@ -65,7 +80,10 @@ def find_header(lines: list[str]) -> tuple[int, str]:
         if first is None:
             first = i
         if _names_time_and_angle(line):
-            return i, _line_sep(line)
+            sep = _line_sep(line)
+            if sep == WHITESPACE:  # one cell per name: ``time [s]`` → ``time[s]``
+                lines[i] = _glued_units(line)
+            return i, sep
     if first is None:  # only blank or comment lines: the caller says so
         first = next((i for i, line in enumerate(lines) if line.strip()), 0)
     return first, _line_sep(lines[first]) if lines else ","
@@ -84,6 +102,38 @@ def blank_non_rows(lines: list[str], header_at: int) -> int:
         elif not line.strip():
             lines[i] = ""
     return dropped
+
+
+def blank_repeated_headers(lines: list[str], header_at: int, sep: str) -> list[int]:
+    """Empty (in place) the lines below the header that repeat it — logs of several runs
+    written one after another into one file (``cat run1.csv run2.csv``), each with its
+    header (and byte-order mark) — and return their indices."""
+    head = _cells(lines[header_at].lstrip("\ufeff"), sep)
+    last = head[-1]  # a quick test before the cells are compared
+    repeats = []
+    for i in range(header_at + 1, len(lines)):
+        if last in lines[i] and _cells(lines[i].lstrip("\ufeff"), sep) == head:
+            lines[i] = ""
+            repeats.append(i)
+    return repeats
+
+
+def runs_of_repeated_headers(repeats: np.ndarray | None, block: np.ndarray | None,
+                             run_labels: np.ndarray | None
+                             ) -> tuple[np.ndarray | None, list[str]]:
+    """Run labels and a note for a file whose header repeats (``repeats``: their file line
+    numbers; ``block``: per row, the repeats above it). Without a run column each log is a
+    run, labelled ``'1'``, ``'2'``, …; with one, the rows keep their labels."""
+    if repeats is None or repeats.size == 0:
+        return run_labels, []
+    shown = ", ".join(str(r) for r in repeats[:5])
+    more = f" and {repeats.size - 5} more" if repeats.size > 5 else ""
+    what = "the rows keep their 'run' labels"
+    if run_labels is None:
+        run_labels = np.array([str(b + 1) for b in block], dtype=object)
+        what = f"each log is a run ('1' … '{repeats.size + 1}')"
+    return run_labels, [f"the header repeats at row(s) {shown}{more}: several logs written "
+                        f"one after another; {what}"]
 
 
 def _decimals(cell: str) -> int | None:

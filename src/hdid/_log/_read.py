@@ -16,6 +16,7 @@ from ._names import (
     _THETA_OUT, _TIME,
 )
 from ._dropouts import find_dropouts
+from ._layout import runs_of_repeated_headers
 from ._rollover import unwrap_rollover
 from ._timestamps import timestamp_seconds
 from ._types import Log, Run
@@ -166,6 +167,9 @@ def read_log(
     # -- cells -------------------------------------------------------------
     cells = _Cells(table)
     run_labels = cells.labels(cols[_RUN]) if _RUN in cols else None
+    # logs written one after another, each with its header (hdid._log._layout)
+    run_labels, header_notes = runs_of_repeated_headers(table.header_repeats, table.block,
+                                                        run_labels)
     setups = cells.labels(cols[_SETUP]) if _SETUP in cols else None
     # date-times (ISO 8601) in the time column are seconds after the first row
     # (hdid._log._timestamps)
@@ -239,7 +243,7 @@ def read_log(
         check_shared_zero(theta, starts, ends, names, setups, fail)
     starts, ends, names, notes = split_at_breaks(time, theta, starts, ends, names,
                                                  min_samples_per_run)
-    notes = list(table.notes) + rollover_notes + notes  # a cut last line, a rollover
+    notes = list(table.notes) + header_notes + rollover_notes + notes
     # one-sample read dropouts (a bus servo's -pi) leave before the step is sought
     # (hdid._log._dropouts)
     dropped, dropout_notes = find_dropouts(time, theta, starts, ends, names, table.lines, fail)

@@ -35,6 +35,10 @@ class _Table:
     lines: np.ndarray
     #: What the reader made of lines that are not rows (a cut last line), for the log's notes.
     notes: list[str] = field(default_factory=list)
+    #: File line numbers of the header's repeats, and per row the number of repeats above
+    #: it (the file is several logs one after another when there are any).
+    header_repeats: np.ndarray | None = None
+    block: np.ndarray | None = None
 
 
 def _show(text: object, limit: int = 20) -> str:
@@ -147,6 +151,7 @@ def _load_csv(path: str | os.PathLike[str]) -> _Table:
     if cut is not None:
         notes.append(cut)
     _layout.blank_non_rows(lines, header_at)
+    repeats = np.asarray(_layout.blank_repeated_headers(lines, header_at, sep), dtype=np.int64)
     try:
         # header=None: the header line is handled here, so that names are not
         # mangled by pandas and frame row i is exactly file line i + 1.
@@ -186,7 +191,8 @@ def _load_csv(path: str | os.PathLike[str]) -> _Table:
     names = [str(values[first]).strip() for values in raw]
     names, keep = _layout.units_row(names, raw, nonblank[1:])
     rows = keep.astype(np.int64) + 1 + header_at
-    return _Table(source, path, names, [values[keep] for values in raw], rows, notes)
+    return _Table(source, path, names, [values[keep] for values in raw], rows, notes,
+                  repeats + 1, np.searchsorted(repeats + 1, rows))
 
 
 def _parser_error(exc: Exception, path) -> LogError:

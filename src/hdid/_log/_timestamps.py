@@ -1,5 +1,6 @@
 """A time column of date-times: ``2026-11-27T10:00:00.004`` (ISO 8601, as data loggers,
-LabVIEW and Python's ``datetime`` write them) read as seconds.
+LabVIEW and Python's ``datetime`` write them) or times of day (``10:00:00.004``) read as
+seconds.
 
 Only the differences between samples matter to the fit, so the readings are taken as
 seconds after the first row's instant, to the nanosecond (pandas' ``datetime64[ns]``).
@@ -20,6 +21,8 @@ from ._table import _cell_text, _show
 
 #: ``YYYY-MM-DD`` then ``T`` or a space and ``hh:mm`` (seconds and fractions optional).
 _ISO = re.compile(r"^\d{4}-\d{2}-\d{2}[T ]\d{1,2}:\d{2}")
+#: A time of day alone: ``10:00:00.004`` (a day's log; past midnight it steps back).
+_CLOCK = re.compile(r"^\d{1,2}:\d{2}:\d{2}(\.\d+)?$")
 
 
 def timestamp_seconds(column, fail) -> np.ndarray | None:
@@ -32,9 +35,16 @@ def timestamp_seconds(column, fail) -> np.ndarray | None:
         raw = np.asarray(column, dtype=object)
         text = np.array([_cell_text(c) for c in raw], dtype=object)
         filled = np.flatnonzero(text != "")
-        if filled.size == 0 or not _ISO.match(text[filled[0]]):
+        if filled.size == 0:
             return None
-        stamps = pd.to_datetime(pd.Series(text), format="ISO8601", utc=True, errors="coerce")
+        if _ISO.match(text[filled[0]]):
+            form = "ISO8601"
+        elif _CLOCK.match(text[filled[0]]):  # a time of day
+            with_fraction = all("." in t for t in text[filled])
+            form = "%H:%M:%S.%f" if with_fraction else "mixed"
+        else:
+            return None
+        stamps = pd.to_datetime(pd.Series(text), format=form, utc=True, errors="coerce")
         bad = np.flatnonzero(stamps.isna().to_numpy())
         if bad.size:
             pos = int(bad[0])
