@@ -223,10 +223,12 @@ def fit_joint(
             f"logs: a joint fit needs exactly one driven log and at least one free-motion "
             f"log; got {len(driven)} driven and {len(free_logs)} free-motion"
         )
-    if not isinstance(model, DrivenJoint) and getattr(driven[0].runs[0], "theta_out", None) is None:
+    if not isinstance(model, DrivenJoint):
         # Without an output encoder the driven log sees tau_c + tau_fout/N, the free-motion
         # log tau_c: the joint fit keeps the output friction at the driven joint's
-        # default rather than folding it into the shared tau_c (see fit_driven).
+        # default rather than folding it into the shared tau_c (see fit_driven). A
+        # DrivenJoint also keeps a pendulum's Gravity as it is: the free-motion logs fit
+        # its zero per set-up (no hanging angle of the driven log's own).
         model = DrivenJoint(Model.default() if model is None else model, 0.05,
                             PositionalError.zeros(max_order if order is None else order))
     alone = fit_driven(
@@ -317,12 +319,27 @@ def _read(log, counts_per_rev, torque_constant, output_counts_per_rev):
 def _as_joint(model, order: int, data: DrivenData | None = None) -> DrivenJoint:
     """A :class:`DrivenJoint` from a model. Its output friction starts at 0 and is fitted
     from the output encoder; without one it is held at 0: eq. 9 alone cannot tell
-    ``tau_fout/N`` from WG Coulomb friction, which then carries it."""
+    ``tau_fout/N`` from WG Coulomb friction, which then carries it. A pendulum's
+    :class:`~hdid.effects.Gravity` becomes :class:`~hdid.effects.gravity.AbsoluteGravity`:
+    a driven log's angles are the drive's, with no fitted zero per set-up, so where the
+    arm hangs is a parameter."""
     if isinstance(model, DrivenJoint):
         return model.with_order(order) if model.positional.order != order else model
-    m = Model.default() if model is None else model
+    m = _with_hanging_angle(Model.default() if model is None else model)
     tau_fout = 0.0 if data is not None and not data.has_output else 0.05
     return DrivenJoint(m, tau_fout, PositionalError.zeros(order))
+
+
+def _with_hanging_angle(model: Model) -> Model:
+    """``model`` with each :class:`~hdid.effects.Gravity` in place given a fitted hanging
+    angle (:class:`~hdid.effects.gravity.AbsoluteGravity`, ``theta_g`` = 0 to start)."""
+    from ..effects.gravity import AbsoluteGravity, Gravity
+
+    if not any(type(e) is Gravity for e in model.effects):
+        return model
+    effects = tuple(AbsoluteGravity.of(e) if type(e) is Gravity else e for e in model.effects)
+    return Model(effects=effects, inertia=model.inertia, ratio=model.ratio,
+                 param_scales=model.param_scales)
 
 
 def _fixed_from(joint: DrivenJoint, fix) -> dict[str, float]:

@@ -46,6 +46,20 @@ def _offset_parameters(joint: DrivenJoint, free) -> list[str]:
             for p in e.parameters if p.name in free]
 
 
+def _gravity_parameters(joint: DrivenJoint, free) -> tuple[str, str] | None:
+    """``(mgl, theta_g)`` of a pendulum with a fitted hanging angle
+    (:class:`~hdid.effects.gravity.AbsoluteGravity`) when both are free. Its torque at
+    the logged axis, ``−(mgl/N)·sin(θ/N − theta_g)``, is linear in ``mgl·cos theta_g``
+    and ``mgl·sin theta_g``: two more columns of the equation-error regression."""
+    from ..effects.gravity import AbsoluteGravity
+
+    for e in joint.wg_model.effects:
+        if isinstance(e, AbsoluteGravity):
+            names = tuple(p.name for p in e.parameters)
+            return names if set(names) <= set(free) else None
+    return None
+
+
 def _coulomb_effects(joint: DrivenJoint):
     """The model's Stribeck-type friction law (an :class:`~hdid.AbstractFriction` with
     ``tau_c`` and ``tau_s``; its nested special case is Coulomb friction, ``tau_s = tau_c``)."""
@@ -92,6 +106,7 @@ def _start_values(data: DrivenData, joint: DrivenJoint, free) -> DrivenJoint:
     scales0 = log_scales(data, joint)
     threshold = max(START_NOISE_FACTOR * speed_noise, START_SPEED_FRACTION * scales0.speed)
     offsets = _offset_parameters(joint, free)
+    gravity = _gravity_parameters(joint, free)
     rows, target, kin_rows, kin_y = [], [], [], []
     K = joint.positional.order
     for i in range(data.n_runs):
@@ -111,6 +126,9 @@ def _start_values(data: DrivenData, joint: DrivenJoint, free) -> DrivenJoint:
         moving[[0, -1]] = False
         s = np.sign(omega)
         cols = [alpha, s, omega] + ([np.ones(n)] if offsets else [])
+        if gravity:
+            # the drive holds (mgl/N)·sin(θ/N − θ_g) = (mgl/N)·(cos θ_g·sin(θ/N) − sin θ_g·cos(θ/N))
+            cols += [np.sin(th / N) / N, np.cos(th / N) / N]
         rows.append(np.stack(cols, axis=1)[moving])
         target.append((td_mid - tl / N)[moving])
         if data.has_output:
@@ -141,6 +159,11 @@ def _start_values(data: DrivenData, joint: DrivenJoint, free) -> DrivenJoint:
             new["c_v"] = float(c_v)
         for name in offsets:
             new[name] = float(coef[3])
+        if gravity:
+            a, b = coef[-2:]  # mgl·cos θ_g, −mgl·sin θ_g
+            if math.hypot(a, b) > 0:
+                new[gravity[0]] = float(math.hypot(a, b))
+                new[gravity[1]] = float(math.atan2(-b, a))
     if data.has_output:
         A, b = np.concatenate(kin_rows), np.concatenate(kin_y)
         coef = np.linalg.lstsq(A, b, rcond=None)[0]

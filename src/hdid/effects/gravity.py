@@ -58,3 +58,44 @@ class Gravity(AbstractEffect):
     def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
         del state
         return -self.mgl * jnp.sin(motion.theta / motion.ratio) / motion.ratio
+
+
+class AbsoluteGravity(AbstractEffect):
+    r"""Gravity on a pendulum in a log of absolute angles (a robot joint's controller
+    angle): output torque ``−mgl·sin(θ/N − theta_g)``, reflected to the logged axis as
+    ``−(mgl/N)·sin(θ/N − theta_g)``.
+
+    The drive torque that holds the arm is ``mgl·sin(θ/N − theta_g)``: the published
+    ``G(θ) = A·sin(θ − θ₀)`` of a manipulator joint at ratio 1 (``A = mgl``,
+    ``θ₀ = theta_g``). ``theta_g`` [rad, output angle] is where the arm hangs (the stable
+    equilibrium), in the log's own angle frame. A free-motion drop measures θ from a
+    fitted zero per set-up, so there :class:`Gravity` holds no angle; a driven log has no
+    such zero (its angles are the drive's), so a driven fit puts this effect in place of
+    :class:`Gravity` (``hdid._fitting._driven_fit``), starting both parameters from the
+    equation-error regression of the logged torque on ``sin(θ/N)`` and ``cos(θ/N)``
+    (:mod:`hdid._fitting._driven_starts`). Like :class:`Gravity`, ``sin`` needs θ in
+    radians.
+
+    Residual mark when missing: a torque that follows ``sin θ``/``cos θ`` of the joint
+    angle, hence a drift of the simulated angle downhill, growing where the arm is
+    horizontal; with the hanging angle wrong, a torque that looks like an offset plus a
+    spring about the wrong angle.
+    """
+
+    mgl: Float[ArrayLike, ""] = parameter(
+        "N m", "pendulum gravity torque m·g·l at the output (mass × g × arm)",
+        start=lambda s: s.k_out)
+    theta_g: Float[ArrayLike, ""] = parameter(
+        "rad", "output angle at which the pendulum hangs (its stable equilibrium), in the "
+        "log's angle frame", transform="identity", start=lambda s: 0.0)
+
+    name: ClassVar[str] = "gravity"
+
+    @classmethod
+    def of(cls, gravity: Gravity, theta_g: float = 0.0) -> AbsoluteGravity:
+        """``gravity`` with its hanging angle ``theta_g`` (0: the zero of the log)."""
+        return cls(mgl=gravity.mgl, theta_g=theta_g)
+
+    def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
+        del state
+        return -self.mgl * jnp.sin(motion.theta / motion.ratio - self.theta_g) / motion.ratio
