@@ -96,6 +96,20 @@ def test_layout_variants_read_to_the_same_log(tmp_path, paper, variant):
     assert log.notes == ref.notes
 
 
+@pytest.mark.parametrize("footer", ["END\n", "Samples: 500\nEnd of data\n", ",,End,\n"])
+def test_a_text_footer_is_dropped(tmp_path, paper, footer):
+    """Words below the last row (no number in the row, or words for the time) are a
+    footer: dropped with a note. A missing value there is still an error (it may be a lost
+    sample)."""
+    text, _, ref = paper
+    log = read_log(_write(tmp_path / "footer.csv", text + footer))
+    assert_same_log(log, ref)
+    assert any("footer" in n and "row 502" in n for n in log.notes), log.notes
+    with pytest.raises(LogError) as err:
+        read_log(_write(tmp_path / "nan.csv", text + "4,B,NaN,NaN\n"))
+    assert err.value.row == 502
+
+
 def test_rows_are_numbered_in_the_file_below_a_preamble(tmp_path, paper):
     """Messages name the row as the file numbers it: 2 preamble lines move row 101 to 103."""
     text = paper[0]

@@ -3,7 +3,8 @@
 Loggers, controllers and spreadsheets put more than the table in a log file: a preamble
 before the header (``# station 4, 2026-11-27``, ``Date: …``), comment lines (``#``) and
 whitespace-only lines among the rows or as a footer, a units row under the header
-(``,,s,rad``), the header repeated where logs were written one after another, and — when the logger was stopped mid-write — a last line cut short. This
+(``,,s,rad``), the header repeated where logs were written one after another, a text
+footer (``END``), and — when the logger was stopped mid-write — a last line cut short. This
 module finds the header line and the delimiter, empties the lines that are not rows (so
 that every row keeps its file line number for the messages), reads a units row into the
 header names, and drops a cut last line with a note. It only reads text: the numbers are
@@ -18,7 +19,7 @@ import numpy as np
 
 from .. import _units
 from ._headers import header_key
-from ._names import _COUNTS, _THETA, _TIME
+from ._names import _COUNTS, _NA_TOKENS, _THETA, _TIME
 
 #: Lines searched for the header below a preamble.
 _HEADER_SEARCH_LINES = 200
@@ -178,6 +179,33 @@ def cut_last_line(text: str, lines: list[str], header_at: int, sep: str) -> str 
     lines[last] = ""
     return (f"the last line (row {last + 1}) has no line end and {why}: the logger stopped "
             "while writing it — dropped")
+
+
+def text_footer(names: list[str], raw: list[np.ndarray], keep: np.ndarray,
+                header_at: int) -> tuple[np.ndarray, str | None]:
+    """Drop a footer: the last rows of the file whose time cell is words (``Samples: 500``,
+    ``End of data``; not a number, a date or a missing-value token), or that hold words and
+    no number at all (``END`` in the first cell).
+    Returns the rows kept and a note naming the footer (None without one)."""
+    at = next((i for i, n in enumerate(names) if header_key(n)[0] == _TIME), None)
+    if at is None:
+        return keep, None
+    n = keep.size
+    def words(cell: str) -> bool:
+        return bool(re.match(r"^[^\W\d_]", cell)) and cell.lower() not in _NA_TOKENS
+
+    while n > 0:
+        row = [str(values[keep[n - 1]]).strip() for values in raw]
+        if not (words(row[at]) or (any(words(c) for c in row)
+                                   and not any(_NUMBER.match(c) for c in row))):
+            break
+        n -= 1
+    if n == keep.size or n == 0:
+        return keep, None
+    first = int(keep[n]) + 1 + header_at
+    shown = next(c for c in (str(v[keep[n]]).strip() for v in raw) if c)
+    return keep[:n], (f"the file ends in a footer of words from row {first} "
+                      f"({shown[:30]!r}): not data — dropped")
 
 
 def units_row(names: list[str], raw: list[np.ndarray], keep: np.ndarray

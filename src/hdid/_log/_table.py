@@ -190,6 +190,8 @@ def _load_csv(path: str | os.PathLike[str]) -> _Table:
     first = int(nonblank[0])  # the header line (frame row 0 is file line header_at + 1)
     names = [str(values[first]).strip() for values in raw]
     names, keep = _layout.units_row(names, raw, nonblank[1:])
+    keep, footer = _layout.text_footer(names, raw, keep, header_at)
+    notes += [footer] if footer else []
     rows = keep.astype(np.int64) + 1 + header_at
     return _Table(source, path, names, [values[keep] for values in raw], rows, notes,
                   repeats + 1, np.searchsorted(repeats + 1, rows))
