@@ -81,6 +81,8 @@ LAYOUTS = {
     "units row": (lambda t: t.replace("theta\n", "theta\n,,s,rad\n", 1), {}),
     "units row in brackets, tab": (
         lambda t: t.replace("theta\n", "theta\n\t\t[s]\t[rad]\n", 1).replace(",", "\t"), {}),
+    "Excel's sep= line": (lambda t: "sep=,\n" + t, {}),
+    "a # footer without a line end": (lambda t: t + "# end of log", {}),
     "comments, whitespace lines and a footer": (
         lambda t: t.replace("\n2,", "\n# run 2 follows\n  \n2,").replace("\n3,", "\n\t\n3,")
         + "# end of log, 500 samples\n", {}),

@@ -161,6 +161,8 @@ def cut_last_line(text: str, lines: list[str], header_at: int, sep: str) -> str 
         return None
     n_header = len(_cells(lines[header_at], sep))
     cells = _cells(lines[last], sep)
+    if _is_comment(lines[last]) or not any(_NUMBER.match(c) for c in cells):
+        return None  # a comment or a footer of words, not a row
     why = None
     if len(cells) < n_header:
         why = f"{len(cells)} of the header's {n_header} cells"
