@@ -46,8 +46,13 @@ A log is driven when it has a motor-torque column; then every run must have it
 column must be filled. ``theta_out`` and ``load_torque`` without a motor torque
 are errors. A driven run need not show motion (it may stay stuck).
 
-Column names are matched case-insensitively after stripping whitespace; other
-columns are ignored. :func:`read_log` checks everything and raises
+Column names are matched case-insensitively after stripping whitespace, with a unit
+in brackets, after a slash or as a suffix (``time [ms]``, ``t/s``, ``theta_deg``;
+:mod:`._headers`); other columns are ignored. What loggers write around the table — a
+preamble, ``#`` comments, a units row, a repeated header, a footer, a last line cut
+mid-write — is found by :mod:`._layout`; a count register that rolls over is unwrapped
+(:mod:`._rollover`); date-times are seconds (:mod:`._timestamps`); a MATLAB ``.mat``
+file's vectors are its columns (:mod:`._mat`). :func:`read_log` checks everything and raises
 :class:`~hdid._errors.LogError` with a one-line message naming the file, the
 column and/or the CSV line and the fix. The file is only ever read.
 

@@ -106,7 +106,12 @@ def read_log(
     both neighbours than any change the run shows, while they agree) is dropped before
     the step is sought and named in ``Log.notes`` (more than 1 % of a run's rows is an
     error); a few readings off the encoder grid that all others lie on are kept and
-    named. Fully blank lines are skipped.
+    named. Fully blank lines are skipped, and so are a preamble above the header, ``#``
+    comments, a units row (read into the names), repeated headers (each block a run when
+    there is no run column), a footer of words and a last line cut mid-write (noted).
+    Raw counts from a 16-, 24- or 32-bit register that rolls over are unwrapped (noted).
+    Two held runs of one set-up at one reading that move off in opposite directions (a
+    counter zeroed at each release) are an error.
 
     Driven logs (a ``motor_torque`` or ``motor_current`` column) are checked
     further: the torque / counts arguments match the columns; no run lacks the
