@@ -244,8 +244,6 @@ def read_log(
     lengths = ends - starts
     check_lengths(lengths, starts, names, min_samples_per_run, _RUN in cols, fail)
     period = sample_period(time, within, fail)
-    if not driven:  # a driven run's motor may push either way from any angle
-        check_shared_zero(theta, starts, ends, names, setups, fail)
     starts, ends, names, notes = split_at_breaks(time, theta, starts, ends, names,
                                                  min_samples_per_run)
     notes = list(table.notes) + header_notes + rollover_notes + notes
@@ -257,6 +255,8 @@ def read_log(
             for a, b in zip(starts, ends)]
     lengths = np.array([r.size for r in rows], dtype=np.int64)
     kept = np.concatenate(rows)
+    if not driven:  # a driven run's motor may push either way from any angle
+        check_shared_zero(theta, rows, names, setups, fail)
     # the step from the readings' levels, within their printing precision (per run: any
     # offset); hdid._log._resolution
     run_starts = np.concatenate(([0], np.cumsum(lengths)[:-1]))

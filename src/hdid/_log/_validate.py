@@ -221,22 +221,23 @@ def check_motion(theta, starts, ends, names, resolution: float | None, fail: Fai
             "(released from inside it, they stay stuck)"]
 
 
-def check_shared_zero(theta, starts, ends, names, setups, fail: Fail) -> None:
+def check_shared_zero(theta, rows, names, setups, fail: Fail) -> None:
     """Runs of one set-up share the encoder's zero (the fit gives each set-up one offset).
     Two of its runs held at the very same reading that move off it in opposite directions
     contradict that: from one held angle the spring (or gravity) pushes one way. That is
     the signature of a counter zeroed at each release (every run starts at 0); it is an
-    error naming both runs, with the fix, rather than a fit of one spring to two zeros."""
+    error naming both runs, with the fix, rather than a fit of one spring to two zeros.
+    ``rows`` holds each run's row positions (read dropouts already left out)."""
     first_move: dict[tuple[str, float], tuple[int, float]] = {}
-    for k, (a, b) in enumerate(zip(starts, ends)):
-        held = theta[a:b]
+    for k, run_rows in enumerate(rows):
+        held = theta[run_rows]
         if held.size < 3 or held[1] != held[0]:
             continue  # a run already moving at its first reading says nothing here
         moved = np.flatnonzero(held != held[0])
         if moved.size == 0:
             continue  # never moves: a rest point inside the stick band
         direction = float(np.sign(held[moved[0]] - held[0]))
-        setup = "1" if setups is None else str(setups[a])
+        setup = "1" if setups is None else str(setups[run_rows[0]])
         key = (setup, float(held[0]))
         if key in first_move and first_move[key][1] != direction:
             other = first_move[key][0]
@@ -246,5 +247,5 @@ def check_shared_zero(theta, starts, ends, names, setups, fail: Fail) -> None:
                 "directions — one spring cannot push both ways from one angle: the encoder "
                 "was zeroed at each release; give each run its own set-up (a 'setup' column "
                 "holding the run's label)",
-                _THETA, int(a))
+                _THETA, int(run_rows[0]))
         first_move.setdefault(key, (k, direction))
