@@ -201,6 +201,18 @@ def test_time_column_names_and_units(tmp_path, paper, header):
     assert_same_log(read_log(path), ref)
 
 
+@pytest.mark.parametrize("header", ["theta [counts]", "Theta (cts)", "theta_counts"])
+def test_an_angle_header_in_counts(tmp_path, counts, header):
+    """``theta [counts]`` is raw counts: read with --counts-per-rev, and without it the
+    error asks for it (it was an unknown unit)."""
+    frame, ref = counts
+    path = tmp_path / "cts.csv"
+    frame.rename(columns={"theta": header}).to_csv(path, index=False)
+    assert_same_log(read_log(path, counts_per_rev=CPR), ref)
+    with pytest.raises(LogError, match="counts-per-rev"):
+        read_log(path)
+
+
 # ------------------------------------------------------------ time as loggers write it
 
 

@@ -126,14 +126,24 @@ def _find_columns(
     return index
 
 
-def _column_scales(table: _Table, cols: dict[str, int]) -> dict[str, float]:
+def _column_scales(table: _Table, cols: dict[str, int], counts_per_rev: float | None = None,
+                   output_counts_per_rev: float | None = None) -> dict[str, float]:
     """Per canonical key, the factor from its header's unit (``time [ms]``) to hdid's units
-    (:mod:`hdid._units`; 1 without a unit), or a LogError naming an unknown unit."""
+    (:mod:`hdid._units`; 1 without a unit), or a LogError naming an unknown unit. An angle
+    in counts (``theta [counts]``) is raw counts: it needs its counts per revolution."""
     out = {}
+    cprs = {_THETA: (counts_per_rev, _COUNTS_HINT),
+            _THETA_OUT: (output_counts_per_rev, _OUTPUT_COUNTS_HINT)}
     for key, i in cols.items():
         header = table.names[i]
         base, unit = header_key(header)
         f = _units.scale(base, unit)
+        if f is None and base in cprs and _units.scale(_COUNTS, unit) is not None:
+            cpr, hint = cprs[base]
+            if cpr is None:
+                raise LogError(f"the header gives the angle in encoder counts; {hint}",
+                               path=table.path, column=header)
+            f = 1.0
         if f is None:
             raise LogError(
                 f"unknown unit {unit!r} for {base!r}: use one of "

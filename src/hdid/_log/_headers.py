@@ -14,8 +14,10 @@ from __future__ import annotations
 import re
 
 from .. import _units
-from ._names import _KNOWN_COLUMNS, _TIME
+from ._names import _KNOWN_COLUMNS, _THETA, _THETA_OUT, _TIME
 
+#: Angle columns, which may be given in encoder counts (``theta_cts``).
+_ANGLES = (_THETA, _THETA_OUT)
 #: Short names loggers give a known column.
 _ALIASES = {"t": _TIME}
 
@@ -41,7 +43,8 @@ def header_key(name: str) -> tuple[str, str | None]:
     head, sep, tail = key.rpartition("_")
     if sep and head:
         head = _ALIASES.get(head, head)
-        if head in _KNOWN_COLUMNS and _units.scale(head, tail) is not None:
+        counts = head in _ANGLES and tail.isalpha() and _units.scale("counts", tail) is not None
+        if head in _KNOWN_COLUMNS and (_units.scale(head, tail) is not None or counts):
             return head, tail
     return key, None
 

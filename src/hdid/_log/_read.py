@@ -145,7 +145,7 @@ def read_log(
     )
     table = _load_frame(source) if path is None else _load_csv(path)
     cols = _find_columns(table, cpr, out_cpr, kt)
-    unit_scale = _column_scales(table, cols)
+    unit_scale = _column_scales(table, cols, cpr, out_cpr)
     if given_step is not None:  # in theta's units, as the header gives them
         given_step *= unit_scale[_THETA]
     driven = _MOTOR in cols
