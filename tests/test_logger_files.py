@@ -163,6 +163,20 @@ def test_logs_written_one_after_another(tmp_path, paper, with_run):
     assert any("header repeats at row(s) 127, 253, 379" in n for n in log.notes), log.notes
 
 
+def test_a_gzip_compressed_log(tmp_path, paper):
+    """A rotated, compressed log (``log.csv.gz``) reads as its text; cut short, it is named."""
+    import gzip
+
+    text, _, ref = paper
+    packed = gzip.compress(text.encode())
+    path = tmp_path / "log.csv.gz"
+    path.write_bytes(packed)
+    assert_same_log(read_log(path), ref)
+    path.write_bytes(packed[: len(packed) // 2])
+    with pytest.raises(LogError, match="gzip file is damaged or cut short"):
+        read_log(path)
+
+
 def test_space_separated_dat_file(tmp_path, paper):
     """A ``.dat`` export: cells separated by runs of spaces, lines indented, units in the
     header after a space (``time [s]``)."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gzip
 import io
 import os
 import re
@@ -94,7 +95,8 @@ def _sniff(head: bytes, err) -> None:
 
 
 def _read_text(path, err) -> str:
-    """The file's text (UTF-8, a byte-order mark dropped), or a LogError naming why not."""
+    """The file's text (UTF-8, a byte-order mark dropped; a gzip-compressed file
+    uncompressed), or a LogError naming why not."""
     try:
         with open(path, "rb") as fh:
             data = fh.read()
@@ -106,6 +108,12 @@ def _read_text(path, err) -> str:
         raise err("cannot read the file (permission denied) — check its permissions") from None
     except OSError as exc:
         raise err(f"cannot read the file ({exc.strerror or exc}) — check the path") from None
+    if data.startswith(b"\x1f\x8b"):  # a gzip-compressed log (log.csv.gz)
+        try:
+            data = gzip.decompress(data)
+        except (OSError, EOFError, ValueError):
+            raise err("this gzip file is damaged or cut short — compress the log again, or "
+                      "give the uncompressed CSV file") from None
     _sniff(data[:_SNIFF_BYTES], err)
     try:
         return data.decode("utf-8-sig")
