@@ -2,9 +2,10 @@
 
 Each variant is written from a shipped log (``data/synthetic``) as a test station would
 write it: a preamble above the header, ``#`` comments and a footer, a units row under the
-header, unit suffixes in the names (``time_ms``, ``t[s]``, ``time [ns]``), a 16- or 32-bit
-count register that rolls over, ISO 8601 date-times, a last line cut mid-write, a MATLAB
-``.mat`` file. Either it reads to the same log as the original — the same runs, samples,
+header, logs written one after another, space-separated cells, unit suffixes in the names
+(``time_ms``, ``t[s]``, ``time [ns]``), a 16- or 32-bit count register that rolls over, a
+counter zeroed at each release, ISO 8601 date-times, a last line cut mid-write, a gzip or
+MATLAB ``.mat`` file. Either it reads to the same log as the original — the same runs, samples,
 readings and encoder step, so the fit (a deterministic function of the log) is the same
 physics, which one end-to-end ``hdid fit`` checks — or it ends with one line naming the
 file, the row or column, and the fix.
@@ -54,10 +55,6 @@ def paper():
 @pytest.fixture(scope="module")
 def counts():
     return pd.read_csv(COUNTS), read_log(COUNTS, counts_per_rev=CPR)
-
-
-def _lines(text: str, sep: str = ",") -> str:
-    return text.replace(",", sep)
 
 
 def _write(path, text: str, *, bom: bool = False, crlf: bool = False):
@@ -161,6 +158,22 @@ def test_logs_written_one_after_another(tmp_path, paper, with_run):
     assert [r.name for r in log.runs] == ["1", "2", "3", "4"]
     assert [r.first_row for r in log.runs] == [2, 128, 254, 380]
     assert any("header repeats at row(s) 127, 253, 379" in n for n in log.notes), log.notes
+
+
+@pytest.mark.parametrize("style", ["numpy.savetxt", "MATLAB % header, spaces"])
+def test_a_header_written_as_a_comment(tmp_path, paper, style):
+    """``numpy.savetxt(..., header='time,theta')`` writes ``# time,theta``; a MATLAB
+    script may write ``% time [s] theta [rad]`` above space-separated columns."""
+    _, frame, ref = paper
+    data = frame.loc[frame.run == 1, ["time", "theta"]].to_numpy()  # one release
+    path = tmp_path / "savetxt.csv"
+    if style == "numpy.savetxt":
+        np.savetxt(path, data, delimiter=",", header="time,theta", fmt="%.12g")
+    else:
+        np.savetxt(path, data, header="time [s]   theta [rad]", fmt="%.12g", comments="% ")
+    log = read_log(path)
+    assert len(log.runs) == 1
+    np.testing.assert_array_equal(log.runs[0].theta, ref.runs[0].theta)
 
 
 def test_a_gzip_compressed_log(tmp_path, paper):

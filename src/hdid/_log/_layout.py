@@ -57,8 +57,20 @@ def _cells(line: str, sep: str) -> list[str]:
     return [c.strip().strip('"').strip() for c in parts]
 
 
+#: What starts a comment line: ``#`` (shells, Python, numpy.savetxt) or ``%`` (MATLAB).
+_COMMENT = ("#", "%")
+
+
+#: First characters of a line that may be a comment or whitespace only.
+_MAY_START_A_NON_ROW = frozenset("#% \t\r\ufeff\v\f")
+
+
 def _is_comment(line: str) -> bool:
-    return line.lstrip().startswith("#")
+    return line.lstrip().lstrip("\ufeff").startswith(_COMMENT)
+
+
+def _uncommented(line: str) -> str:
+    return line.lstrip().lstrip("\ufeff").lstrip("#%").strip()
 
 
 def _names_time_and_angle(line: str) -> bool:
@@ -69,10 +81,12 @@ def _names_time_and_angle(line: str) -> bool:
 def find_header(lines: list[str]) -> tuple[int, str]:
     """Index of the header line and the delimiter.
 
-    The header is the first line (not blank, not a ``#`` comment) that names both a time
-    and an angle column; the lines above it are a preamble. When no line among the first
-    :data:`_HEADER_SEARCH_LINES` does, it is the first line that is not blank or a comment
-    (so that a header lacking a required column is named in the error as it is).
+    The header is the first line (not blank, not a ``#`` or ``%`` comment) that names both
+    a time and an angle column; the lines above it are a preamble. Failing that, it is the
+    first comment line that names them (``# time,theta`` from ``numpy.savetxt``), its
+    comment mark dropped. When no line among the first :data:`_HEADER_SEARCH_LINES` does,
+    it is the first line that is not blank or a comment (so that a header lacking a
+    required column is named in the error as it is).
     """
     first = None
     for i, line in enumerate(lines[:_HEADER_SEARCH_LINES]):
@@ -84,6 +98,14 @@ def find_header(lines: list[str]) -> tuple[int, str]:
             sep = _line_sep(line)
             if sep == WHITESPACE:  # one cell per name: ``time [s]`` → ``time[s]``
                 lines[i] = _glued_units(line)
+            return i, sep
+    # a header written as a comment (numpy.savetxt's ``# time,theta``, MATLAB's ``%``)
+    for i, line in enumerate(lines[:_HEADER_SEARCH_LINES]):
+        if _is_comment(line) and _names_time_and_angle(_uncommented(line)):
+            lines[i] = _uncommented(line)
+            sep = _line_sep(lines[i])
+            if sep == WHITESPACE:
+                lines[i] = _glued_units(lines[i])
             return i, sep
     if first is None:  # only blank or comment lines: the caller says so
         first = next((i for i, line in enumerate(lines) if line.strip()), 0)
@@ -97,6 +119,8 @@ def blank_non_rows(lines: list[str], header_at: int) -> int:
     for i, line in enumerate(lines):
         if i == header_at or not line:
             continue
+        if i > header_at and line[0] not in _MAY_START_A_NON_ROW:
+            continue  # a row (the quick test for most lines)
         if i < header_at or _is_comment(line):
             dropped += bool(line.strip())
             lines[i] = ""

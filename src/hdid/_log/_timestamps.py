@@ -33,13 +33,14 @@ def timestamp_seconds(column, fail) -> np.ndarray | None:
         stamps = pd.to_datetime(column, utc=True)
     else:
         raw = np.asarray(column, dtype=object)
+        first = next((t for t in map(_cell_text, raw) if t), "")
+        if not first or first[0] in "+-." or first[-1:].isdigit() and ":" not in first:
+            return None  # a number (the quick test: most time columns)
         text = np.array([_cell_text(c) for c in raw], dtype=object)
         filled = np.flatnonzero(text != "")
-        if filled.size == 0:
-            return None
-        if _ISO.match(text[filled[0]]):
+        if _ISO.match(first):
             form = "ISO8601"
-        elif _CLOCK.match(text[filled[0]]):  # a time of day
+        elif _CLOCK.match(first):  # a time of day
             with_fraction = all("." in t for t in text[filled])
             form = "%H:%M:%S.%f" if with_fraction else "mixed"
         else:
