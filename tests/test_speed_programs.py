@@ -30,6 +30,7 @@ def counted(monkeypatch):
     monkeypatch.setattr(_programs, "_LOADED", OrderedDict())
     monkeypatch.setattr(_programs, "_KEYS", OrderedDict())
     monkeypatch.setattr(_programs, "_MODULES", OrderedDict())
+    monkeypatch.setattr(_programs, "_TOKENS", {})
     n = [0]
     real = _programs._key
 

@@ -36,9 +36,22 @@ def _stored_solve(problem: Problem, U, active, k, state):
 LANES = 1
 
 
+#: ``jnp.asarray(k)`` of the iteration budgets seen (a weakly typed integer, as the
+#: program's key has it): a conversion costs ~50 µs, a fit makes tens of calls.
+_BUDGETS: dict = {}
+
+
 def _call_args(U, on, k, state: LMState):
-    """The arguments of one :func:`_stored_solve` call (their types decide the program's key)."""
-    return jnp.asarray(U), jnp.asarray(on), jnp.asarray(k), state
+    """The arguments of one :func:`_stored_solve` call (their types decide the program's
+    key): ``U`` and ``on`` as float64 and bool NumPy arrays (the program takes them as
+    ``jnp.asarray`` would give them, without a conversion of ours), ``k`` a JAX integer."""
+    if type(k) is int:  # (a NumPy integer converts to a strongly typed one: not cached)
+        kk = _BUDGETS.get(k)
+        if kk is None:
+            kk = _BUDGETS.setdefault(k, jnp.asarray(k))
+    else:
+        kk = jnp.asarray(k)
+    return np.asarray(U, dtype=float), np.asarray(on, dtype=bool), kk, state
 
 
 def _local_fits(problem: Problem, U0, max_steps: int, lanes: int = LANES, solve=None,
@@ -72,6 +85,8 @@ def _local_fits(problem: Problem, U0, max_steps: int, lanes: int = LANES, solve=
                                               stop_below=stop_below)])
         return tuple(np.concatenate(parts) for parts in zip(*outs))
     solve = _stored_solve if solve is None else solve
+    if lanes == 1:
+        return _one_at_a_time(problem, U0, max_steps, solve, stop_below)
     U = np.array(U0, dtype=float)
     N, n = U.shape
     sched = _Schedule(N, max_steps, stop_below)
@@ -112,6 +127,41 @@ def _local_fits(problem: Problem, U0, max_steps: int, lanes: int = LANES, solve=
                 f[r] = f[o]
         sched.update(costs, done, steps)
     return U, sched.costs, sched.ok, sched.steps, np.where(state[2][:, None], state[0], np.nan)
+
+
+def _one_at_a_time(problem: Problem, U0, max_steps: int, solve, stop_below: float):
+    """:func:`_local_fits` with one lane a call: each row's LM state stays as the program
+    returned it (device arrays, its Jacobian never copied to the host between calls), and
+    rows with the same unknowns and the same state object — a short group's padding
+    copies, which stay twins while the schedule treats them alike — are computed once.
+    The same calls on the same numbers as the general path, in the same order."""
+    U = np.array(U0, dtype=float)
+    N, n = U.shape
+    sched = _Schedule(N, max_steps, stop_below)
+    m = int(np.prod(problem.times.shape)) + problem.n_physical
+    empty = LMState(*(np.asarray(f) for f in LMState.empty(1, m, n)))
+    state = [empty] * N
+    on = np.ones(1, dtype=bool)
+    while (task := sched.next()) is not None:
+        active, k, fresh = task
+        costs, done, steps = np.full(N, np.inf), np.zeros(N, dtype=bool), np.zeros(N, dtype=int)
+        first: dict = {}
+        for r in np.flatnonzero(active):
+            key = (U[r].tobytes(), id(state[r]))
+            if key in first:  # a twin: the result of its first copy
+                o = first[key]
+                U[r], costs[r], done[r], steps[r], state[r] = U[o], costs[o], done[o], steps[o], state[o]
+                continue
+            first[key] = r
+            st = state[r]._replace(fresh=np.full(1, fresh, dtype=bool))
+            U2, c2, d2, s2, st2 = solve(problem, *_call_args(U[r:r + 1], on, k, st))
+            U[r] = np.asarray(U2)[0]
+            costs[r], done[r], steps[r] = np.asarray(c2)[0], np.asarray(d2)[0], np.asarray(s2)[0]
+            state[r] = LMState(*st2)
+        sched.update(costs, done, steps)
+    R = np.stack([np.asarray(st.R)[0] for st in state])
+    have = np.array([bool(np.asarray(st.have)[0]) for st in state])
+    return U, sched.costs, sched.ok, sched.steps, np.where(have[:, None], R, np.nan)
 
 
 def solve_fresh(problem: Problem, U0, active, max_steps: int):

@@ -187,14 +187,20 @@ def _describe(tree):
     return (treedef, str(treedef), mask, others, avals), leaves
 
 
-#: :func:`_describe` of modules (a problem, a model) by identity: a fit passes the same
-#: problem to tens of calls. Modules are immutable; the entry keeps the module alive, so
+#: :func:`_describe` of modules (a problem, a model) by identity, with a small integer
+#: standing for the description (hashing a problem's tree costs ~0.1 ms, tens of calls a
+#: fit pass the same problem). Modules are immutable; the entry keeps the module alive, so
 #: its ``id`` is not reused while cached.
 _MODULES: OrderedDict[int, tuple] = OrderedDict()
 MAX_MODULES = 32
+#: Description → its integer (:data:`_MODULES`); cleared with :data:`_KEYS` when full.
+_TOKENS: dict[tuple, int] = {}
+MAX_TOKENS = 4096
 
 
 def _described(arg):
+    """``(part, leaves)`` of one argument for :func:`_memo_key`: a module's integer
+    (:data:`_TOKENS`), any other argument's :func:`_describe`."""
     if not isinstance(arg, eqx.Module):
         return _describe(arg)
     got = _MODULES.get(id(arg))
@@ -202,23 +208,31 @@ def _described(arg):
         _MODULES.move_to_end(id(arg))
         return got[1], got[2]
     desc, leaves = _describe(arg)
-    _MODULES[id(arg)] = (arg, desc, leaves)
+    try:
+        if len(_TOKENS) >= MAX_TOKENS:  # (memos name tokens: all go together)
+            _TOKENS.clear()
+            _KEYS.clear()
+            _MODULES.clear()
+        token = ("module", _TOKENS.setdefault(desc, len(_TOKENS)))
+    except TypeError:  # unhashable: described each time (and no memo, _memo_key)
+        return desc, leaves
+    _MODULES[id(arg)] = (arg, token, leaves)
     while len(_MODULES) > MAX_MODULES:
         _MODULES.popitem(last=False)
-    return desc, leaves
+    return token, leaves
 
 
 def _memo_key(name: str, args):
     """``(memo, leaves)``: the arrays of ``args`` (the dynamic leaves, in the order of
     ``eqx.partition(args, eqx.is_array)``'s flattening) and a hashable description of
-    everything :func:`_key` reads (:func:`_describe`, argument by argument). ``memo`` is
+    everything :func:`_key` reads (:func:`_described`, argument by argument). ``memo`` is
     ``None`` where some part is unhashable."""
-    descs, leaves = [], []
+    parts, leaves = [], []
     for arg in args:
         d, lv = _described(arg)
-        descs.append(d)
+        parts.append(d)
         leaves.extend(lv)
-    memo = (name, tuple(descs))
+    memo = (name, tuple(parts))
     try:
         hash(memo)
     except TypeError:
