@@ -228,7 +228,9 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
             step = noise_sigma(runs, None) * math.sqrt(12.0)
             source = "noise"
     else:
-        step = noise_sigma(runs, None) * math.sqrt(12.0)
+        # (never below the printing's own rounding, print unit/√12)
+        step = max(noise_sigma(runs, None) * math.sqrt(12.0),
+                   float(getattr(log, "print_unit", None) or 0.0))
         source = "noise"
     quantized = source != "noise"
     sigma = step / math.sqrt(12.0)
@@ -307,13 +309,16 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
         if still_run[i]:
             tails[i] = float(t[-1] - t[0]) + dt
         w = np.ones(n)
-        if quantized and still_run[i]:  # one reading, one observation
+        # (readings on no grid keep full weight, unless the printing repeats one level:
+        # :func:`_repeats`)
+        if still_run[i] and (quantized or _repeats(th)):  # one reading, one observation
             w[:] = 1.0 / math.sqrt(n)
-        elif quantized:
-            w[: k0 + 1] = 1.0 / math.sqrt(k0 + 1)
+        elif not still_run[i]:
+            if quantized or _repeats(th[: k0 + 1]):
+                w[: k0 + 1] = 1.0 / math.sqrt(k0 + 1)
             free_tail = min(tail_start + FULL_WEIGHT_TAIL, n)
             n_tail = n - free_tail
-            if n_tail > 0:
+            if n_tail > 0 and (quantized or _repeats(th[tail_start:])):
                 w[free_tail:] = 1.0 / math.sqrt(n_tail)
         weight[i, :n] = w
         if still_run[i]:
@@ -420,6 +425,16 @@ def search_weight(prep: Prepared) -> np.ndarray:
         if stopped[i] and n > free_tail:
             w[i, free_tail:n] = 1.0 / math.sqrt(n - free_tail)
     return w
+
+
+def _repeats(th: np.ndarray) -> bool:
+    """Whether a still stretch of readings on no grid repeats one printed level (most of
+    its steps are exactly 0): its noise is below the print unit, and the error of every
+    reading is the same rounding of one value — one reading printed again and again, one
+    observation as on an encoder, not independent noise (a 17-bit encoder printed to
+    1e-4 rad: ~450 stuck samples a run counted as 450 observations put the friction's
+    errors 4 sd from the truth)."""
+    return th.size >= 3 and float(np.mean(np.diff(th) == 0.0)) > 0.5
 
 
 def _first_slope(t: np.ndarray, th: np.ndarray) -> float:
