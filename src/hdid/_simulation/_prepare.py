@@ -37,7 +37,9 @@ class Prepared:
         pre-release hold and the stuck tail — carries *one* observation's worth of
         information (its quantization error is the same for every sample), so its samples
         share a total weight of one: ``w = 1/sqrt(n)`` on the residual. Readings on no
-        grid (analog, interpolated) carry independent noise and keep full weight.
+        grid (analog, interpolated) carry independent noise and keep full weight, except
+        a still stretch that repeats one printed level (:func:`_repeats`). The search for
+        the optimum weights every stuck tail as one observation (:func:`search_weight`).
     hold, rest:
         Reading before release (a run that starts in motion: its first reading) and at
         the end of each run.
