@@ -104,7 +104,9 @@ def inside_cut(values, ratio, design):
 def draw_noise(gen, seed, noise="prior"):
     """The log's noise σ_n [rad] before rounding: ``"prior"``, drawn from the sampler's own
     prior (log-uniform on ``density.SIGMA_BOUNDS`` encoder steps; its own stream, so the
-    truths do not depend on it); ``"none"``, 0 — rounding alone, outside that prior, whose
+    truths do not depend on it); ``"moving"``, the same on the readings after each release
+    only (:func:`draw_log`: the pre-release holds as without noise, a test of the
+    likelihood apart from how the log is read); ``"none"``, 0 — rounding alone, outside that prior, whose
     Gaussian q²/12 likelihood treats the rounding errors as independent."""
     import numpy as np
 
@@ -128,6 +130,10 @@ def draw_log(gen, design_name, seed, noise="prior"):
     sigma = draw_noise(gen, seed, noise)
     df, info = gen.make_log(truth, **dict(design, seed=seed), noise_std=sigma,
                             return_truth=True)
+    if noise == "moving":  # the holds read as without noise (the same release instants)
+        clean = gen.make_log(truth, **dict(design, seed=seed))
+        held = df.time.to_numpy() <= df.run.map({r["run"]: r["t_release"] for r in info["runs"]}).to_numpy()
+        df.loc[held, "theta"] = clean.loc[held, "theta"]
     return truth, df, info, {"band_rejects": band_rejects, "order_rejects": order_rejects,
                              "noise_sigma_rad": sigma}
 
@@ -209,6 +215,9 @@ def _steps(r):
 
 def render(res):
     cli = "\n" + render_cli(res["cli"]) if "cli" in res else ""
+    for key, sub in res.get("checks", {}).items():  # diagnostic runs kept beside the result
+        cli = (f"\n# Check: {key}\n\n{sub.get('about', '')}\n\n"
+               + _render(sub, sub["logs"], sub["options"]["method"]) + cli)
     if "logs" not in res:
         return cli.lstrip("\n")
     methods = list(dict.fromkeys(r.get("method") or res["options"].get("method", "emcee")
@@ -415,7 +424,7 @@ def main(argv=None):
     ap.add_argument("--name", default="posterior_sbc", help="results/NAME.{json,md}")
     ap.add_argument("--method", default="emcee,smc",
                     help="samplers, comma-separated (each log's fit and optima shared)")
-    ap.add_argument("--noise", choices=("prior", "none"), default="prior",
+    ap.add_argument("--noise", choices=("prior", "moving", "none"), default="prior",
                     help="the logs' noise before rounding: from the sampler's prior, or none")
     ap.add_argument("--shard", default="0/1", help="K/N: run every N-th log from the K-th")
     ap.add_argument("--merge", nargs="+", metavar="JSON", help="join shards' results into NAME")
@@ -438,15 +447,14 @@ def main(argv=None):
         res = dict(parts[0], logs=[r for q in parts for r in q["logs"]],
                    shards=[{k: q[k] for k in ("generated", "options", "load_start")} for q in parts])
         res.pop("cli", None)
-        res.update({k: v for k, v in _stored(args.name).items() if k == "cli"})
+        res.update({k: v for k, v in _stored(args.name).items() if k in ("cli", "checks")})
         return _common.write_result(args.name, res, render, indent=1)
 
     res = {"generated": _dt.datetime.now().isoformat(timespec="seconds"), "load_start": _common.loads(),
            "machine": f"{os.cpu_count()} cores, {_common.cpu_model()}", "src": _common.src_fingerprint(),
            "options": {k: v for k, v in vars(args).items() if k != "render"},
            "logs": []}
-    if "cli" in _stored(args.name):  # the other mode's section stays
-        res["cli"] = _stored(args.name)["cli"]
+    res.update({k: v for k, v in _stored(args.name).items() if k in ("cli", "checks")})
     sched = []
     for i in range(max(args.paper_logs, args.rich_logs)):
         if i < args.paper_logs:
