@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from hdid._problems import _programs
+from hdid._problems import _program_keys, _programs
 
 
 class _Gain(eqx.Module):
@@ -28,9 +28,9 @@ def counted(monkeypatch):
     """The number of times the key's text is hashed (``_programs._key``), in a process
     with nothing compiled or memoised yet."""
     monkeypatch.setattr(_programs, "_LOADED", OrderedDict())
-    monkeypatch.setattr(_programs, "_KEYS", OrderedDict())
-    monkeypatch.setattr(_programs, "_MODULES", OrderedDict())
-    monkeypatch.setattr(_programs, "_TOKENS", {})
+    monkeypatch.setattr(_program_keys, "KEYS", OrderedDict())
+    monkeypatch.setattr(_program_keys, "MODULES", OrderedDict())
+    monkeypatch.setattr(_program_keys, "TOKENS", {})
     n = [0]
     real = _programs._key
 

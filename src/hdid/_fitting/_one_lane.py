@@ -150,7 +150,8 @@ def _one_at_a_time(problem: Problem, U0, max_steps: int, solve, stop_below: floa
             key = (U[r].tobytes(), id(state[r]))
             if key in first:  # a twin: the result of its first copy
                 o = first[key]
-                U[r], costs[r], done[r], steps[r], state[r] = U[o], costs[o], done[o], steps[o], state[o]
+                U[r], costs[r], done[r], steps[r] = U[o], costs[o], done[o], steps[o]
+                state[r] = state[o]
                 continue
             first[key] = r
             st = state[r]._replace(fresh=np.full(1, fresh, dtype=bool))

@@ -50,12 +50,13 @@ import equinox as eqx
 import jax
 
 from .. import _compile_clock, _config
+from . import _program_keys
 
 #: Modules that only orchestrate (no function of theirs is traced into a stored program:
 #: those come from ``_refit``, ``_residuals`` and the problem, model and effects they
 #: call; this module only wraps them, and a stored program that no longer loads is
 #: traced again): editing them does not invalidate the store.
-UNTRACED = frozenset({"_problems/_programs.py"})
+UNTRACED = frozenset({"_problems/_programs.py", "_problems/_program_keys.py"})
 #: Packages of such modules: the command line, log reading (NumPy only).
 UNTRACED_PACKAGES = frozenset({"cli", "_log", "_diagnosis"})
 _ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
@@ -165,88 +166,12 @@ def _key(name: str, treedef, static, leaves) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-#: :func:`_key` of arguments seen before in this process, by a cheap hashable description
-#: (:func:`_memo_key`): the key's hash of text costs ~0.1–0.3 ms a call (each leaf's dtype
-#: as text, the tree's), tens of calls a fit. Bounded, most recently used last.
-_KEYS: OrderedDict[tuple, str] = OrderedDict()
-MAX_KEYS = 512
-
-
-def _describe(tree):
-    """``(description, leaves)`` of one argument for :func:`_memo_key`: its tree (static
-    fields included) and the tree's text (equal static fields can print apart, 1 and 1.0,
-    as :func:`_key` sees them), which leaves are arrays, the other leaves (each with its
-    type, floats by their bits, so ``0.0`` and ``-0.0`` stay apart) and the arrays'
-    shapes, dtypes and weak types; ``leaves``: the arrays."""
-    flat, treedef = jax.tree_util.tree_flatten(tree)
-    mask = tuple(eqx.is_array(x) for x in flat)
-    leaves = [x for x, a in zip(flat, mask) if a]
-    others = tuple((type(x), x.hex() if isinstance(x, float) else x)
-                   for x, a in zip(flat, mask) if not a)
-    avals = tuple((x.shape, x.dtype, bool(getattr(x, "weak_type", False))) for x in leaves)
-    return (treedef, str(treedef), mask, others, avals), leaves
-
-
-#: :func:`_describe` of modules (a problem, a model) by identity, with a small integer
-#: standing for the description (hashing a problem's tree costs ~0.1 ms, tens of calls a
-#: fit pass the same problem). Modules are immutable; the entry keeps the module alive, so
-#: its ``id`` is not reused while cached.
-_MODULES: OrderedDict[int, tuple] = OrderedDict()
-MAX_MODULES = 32
-#: Description → its integer (:data:`_MODULES`); cleared with :data:`_KEYS` when full.
-_TOKENS: dict[tuple, int] = {}
-MAX_TOKENS = 4096
-
-
-def _described(arg):
-    """``(part, leaves)`` of one argument for :func:`_memo_key`: a module's integer
-    (:data:`_TOKENS`), any other argument's :func:`_describe`."""
-    if not isinstance(arg, eqx.Module):
-        return _describe(arg)
-    got = _MODULES.get(id(arg))
-    if got is not None and got[0] is arg:
-        _MODULES.move_to_end(id(arg))
-        return got[1], got[2]
-    desc, leaves = _describe(arg)
-    try:
-        if len(_TOKENS) >= MAX_TOKENS:  # (memos name tokens: all go together)
-            _TOKENS.clear()
-            _KEYS.clear()
-            _MODULES.clear()
-        token = ("module", _TOKENS.setdefault(desc, len(_TOKENS)))
-    except TypeError:  # unhashable: described each time (and no memo, _memo_key)
-        return desc, leaves
-    _MODULES[id(arg)] = (arg, token, leaves)
-    while len(_MODULES) > MAX_MODULES:
-        _MODULES.popitem(last=False)
-    return token, leaves
-
-
-def _memo_key(name: str, args):
-    """``(memo, leaves)``: the arrays of ``args`` (the dynamic leaves, in the order of
-    ``eqx.partition(args, eqx.is_array)``'s flattening) and a hashable description of
-    everything :func:`_key` reads (:func:`_described`, argument by argument). ``memo`` is
-    ``None`` where some part is unhashable."""
-    parts, leaves = [], []
-    for arg in args:
-        d, lv = _described(arg)
-        parts.append(d)
-        leaves.extend(lv)
-    memo = (name, tuple(parts))
-    try:
-        hash(memo)
-    except TypeError:
-        return None, leaves
-    return memo, leaves
-
-
 def call(name: str, fn: Callable, *args):
     """``fn(*args)`` compiled once per key (arrays dynamic, everything else static) and
     read from the store in later processes."""
-    memo, leaves = _memo_key(name, args)
-    key = _KEYS.get(memo) if memo is not None else None
+    memo, leaves = _program_keys.memo_key(name, args)
+    key = _program_keys.lookup(memo)
     if key is not None:
-        _KEYS.move_to_end(memo)
         prog = _LOADED.get(key)
         if prog is not None:
             _LOADED.move_to_end(key)
@@ -258,10 +183,7 @@ def call(name: str, fn: Callable, *args):
             key = _key(name, treedef, static, leaves)
         except Exception:  # noqa: BLE001 - an unkeyable argument: the ordinary path
             return eqx.filter_jit(fn)(*args)
-        if memo is not None:
-            _KEYS[memo] = key
-            while len(_KEYS) > MAX_KEYS:
-                _KEYS.popitem(last=False)
+        _program_keys.remember(memo, key)
     prog = _LOADED.get(key)
     if prog is not None:
         _LOADED.move_to_end(key)
