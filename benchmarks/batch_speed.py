@@ -506,6 +506,8 @@ def main(argv=None):
         prev["runs"] = [new.pop(r["config"]["label"], r) for r in prev["runs"]] + list(new.values())
         prev.setdefault("reruns", []).append({"only": args.only, **{k: res[k] for k in (
             "load_start", "load_end", "machine", "script_s")}})
+        if "before" in res:  # the before/after rows were re-measured: their commit too
+            prev["before"] = res["before"]
         res = prev
     _common.write_result(NAME, res, render)
     print(render(res))

@@ -336,21 +336,22 @@ def child_profile(reps: int) -> dict:
     from hdid._compile_clock import _clock
     from hdid._fitting import _fit
 
-    acc, depth = {}, [0]
+    acc, cpu, depth = {}, {}, {}
 
-    def wrap(name):
-        f = getattr(_fit, name)
+    def wrap(name, mod=_fit):
+        f = getattr(mod, name)
 
         def g(*a, **k):
-            depth[0] += 1
-            t = time.perf_counter()
+            depth[name] = depth.get(name, 0) + 1
+            t, c = time.perf_counter(), time.process_time()
             try:
                 return f(*a, **k)
             finally:
-                depth[0] -= 1
-                if depth[0] == 0:
+                depth[name] -= 1
+                if depth[name] == 0:
                     acc[name] = acc.get(name, 0.0) + time.perf_counter() - t
-        setattr(_fit, name, g)
+                    cpu[name] = cpu.get(name, 0.0) + time.process_time() - c
+        setattr(mod, name, g)
 
     calls = []
     try:
@@ -368,16 +369,22 @@ def child_profile(reps: int) -> dict:
     hdid.fit(str(LOG)), hdid.fit(str(LOG))  # warm-up: programs compiled or read
     for name in PHASES:
         wrap(name)
+    try:  # the stick-band bracket, inside the analysis
+        from hdid._fitting import _identifiability
+        wrap("band_bracket", _identifiability)
+    except (ImportError, AttributeError):
+        pass
     clock = _clock()
     rows = []
     for _ in range(reps):
         acc.clear()
+        cpu.clear()
         calls.clear()
         mark = clock.mark()
         with Clock() as c:
             r = hdid.fit(str(LOG))
         rows.append({"wall_s": c.wall, "cpu_s": c.cpu, "compile_s": clock.since(mark),
-                     "phases": dict(acc), "solve_calls": len(calls),
+                     "phases": dict(acc), "phases_cpu": dict(cpu), "solve_calls": len(calls),
                      "solve_s": sum(x for x, _ in calls), "iterations": sum(n for _, n in calls)})
     out = {"rows": rows, "hdid_file": hdid.__file__,
            "limits": [(x["limit"], x["chi2"], x["fits_as_well"]) for x in r.limits],
@@ -430,7 +437,10 @@ def bench_profile(trees: dict, reps: int, rounds: int) -> dict:
         res["trees"][label] = {
             "src": str(trees[label]), "wall_s": _stats(r["wall_s"] for r in rows),
             "cpu_s": _stats(r["cpu_s"] for r in rows),
-            "phases_s": {ph: statistics.median(r["phases"].get(ph, 0.0) for r in rows) for ph in PHASES},
+            "phases_s": {ph: statistics.median(r["phases"].get(ph, 0.0) for r in rows)
+                         for ph in (*PHASES, "band_bracket")},
+            "phases_cpu_s": {ph: statistics.median(r.get("phases_cpu", {}).get(ph, 0.0) for r in rows)
+                             for ph in (*PHASES, "band_bracket")},
             "nested_false_s": statistics.median(x["nested_false_s"] for x in res["rounds"]
                                                 if x["tree"] == label)}
     return res
@@ -509,9 +519,16 @@ def render_profile(pr: dict) -> list[str]:
              for n in names) + "); medians. Load (1-min) before each process: "
          + ", ".join(f"{x['tree']} {x['load_before']['load1']:.1f}" for x in pr["rounds"])
          + ". The machine is shared: compare the trees by their ratio, not the absolute times.\n",
-         "| phase | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
-    for ph, text in PHASES.items():
-        L.append(f"| {text} | " + " | ".join(_ms(trees[n]["phases_s"][ph]) for n in names) + " |")
+         "| phase | " + " | ".join(f"{n}: wall; CPU" for n in names) + " |",
+        "|---|" + "---|" * len(names)]
+
+    def cell(n, ph):
+        c = trees[n].get("phases_cpu_s", {}).get(ph)
+        w = trees[n]["phases_s"].get(ph)
+        return (_ms(w) if w is not None else "–") + (f"; {_ms(c)}" if c is not None else "")
+
+    for ph, text in {**PHASES, "band_bracket": "… of the analysis: the stick-band bracket"}.items():
+        L.append(f"| {text} | " + " | ".join(cell(n, ph) for n in names) + " |")
     L.append("| **warm `hdid.fit`, total (wall)** | " + " | ".join(
         f"**{_ms(trees[n]['wall_s']['median'])}** (min {_ms(trees[n]['wall_s']['min'])})" for n in names) + " |")
     L.append("| CPU (user+sys) | " + " | ".join(_ms(trees[n]["cpu_s"]["median"]) for n in names) + " |")
@@ -546,6 +563,8 @@ def main(argv=None) -> None:
     ap.add_argument("--profile", action="store_true",
                     help="only the warm fit's profile (kept beside the other sections)")
     ap.add_argument("--before", type=Path, help="with --profile: an older checkout to compare")
+    ap.add_argument("--now", type=Path, help="with --profile/--cold: the checkout measured as "
+                    "'now' (default: this one; a clean worktree keeps others' edits out)")
     ap.add_argument("--cold", type=int, metavar="N",
                     help="only the cold command: N warm-cache runs per tree (with --before)")
     ap.add_argument("--child", type=int, help=argparse.SUPPRESS)
@@ -557,7 +576,7 @@ def main(argv=None) -> None:
         return
     if args.cold or args.profile:  # one section re-measured, the others kept
         trees = {"before": args.before.resolve() / "src"} if args.before else {}
-        trees["now"] = ROOT / "src"
+        trees["now"] = (args.now.resolve() if args.now else ROOT) / "src"
         res = json.loads((_common.RESULTS / f"{NAME}.json").read_text())
         key = "cold" if args.cold else "profile"
         res[key] = (bench_cold(trees, args.cold) if args.cold else
