@@ -55,7 +55,7 @@ def _described(arg):
         return _describe(arg)
     got = MODULES.get(id(arg))
     if got is not None and got[0] is arg:
-        MODULES.move_to_end(id(arg))
+        _touch(MODULES, id(arg))
         return got[1], got[2]
     desc, leaves = _describe(arg)
     try:
@@ -68,7 +68,10 @@ def _described(arg):
         return desc, leaves
     MODULES[id(arg)] = (arg, token, leaves)
     while len(MODULES) > MAX_MODULES:
-        MODULES.popitem(last=False)
+        try:
+            MODULES.popitem(last=False)
+        except KeyError:  # emptied by another thread
+            break
     return token, leaves
 
 
@@ -96,8 +99,16 @@ def lookup(memo) -> str | None:
         return None
     key = KEYS.get(memo)
     if key is not None:
-        KEYS.move_to_end(memo)
+        _touch(KEYS, memo)
     return key
+
+
+def _touch(d: OrderedDict, k) -> None:
+    """Mark ``k`` recently used (gone already where another thread evicted it: fine)."""
+    try:
+        d.move_to_end(k)
+    except KeyError:
+        pass
 
 
 def remember(memo, key: str) -> None:
@@ -106,4 +117,7 @@ def remember(memo, key: str) -> None:
         return
     KEYS[memo] = key
     while len(KEYS) > MAX_KEYS:
-        KEYS.popitem(last=False)
+        try:
+            KEYS.popitem(last=False)
+        except KeyError:  # emptied by another thread
+            break
