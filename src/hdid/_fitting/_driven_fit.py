@@ -397,8 +397,6 @@ def _pack(problem, joint: DrivenJoint, nuisance=None, data=None) -> np.ndarray:
     return np.concatenate([phys, nuisance])
 
 
-
-
 #: Rounds of "fit, then hand each window the output-friction sign its predecessor's
 #: simulation ends with, and refit" (the sign is discrete, so it is not fitted).
 DIRECTION_ROUNDS = 3
