@@ -107,3 +107,33 @@ def test_cli_posterior_errors_are_one_line_naming_flag_and_argument(tmp_path):
         line = res.output.strip()
         assert "\n" not in line and "Traceback" not in line, line
         assert all(n in line for n in needles), line
+
+
+def test_a_log_with_sensor_noise_at_its_noise_is_not_a_wrong_basin():
+    """Readings with Gaussian noise of half a step before rounding (after each release; the
+    holds as the clamp reads them): the fit's residual is at that noise, about 0.55 step
+    RMS, which is 1.9× the quantization floor (0.29 step). The floor is the scatter of the
+    readings at rest (the gear is still there: sensor noise alone), so no WRONG BASIN
+    statement; the noiseless log of the same plant keeps the quantization floor exactly."""
+    from hdid._posterior.basin import noise_floor
+    from hdid.reference import logs
+
+    q = 2 * np.pi / logs.COUNTS_PER_REV
+    sigma = 0.5 * q
+    design = dict(logs.PAPER_DESIGN, seed=11)
+    clean, info = logs.make_log(logs.TRUTH_CSF8, **design, return_truth=True)
+    noisy = logs.make_log(logs.TRUTH_CSF8, **design, noise_std=sigma)
+    release = clean["run"].map({r["run"]: r["t_release"] for r in info["runs"]})
+    held = (clean["time"] <= release).to_numpy()
+    noisy.loc[held, "theta"] = clean.loc[held, "theta"]
+    fit = hdid.fit(noisy, inertia=logs.TRUTH_CSF8["inertia"], nested=False, n_starts=2)
+    total = math.sqrt(sigma**2 + q**2 / 12)
+    # the rest scatter's estimate: 4 runs' tails, truncated to the flicker of the last
+    # reading (a slight underestimate); 25 % holds it to the noise, the quantization floor
+    # alone is 48 % below
+    assert noise_floor(fit) == pytest.approx(total, rel=0.25)
+    assert fit.rms_residual_rad > BASIN_FACTOR * fit.quantization_floor_rad  # the old alarm
+    same, check = basin_check(fit, echo=False)
+    assert same is fit and check.statement is None
+    fit0 = hdid.fit(clean, inertia=logs.TRUTH_CSF8["inertia"], nested=False, n_starts=2)
+    assert noise_floor(fit0) == fit0.quantization_floor_rad

@@ -1,4 +1,4 @@
-"""Never sample around a poorer basin: the fit's residual against the quantization floor.
+"""Never sample around a poorer basin: the fit's residual against its noise floor.
 
 A posterior is a statement about the neighbourhood of an optimum. When the least-squares
 fit has not reached the quantization floor, its optimum may be a poorer basin of the
@@ -7,7 +7,8 @@ posterior around it put the true ``tau_c`` 20 % outside its interval), or the mo
 lack an effect the log shows; either way the intervals would describe the wrong place.
 
 Before any sampling (:func:`basin_check`), a fit whose RMS residual is above
-``BASIN_FACTOR`` × the floor (``step/√12``) goes through the fit's own limit and restart
+``BASIN_FACTOR`` × the floor (``step/√12``, or the readings' scatter where the gear rests
+if larger: :func:`noise_floor`) goes through the fit's own limit and restart
 checks (:mod:`hdid._fitting._limits`: Coulomb friction, no dry friction, the linear
 spring; each limit fitted, the full model restarted next to its optimum, the best kept).
 A fit that already went through them (``fit.limits`` names every limit of its model) is
@@ -64,9 +65,45 @@ def _num(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
-def rms_over_floor(fit) -> float:
-    """The fit's RMS residual as a multiple of the quantization floor (``step/√12``)."""
+#: Readings at rest a run needs for its scatter to count in :func:`noise_floor` (fewer: the
+#: run's scatter is not estimated; at 5, a pooled sd over 4 runs is good to ±17 %).
+MIN_REST_READINGS = 5
+
+
+def noise_floor(fit) -> float:
+    """The residual a fit at its best basin leaves [rad]: the quantization floor
+    (``step/√12``), or the scatter of the readings where the gear rests, if larger — the
+    trailing stretch of each run that the log's preparation weights as one observation
+    (within the flicker of its last reading), about its own mean, pooled over the runs.
+    There the angle is constant, so the scatter is the sensor's noise whatever the fit
+    says; on a noiseless encoder it is 0 and the quantization floor stands. Without it a
+    log with noise before rounding (0.5 step: 1.9× the quantization floor) was stated to be
+    in the wrong basin at its own noise level."""
+    import numpy as np
+
     floor = float(fit.quantization_floor_rad)
+    prob = getattr(fit, "problem", None)
+    if prob is None:
+        return floor
+    theta, weight = np.asarray(prob.theta, dtype=float), np.asarray(prob.weight, dtype=float)
+    ss, dof = 0.0, 0
+    for th, w in zip(theta, weight):
+        on = np.flatnonzero(w > 0)
+        if on.size == 0:
+            continue
+        k = on[-1]
+        while k >= 0 and 0 < w[k] < 1:
+            k -= 1
+        rest = th[k + 1 : on[-1] + 1]
+        if rest.size >= MIN_REST_READINGS:
+            ss += float(np.sum((rest - rest.mean()) ** 2))
+            dof += rest.size - 1
+    return max(floor, math.sqrt(ss / dof)) if dof > 0 else floor
+
+
+def rms_over_floor(fit) -> float:
+    """The fit's RMS residual as a multiple of its floor (:func:`noise_floor`)."""
+    floor = noise_floor(fit)
     rms = float(fit.rms_residual_rad)
     return rms / floor if floor > 0 and math.isfinite(rms) else math.inf
 
@@ -98,7 +135,7 @@ def basin_check(fit, log=None, *, echo: bool = True):
     statement = None
     if after > BASIN_FACTOR:
         statement = (
-            f"WRONG BASIN: the fit's residual is {after:.2f}× the quantization floor (above "
+            f"WRONG BASIN: the fit's residual is {after:.2f}× the noise floor (above "
             f"{BASIN_FACTOR:g}×) after {checks}, so the intervals below would describe the "
             "wrong basin (a poorer optimum, or a model that lacks an effect the log shows), "
             "not the data's best fit — run `hdid diagnose` on the log (hdid.diagnose), add "

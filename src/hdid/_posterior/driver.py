@@ -130,7 +130,7 @@ def sample_posterior(
     Notes
     -----
     Never around a poorer basin (:mod:`~hdid._posterior.basin`): before any sampling, a
-    fit whose residual is above ``BASIN_FACTOR`` (1.5) × the quantization floor goes
+    fit whose residual is above ``BASIN_FACTOR`` (1.5) × its noise floor (the quantization floor, or the scatter at rest if larger) goes
     through the fit's limit and restart checks (reused when the fit ran them); if it is
     still above, one line saying that the intervals would describe the wrong basin is
     printed to standard error at once and leads the result's warnings and report
