@@ -443,20 +443,30 @@ def test_time_not_increasing(tmp_path):
 
 
 def test_duplicated_row(tmp_path):
+    """An exact copy of a row (a sample written twice) is dropped with a note; the same
+    time with another reading is two samples at one instant: an error naming the row."""
     lines = log_lines()
     lines.insert(20, lines[19])  # copy of line 20 becomes line 21
+    path = write_lines(tmp_path / "dup.csv", lines)
+    log = read_log(path)
+    assert [r.n_samples for r in log.runs] == [40, 40]
+    assert any("row(s) 21 repeat the row above exactly" in n for n in log.notes), log.notes
+    lines = set_cell(lines, 21, "theta", repr(float(lines[19].split(",")[3]) + Q))
     path = write_lines(tmp_path / "dup.csv", lines)
     err = error_of(path)
     assert_error(err, path, column="time", row=21)
     assert "repeats" in str(err)
 
 
-def test_time_restart_without_run_column_suggests_run(tmp_path):
+def test_time_restart_without_run_column_splits_the_runs(tmp_path):
+    """A clock that restarts at 0 without a run column: each stretch is a run, and a note
+    names the row where time drops back."""
     lines = log_lines(run_col=False, setup=False, inertia=False)
     path = write_lines(tmp_path / "restart.csv", lines)
-    err = error_of(path)
-    assert_error(err, path, column="time", row=42)
-    assert "'run'" in str(err)
+    log = read_log(path)
+    assert [(r.name, r.n_samples, r.first_row) for r in log.runs] == [("1", 40, 2),
+                                                                      ("2", 40, 42)]
+    assert any("time restarts at row(s) 42 " in n for n in log.notes), log.notes
 
 
 def test_uneven_sampling_is_data(tmp_path):

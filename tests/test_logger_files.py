@@ -366,6 +366,145 @@ def test_a_fast_swing_is_no_wrap():
     assert "row(s) 5" in note
 
 
+# ------------------------------------------------------------ single-turn angles
+
+
+def _single_turn(frame, variant: str):
+    """The log as a single-turn absolute encoder reads it, with the set-up's rest moved
+    next to the wrap point (so the runs swing across it): counts in [0, cpr), radians in
+    [-pi, pi), degrees in [0, 360)."""
+    d = frame.copy()
+    if variant == "counts [0, cpr)":
+        d["theta"] = (d["theta"] + CPR - 20) % CPR  # rests 10-50 counts from the wrap
+        return d
+    if variant == "rad [-pi, pi)":
+        d["theta"] = (d["theta"] + 2 * np.pi - 0.01) % (2 * np.pi) - np.pi
+        return d
+    d["theta [deg]"] = (np.degrees(d.pop("theta")) + 359.95) % 360.0
+    return d
+
+
+@pytest.mark.parametrize("variant", ["counts [0, cpr)", "rad [-pi, pi)", "deg [0, 360)"])
+def test_a_single_turn_angle_that_wraps_is_unwrapped(tmp_path, paper, counts, variant):
+    """Released next to the wrap point, the readings step by about one revolution between
+    two samples (4000 counts, 2 pi, 360 deg) where the gear moved a few encoder steps. Read
+    as they stand, the runs lie a revolution apart and every swing has a jump of 2 pi in it
+    (the old reader gave runs 6.25 rad apart, a 'dropout' at a swing's peak); unwrapped,
+    the readings are the original's plus one constant (the set-up's other zero), with the
+    same encoder step, and a note names the wraps."""
+    frame, ref = (counts[0], counts[1]) if variant.startswith("counts") else paper[1:]
+    d = _single_turn(frame, variant)
+    raw = d.filter(like="theta").to_numpy().ravel()
+    assert np.ptp(raw) > 0.9 * (CPR if variant.startswith("counts") else
+                                 2 * np.pi if "rad" in variant else 360)  # it does wrap
+    path = tmp_path / "single_turn.csv"
+    d.to_csv(path, index=False)
+    log = read_log(path, counts_per_rev=CPR if variant.startswith("counts") else None)
+    assert_same_log(log, ref, theta_offset=True)
+    assert any("single-turn angle wraps at one revolution" in n for n in log.notes), log.notes
+    assert not any("dropout" in n for n in log.notes), log.notes
+
+
+def test_a_set_up_on_both_ends_of_the_range_shares_one_zero():
+    """Two runs of one set-up resting on either side of the wrap point (4090-4095 and 1-6
+    of 4096 counts), neither crossing it: read as they stand they are a revolution apart,
+    which no shared zero fits; the run on the other end (the minority: most runs stay as
+    read) moves by one revolution, named."""
+    from hdid._log._revolutions import unwrap_revolutions
+
+    q = 2 * np.pi / 4096
+    rng = np.random.default_rng(3)
+    a = (4090 + rng.integers(0, 6, 20)) * q
+    b = (1 + rng.integers(0, 6, 20)) * q
+    c = (4088 + rng.integers(0, 6, 20)) * q
+    theta = np.concatenate([a, b, c])
+    out, notes = unwrap_revolutions(theta, [0, 20, 40], [20, 40, 60], ["a", "b", "c"], None,
+                                    np.arange(60) + 2, "theta", 4096)
+    np.testing.assert_array_equal(out[:20], a)
+    np.testing.assert_array_equal(out[40:], c)
+    np.testing.assert_allclose(out[20:40], b + 2 * np.pi, rtol=0, atol=1e-12)
+    assert len(notes) == 1 and "run(s) 'b'" in notes[0], notes
+
+
+def test_a_read_dropout_across_the_wrap_point_stays_a_dropout(tmp_path, paper):
+    """A bus servo's failed read (-pi) among readings near +1.5 rad is a step of 4.6 rad,
+    more than half a revolution, and it comes back at the next sample: undone it would still
+    be 1.6 rad from its neighbours, far beyond any one-sample change of the log (0.19 rad),
+    so it is no wrap. It is dropped as a read dropout, as before, and no wrap is noted."""
+    _, frame, ref = paper
+    d = frame.copy()
+    d["theta"] = d["theta"] + 1.5
+    k = 40  # in the free swing of the first run
+    d.loc[k, "theta"] = -np.pi
+    path = tmp_path / "dropout.csv"
+    d.to_csv(path, index=False)
+    log = read_log(path)
+    assert not any("wraps" in n for n in log.notes), log.notes
+    assert [n for n in log.notes if "read dropout" in n and f"row {k + 2} " in n]
+    np.testing.assert_allclose(log.runs[0].theta - 1.5, np.delete(ref.runs[0].theta, k),
+                               rtol=0, atol=1e-12)
+
+
+# ------------------------------------------------------------ time that restarts, rows twice
+
+
+def test_time_that_restarts_without_a_run_column_splits_the_runs(tmp_path, paper):
+    """A logger that restarts its clock at each release and writes no run column: time
+    drops back to 0 at rows 127, 252 and 377. Each stretch is a run, the log is the
+    original (four runs of 125 samples, the same readings), and a note names the rows.
+    The old reader refused the log."""
+    _, frame, ref = paper
+    d = frame.copy()
+    d["time"] = d["time"] - d.groupby("run")["time"].transform("first")
+    path = tmp_path / "restarts.csv"
+    d.drop(columns="run").to_csv(path, index=False)
+    log = read_log(path)
+    assert_same_log(log, ref)
+    assert [r.name for r in log.runs] == ["1", "2", "3", "4"]
+    assert [r.first_row for r in log.runs] == [2, 127, 252, 377]
+    assert any("time restarts at row(s) 127 (0.496 s → 0 s), 252" in n for n in log.notes)
+
+
+@pytest.mark.parametrize("case", ["two rows swapped", "restart inside a labelled run"])
+def test_time_that_drops_back_otherwise_stays_an_error(tmp_path, paper, case):
+    """Two rows out of order (time drops by one sample, not back to the stretch's start) ask
+    to sort the rows; with a run column, a restart inside one run is an error (the labels
+    say it is one release)."""
+    _, frame, _ = paper
+    d = frame.copy()
+    if case == "two rows swapped":
+        d.loc[[20, 21], "time"] = d.loc[[21, 20], "time"].to_numpy()
+        d = d.drop(columns="run")
+    else:
+        d.loc[60:124, "time"] -= d.loc[60, "time"]
+    path = tmp_path / "order.csv"
+    d.to_csv(path, index=False)
+    with pytest.raises(LogError) as err:
+        read_log(path)
+    assert err.value.column == "time" and err.value.row == (23 if "swapped" in case else 62)
+    assert "is not after the previous" in str(err.value)
+
+
+def test_a_row_written_twice_is_dropped(tmp_path, paper):
+    """Rows 52 and 54 repeat the row above exactly (same time, same readings): the copies
+    are dropped, the log is the original, and a note names them. The old reader refused
+    the log ('repeats the previous row'). The same time with another reading is two
+    samples at one instant: still an error naming the row."""
+    _, frame, ref = paper
+    d = pd.concat([frame.iloc[:50], frame.iloc[49:51], frame.iloc[50:]], ignore_index=True)
+    path = tmp_path / "twice.csv"
+    d.to_csv(path, index=False)
+    log = read_log(path)
+    assert_same_log(log, ref)
+    assert any("row(s) 52, 54 repeat the row above exactly" in n for n in log.notes), log.notes
+    d.loc[50, "theta"] += ref.resolution  # one encoder step off: a different reading
+    d.to_csv(path, index=False)
+    with pytest.raises(LogError) as err:
+        read_log(path)
+    assert err.value.row == 52 and err.value.column == "time"
+    assert "different readings" in str(err.value)
+
+
 # ------------------------------------------------------------ a last line cut mid-write
 
 

@@ -15,7 +15,9 @@ columns
     given (``counts`` is accepted as an alias in that case).
 ``run`` (optional)
     Label of the release the row belongs to; the rows of one run must be
-    contiguous. Without it the whole file is one run named ``"1"``.
+    contiguous. Without it the whole file is one run named ``"1"``, or, where time
+    drops back (a clock restarted at each release), one run per stretch
+    (``"1"``, ``"2"``, …; noted).
 ``setup`` (optional)
     Set-up label, constant within a run (default ``"1"``).
 ``added_inertia`` (optional)

@@ -17,7 +17,9 @@ from ._names import (
 )
 from ._dropouts import find_dropouts
 from ._layout import runs_of_repeated_headers
+from ._revolutions import REVOLUTION, unwrap_revolutions
 from ._rollover import unwrap_rollover
+from ._time_order import repeated_rows, repeated_rows_note, runs_at_restarts, take_rows
 from ._timestamps import timestamp_seconds
 from ._types import Log, Run
 from ._resolution import column_print_units, find_step
@@ -109,7 +111,10 @@ def read_log(
     named. Fully blank lines are skipped, and so are a preamble above the header, ``#``
     comments, a units row (read into the names), repeated headers (each block a run when
     there is no run column), a footer of words and a last line cut mid-write (noted).
-    Raw counts from a 16-, 24- or 32-bit register that rolls over are unwrapped (noted).
+    Raw counts from a 16-, 24- or 32-bit register that rolls over are unwrapped (noted),
+    and so is a single-turn angle that wraps at one revolution (:mod:`._revolutions`).
+    A row that repeats the one above exactly is dropped; without a ``run`` column, time
+    that drops back starts a new run (:mod:`._time_order`; both noted).
     Two held runs of one set-up at one reading that move off in opposite directions (a
     counter zeroed at each release) are an error.
 
@@ -204,6 +209,22 @@ def read_log(
     if motor is not None and kt is not None:
         motor = motor * kt
 
+    # -- rows written twice, a clock that restarts (hdid._log._time_order) --------
+    order_notes = []
+    twice = repeated_rows([run_labels, setups, time, theta, inertia, motor, theta_out, load])
+    if twice.size:
+        order_notes.append(repeated_rows_note(table.lines, twice))
+        keep = np.setdiff1d(np.arange(n), twice)
+        run_labels, setups, time, theta, inertia, motor, theta_out, load = (
+            None if v is None else v[keep]
+            for v in (run_labels, setups, time, theta, inertia, motor, theta_out, load))
+        take_rows(table, keep)
+        n = int(keep.size)
+    if _RUN not in cols:
+        run_labels, restart_notes = runs_at_restarts(time, run_labels, table.lines,
+                                                     min_samples_per_run)
+        order_notes += restart_notes
+
     # -- counts vs. radians (a count register that rolls over is unwrapped first) ------
     rollover_notes = []
     if cpr is not None:
@@ -237,6 +258,15 @@ def read_log(
     # -- runs, sampling, motion (hdid._log._validate) ------------------------
     starts, names = run_blocks(run_labels, n, fail)
     ends = np.append(starts[1:], n)
+    # a single-turn angle that wraps at one revolution (hdid._log._revolutions)
+    theta, wrap_notes = unwrap_revolutions(
+        theta, starts, ends, names, setups, table.lines, name(_THETA),
+        cpr if cpr is not None else REVOLUTION / unit_scale[_THETA])
+    if theta_out is not None:
+        theta_out, note = unwrap_revolutions(
+            theta_out, starts, ends, names, setups, table.lines, name(_THETA_OUT),
+            out_cpr if out_cpr is not None else REVOLUTION / unit_scale[_THETA_OUT])
+        wrap_notes += note
     new_run = np.zeros(n, dtype=bool)
     new_run[starts] = True
     within = ~new_run[1:]  # step i -> i+1 stays inside one run
@@ -246,7 +276,8 @@ def read_log(
     period = sample_period(time, within, fail)
     starts, ends, names, notes = split_at_breaks(time, theta, starts, ends, names,
                                                  min_samples_per_run)
-    notes = list(table.notes) + header_notes + rollover_notes + notes
+    notes = (list(table.notes) + header_notes + order_notes + rollover_notes + wrap_notes
+             + notes)
     # one-sample read dropouts (a bus servo's -pi) leave before the step is sought
     # (hdid._log._dropouts)
     dropped, dropout_notes = find_dropouts(time, theta, starts, ends, names, table.lines, fail)
