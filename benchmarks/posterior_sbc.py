@@ -185,6 +185,8 @@ def run_one(gen, design_name, seed, max_steps, method="emcee,smc", noise="prior"
         # release: the draws are conditioned on the same cut (else SBC is biased by construction)
         keep = inside_cut(values, truth.get("ratio", 100.0), design)
         out["cut_share"] = float(1.0 - keep.mean())
+        if keep.sum() < 2:  # every draw outside the cut: ranked uncut (the row says so)
+            keep = np.ones_like(keep)
         for n in REPORTED + ("noise_sigma_rad",):
             v, tr = np.asarray(values[n])[keep], tv[n]
             lo95, lo68, med, hi68, hi95 = np.percentile(v, [2.5, 16, 50, 84, 97.5])
