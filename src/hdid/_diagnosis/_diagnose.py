@@ -157,6 +157,7 @@ from ._search import (  # noqa: F401 (re-exported: tests, calibration)
     analyse_strong,
     candidate_table,
     current_from_candidates,
+    driver_refits,
     grid_points,
     hints_from,
     look_at,
@@ -319,6 +320,7 @@ def _ladder_of_candidates(s: Search, current, wanted, steps, n_starts):
             prep = s.base_setup.prep
             fcheck = floor_check(current, 1.0 / float(prep.sample_period), len(prep.lengths))
         results = candidate_table(s, by_key, current, fcheck)
+        results = driver_refits(s, by_key, results, current, fcheck, floor, STRONG_DBIC)
         s.notes += rank_within_families(results, s.all_cands, STRONG_DBIC, AMBIGUOUS_DBIC)
         strong = analyse_strong(results, STRONG_DBIC)
         for c in results:
