@@ -12,6 +12,10 @@ from . import _candidates, _fisher, _linearity, _rank
 from ._candidates import Experiment
 from ._result import DesignResult
 
+#: ``separate``'s global rival fits (best first, until the largest separation is a value;
+#: :func:`hdid._design._separate.separations`' ``certify``).
+RIVAL_FITS = 3
+
 
 @float64
 def design(
@@ -24,6 +28,7 @@ def design(
     check_candidate: str | None = None,
     seed: int = 0,
     separate=None,
+    rival_fits: int = RIVAL_FITS,
     **fit_options,
 ) -> DesignResult:
     """Rank candidate experiments by the standard errors they would give at the current fit.
@@ -55,8 +60,15 @@ def design(
     separate:
         Two fits of the same log by rival models (FitResults or fit JSON paths, e.g. two
         diagnose candidates): each candidate also gets the expected ``2·ln LR`` that
-        tells them apart (linearised, both directions; :mod:`hdid._design._separate`),
-        and ``criterion="separate"`` (the default then) ranks by the smaller of the two.
+        tells them apart, both directions, computed as :func:`hdid.diagnose` computes its
+        separating experiments (:mod:`hdid._design._separate`): linearised, then with the
+        rival refitted locally on the exact simulator (an upper bound), and the largest
+        then with the rival fitted globally by :func:`hdid.fit` (a value); and
+        ``criterion="separate"`` (the default then) ranks by the smaller of the two.
+    rival_fits:
+        With ``separate``: at most this many experiments' rivals fitted globally, the
+        largest separation first, until the largest is a value (each costs two
+        :func:`hdid.fit` calls on a log of that design); 0 keeps the local upper bounds.
 
     The prediction is the linearised Fisher information of the exact simulator with the
     nuisances (release instants, start angles, set-up offsets) estimated alongside and the
@@ -87,10 +99,13 @@ def design(
     preds, derived = _fisher.predict(result, cands)
     _linearity.check(result, preds, every)
     if pair is not None:
-        from ._separate import separation
+        from ._separate import separations
 
-        for p, sep in zip(preds, separation(pair[0], pair[1], cands)):
-            p.separation = sep
+        for p, sep in zip(preds, separations(pair[0], pair[1], cands, certify=rival_fits)):
+            lam = sep.best if sep.fitted else sep.refitted
+            p.separation, p.separation_kind = (
+                (lam, "rival fitted globally" if sep.fitted else "upper bound")
+                if all(math.isfinite(x) for x in lam) else (sep.linear, "linearised"))
     ranking = _rank.rank(preds, criterion, targets)
     values = {n: result.model.float_values()[n] for n in every}
     out = DesignResult(

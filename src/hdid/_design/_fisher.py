@@ -59,6 +59,9 @@ class Prediction:
     stack_rows: tuple | None = None      # (Stacked, rows) where its runs were simulated
     #: expected 2 ln LR of the separated pair ``(A true, B true)`` (``separate=``)
     separation: tuple[float, float] | None = None
+    #: how ``separation`` was computed: "rival fitted globally" (a value), "upper bound"
+    #: (the rival refitted locally) or "linearised"
+    separation_kind: str | None = None
 
 
 def parameter_names(fit) -> tuple[tuple[str, ...], tuple[str, ...]]:

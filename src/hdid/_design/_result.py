@@ -70,9 +70,9 @@ class DesignResult:
         crit = {"targets": "geometric mean of the std ratios of " + ", ".join(self.targets),
                 "d": "D-optimality (confidence-volume ratio as a geometric-mean std ratio)",
                 "separate": "the expected 2 ln LR between the two rival fits (the smaller "
-                            "direction; score column; linearised at each rival's fit to this "
-                            "log, not confirmed by refitting: far from this log's design the "
-                            "rival's best fit moves and the value overstates), std ratios"
+                            "direction; score column: the rival fitted globally by hdid.fit "
+                            "where marked '=', else refitted locally, an upper bound '<='), "
+                            "std ratios"
                 }[self.criterion]
         lines = [f"hdid design: {self.source}", "",
                  f"ranking by {crit}, relative to this log (1 = as now, < 1 better):"]
@@ -87,7 +87,7 @@ class DesignResult:
                 lines.append(f"{k:>3}  {e.name:<{width}}  {e.n_runs:>4}  not evaluated: {p.error}")
                 continue
             row = (f"{k:>3}  {e.name:<{width}}  {e.n_runs:>4}  {e.rate:>6.0f}  "
-                   f"{e.counts_per_rev:>6.0f}  {self._score_text(s):>7}")
+                   f"{e.counts_per_rev:>6.0f}  {self._score_text(s, p):>7}")
             row += "".join(f"  {_ratio(self.relative(i, n)):>10}" for n in shown)
             lines.append(row + ("  !" if p.honesty else ""))
         best = self.best
@@ -114,9 +114,11 @@ class DesignResult:
             lines += ["", "warnings:", *[f"  - {w}" for w in self.warnings]]
         return "\n".join(lines)
 
-    def _score_text(self, s: float) -> str:
+    def _score_text(self, s: float, p: Prediction | None = None) -> str:
         if self.criterion == "separate":
-            return _num(-s) if math.isfinite(s) else "n/a"
+            mark = {"rival fitted globally": "=", "upper bound": "<="}.get(
+                getattr(p, "separation_kind", None), "")
+            return mark + _num(-s) if math.isfinite(s) else "n/a"
         return _ratio(math.exp(s) if math.isfinite(s) else s)
 
     def _check_lines(self) -> list[str]:
@@ -156,7 +158,8 @@ class DesignResult:
                 "relative_to_this_log": {n: self.relative(i, n) for n in self.quantities()},
                 "linearisation": list(p.honesty),
                 "expected_2lnlr": None if p.separation is None else {
-                    "a_true": p.separation[0], "b_true": p.separation[1]},
+                    "a_true": p.separation[0], "b_true": p.separation[1],
+                    "value_kind": p.separation_kind},
             }
 
         d = {

@@ -70,7 +70,8 @@ def _prediction(c: dict) -> Prediction:
         n_effective=_num(c.get("n_effective")), sigma=_num(c.get("noise_rad")),
         error=c.get("error"), honesty=list(c.get("linearisation", [])),
         separation=None if c.get("expected_2lnlr") is None else (
-            _num(c["expected_2lnlr"]["a_true"]), _num(c["expected_2lnlr"]["b_true"])))
+            _num(c["expected_2lnlr"]["a_true"]), _num(c["expected_2lnlr"]["b_true"])),
+        separation_kind=(c.get("expected_2lnlr") or {}).get("value_kind"))
 
 
 def _check(c: dict) -> CheckResult:

@@ -16,7 +16,7 @@ from ._common import _Command, _Fail, _QUIET, _check_output, _emit
     "Candidates and ranking",
     click.option("--target", "targets", metavar="NAMES", help="Rank by the std of these (comma-separated parameters or derived quantities; 'band' = stick-band half-width, 'frequency' = natural frequency), e.g. --target tau_c,band. Default: D-optimality."),
     click.option("--criterion", type=click.Choice(["targets", "d", "separate"]), help="'targets' (default with --target), 'd' (D-optimality on the free parameters) or 'separate' (default with --separate)."),
-    click.option("--separate", metavar="A.json,B.json", help="Two fits of the same log by rival models (hdid fit --json with different --add): rank by the expected 2 ln LR that tells them apart."),
+    click.option("--separate", metavar="A.json,B.json", help="Two fits of the same log by rival models (hdid fit --json with different --add): rank by the expected 2 ln LR that tells them apart, computed as diagnose computes its separating experiments (the rival refitted locally, then the largest fitted globally by hdid.fit until the top is a value)."),
     click.option("--experiments", "experiments_file", metavar="FILE", type=click.Path(dir_okay=False), help="Your own candidate experiments (TOML [[candidate]] tables or JSON list): each names what differs from the log (rate, amplitudes, counts_per_rev, repeats, added_inertia, duration, hold)."),
 )
 @cloup.option_group(
