@@ -405,6 +405,25 @@ def test_a_single_turn_angle_that_wraps_is_unwrapped(tmp_path, paper, counts, va
     assert not any("dropout" in n for n in log.notes), log.notes
 
 
+def test_an_output_angle_that_wraps_at_one_revolution_is_unwrapped(tmp_path):
+    """An absolute single-turn output encoder printing [-pi, pi), the driven log's output
+    resting next to the wrap point: unwrapped like the input's, the output angle is the
+    original's plus one constant and a note names the wraps."""
+    d = pd.read_csv(SYNTH / "driven_csf8.csv")
+    ref = read_log(SYNTH / "driven_csf8.csv")
+    centre = np.median(d["theta_out"])
+    d["theta_out"] = (d["theta_out"] - centre + 2 * np.pi - 0.002) % (2 * np.pi) - np.pi
+    path = tmp_path / "out_wraps.csv"
+    d.to_csv(path, index=False)
+    log = read_log(path)
+    shift = log.runs[0].theta_out[0] - ref.runs[0].theta_out[0]
+    for a, b in zip(log.runs, ref.runs):
+        # float64 rounding of the modulo and the unwrap (readings up to 2 pi): a few ulp
+        np.testing.assert_allclose(a.theta_out - shift, b.theta_out, rtol=0, atol=1e-13)
+        np.testing.assert_array_equal(a.theta, b.theta)
+    assert any("'theta_out': a single-turn angle wraps" in n for n in log.notes), log.notes
+
+
 def test_a_set_up_on_both_ends_of_the_range_shares_one_zero():
     """Two runs of one set-up resting on either side of the wrap point (4090-4095 and 1-6
     of 4096 counts), neither crossing it: read as they stand they are a revolution apart,

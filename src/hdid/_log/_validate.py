@@ -75,8 +75,8 @@ def check_within_runs(setups, inertia, time, within, fail: Fail) -> None:
         else:
             msg = (
                 f"time {time[pos + 1]:.9g} is not after the previous {time[pos]:.9g} — time must "
-                "increase strictly within a run; sort the rows, or add a 'run' column if a new "
-                "release starts here"
+                "increase strictly within a run; sort the rows, or give the rows from here a "
+                "'run' label of their own if a new release starts here"
             )
         problems.append((pos + 1, 2, fail(msg, _TIME, pos + 1)))
     problems = [p for p in problems if p is not None]
