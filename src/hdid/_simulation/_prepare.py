@@ -21,6 +21,10 @@ MAX_SILENT_START = 0.012
 
 #: Samples right after the last motion that keep full weight (they time the stop).
 FULL_WEIGHT_TAIL = 3
+#: Still stretches whose noise estimate lies within this factor of the runs' typical one
+#: are pooled (:func:`noise_sigma`): ~10 differences each put a still stretch's estimate
+#: within about 0.5–2× σ; a moving stretch is orders of magnitude above.
+STILL_SPREAD = 3.0
 
 
 @dataclass(frozen=True)
@@ -150,22 +154,30 @@ def noise_sigma(runs, step: float | None, still_only: bool = False) -> float:
     differences (variance ``20·σ²`` for white noise; an upper bound where the motion is
     coarsely sampled). Never below ``1e-4`` of the log's angle span (the simulator's accuracy).
     """
-    pieces = []
-    for run in runs:
+    pieces, owner = [], []
+    for k, run in enumerate(runs):
         th = np.asarray(run.theta, dtype=float)
         n = len(th)
         m = max(4, min(50, n // 10))
         for seg in (th[:m], th[-m:]):
             d = np.diff(seg)
             if d.size >= 3:
-                pieces.append(d)
+                pieces.append(d - np.median(d))
+                owner.append(k)
     span = max(float(np.ptp(np.concatenate([r.theta for r in runs]))), 1e-300)
     sig_still = np.inf
     if pieces:
-        # first differences of a still stretch: variance 2σ²; the smaller of the head's
-        # and tail's estimates per run (one of them may move)
-        mads = [1.4826 * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(2) for d in pieces]
-        sig_still = float(np.min(mads)) if mads else np.inf
+        # first differences of a still stretch: variance 2σ². The smaller of the head's
+        # and tail's estimates per run (one of them may move); the stretches within
+        # STILL_SPREAD of the runs' median of those, pooled: the smallest of a few
+        # estimates from ~10 differences each is biased low (a 66 Hz log at 250 Hz: 0.53 σ,
+        # and its stuck tails then looked like motion)
+        mads = np.array([1.4826 * float(np.median(np.abs(d))) / math.sqrt(2) for d in pieces])
+        owner = np.asarray(owner)
+        per_run = [float(np.min(mads[owner == k])) for k in np.unique(owner)]
+        ref = float(np.median(per_run))
+        kept = [d for d, e in zip(pieces, mads) if e <= STILL_SPREAD * ref]
+        sig_still = 1.4826 * float(np.median(np.abs(np.concatenate(kept)))) / math.sqrt(2)
     if still_only:  # (nan where the still stretches say nothing)
         return sig_still if np.isfinite(sig_still) else float("nan")
     d3 = np.concatenate([np.diff(np.asarray(r.theta, float), 3) for r in runs if len(r.theta) > 4])
@@ -256,6 +268,7 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
     tail_starts = np.zeros(R, dtype=int)
     tails = np.zeros(R)  # duration of the still stretch at the end of each run [s]
     half_periods: list[float] = []
+    stops: list[float] = []  # release to rest where a run shows no turn: a bound only
     # A reading that differs from its neighbour by more than this is motion (not a flicker
     # of the last digit, not noise).
     still = (1.0 * step + 3.0 * sigma) if quantized else 5.0 * sigma
@@ -335,8 +348,12 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
             half_periods.append(tt[0] - 0.5 * (t[k0] + t[min(k0 + 1, n - 1)]))
         elif not moving[i] and tail_start < n:
             # reached rest without a turn: the stop (a Coulomb stop is a turning point)
-            half_periods.append(max(t[min(tail_start, n - 1)] - t[k0], dt))
-    hp = np.asarray([h for h in half_periods if h > 0])
+            stops.append(max(t[min(tail_start, n - 1)] - t[k0], dt))
+    # (on an encoder the stop is the first sample at the rest count; with noise it is
+    # where the noise last left the rest reading, late by up to the tail: there a stop
+    # counts only where no run shows a turn — a 66 Hz log at 250 Hz read 3.7 Hz)
+    hp = np.asarray([h for h in (half_periods + stops if quantized else half_periods or stops)
+                     if h > 0])
     if hp.size:
         frequency = 1.0 / (2.0 * float(np.median(hp)))
     else:  # a log shorter than half a swing: at least one quarter period long
