@@ -484,6 +484,21 @@ def test_time_that_restarts_without_a_run_column_splits_the_runs(tmp_path, paper
     assert any("time restarts at row(s) 127 (0.496 s → 0 s), 252" in n for n in log.notes)
 
 
+def test_logs_written_one_after_another_whose_clock_restarts(tmp_path, paper):
+    """Two logs concatenated (the header repeated), each holding two releases with the
+    clock restarted at each and no run column: four runs, a log's second stretch named
+    after it ('1.2'), the readings the original's."""
+    _, frame, ref = paper
+    d = frame.copy()
+    d["time"] = d["time"] - d.groupby("run")["time"].transform("first")
+    first, second = (d[d.run.isin(r)].drop(columns="run") for r in ((1, 2), (3, 4)))
+    text = first.to_csv(index=False) + second.to_csv(index=False)
+    log = read_log(_write(tmp_path / "cat_restarts.csv", text))
+    assert_same_log(log, ref)
+    assert [r.name for r in log.runs] == ["1", "1.2", "2", "2.2"]
+    assert any("time restarts at row(s) 127 " in n and "378 " in n for n in log.notes)
+
+
 @pytest.mark.parametrize("case", ["two rows swapped", "restart inside a labelled run"])
 def test_time_that_drops_back_otherwise_stays_an_error(tmp_path, paper, case):
     """Two rows out of order (time drops by one sample, not back to the stretch's start) ask
