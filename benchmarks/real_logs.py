@@ -3,17 +3,21 @@
 
     python benchmarks/real_logs.py            # ≈ 10 fits, each compiling its own program
     python benchmarks/real_logs.py --render   # results/real_logs.md from its JSON
+    python benchmarks/real_logs.py --measured # + the measured logs of ../shared/data/real
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
+import subprocess
 import sys
+import tempfile
 import time
 
-from _common import ROOT, parse_or_render, run_meta, write_result
+from _common import RESULTS, ROOT, parse_or_render, run_meta, write_result
 
 sys.path.insert(0, str(ROOT / "tests"))
 
@@ -41,6 +45,22 @@ def scenarios():
                "k1")
 
 
+def measured():
+    """UR10e joints 1-4 (driven; published model) and the STS3215 drops (m·g·l of the point
+    mass), with only what a user knows: ratio 1, the offset, gravity, the lab's inertia."""
+    real = ROOT.parent / "shared" / "data" / "real"
+    for j, r in json.loads((real / "ur10e_hd/reference.json").read_text())["joints"].items():
+        g, p = r["derived_from_published_rigid_body_params"], r["published"]
+        ref = dict(inertia=g["effective_inertia_M_jj_kgm2"], c_v=p["Fv_Nms_per_rad"],
+                   tau_c=p["Fc_Nm"], mgl=g["gravity_A_Nm"], theta_g=g["gravity_theta0_rad"])
+        yield (f"UR10e {j}", real / "ur10e_hd" / r["file"], ["--add", "torque_offset"]
+               + ["--add", "gravity"] * bool(ref["mgl"]), {k: v for k, v in ref.items() if v})
+    for k, v in json.loads((real / "sts3215_drop/reference.json").read_text())["setups"].items():
+        yield (f"STS3215 {k}", real / "sts3215_drop" / v["csv"], ["--remove", "stiffness", "--add",
+               "gravity", "--inertia", repr(v["bam_m6_total_inertia_kgm2"])],
+               {"mgl": v["mgl_point_mass_Nm"]})
+
+
 def judge(result, truth):
     rows = []
     for name, est in result.parameters.items():
@@ -56,7 +76,21 @@ def judge(result, truth):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    if parse_or_render(ap, argv, "real_logs", render) is None:
+    ap.add_argument("--measured", action="store_true", help="fit the measured logs instead")
+    if (args := parse_or_render(ap, argv, "real_logs", render)) is None:
+        return
+    if args.measured:  # rows added to the stored result, one fit (a CLI process) each
+        res = {**json.loads((RESULTS / "real_logs.json").read_text()), "measured": []}
+        for label, path, opts, ref in measured():
+            load, t0, out = os.getloadavg()[0], time.perf_counter(), tempfile.mktemp(".json")
+            subprocess.run(["hdid", "fit", str(path), "--ratio", "1", *opts, "--json", out, "-q"])
+            d, wall = json.loads(open(out).read()), time.perf_counter() - t0
+            rms = (d["rms"]["wg_rad"] / d["rms"]["wg_floor_rad"] if "rms" in d
+                   else d["rms_residual_rad"] / d["quantization_floor_rad"])
+            res["measured"].append(dict(log=label, options=opts, wall_s=wall, load=load, rms=rms,
+                                        vs={k: (d["parameters"][k]["value"], v) for k, v in ref.items()},
+                                        warnings=d["warnings"], meta=run_meta()))
+            write_result("real_logs", res, render, indent=1)
         return
     out = []
     for label, log, truth, model, key in scenarios():
@@ -77,7 +111,8 @@ def main(argv=None):
         print(label, f"{wall:.0f} s", "error: " + err if err else
               ", ".join(f"{p['name']} z={p['z']:+.1f}{'*' if p['flagged'] else ''}"
                         for p in row["parameters"]), flush=True)
-    write_result("real_logs", {"meta": run_meta(), "rows": out}, render, indent=1)
+    kept = json.loads((RESULTS / "real_logs.json").read_text()).get("measured", [])
+    write_result("real_logs", {"meta": run_meta(), "rows": out, "measured": kept}, render, indent=1)
 
 
 def render(res: dict) -> str:
@@ -100,6 +135,13 @@ def render(res: dict) -> str:
         lines.append(f"| {r['scenario']} | {r['key']} | {k['fit']:.5g} ± {k['std']:.2g} / "
                      f"{k['truth']:.5g} | {'yes' if not bad else 'no'} | {', '.join(bad)} | "
                      f"{r['wall_s']:.0f} ({r['load']:.1f}) |")
+    if res.get("measured"):
+        lines += ["", "## Measured logs (`--measured`): fit (fit/reference − 1; theta_g: fit − "
+                  "reference)", "", "| log | fit vs reference | RMS/floor | wall [s] (load) |",
+                  "|---|---|---|---|"] + [f"| {m['log']} | " + ", ".join(
+                      f"{k} {a:.4g} ({a - b:+.3f})" if k == "theta_g" else f"{k} {a:.4g} "
+                      f"({a / b - 1:+.0%})" for k, (a, b) in m["vs"].items()) + f" | {m['rms']:.1f}"
+                  f" | {m['wall_s']:.0f} ({m['load']:.1f}) |" for m in res["measured"]]
     return "\n".join(lines) + "\n"
 
 
