@@ -103,6 +103,27 @@ def test_gravity_torque_and_start_against_numpy():
     assert p.start(s) == pytest.approx(s.k_wg * s.ratio**2) and p.transform == "log"
 
 
+def test_absolute_gravity_torque_against_numpy():
+    # A driven log's angles have no zero at the hanging position: the driven fit's gravity
+    # is −(mgl/N)·sin(θ/N − theta_g) (the published G(θ) = A·sin(θ − θ₀) of a robot joint,
+    # as a torque on the drive); at theta_g = 0 it is the free-motion Gravity exactly.
+    from hdid.effects.gravity import AbsoluteGravity, Gravity
+
+    rng = np.random.default_rng(17)
+    for ratio in (1.0, 100.0):
+        for mgl, theta_g in ((111.5, 1.563), (3.1, -2.9), (0.3, 0.0)):
+            e = AbsoluteGravity(mgl=mgl, theta_g=theta_g)
+            plain = Gravity(mgl=mgl)
+            for theta, omega in zip(rng.uniform(-4, 4, 10) * ratio, rng.normal(0, 5, 10)):
+                m = _motion(theta, omega, 0.0, ratio)
+                want = -mgl * np.sin(theta / ratio - theta_g) / ratio
+                assert float(e.torque(m, None)) == pytest.approx(want, rel=1e-12, abs=1e-14)
+                if theta_g == 0.0:
+                    assert float(e.torque(m, None)) == float(plain.torque(m, None))
+    assert AbsoluteGravity.of(Gravity(mgl=2.0), 0.5) == AbsoluteGravity(mgl=2.0, theta_g=0.5)
+    assert [p.name for p in AbsoluteGravity.parameters] == ["mgl", "theta_g"]
+
+
 @pytest.mark.parametrize("ratio", [1.0, 50.0])
 def test_gravity_pendulum_against_the_independent_simulator(ratio):
     # A pendulum with Stribeck friction, no spring, simulated by hdid and by the
