@@ -1,9 +1,5 @@
 """What the benchmark and calibration scripts share: paths, the machine and load record,
-and the results files (``results/<name>.json`` and the markdown rendered from it). Run
-the scripts as ``python benchmarks/<script>.py``; synthetic logs come from
-:mod:`hdid.reference.logs`."""
-
-from __future__ import annotations
+and the results files (``results/<name>.json`` and the markdown rendered from it)."""
 
 import datetime
 import hashlib
@@ -34,13 +30,10 @@ def src_fingerprint() -> str:
 
 
 def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "?"
+    cpuinfo = Path("/proc/cpuinfo")
+    names = [ln.split(":", 1)[1].strip() for ln in (cpuinfo.read_text().splitlines() if cpuinfo.exists() else [])
+             if ln.startswith("model name")]
+    return names[0] if names else platform.processor() or "?"
 
 
 def load(tag: str = "") -> dict:
@@ -84,8 +77,7 @@ def run_meta(**extra) -> dict:
 
 
 class Clock:
-    """Wall and process CPU time (user+sys, all threads) of a ``with`` block:
-    ``.wall`` and ``.cpu`` in seconds."""
+    """Wall and process CPU time (user+sys, all threads) of a ``with`` block: ``.wall``, ``.cpu`` [s]."""
 
     def __enter__(self):
         self.w0, self.c0 = time.perf_counter(), time.process_time()
@@ -94,6 +86,12 @@ class Clock:
     def __exit__(self, *exc):
         self.wall = time.perf_counter() - self.w0
         self.cpu = time.process_time() - self.c0
+
+
+def stored(name: str) -> dict:
+    """``results/<name>.json`` as stored, or ``{}``."""
+    f = RESULTS / f"{name}.json"
+    return json.loads(f.read_text()) if f.exists() else {}
 
 
 def write_result(name: str, res, render, indent: int = 2) -> None:
@@ -126,6 +124,5 @@ def parse_or_render(ap, argv, name, render, indent: int = 2):
 
 def interpretation_section(res: dict) -> list[str]:
     """Markdown lines of the hand-written interpretation stored in ``res``, if any."""
-    text = res.get("interpretation")
-    return ["## Interpretation", "", text, ""] if text else []
+    return ["## Interpretation", "", res["interpretation"], ""] if res.get("interpretation") else []
 

@@ -6,8 +6,6 @@ how many fits end above 1.5× the quantization floor ``step/√12`` (a poorer op
     python benchmarks/clean_floor.py --report
 """
 
-from __future__ import annotations
-
 import argparse
 import json
 import math
@@ -15,6 +13,7 @@ import os
 import subprocess
 import sys
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -38,23 +37,19 @@ SEED_BASE = {"paper": 330000, "rich": 331000}
 
 def draw_plant(rng: np.random.Generator) -> ind.Plant:
     """One broad plant (the ranges: benchmarks/README.md)."""
-    N, inertia = 100.0, 7e-7
-    k1 = 940.0 * rng.uniform(0.6, 1.4)
-    k2 = K2_CATALOG * rng.uniform(0.0, 2.0)
-    k_wg = k1 / N**2
-    tau_s = k_wg * rng.uniform(0.012, 0.040)
+    N = 100.0
+    k1, k2 = 940.0 * rng.uniform(0.6, 1.4), K2_CATALOG * rng.uniform(0.0, 2.0)
+    tau_s = k1 / N**2 * rng.uniform(0.012, 0.040)  # the wave generator's stiffness times a small angle
     tau_c = tau_s / rng.uniform(1.1, 2.0)
     v_s = math.exp(rng.uniform(math.log(2.0), math.log(20.0)))
     delta = rng.uniform(0.8, 3.0)
     c_v = 1.8e-5 * math.exp(rng.uniform(-0.5, 0.5) * math.log(10.0))
-    return ind.Plant(inertia=inertia, ratio=N, k1=k1, k2=k2, tau_c=tau_c, tau_s=tau_s,
-                     v_s=v_s, delta=delta, c_v=c_v)
+    return ind.Plant(inertia=7e-7, ratio=N, k1=k1, k2=k2, tau_c=tau_c, tau_s=tau_s, v_s=v_s, delta=delta, c_v=c_v)
 
 
 def make(design: str, seed: int):
     """``(DataFrame, truth)`` of log ``seed`` of ``design``."""
-    d = DESIGNS[design]
-    rng = np.random.default_rng(SEED_BASE[design] + seed)
+    d, rng = DESIGNS[design], np.random.default_rng(SEED_BASE[design] + seed)
     plant = draw_plant(rng)
     offsets = {s: float(rng.uniform(-0.03, 0.03)) for s in sorted(set(d["setups"]))}
     phases = rng.uniform(0.0, 1.0, len(d["amps"]))
@@ -67,19 +62,14 @@ def fit_one(design: str, seed: int) -> dict:
     import hdid
 
     df, truth = make(design, seed)
-    t0 = time.perf_counter()
-    row = {"design": design, "seed": seed, "truth": truth["params"]}
+    t0, row = time.perf_counter(), {"design": design, "seed": seed, "truth": truth["params"]}
     try:
         r = hdid.fit(df, resolution=truth["resolution"], ratio=100.0)
     except Exception as exc:  # a failed fit is a row too
-        row.update(error=f"{type(exc).__name__}: {exc}"[:300], ratio=math.nan)
-        row["wall_s"] = time.perf_counter() - t0
-        return row
-    row["wall_s"] = time.perf_counter() - t0
-    row["ratio"] = r.rms_residual_rad / r.quantization_floor_rad
-    row.update(values=r.values, limits=getattr(r, "limits", None),
-               restarted_from=getattr(r, "restarted_from", None), n_warnings=len(r.warnings))
-    return row
+        return row | {"error": f"{type(exc).__name__}: {exc}"[:300], "ratio": math.nan, "wall_s": time.perf_counter() - t0}
+    return row | {"wall_s": time.perf_counter() - t0, "ratio": r.rms_residual_rad / r.quantization_floor_rad,
+                  "values": r.values, "limits": getattr(r, "limits", None),
+                  "restarted_from": getattr(r, "restarted_from", None), "n_warnings": len(r.warnings)}
 
 
 #: Rows at or below this ratio keep no truth or fitted values in the results file (the
@@ -120,11 +110,7 @@ def render(rows: list[dict]) -> str:
         ratio = np.array([x["ratio"] for x in g], dtype=float)
         err = sum("error" in x for x in g)
         above = int(np.sum(ratio[np.isfinite(ratio)] > ABOVE))
-        won: dict = {}
-        for x in g:
-            k = x.get("restarted_from")
-            if k:
-                won[k] = won.get(k, 0) + 1
+        won = Counter(x["restarted_from"] for x in g if x.get("restarted_from"))
         loads = [x.get("load1") for x in g if x.get("load1") is not None]
         out.append(
             f"| {label} | {design} | {len(g)} | {above} | {100 * above / len(g):.1f} % | {err} "
@@ -144,9 +130,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("designs", nargs="*", default=["paper", "rich"])
     ap.add_argument("--seeds", default="0:200", help="first:stop (log indices)")
-    ap.add_argument("--only", default="",
-                    help="comma-separated log indices instead of --seeds (e.g. the misses "
-                         "of an earlier run)")
+    ap.add_argument("--only", default="", help="comma-separated log indices instead of --seeds (e.g. an earlier run's misses)")
     ap.add_argument("--label", default="after")
     ap.add_argument("--append", action="store_true", help="keep the rows already stored")
     ap.add_argument("--report", action="store_true", help="only rewrite the .md")
@@ -165,13 +149,10 @@ def main(argv=None) -> int:
     seeds = [int(x) for x in a.only.split(",")] if a.only else range(lo, hi)
     for seed in seeds:
         for design in a.designs:
-            if any(r.get("label") == a.label and r["design"] == design and r["seed"] == seed
-                   for r in rows):
+            if any(r.get("label") == a.label and r["design"] == design and r["seed"] == seed for r in rows):
                 continue
-            row = fit_one(design, seed)
-            row.update(label=a.label, hdid=str(Path(hdid.__file__).parent), commit=head,
-                       load1=os.getloadavg()[0])
-            rows.append(row)
+            rows.append(row := fit_one(design, seed) | dict(label=a.label, hdid=str(Path(hdid.__file__).parent),
+                                                             commit=head, load1=os.getloadavg()[0]))
             print(f"{a.label} {design} {seed}: ratio {row['ratio']:.3f} "
                   f"{row['wall_s']:.1f} s load {row['load1']:.2f} "
                   f"{row.get('restarted_from') or ''} {row.get('error', '')}", flush=True)

@@ -5,8 +5,6 @@ each call a fresh pinned process with its own cache folder.
     python benchmarks/diagnose_speed.py --render
 """
 
-from __future__ import annotations
-
 import argparse
 import json
 import os
@@ -47,25 +45,19 @@ print("@@" + json.dumps({"wall_s": wall, "cpu_s": ru.ru_utime + ru.ru_stime,
 
 
 def measure(src: str, cache: Path, core: int, log: Path) -> dict:
-    env = {**os.environ, "HDID_CACHE_DIR": str(cache), "PYTHONPATH": str(Path(src).resolve())}
-    env.pop("HDID_NO_CACHE", None)
+    env = {k: v for k, v in os.environ.items() if k != "HDID_NO_CACHE"}
+    env |= {"HDID_CACHE_DIR": str(cache), "PYTHONPATH": str(Path(src).resolve())}
     with tempfile.TemporaryDirectory() as tmp:
-        load0 = load_text()
-        t0 = time.perf_counter()
+        load0, t0 = load_text(), time.perf_counter()
         r = subprocess.run(["taskset", "-c", str(core), sys.executable, "-c", CHILD, str(log),
                             str(Path(tmp) / "d.json")], capture_output=True, text=True, env=env)
-        wall = time.perf_counter() - t0
-        load1 = load_text()
+        times = {"process_wall_s": time.perf_counter() - t0, "load_start": load0, "load_end": load_text()}
     line = next((x for x in r.stdout.splitlines() if x.startswith("@@")), None)
-    if line is None:
-        return {"error": (r.stderr or r.stdout)[-3000:], "process_wall_s": wall,
-                "load_start": load0, "load_end": load1}
-    rec = json.loads(line[2:])
-    rec.update(process_wall_s=wall, load_start=load0, load_end=load1)
-    return rec
+    return {"error": (r.stderr or r.stdout)[-3000:], **times} if line is None else {**json.loads(line[2:]), **times}
 
 
 def summarize_programs(progs: list[dict]) -> dict:
+    """Per ``how`` (stored / traced / jit): how many programs, and their prepare and compile seconds summed."""
     out: dict[str, dict] = {}
     for p in progs:
         o = out.setdefault(p["how"], {"n": 0, "prepare_s": 0.0, "compile_s": 0.0})
@@ -94,9 +86,8 @@ def render(res: dict) -> str:
                          f"{r['error'].strip().splitlines()[-1][:120]} |")
             continue
         t = r["timing"]
-        ps = summarize_programs(r.get("programs", []))
         prog = "; ".join(f"{k} {v['n']}: {v['prepare_s']:.1f} + {v['compile_s']:.1f} s"
-                         for k, v in sorted(ps.items())) or "—"
+                         for k, v in sorted(summarize_programs(r.get("programs", [])).items())) or "—"
         cands = ", ".join(f"{lb} {d:.1f}" for lb, d in r["candidates"][:3])
         lines.append(
             f"| {r['code']} | {r['cache']} | {r['process_wall_s']:.1f} | {r['cpu_s']:.1f} | "
@@ -104,8 +95,8 @@ def render(res: dict) -> str:
             f"{r['load_start']} → {r['load_end']} | {r['verdict']} ({cands}) |")
     lines += ["", "Programs column: `how n: prepare + compile s` — `stored`: read from the "
               "program store, `traced`: traced and lowered in this process, `jit`: the store "
-              "off or failed; compile = XLA compile or a read of JAX's persistent cache.", ""]
-    lines += interpretation_section(res)
+              "off or failed; compile = XLA compile or a read of JAX's persistent cache.", "",
+              *interpretation_section(res)]
     return "\n".join(lines) + "\n"
 
 

@@ -5,8 +5,6 @@ free-motion + driven fit narrows the uncertainty compared with either log alone.
     python benchmarks/driven_joint.py --render       # results/driven_joint.md from its JSON
 """
 
-from __future__ import annotations
-
 import argparse
 import json
 import math
@@ -24,10 +22,7 @@ PHYSICAL = ("k1", "k2", "tau_c", "tau_s", "v_s", "delta", "c_v", "inertia", "tau
 
 
 def _pos_truth(p):
-    out = {"pos_a0": p["pos_a0"]}
-    out |= {f"pos_a{n + 1}": v for n, v in enumerate(p["pos_a"])}
-    out |= {f"pos_b{n + 1}": v for n, v in enumerate(p["pos_b"])}
-    return out
+    return {"pos_a0": p["pos_a0"], **{f"pos_{ab}{n + 1}": v for ab in "ab" for n, v in enumerate(p[f"pos_{ab}"])}}
 
 
 def recovery(seeds: int) -> list[dict]:
@@ -37,34 +32,28 @@ def recovery(seeds: int) -> list[dict]:
         cases = [("shipped", DATA / "driven_csf8.csv", truth["params"])]
         for s in range(1, seeds):
             df, tr = logs.make_driven_log(seed=1000 + s)
-            path = Path(tmp) / f"seed{s}.csv"
-            df.to_csv(path, index=False)
+            df.to_csv(path := Path(tmp) / f"seed{s}.csv", index=False)
             cases.append((f"seed {1000 + s}", path, tr["params"]))
         for label, path, p in cases:
             t0 = time.perf_counter()
             r = hdid.fit_driven(path)
-            wall = time.perf_counter() - t0
-            row = {"log": label, "wall_s": wall, "order": r.positional["order"],
-                   "order_true": len(p["pos_a"]), "rms": r.rms, "params": {}, "positional": {}}
+            wall, coef, pos = time.perf_counter() - t0, r.positional["coefficients"], _pos_truth(p)
+            row = {"log": label, "wall_s": wall, "order": r.positional["order"], "order_true": len(p["pos_a"]),
+                   "rms": r.rms, "params": {}, "positional": {}}
             for n in PHYSICAL:
                 est = r.parameters[n]
-                row["params"][n] = {"value": est.value, "std": est.std, "truth": p[n],
-                                    "z": (est.value - p[n]) / est.std}
-            for n, v in _pos_truth(p).items():
-                c = r.positional["coefficients"].get(n)
-                if c is not None:
-                    row["positional"][n] = {"value": c["value"], "std": c["std"], "truth": v,
-                                            "z": (c["value"] - v) / c["std"]}
-            row["extra_harmonics"] = {n: c for n, c in r.positional["coefficients"].items()
-                                      if n not in _pos_truth(p)}
+                row["params"][n] = {"value": est.value, "std": est.std, "truth": p[n], "z": (est.value - p[n]) / est.std}
+            for n, v in ((n, v) for n, v in pos.items() if n in coef):
+                c = coef[n]
+                row["positional"][n] = {"value": c["value"], "std": c["std"], "truth": v, "z": (c["value"] - v) / c["std"]}
+            row["extra_harmonics"] = {n: c for n, c in coef.items() if n not in pos}
             rows.append(row)
             print(label, f"{wall:.0f} s", "order", row["order"], flush=True)
     return rows
 
 
 def narrowing() -> dict:
-    free = DATA / "csf8_paper.csv"
-    driven = DATA / "driven_csf8.csv"
+    free, driven = DATA / "csf8_paper.csv", DATA / "driven_csf8.csv"
     wg_only = pd.read_csv(driven).drop(columns=["theta_out"])
     truth = json.loads((DATA / "truth.json").read_text())["driven_csf8.csv"]["params"]
     cases = {}
@@ -112,16 +101,13 @@ def render(res: dict) -> str:
         zs = " | ".join(f"{r['params'][n]['z']:+.1f}" for n in PHYSICAL)
         zf = max(abs(c["z"]) for c in r["positional"].values()) if r["positional"] else float("nan")
         rms = r["rms"]
-        lines.append(
-            f"| {r['log']} | {r['order']} | {zs} | {zf:.1f} | "
-            f"{rms['wg_rad'] / rms['wg_floor_rad']:.2f} | "
-            f"{rms['kinematic_rad'] / rms['kinematic_floor_rad']:.2f} | {r['wall_s']:.0f} |")
+        lines.append(f"| {r['log']} | {r['order']} | {zs} | {zf:.1f} | {rms['wg_rad'] / rms['wg_floor_rad']:.2f} | "
+                     f"{rms['kinematic_rad'] / rms['kinematic_floor_rad']:.2f} | {r['wall_s']:.0f} |")
     extra = [f"{r['log']}: " + ", ".join(
         f"{n} = {c['value']:.2g} ± {c['std']:.1g}" for n, c in r["extra_harmonics"].items())
         for r in rec if r["extra_harmonics"]]
     if extra:
-        lines += ["", "Harmonics above the true order where BIC chose more (truth 0):", ""]
-        lines += [f"- {e}" for e in extra]
+        lines += ["", "Harmonics above the true order where BIC chose more (truth 0):", "", *(f"- {e}" for e in extra)]
     lines += ["", "Relative errors of the shipped log's fit:", "",
               "| parameter | truth | fit | rel. error | rel. std |", "|---|---|---|---|---|"]
     r0 = rec[0]
@@ -148,9 +134,8 @@ def main(argv=None):
     args = parse_or_render(ap, argv, "driven_joint", render)
     if args is None:
         return
-    meta = run_meta()
-    res = {"meta": meta, "recovery": recovery(args.seeds), "narrowing": narrowing()}
-    meta["load_end"] = load_text()
+    res = {"meta": run_meta(), "recovery": recovery(args.seeds), "narrowing": narrowing()}
+    res["meta"]["load_end"] = load_text()
     write_result("driven_joint", res, render)
     print(render(res))
 

@@ -1,16 +1,12 @@
-"""The JAX GPU path: the same fit, log-posterior, sampler and batch fit on CPU and on a GPU,
-one result (``gpu_path.json``: a ``cpu`` and a ``gpu`` run; the GPU run is checked against
-the stored CPU run's walker positions and numbers).
+"""The JAX GPU path: the same fit, log-posterior, sampler and batch fit on CPU and on a GPU, one
+result (a ``cpu`` and a ``gpu`` run; the GPU run checked against the stored CPU run's numbers).
 
     python benchmarks/gpu_path.py --tag cpu      # JAX_PLATFORMS=cpu forces the CPU
     python benchmarks/gpu_path.py --tag gpu      # on a machine with a GPU, after the CPU run
     python benchmarks/gpu_path.py --render       # gpu_path.md from gpu_path.json
 """
 
-from __future__ import annotations
-
 import argparse
-import json
 import os
 import sys
 import time
@@ -28,14 +24,12 @@ PARAMS = ("k1", "k2", "tau_c", "tau_s", "v_s", "delta", "c_v")
 
 def _per_call(fn, reps=20, min_time=1.0):
     fn()
-    walls = []
-    t0 = time.perf_counter()
+    walls, t0 = [], time.perf_counter()
     while len(walls) < reps or (time.perf_counter() - t0 < min_time and len(walls) < 2000):
         with Clock() as c:
             fn()
         walls.append(c.wall)
-    walls.sort()
-    return {"median_s": walls[len(walls) // 2], "min_s": walls[0], "n": len(walls)}
+    return {"median_s": sorted(walls)[len(walls) // 2], "min_s": min(walls), "n": len(walls)}
 
 
 def measure(args, ref, save) -> dict:
@@ -57,8 +51,7 @@ def measure(args, ref, save) -> dict:
     with Clock() as c2:
         fit = hdid.fit(LOG)
     params = {k: float(fit.values[k]) for k in PARAMS if k in fit.values}
-    res["fit"] = {"first_s": c1.wall, "warm_s": c2.wall, "params": params,
-                  "cost": float(fit.starts.costs[fit.starts.best])}
+    res["fit"] = {"first_s": c1.wall, "warm_s": c2.wall, "params": params, "cost": float(fit.starts.costs[fit.starts.best])}
     if ref:
         rp = ref["fit"]["params"]
         res["fit"]["max_rel_diff_vs_reference"] = max(abs(params[k] - rp[k]) / abs(rp[k]) for k in rp)
@@ -93,11 +86,9 @@ def measure(args, ref, save) -> dict:
         with Clock() as c:
             post = sample_posterior(fit, method="emcee", n_steps=POST_STEPS, n_walkers=W, seed=0, progress=False)
         tau = np.asarray(post.tau)
-        info = {"n_walkers": int(post.chain.shape[1]), "n_steps": int(post.chain.shape[0]),
-                "wall_s": c.wall, "ms_per_step": c.wall / POST_STEPS * 1e3,
-                "tau_max": float(np.nanmax(tau)),
-                "tau_max_label": post.labels[int(np.nanargmax(tau))],
-                "acceptance": float(np.mean(post.acceptance)),
+        info = {"n_walkers": int(post.chain.shape[1]), "n_steps": int(post.chain.shape[0]), "wall_s": c.wall,
+                "ms_per_step": c.wall / POST_STEPS * 1e3, "tau_max": float(np.nanmax(tau)),
+                "tau_max_label": post.labels[int(np.nanargmax(tau))], "acceptance": float(np.mean(post.acceptance)),
                 "walker_steps_per_s": post.chain.shape[1] * POST_STEPS / c.wall}
         res["posterior"].append(info)
         print("posterior", info, flush=True)
@@ -113,17 +104,14 @@ def measure(args, ref, save) -> dict:
     for n in args.n_logs:
         with Clock() as c:
             table = hdid.fit_many(paths[2:2 + n])
-        res["fit_many"]["runs"].append({"n_logs": n, "wall_s": c.wall, "cpu_s": c.cpu,
-                                        "logs_per_s": n / c.wall, "errors": int(table["error"].notna().sum()),
+        res["fit_many"]["runs"].append({"n_logs": n, "wall_s": c.wall, "cpu_s": c.cpu, "logs_per_s": n / c.wall,
+                                        "errors": int(table["error"].notna().sum()),
                                         "k1_median": float(np.nanmedian(table["k1"]))})
         print("fit_many", res["fit_many"]["runs"][-1], flush=True)
         save(res)
     res["load_end"] = os.getloadavg()[0]
     save(res)
     return res
-
-
-# --------------------------------------------------------------------------- render
 
 
 def render(results: dict) -> str:
@@ -173,9 +161,7 @@ def render(results: dict) -> str:
         for q in r["fit_many"]["runs"]:
             L.append(f"| {t} | {q['n_logs']} | {q['wall_s']:.1f} s | {q['logs_per_s']:.1f} | "
                      f"{q['errors']} | {q['k1_median']:.1f} |")
-    L.append("")
-    L += _common.interpretation_section(results)
-    return "\n".join(L)
+    return "\n".join([*L, "", *_common.interpretation_section(results)])
 
 
 def main(argv=None):
@@ -187,15 +173,10 @@ def main(argv=None):
     args = parse_or_render(ap, argv, "gpu_path", render, indent=1)
     if args is None:
         return 0
-    path = RESULTS / "gpu_path.json"
-    results = json.loads(path.read_text()) if path.exists() else {}
-    ref = results.get("cpu") if args.tag == "gpu" else None
-
-    def save(res):
-        write_result("gpu_path", results | {args.tag: res}, render, indent=1)
-
-    measure(args, ref, save)
-    print(f"wrote {path}")
+    results = _common.stored("gpu_path")
+    measure(args, results.get("cpu") if args.tag == "gpu" else None,
+            lambda res: write_result("gpu_path", results | {args.tag: res}, render, indent=1))
+    print(f"wrote {RESULTS / 'gpu_path.json'}")
     return 0
 
 

@@ -5,8 +5,6 @@
     python benchmarks/long_log.py --render      # results/long_log.md from its JSON
 """
 
-from __future__ import annotations
-
 import argparse
 import json
 import os
@@ -38,10 +36,9 @@ print(json.dumps({"read_s": t1 - t0, "fit_s": t2 - t1,
 def one(n: int, timeout: float, tmp: Path) -> dict:
     from hdid._simulation._synthetic import synthesize
 
-    path = tmp / f"long_{n}.csv"
-    t = time.perf_counter()
-    synthesize(path, amplitudes=AMPLITUDES, rate=RATE, duration=n / RATE, hold=0.01,
-               counts_per_rev=4000, seed=1, overwrite=True)
+    path, t = tmp / f"long_{n}.csv", time.perf_counter()
+    synthesize(path, amplitudes=AMPLITUDES, rate=RATE, duration=n / RATE, hold=0.01, counts_per_rev=4000, seed=1,
+               overwrite=True)
     row = {"samples_per_run": n, "rows": len(AMPLITUDES) * n, "mb": path.stat().st_size / 1e6,
            "simulate_s": time.perf_counter() - t}
     env = {**os.environ, "HDID_NO_CACHE": "1", "JAX_PLATFORMS": "cpu"}
@@ -53,8 +50,7 @@ def one(n: int, timeout: float, tmp: Path) -> dict:
         return {**row, "status": f"stopped after {timeout:.0f} s"}
     if out.returncode != 0:
         return {**row, "status": "failed", "stderr": out.stderr.strip().splitlines()[-1:]}
-    return {**row, "process_s": time.perf_counter() - t,
-            **json.loads(out.stdout.strip().splitlines()[-1]), "status": "ok"}
+    return {**row, "process_s": time.perf_counter() - t, **json.loads(out.stdout.strip().splitlines()[-1]), "status": "ok"}
 
 
 def render(res: dict) -> str:
@@ -76,8 +72,7 @@ def render(res: dict) -> str:
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--samples", default="1000,2500,5000,10000,25000",
-                    help="samples per run, comma-separated")
+    ap.add_argument("--samples", default="1000,2500,5000,10000,25000", help="samples per run, comma-separated")
     ap.add_argument("--timeout", type=float, default=600.0, help="per fit [s]")
     args = parse_or_render(ap, argv, "long_log", render)
     if args is None:
@@ -90,8 +85,8 @@ def main(argv=None) -> None:
             print(json.dumps(rows[-1]), flush=True)
             if rows[-1]["status"] != "ok":
                 break
-    meta = run_meta(affinity=sorted(os.sched_getaffinity(0)), load_after=os.getloadavg()[0],
-                    rate_hz=RATE, amplitudes=AMPLITUDES)
+    meta = run_meta(affinity=sorted(os.sched_getaffinity(0)), load_after=os.getloadavg()[0], rate_hz=RATE,
+                    amplitudes=AMPLITUDES)
     write_result("long_log", {"meta": meta, "rows": rows}, render)
 
 

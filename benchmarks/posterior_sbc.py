@@ -1,8 +1,6 @@
-"""Simulation-based calibration of the posterior under its default priors: coverage, rank
-histograms, convergence and time per log, emcee and SMC on the same fits; with ``--cli``,
-the time of ``hdid fit LOG --posterior`` as a whole process (the shipped paper log, then
-drawn paper logs), emcee and SMC alternating: the result's CLI-speed section (one result,
-results/posterior_sbc.*; each mode keeps the other's section).
+"""Simulation-based calibration of the posterior under its default priors (coverage, ranks,
+convergence, time; emcee and SMC on the same fits); ``--cli``: ``hdid fit LOG --posterior`` timed
+as a process, the result's CLI-speed section (each mode keeps the other's section).
 
     taskset -c 1 python benchmarks/posterior_sbc.py [--paper-logs 20 --rich-logs 20] [--seed0 34000]
         [--max-steps 20000] [--budget-min 600] [--method emcee,smc]
@@ -10,10 +8,8 @@ results/posterior_sbc.*; each mode keeps the other's section).
     python benchmarks/posterior_sbc.py [--cli] --render [--interpretation FILE]
 """
 
-from __future__ import annotations
-
 import argparse
-import datetime as _dt
+import functools
 import json
 import math
 import os
@@ -26,7 +22,7 @@ import traceback
 from pathlib import Path
 
 import _common
-from _common import DATA, RESULTS, ROOT
+from _common import DATA, ROOT
 
 CHECKED = ("k1", "k2", "tau_c", "tau_s", "c_v", "stick_band_halfwidth_rad")
 REPORTED = CHECKED + ("v_s", "delta")
@@ -36,29 +32,27 @@ BINS = 10
 #: would have a run without motion, which hdid rejects).
 BAND_MARGIN = 0.9
 DEFAULT_PRIOR_NAMES = ("k1", "k2", "tau_c", "tau_s", "c_v", "v_s", "delta")
-_NOMINAL = {}
 
 
-def nominal_default_prior(gen, design_name, design):
+def _design(gen, design_name):
+    return gen.RICH_DESIGN if design_name == "rich" else gen.PAPER_DESIGN
+
+
+@functools.cache
+def nominal_default_prior(design_name):
     """``{name: (centre value, sd in the transformed space)}``: the default priors of the
     design's nominal log (see ``DEFAULT_PRIOR_NAMES``)."""
-    if design_name in _NOMINAL:
-        return _NOMINAL[design_name]
     import numpy as np
 
     from hdid._fitting._fit import _setup
     from hdid._models._transforms import from_unconstrained
     from hdid._posterior.priors import default_priors
+    from hdid.reference import logs as gen
 
     cat = dict(gen.TRUTH_CSF8)
-    df = gen.make_log(cat, **dict(design, seed=0))
-    prob = _setup(df, inertia=cat["inertia"]).problem
-    specs = prob.base.parameter_specs()
-    pri = default_priors(prob)
-    out = {n: (float(from_unconstrained(specs[n], pri[n].mean, np)), float(pri[n].sd))
-           for n in DEFAULT_PRIOR_NAMES}
-    _NOMINAL[design_name] = out
-    return out
+    prob = _setup(gen.make_log(cat, **dict(_design(gen, design_name), seed=0)), inertia=cat["inertia"]).problem
+    specs, pri = prob.base.parameter_specs(), default_priors(prob)
+    return {n: (float(from_unconstrained(specs[n], pri[n].mean, np)), float(pri[n].sd)) for n in DEFAULT_PRIOR_NAMES}
 
 
 def draw_default(gen, rng, design_name, design):
@@ -67,7 +61,7 @@ def draw_default(gen, rng, design_name, design):
     from hdid.effects.stribeck import DELTA_INTERVAL
     from hdid.reference import stick_band_halfwidth
 
-    pri = nominal_default_prior(gen, design_name, design)
+    pri = nominal_default_prior(design_name)
     lo, hi = DELTA_INTERVAL
     amp = min(abs(a) for a in design["amplitudes"])
     band_rejects = order_rejects = 0
@@ -102,12 +96,9 @@ def inside_cut(values, ratio, design):
 
 
 def draw_noise(gen, seed, noise="prior"):
-    """The log's noise σ_n [rad] before rounding: ``"prior"``, drawn from the sampler's own
-    prior (log-uniform on ``density.SIGMA_BOUNDS`` encoder steps; its own stream, so the
-    truths do not depend on it); ``"moving"``, the same on the readings after each release
-    only (:func:`draw_log`: the pre-release holds as without noise, a test of the
-    likelihood apart from how the log is read); ``"none"``, 0 — rounding alone, outside that prior, whose
-    Gaussian q²/12 likelihood treats the rounding errors as independent."""
+    """The log's noise σ_n [rad] before rounding: ``"prior"``, from the sampler's prior
+    (log-uniform on ``density.SIGMA_BOUNDS`` steps, its own stream); ``"moving"``, the same after
+    each release only (:func:`draw_log`: the holds noiseless); ``"none"``, 0 (rounding alone)."""
     import numpy as np
 
     from hdid._posterior.density import SIGMA_BOUNDS
@@ -124,18 +115,15 @@ def draw_log(gen, design_name, seed, noise="prior"):
     the noise by :func:`draw_noise`."""
     import numpy as np
 
-    design = gen.RICH_DESIGN if design_name == "rich" else gen.PAPER_DESIGN
-    truth, band_rejects, order_rejects = draw_default(gen, np.random.default_rng(seed),
-                                                      design_name, design)
+    design = _design(gen, design_name)
+    truth, band_rejects, order_rejects = draw_default(gen, np.random.default_rng(seed), design_name, design)
     sigma = draw_noise(gen, seed, noise)
-    df, info = gen.make_log(truth, **dict(design, seed=seed), noise_std=sigma,
-                            return_truth=True)
+    df, info = gen.make_log(truth, **dict(design, seed=seed), noise_std=sigma, return_truth=True)
     if noise == "moving":  # the holds read as without noise (the same release instants)
         clean = gen.make_log(truth, **dict(design, seed=seed))
         held = df.time.to_numpy() <= df.run.map({r["run"]: r["t_release"] for r in info["runs"]}).to_numpy()
         df.loc[held, "theta"] = clean.loc[held, "theta"]
-    return truth, df, info, {"band_rejects": band_rejects, "order_rejects": order_rejects,
-                             "noise_sigma_rad": sigma}
+    return truth, df, info, {"band_rejects": band_rejects, "order_rejects": order_rejects, "noise_sigma_rad": sigma}
 
 
 def run_one(gen, design_name, seed, max_steps, method="emcee,smc", noise="prior"):
@@ -147,8 +135,7 @@ def run_one(gen, design_name, seed, max_steps, method="emcee,smc", noise="prior"
     from hdid._posterior.modes import sampled_modes
 
     truth, df, info, notes = draw_log(gen, design_name, seed, noise)
-    design = gen.RICH_DESIGN if design_name == "rich" else gen.PAPER_DESIGN
-    prior = nominal_default_prior(gen, design_name, design)
+    design, prior = _design(gen, design_name), nominal_default_prior(design_name)
     base = {"design": design_name, "seed": seed, "truth_params": truth, "load_start": _common.loads(),
             "prior": "default", "band_rejects": notes["band_rejects"], "truth_notes": notes}
     t0 = time.perf_counter()
@@ -163,18 +150,14 @@ def run_one(gen, design_name, seed, max_steps, method="emcee,smc", noise="prior"
     tv["noise_sigma_rad"] = notes["noise_sigma_rad"]
     outs = []
     for m in method.split(","):
-        out = dict(base, load_start=_common.loads())
-        t1 = time.perf_counter()
+        out, t1 = dict(base, load_start=_common.loads()), time.perf_counter()
         kw = {} if m == "smc" else {"max_steps": max_steps}
         post = hdid.sample_posterior(fit, seed=seed % 1000, method=m, prior=prior, modes=modes, **kw)
-        out["posterior_s"] = time.perf_counter() - t1 + modes_s
-        out["load_end"] = _common.loads()
+        out.update(posterior_s=time.perf_counter() - t1 + modes_s, load_end=_common.loads())
         diag = post.to_dict()["posterior_diagnostics"]
-        out.update(steps=int(post.chain.shape[0]), converged=bool(post.converged),
-                   rhat_max=diag["convergence"]["rhat_max"],
-                   met_by=diag["convergence"].get("met_by"),
-                   ess_bulk_min=diag["convergence"]["ess_bulk_min"],
-                   ess_tail_min=diag["convergence"]["ess_tail_min"],
+        c = diag["convergence"]
+        out.update(steps=int(post.chain.shape[0]), converged=bool(post.converged), rhat_max=c["rhat_max"],
+                   met_by=c.get("met_by"), ess_bulk_min=c["ess_bulk_min"], ess_tail_min=c["ess_tail_min"],
                    tau_max=diag["tau_max"], compile_s=post.compile_s, stage_s=post.stage_s,
                    mode_search_s=modes_s, n_modes=len(post.modes),
                    move_acceptance=diag["move_acceptance"], warnings=list(post.warnings),
@@ -218,27 +201,23 @@ def _steps(r):
 def render(res):
     cli = "\n" + render_cli(res["cli"]) if "cli" in res else ""
     for key, sub in res.get("checks", {}).items():  # diagnostic runs kept beside the result
-        cli = (f"\n# Check: {key}\n\n{sub.get('about', '')}\n\n"
-               + _render(sub, sub["logs"], sub["options"]["method"]) + cli)
+        cli = f"\n# Check: {key}\n\n{sub.get('about', '')}\n\n" + _render(sub, sub["logs"], sub["options"]["method"]) + cli
     if "logs" not in res:
         return cli.lstrip("\n")
-    methods = list(dict.fromkeys(r.get("method") or res["options"].get("method", "emcee")
-                                 for r in res["logs"]))
+    methods = list(dict.fromkeys(r.get("method") or res["options"].get("method", "emcee") for r in res["logs"]))
     if len(methods) <= 1:
         return _render(res, res["logs"]) + cli
     head = (f"# Posterior calibration, samplers side by side: {', '.join(methods)}\n\n"
             "Each log is fitted once and its optima found once; every sampler gets the same "
             "fit and optima (time of that search is counted in each sampler's time).\n\n"
             + "\n".join(_common.interpretation_section(res)))
-    return head + "\n".join(_render(res, [r for r in res["logs"]
-                                          if (r.get("method") or "emcee") == m], m)
+    return head + "\n".join(_render(res, [r for r in res["logs"] if (r.get("method") or "emcee") == m], m)
                             for m in methods) + cli
 
 
 def _render(res, all_logs, method=None):
     logs = [r for r in all_logs if "quantities" in r]
-    L = [f"#{'#' if method else ''} Posterior SBC under the default priors"
-         f"{': sampler ' + method if method else ''}\n",
+    L = [f"#{'#' if method else ''} Posterior SBC under the default priors{': sampler ' + method if method else ''}\n",
          f"Generated by `python benchmarks/posterior_sbc.py` on {res['generated']} (options "
          f"{json.dumps(res['options'])}); truths drawn from the sampler's prior (the default "
          "priors of each design's nominal log); one core per log on "
@@ -251,18 +230,14 @@ def _render(res, all_logs, method=None):
         return "\n".join(L)
     conv = [r for r in logs if r["converged"]]
     by_rule = {k: sum(r.get("met_by") == k for r in conv) for k in ("R-hat", "50 tau")}
-    L.append(f"**Converged (bulk/tail ESS ≥ 400 and R-hat ≤ 1.01 or a chain ≥ 50 τ, on every "
-             f"sampled quantity and the band): {len(conv)} of {len(logs)}** (by R-hat "
-             f"{by_rule['R-hat']}, by 50 τ {by_rule['50 tau']}).\n")
-    L += ["## Coverage of the central intervals (truth inside)\n",
+    L += [f"**Converged (bulk/tail ESS ≥ 400 and R-hat ≤ 1.01 or a chain ≥ 50 τ, on every sampled quantity and "
+          f"the band): {len(conv)} of {len(logs)}** (by R-hat {by_rule['R-hat']}, by 50 τ {by_rule['50 tau']}).\n",
+          "## Coverage of the central intervals (truth inside)\n",
           "| quantity | 95 % paper | 95 % rich | 95 % pooled [Wilson 95 %] | 68 % pooled |", "|---|---|---|---|---|"]
     tot_k = tot_n = 0
     for n in REPORTED:
-        cells = []
-        for des in ("paper", "rich"):
-            rs = [r for r in logs if r["design"] == des]
-            k = sum(r["quantities"][n]["cover95"] for r in rs)
-            cells.append(f"{k}/{len(rs)}" if rs else "–")
+        rs = {des: [r["quantities"][n]["cover95"] for r in logs if r["design"] == des] for des in ("paper", "rich")}
+        cells = [f"{sum(c)}/{len(c)}" if c else "–" for c in rs.values()]
         k = sum(r["quantities"][n]["cover95"] for r in logs)
         k68 = sum(r["quantities"][n]["cover68"] for r in logs)
         lo, hi = _wilson(k, len(logs))
@@ -276,11 +251,10 @@ def _render(res, all_logs, method=None):
              f"{tot_k}/{tot_n} = {tot_k / tot_n:.1%} [{lo:.1%}, {hi:.1%}].\n")
     for des in ("paper", "rich", None):
         rs = [r for r in conv if des in (None, r["design"])]
-        k = sum(r["quantities"][n]["cover95"] for r in rs for n in CHECKED)
+        k, m = sum(r["quantities"][n]["cover95"] for r in rs for n in CHECKED), len(rs) * len(CHECKED)
         if rs:
-            lo, hi = _wilson(k, len(rs) * len(CHECKED))
-            L.append(f"Converged logs only, {des or 'both designs'}: {k}/{len(rs) * len(CHECKED)} "
-                     f"= {k / (len(rs) * len(CHECKED)):.1%} [{lo:.1%}, {hi:.1%}].")
+            lo, hi = _wilson(k, m)
+            L.append(f"Converged logs only, {des or 'both designs'}: {k}/{m} = {k / m:.1%} [{lo:.1%}, {hi:.1%}].")
     basin = sum(any(w.startswith("WRONG BASIN") for w in r.get("warnings", [])) for r in logs)
     L.append(f"\nLogs with the WRONG BASIN statement: {basin} of {len(logs)}.\n")
     L += [f"## Rank of the truth among the draws ({BINS} bins, counts; uniform if calibrated)\n",
@@ -291,9 +265,8 @@ def _render(res, all_logs, method=None):
             h[min(BINS - 1, int(r["quantities"][n]["rank"] * BINS))] += 1
         L.append(f"| {n} | " + " | ".join(str(c) for c in h) + " |")
     wr = {}
-    for r in logs:
-        for n, w in (r.get("widths") or {}).items():
-            wr.setdefault(n, []).append(w["posterior_over_prior_width"])
+    for n, w in ((n, w) for r in logs for n, w in (r.get("widths") or {}).items()):
+        wr.setdefault(n, []).append(w["posterior_over_prior_width"])
     if wr:
         L += ["\n## What the data narrowed: posterior sd / prior sd (transformed space)\n",
               "Median over the logs [min, max]; ≤ 0.71 'measured' (the data carry at least "
@@ -308,13 +281,11 @@ def _render(res, all_logs, method=None):
     for r in logs:
         miss = [n for n in REPORTED if not r["quantities"][n]["cover95"]]
         conv_ = f"yes ({r['met_by']})" if r["converged"] else "NO"
-        L.append(f"| {r['design']} | {r['seed']} | {conv_} | "
-                 f"{_steps(r)} | {r['rhat_max']:.3f} | {r['ess_bulk_min']:.0f} | "
-                 f"{r['ess_tail_min']:.0f} | {r['fit_s']:.0f} | {r['posterior_s']:.0f} "
+        L.append(f"| {r['design']} | {r['seed']} | {conv_} | {_steps(r)} | {r['rhat_max']:.3f} | "
+                 f"{r['ess_bulk_min']:.0f} | {r['ess_tail_min']:.0f} | {r['fit_s']:.0f} | {r['posterior_s']:.0f} "
                  f"({r['compile_s']:.1f}, {r['mode_search_s']:.0f}) | {r['load_start'][0]} → "
                  f"{r['load_end'][0]} | {', '.join(miss) or '–'} |")
-    for des in ("paper", "rich"):
-        ts = [r["posterior_s"] for r in logs if r["design"] == des]
+    for des, ts in ((d, [r["posterior_s"] for r in logs if r["design"] == d]) for d in ("paper", "rich")):
         if ts:
             L.append(f"\nMedian `sample_posterior` time, {des}: {statistics.median(ts):.0f} s "
                      f"(one core of a shared 2-core machine, see loads).")
@@ -342,12 +313,10 @@ def run_cli(sampler, log, out, timeout):
     full = json.loads(Path(out).read_text())
     d = full["posterior_diagnostics"]
     c = d.get("convergence") or {}
-    return r | {"posterior_s": d["wall_time_s"], "compile_s": d.get("compile_s"),
-                "mode_search_s": d.get("mode_search_s"), "converged": d["converged"],
-                "steps": d.get("n_steps"), "burn_in": d.get("burn_in"),
-                "chain_in_tau": d.get("chain_in_tau_max"), "met_by": c.get("met_by"),
-                "rhat_max": c.get("rhat_max"), "ess_bulk_min": c.get("ess_bulk_min"),
-                "ess_tail_min": c.get("ess_tail_min"),
+    return r | {"posterior_s": d["wall_time_s"], "converged": d["converged"],
+                **{k: d.get(k) for k in ("compile_s", "mode_search_s", "burn_in")}, "steps": d.get("n_steps"),
+                "chain_in_tau": d.get("chain_in_tau_max"),
+                **{k: c.get(k) for k in ("met_by", "rhat_max", "ess_bulk_min", "ess_tail_min")},
                 "band95": full["posterior"]["stick_band_halfwidth_rad"]["ci95"]}
 
 
@@ -370,16 +339,13 @@ def render_cli(res):
             emcee = k == "emcee"
             steps = f"{r['steps']} (+{r['burn_in']})" if emcee else "–"
             L.append(
-                f"| {row['log']} | {k} | {r['process_s']:.0f} | {r['posterior_s']:.0f} | "
-                f"{f(r['compile_s'], '.1f')} | {f(r['mode_search_s'], '.1f')} | "
-                f"{'yes' if r['converged'] else 'NO'} ({r.get('met_by') or '–'}) | "
-                f"{steps} | "
-                f"{f(r['rhat_max'], '.3f')} | {f(r['ess_bulk_min'], '.0f')}/"
+                f"| {row['log']} | {k} | {r['process_s']:.0f} | {r['posterior_s']:.0f} | {f(r['compile_s'], '.1f')} | "
+                f"{f(r['mode_search_s'], '.1f')} | {'yes' if r['converged'] else 'NO'} ({r.get('met_by') or '–'}) | "
+                f"{steps} | {f(r['rhat_max'], '.3f')} | {f(r['ess_bulk_min'], '.0f')}/"
                 f"{f(r['ess_tail_min'], '.0f')} | {f(r['chain_in_tau'], '.1f') if emcee else '–'} | "
                 f"{1e3 * r['band95'][0]:.1f}–{1e3 * r['band95'][1]:.1f} | "
                 f"{r['load_start'][0]} → {r['load_end'][0]} |")
-    for k in SAMPLERS:
-        ok = [row[k] for row in res["rows"] if row.get(k, {}).get("rc") == 0]
+    for k, ok in ((k, [row[k] for row in res["rows"] if row.get(k, {}).get("rc") == 0]) for k in SAMPLERS):
         if ok:
             L.append(f"\n{k}: median process {statistics.median(r['process_s'] for r in ok):.0f} s, "
                      f"median posterior {statistics.median(r['posterior_s'] for r in ok):.0f} s, "
@@ -387,30 +353,21 @@ def render_cli(res):
     return "\n".join(L) + "\n"
 
 
-def _stored(name):
-    """``results/NAME.json`` as stored, or ``{}``."""
-    f = RESULTS / f"{name}.json"
-    return json.loads(f.read_text()) if f.exists() else {}
-
-
 def main_cli(args, gen):
     """``--cli``: the shipped paper log and ``--logs``−1 drawn ones, ``--repeats`` processes
     each per sampler, alternating."""
-    tmp = Path(tempfile.mkdtemp())
-    logs = [("csf8_paper.csv", DATA / "csf8_paper.csv")]
+    tmp, logs = Path(tempfile.mkdtemp()), [("csf8_paper.csv", DATA / "csf8_paper.csv")]
     for seed in range(args.seed0, args.seed0 + args.logs - 1):
         logs.append((f"paper_{seed}.csv", tmp / f"paper_{seed}.csv"))
         draw_log(gen, "paper", seed)[1].to_csv(logs[-1][1], index=False)
-    full = _stored(args.name)
-    full["cli"] = res = {"generated": time.strftime("%Y-%m-%dT%H:%M:%S"),
-                         "src": _common.src_fingerprint(), "rows": []}
+    full = _common.stored(args.name)
+    full["cli"] = res = {"generated": time.strftime("%Y-%m-%dT%H:%M:%S"), "src": _common.src_fingerprint(), "rows": []}
     for name, path in logs:
         for _ in range(args.repeats):
             row = {"log": name}
             for k in SAMPLERS:
                 row[k] = run_cli(k, path, tmp / f"{k}.json", args.timeout)
-                print(name, k, {x: row[k].get(x) for x in ("process_s", "posterior_s",
-                                                           "converged", "rc")},
+                print(name, k, {x: row[k].get(x) for x in ("process_s", "posterior_s", "converged", "rc")},
                       _common.loads(), flush=True)
             res["rows"].append(row)
             _common.write_result(args.name, full, render, indent=1)
@@ -435,34 +392,27 @@ def main(argv=None):
     ap.add_argument("--logs", type=int, default=1, help="--cli: the shipped log and N-1 drawn ones")
     ap.add_argument("--repeats", type=int, default=3, help="--cli: runs per log and sampler")
     ap.add_argument("--timeout", type=float, default=900, help="--cli: per process [s]")
-    args = _common.parse_or_render(ap, argv, lambda a: a.name, render,
-                                   indent=1)
+    args = _common.parse_or_render(ap, argv, lambda a: a.name, render, indent=1)
     if args is None:
         return
     from hdid.reference import logs as gen
 
     if args.cli:
         return main_cli(args, gen)
-    out_json, out_md = RESULTS / f"{args.name}.json", RESULTS / f"{args.name}.md"
     if args.merge:
         parts = [json.loads(Path(f).read_text()) for f in args.merge]
         res = dict(parts[0], logs=[r for q in parts for r in q["logs"]],
                    shards=[{k: q[k] for k in ("generated", "options", "load_start")} for q in parts])
         res.pop("cli", None)
-        res.update({k: v for k, v in _stored(args.name).items() if k in ("cli", "checks")})
+        res.update({k: v for k, v in _common.stored(args.name).items() if k in ("cli", "checks")})
         return _common.write_result(args.name, res, render, indent=1)
 
-    res = {"generated": _dt.datetime.now().isoformat(timespec="seconds"), "load_start": _common.loads(),
+    res = {"generated": time.strftime("%Y-%m-%dT%H:%M:%S"), "load_start": _common.loads(),
            "machine": f"{os.cpu_count()} cores, {_common.cpu_model()}", "src": _common.src_fingerprint(),
-           "options": {k: v for k, v in vars(args).items() if k != "render"},
-           "logs": []}
-    res.update({k: v for k, v in _stored(args.name).items() if k in ("cli", "checks")})
-    sched = []
-    for i in range(max(args.paper_logs, args.rich_logs)):
-        if i < args.paper_logs:
-            sched.append(("paper", args.seed0 + i))
-        if i < args.rich_logs:
-            sched.append(("rich", args.seed0 + 1000 + i))
+           "options": {k: v for k, v in vars(args).items() if k != "render"}, "logs": []}
+    res.update({k: v for k, v in _common.stored(args.name).items() if k in ("cli", "checks")})
+    sched = [(d, args.seed0 + off + i) for i in range(max(args.paper_logs, args.rich_logs))
+             for d, off, n in (("paper", 0, args.paper_logs), ("rich", 1000, args.rich_logs)) if i < n]
     k, n = (int(x) for x in args.shard.split("/"))
     t_start = time.perf_counter()
     for name, seed in sched[k::n]:
@@ -471,11 +421,9 @@ def main(argv=None):
         try:
             rs = run_one(gen, name, seed, args.max_steps, args.method, args.noise)
         except Exception:  # record and go on
-            rs = [{"design": name, "seed": seed, "method": m, "error": traceback.format_exc()}
-                  for m in args.method.split(",")]
+            rs = [{"design": name, "seed": seed, "method": m, "error": traceback.format_exc()} for m in args.method.split(",")]
         res["logs"].extend(rs)
-        out_json.write_text(json.dumps(res, indent=1))
-        out_md.write_text(render(res))
+        _common.write_result(args.name, res, render, indent=1)
         for r in rs:
             print(name, seed, {k: r.get(k) for k in ("method", "converged", "steps", "posterior_s",
                                                     "rhat_max", "ess_bulk_min")}, _common.loads(), flush=True)

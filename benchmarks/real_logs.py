@@ -6,8 +6,6 @@
     python benchmarks/real_logs.py --measured # + the measured logs of ../shared/data/real
 """
 
-from __future__ import annotations
-
 import argparse
 import json
 import math
@@ -17,7 +15,7 @@ import sys
 import tempfile
 import time
 
-from _common import RESULTS, ROOT, parse_or_render, run_meta, write_result
+from _common import ROOT, parse_or_render, run_meta, stored, write_result
 
 sys.path.insert(0, str(ROOT / "tests"))
 
@@ -63,9 +61,7 @@ def measured():
 
 def judge(result, truth):
     rows = []
-    for name, est in result.parameters.items():
-        if est.fixed:
-            continue
+    for name, est in ((n, e) for n, e in result.parameters.items() if not e.fixed):
         tv = truth["inertia"] if name == "inertia" else truth["params"][name]
         z = (est.value - tv) / est.std if est.std and math.isfinite(est.std) else math.nan
         flagged = any(name in w for w in result.warnings)
@@ -80,7 +76,7 @@ def main(argv=None):
     if (args := parse_or_render(ap, argv, "real_logs", render)) is None:
         return
     if args.measured:  # rows added to the stored result, one fit (a CLI process) each
-        res = {**json.loads((RESULTS / "real_logs.json").read_text()), "measured": []}
+        res = {**stored("real_logs"), "measured": []}
         for label, path, opts, ref in measured():
             load, t0, out = os.getloadavg()[0], time.perf_counter(), tempfile.mktemp(".json")
             subprocess.run(["hdid", "fit", str(path), "--ratio", "1", *opts, "--json", out, "-q"])
@@ -94,25 +90,21 @@ def main(argv=None):
         return
     out = []
     for label, log, truth, model, key in scenarios():
-        load = os.getloadavg()[0]
-        t0 = time.perf_counter()
+        load, t0, res, err = os.getloadavg()[0], time.perf_counter(), None, None
         try:
             res = hdid.fit(log, model)
-            err = None
         except hdid.HdidError as exc:
-            res, err = None, str(exc)
-        wall = time.perf_counter() - t0
-        row = dict(scenario=label, key=key, wall_s=wall, load=load, error=err)
+            err = str(exc)
+        row = dict(scenario=label, key=key, wall_s=(wall := time.perf_counter() - t0), load=load, error=err)
         if res is not None:
-            row["parameters"] = judge(res, truth)
-            row["warnings"] = res.warnings
-            row["rms_over_floor"] = res.rms_residual_rad / res.quantization_floor_rad
+            row.update(parameters=judge(res, truth), warnings=res.warnings,
+                       rms_over_floor=res.rms_residual_rad / res.quantization_floor_rad)
         out.append(row)
         print(label, f"{wall:.0f} s", "error: " + err if err else
               ", ".join(f"{p['name']} z={p['z']:+.1f}{'*' if p['flagged'] else ''}"
                         for p in row["parameters"]), flush=True)
-    kept = json.loads((RESULTS / "real_logs.json").read_text()).get("measured", [])
-    write_result("real_logs", {"meta": run_meta(), "rows": out, "measured": kept}, render, indent=1)
+    write_result("real_logs", {"meta": run_meta(), "rows": out, "measured": stored("real_logs").get("measured", [])},
+                 render, indent=1)
 
 
 def render(res: dict) -> str:

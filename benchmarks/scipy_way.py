@@ -1,9 +1,5 @@
-"""The free-motion fit done "the way a user would without hdid": scipy only (``solve_ivp``
-LSODA, tanh-smoothed friction, ``least_squares``); ``fit_scipy`` is the baseline of
-``fit_speed.py`` and ``batch_speed.py``, which import it (run alone it prints this).
-"""
-
-from __future__ import annotations
+"""The free-motion fit done "the way a user would without hdid": scipy only (``solve_ivp`` LSODA,
+tanh-smoothed friction, ``least_squares``), the baseline that ``fit_speed.py`` and ``batch_speed.py`` import."""
 
 import math
 import time
@@ -40,9 +36,7 @@ def simulate_run_scipy(time_s: np.ndarray, *, theta0: float, t_release: float,
     sign smoothing at velocity ``eps`` [rad/s]; LSODA at rtol 1e-6, atol 1e-9. NaN after
     the release if the integration failed or ran over :data:`MAX_RHS_CALLS`."""
     k1, k2, tc, ts, vs, dl, cv = (float(params[n]) for n in PARAM_NAMES)
-    N, inv_i = float(ratio), 1.0 / float(inertia)
-    tanh, exp = math.tanh, math.exp
-    calls = [0]
+    N, inv_i, tanh, exp, calls = float(ratio), 1.0 / float(inertia), math.tanh, math.exp, [0]
 
     def rhs(_t, y):
         calls[0] += 1
@@ -75,10 +69,8 @@ def runs_from_dataframe(df) -> list[dict]:
     runs = []
     for run_id, g in df.groupby("run", sort=True):
         g = g.sort_values("time")
-        t = g["time"].to_numpy(float)
-        th = g["theta"].to_numpy(float)
-        moved = np.flatnonzero(th != th[0])
-        dt = float(np.median(np.diff(t)))
+        t, th = g["time"].to_numpy(float), g["theta"].to_numpy(float)
+        moved, dt = np.flatnonzero(th != th[0]), float(np.median(np.diff(t)))
         k = int(moved[0]) - 1 if moved.size else len(t) - 1
         runs.append({"run": run_id, "time": t, "theta": th, "setup": str(g["setup"].iloc[0]),
                      "t_release0": float(t[k] + 0.5 * dt), "theta0_enc": float(th[0])})
@@ -90,16 +82,12 @@ def guess_offsets(runs: Sequence[Mapping]) -> dict[str, float]:
     releases (one direction only: their mean, off by up to the stick band's half-width)."""
     out: dict[str, float] = {}
     for setup in dict.fromkeys(str(r["setup"]) for r in runs):
-        rs = [r for r in runs if str(r["setup"]) == setup]
         finals = {+1: [], -1: []}
-        for r in rs:
-            th = np.asarray(r["theta"], float)
-            direction = 1 if th[-1] > r["theta0_enc"] else -1
-            finals[direction].append(float(th[-1]))
-        if finals[1] and finals[-1]:
-            out[setup] = 0.5 * (np.mean(finals[1]) + np.mean(finals[-1]))
-        else:
-            out[setup] = float(np.mean(finals[1] + finals[-1]))
+        for r in (r for r in runs if str(r["setup"]) == setup):
+            th = float(np.asarray(r["theta"], float)[-1])
+            finals[1 if th > r["theta0_enc"] else -1].append(th)
+        both = finals[1] and finals[-1]
+        out[setup] = 0.5 * (np.mean(finals[1]) + np.mean(finals[-1])) if both else float(np.mean(finals[1] + finals[-1]))
     return out
 
 
@@ -119,54 +107,40 @@ def fit_scipy(runs: list[dict], x0: dict, inertia: float, ratio: float = 100.0, 
     smoothing velocity [rad/s]. Returns ``params``, ``runs`` (``t_release``, ``theta0``,
     ``theta0_enc``), ``offsets``, ``nfev``, ``n_simulations``, ``wall_s``, ``rms`` [rad], ``success``."""
     t_start = time.perf_counter()
-    missing = [n for n in PARAM_NAMES if n not in x0]
-    if missing:
+    if missing := [n for n in PARAM_NAMES if n not in x0]:
         raise ValueError(f"x0 lacks {missing}")
     if any(float(x0[n]) <= 0 for n in PARAM_NAMES):
         raise ValueError("starting physical parameters must be > 0 (log-space fit)")
-    n_runs = len(runs)
-    setups = list(dict.fromkeys(str(r["setup"]) for r in runs))
+    n_runs, n_p, setups = len(runs), len(PARAM_NAMES), list(dict.fromkeys(str(r["setup"]) for r in runs))
     offsets0 = guess_offsets(runs)
-    t_rel0 = [r["t_release0"] for r in runs]
-    th_enc0 = [r["theta0_enc"] for r in runs]
     run_setup = [setups.index(str(r["setup"])) for r in runs]
     times = [np.asarray(r["time"], float) for r in runs]
-    data = [np.asarray(r["theta"], float) for r in runs]
-    y_all = np.concatenate(data)
-
-    n_p = len(PARAM_NAMES)
-    x_init = np.concatenate([
-        np.log([float(x0[n]) for n in PARAM_NAMES]),
-        np.asarray(t_rel0, float),
-        np.asarray(th_enc0, float),
-        np.asarray([offsets0[s] for s in setups], float),
-    ])
+    y_all = np.concatenate([np.asarray(r["theta"], float) for r in runs])
+    x_init = np.concatenate([np.log([float(x0[n]) for n in PARAM_NAMES]),
+                             np.asarray([r["t_release0"] for r in runs], float),
+                             np.asarray([r["theta0_enc"] for r in runs], float),
+                             np.asarray([offsets0[s] for s in setups], float)])
     counters = {"sims": 0}
 
-    def unpack(x):
-        params = dict(zip(PARAM_NAMES, np.exp(x[:n_p])))
-        t_rel = x[n_p:n_p + n_runs]
-        th_enc = x[n_p + n_runs:n_p + 2 * n_runs]
-        offs = x[n_p + 2 * n_runs:]
-        return params, t_rel, th_enc, offs
+    def unpack(x):  # params, release times, encoder start angles, set-up offsets
+        return (dict(zip(PARAM_NAMES, np.exp(x[:n_p]))), x[n_p:n_p + n_runs], x[n_p + n_runs:n_p + 2 * n_runs],
+                x[n_p + 2 * n_runs:])
 
     def model(x):
         params, t_rel, th_enc, offs = unpack(x)
         out = []
         for i in range(n_runs):
             off = offs[run_setup[i]]
-            th = simulate_run_scipy(times[i], theta0=th_enc[i] - off, t_release=t_rel[i],
-                                    params=params, inertia=inertia, ratio=ratio, eps=eps)
+            out.append(off + simulate_run_scipy(times[i], theta0=th_enc[i] - off, t_release=t_rel[i],
+                                                params=params, inertia=inertia, ratio=ratio, eps=eps))
             counters["sims"] += 1
-            out.append(th + off)
         return np.concatenate(out)
 
     def residuals(x):
         r = model(x) - y_all
         return np.where(np.isfinite(r), r, 1.0)  # a failed solve is a large residual
 
-    lo = np.full(x_init.shape, -np.inf)
-    hi = np.full(x_init.shape, np.inf)
+    lo, hi = np.full(x_init.shape, -np.inf), np.full(x_init.shape, np.inf)
     for name, (b_lo, b_hi) in DEFAULT_BOUNDS.items():
         j = PARAM_NAMES.index(name)
         lo[j], hi[j] = math.log(b_lo), math.log(b_hi)
@@ -175,19 +149,12 @@ def fit_scipy(runs: list[dict], x0: dict, inertia: float, ratio: float = 100.0, 
                         diff_step=DIFF_STEP, bounds=(lo, hi), max_nfev=max_nfev)
     params, t_rel, th_enc, offs = unpack(res.x)
     r_final = model(res.x) - y_all
-    wall = time.perf_counter() - t_start
-    return {
-        "params": {**{n: float(v) for n, v in params.items()}, "inertia": float(inertia)},
-        "runs": [{"t_release": float(t_rel[i]), "theta0": float(th_enc[i] - offs[run_setup[i]]),
-                  "theta0_enc": float(th_enc[i])} for i in range(n_runs)],
-        "offsets": {s: float(offs[j]) for j, s in enumerate(setups)},
-        "nfev": int(res.nfev),
-        "n_simulations": counters["sims"],
-        "wall_s": wall,
-        "rms": float(np.sqrt(np.mean(r_final**2))),
-        "success": bool(res.success),
-    }
-
+    return {"params": {**{n: float(v) for n, v in params.items()}, "inertia": float(inertia)},
+            "runs": [{"t_release": float(t_rel[i]), "theta0": float(th_enc[i] - offs[run_setup[i]]),
+                      "theta0_enc": float(th_enc[i])} for i in range(n_runs)],
+            "offsets": {s: float(offs[j]) for j, s in enumerate(setups)}, "nfev": int(res.nfev),
+            "n_simulations": counters["sims"], "wall_s": time.perf_counter() - t_start,
+            "rms": float(np.sqrt(np.mean(r_final**2))), "success": bool(res.success)}
 
 
 if __name__ == "__main__":
