@@ -97,9 +97,9 @@ def _save(rows: list[dict]) -> None:
 
 def render(rows: list[dict]) -> str:
     out = ["# Clean logs from an independent simulator: fits above 1.5× the floor", "",
-           "See `benchmarks/clean_floor.py` for the plant ranges and designs. One row per "
-           "(label, design); a fit counts as *above* when its RMS residual exceeds "
-           f"{ABOVE}× the quantization floor (step/√12), *error* when it raised.", "",
+           "See `benchmarks/clean_floor.py` for the plant ranges and designs. One row per (label, design); a fit "
+           f"counts as *above* when its RMS residual exceeds {ABOVE}× the quantization floor (step/√12), *error* "
+           "when it raised.", "",
            "| label | design | logs | above 1.5× | rate | errors | median ratio | max ratio "
            "| median wall [s] | load (1 min) | limit restarts that won |",
            "|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -113,11 +113,10 @@ def render(rows: list[dict]) -> str:
         won = Counter(x["restarted_from"] for x in g if x.get("restarted_from"))
         loads = [x.get("load1") for x in g if x.get("load1") is not None]
         out.append(
-            f"| {label} | {design} | {len(g)} | {above} | {100 * above / len(g):.1f} % | {err} "
-            f"| {np.nanmedian(ratio):.3f} | {np.nanmax(ratio):.3f} "
-            f"| {np.median([x['wall_s'] for x in g]):.1f} "
-            f"| {np.median(loads) if loads else math.nan:.2f} "
-            f"| {', '.join(f'{k} {v}' for k, v in sorted(won.items())) or '—'} |")
+            f"| {label} | {design} | {len(g)} | {above} | {100 * above / len(g):.1f} % | {err} | "
+            f"{np.nanmedian(ratio):.3f} | {np.nanmax(ratio):.3f} | {np.median([x['wall_s'] for x in g]):.1f} | "
+            f"{np.median(loads) if loads else math.nan:.2f} | "
+            f"{', '.join(f'{k} {v}' for k, v in sorted(won.items())) or '—'} |")
     out += ["", "Logs above 1.5× (label, design, seed: ratio):", ""]
     for r in rows:
         if not r["ratio"] <= ABOVE:

@@ -20,14 +20,12 @@ NAME = "diagnose_speed"
 LOG = DATA / "hidden_hysteresis_1khz.csv"
 
 CHILD = r"""
-import json, resource, sys, time
+import contextlib, json, resource, sys, time
 t0 = time.perf_counter()
 from hdid.cli import main
 out = sys.argv[2]
-try:
+with contextlib.suppress(SystemExit):
     main(["diagnose", sys.argv[1], "--json", out, "--quiet"], standalone_mode=False)
-except SystemExit:
-    pass
 wall = time.perf_counter() - t0
 ru = resource.getrusage(resource.RUSAGE_SELF)
 try:
@@ -36,11 +34,9 @@ try:
 except Exception:
     stats = []
 d = json.load(open(out))
-print("@@" + json.dumps({"wall_s": wall, "cpu_s": ru.ru_utime + ru.ru_stime,
-                         "timing": d.get("timing", {}), "verdict": d["verdict"],
-                         "summary": d["summary"],
-                         "candidates": [(c["variant"], c["delta_bic"]) for c in d["candidates"]],
-                         "scanned": d.get("scanned", {}), "programs": stats}))
+print("@@" + json.dumps({"wall_s": wall, "cpu_s": ru.ru_utime + ru.ru_stime, "timing": d.get("timing", {}),
+                         "verdict": d["verdict"], "summary": d["summary"], "scanned": d.get("scanned", {}),
+                         "candidates": [(c["variant"], c["delta_bic"]) for c in d["candidates"]], "programs": stats}))
 """
 
 
@@ -69,13 +65,12 @@ def render(res: dict) -> str:
     m = res["meta"]
     lines = [
         f"# `hdid diagnose {Path(res['log']).name}`: time per code, cold and warm", "",
-        f"Measured {m['date']} on {m['cpu']} ({m['cores']} cores, shared), each process pinned "
-        f"to core {res['core']} with its own cache folder; load average (1/5/15 min) at start "
-        f"{m['load']}, at end {m.get('load_end', '?')}. Source fingerprint of this checkout "
-        f"{m['src']}. \"cold\" = empty cache; \"warm\" = a second process with the cache the "
-        "first left. Compile = JAX tracing, lowering and compiling or reading its cache "
-        "(diagnose's own `timing`); the program store's rows say how many programs were "
-        "read from it or traced, and the seconds of each.", "",
+        f"Measured {m['date']} on {m['cpu']} ({m['cores']} cores, shared), each process pinned to core {res['core']} "
+        f"with its own cache folder; load average (1/5/15 min) at start {m['load']}, at end "
+        f"{m.get('load_end', '?')}. Source fingerprint of this checkout {m['src']}. \"cold\" = empty cache; \"warm\" "
+        "= a second process with the cache the first left. Compile = JAX tracing, lowering and compiling or reading "
+        "its cache (diagnose's own `timing`); the program store's rows say how many programs were read from it or "
+        "traced, and the seconds of each.", "",
         "| code | cache | wall s | CPU s | compile s | fitting s | programs (store) | load start → end | verdict (first candidates) |",
         "|---|---|---|---|---|---|---|---|---|",
     ]

@@ -55,16 +55,14 @@ def recovery(seeds: int) -> list[dict]:
 def narrowing() -> dict:
     free, driven = DATA / "csf8_paper.csv", DATA / "driven_csf8.csv"
     wg_only = pd.read_csv(driven).drop(columns=["theta_out"])
-    truth = json.loads((DATA / "truth.json").read_text())["driven_csf8.csv"]["params"]
-    cases = {}
+    truth, cases = json.loads((DATA / "truth.json").read_text())["driven_csf8.csv"]["params"], {}
 
     def rel(result):  # None: not in this model (free motion has no output friction)
         ests = {n: result.parameters.get(n) for n in PHYSICAL}
         return {n: None if e is None else "fixed" if e.fixed else
                 e.std / abs(e.value) if math.isfinite(e.std) else math.inf for n, e in ests.items()}
 
-    runs = [
-        ("A free-motion alone, inertia free", lambda: hdid.fit(free, free_inertia=True)),
+    runs = [("A free-motion alone, inertia free", lambda: hdid.fit(free, free_inertia=True)),
         ("A' free-motion alone, inertia fixed at datasheet", lambda: hdid.fit(free)),
         ("B driven alone", lambda: hdid.fit_driven(driven)),
         # without the output encoder the output friction is not seen (it looks like WG
@@ -74,11 +72,9 @@ def narrowing() -> dict:
          lambda: hdid.fit_driven(wg_only, fix={"tau_fout": truth["tau_fout"]})),
         ("D joint free-motion + driven", lambda: hdid.fit_joint([free, driven])),
         ("E joint free-motion + driven without output encoder, tau_fout given",
-         lambda: hdid.fit_joint([free, wg_only], fix={"tau_fout": truth["tau_fout"]})),
-    ]
+         lambda: hdid.fit_joint([free, wg_only], fix={"tau_fout": truth["tau_fout"]}))]
     for label, f in runs:
-        t0 = time.perf_counter()
-        r = f()
+        t0, r = time.perf_counter(), f()
         cases[label] = {"rel_std": rel(r), "wall_s": time.perf_counter() - t0,
                         "values": {n: r.parameters[n].value for n in PHYSICAL if n in r.parameters}}
         print(label, f"{cases[label]['wall_s']:.0f} s", flush=True)

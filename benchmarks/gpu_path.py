@@ -121,27 +121,23 @@ def render(results: dict) -> str:
     for t, r in cols:
         m = r["machine"]
         L.append(f"- **{t}**: generated {r['generated']} by `python benchmarks/gpu_path.py "
-                 f"--tag {r['tag']}`; backend `{m['backend']}`, device {m['device_kind']}, "
-                 f"{m['nproc']} CPU cores ({m['cpu']}), python {m['python']}, jax {m['jax']}, "
-                 f"x64 {m['x64']}, src {m['src_fingerprint']}, load {m['load_start']:.1f} → "
-                 f"{r.get('load_end', float('nan')):.1f}.")
+                 f"--tag {r['tag']}`; backend `{m['backend']}`, device {m['device_kind']}, {m['nproc']} CPU cores "
+                 f"({m['cpu']}), python {m['python']}, jax {m['jax']}, x64 {m['x64']}, src {m['src_fingerprint']}, "
+                 f"load {m['load_start']:.1f} → {r.get('load_end', float('nan')):.1f}.")
+    row = lambda label, cell: f"| {label} | " + " | ".join(cell(r) for _, r in cols) + " |"  # noqa: E731
     L += ["", "## 1. Fit of the shipped paper log", "",
           "| | " + " | ".join(t for t, _ in cols) + " |", "|---|" + "---|" * len(cols),
-          "| first call (compile) | " + " | ".join(f"{r['fit']['first_s']:.1f} s" for _, r in cols) + " |",
-          "| warm call | " + " | ".join(f"{r['fit']['warm_s']:.2f} s" for _, r in cols) + " |",
-          "| cost | " + " | ".join(f"{r['fit']['cost']:.6f}" for _, r in cols) + " |"]
-    for k in PARAMS:
-        L.append(f"| {k} | " + " | ".join(f"{r['fit']['params'][k]:.10g}" for _, r in cols) + " |")
+          row("first call (compile)", lambda r: f"{r['fit']['first_s']:.1f} s"),
+          row("warm call", lambda r: f"{r['fit']['warm_s']:.2f} s"), row("cost", lambda r: f"{r['fit']['cost']:.6f}"),
+          *(row(k, lambda r: f"{r['fit']['params'][k]:.10g}") for k in PARAMS)]
     if gpu and "max_rel_diff_vs_reference" in gpu["fit"]:
         L.append(f"\nLargest relative difference of a fitted parameter, GPU vs CPU: "
                  f"{gpu['fit']['max_rel_diff_vs_reference']:.1e}.")
     L += ["", "## 2. One call of the vectorised log-posterior (`LogPosterior.batch`)", "",
           "| walkers | " + " | ".join(f"{t} median | {t} µs/walker" for t, _ in cols) + " |",
           "|---|" + "---|---|" * len(cols)]
-    for W in WALKERS:
-        row = [f"{r['logp_batch'][str(W)]['median_s'] * 1e3:.2f} ms | "
-               f"{r['logp_batch'][str(W)]['us_per_walker']:.1f}" for _, r in cols]
-        L.append(f"| {W} | " + " | ".join(row) + " |")
+    L += [row(W, lambda r: f"{r['logp_batch'][str(W)]['median_s'] * 1e3:.2f} ms | "
+                           f"{r['logp_batch'][str(W)]['us_per_walker']:.1f}") for W in WALKERS]
     if gpu and "logp_max_abs_diff_vs_reference" in gpu:
         L.append(f"\nAt the {len(gpu['positions'])} stored walker positions the GPU's log p "
                  f"differs from the CPU's by at most {gpu['logp_max_abs_diff_vs_reference']:.1e} "

@@ -26,8 +26,7 @@ t0 = time.perf_counter()
 log = hdid.read_log(sys.argv[1])
 t1 = time.perf_counter()
 r = hdid.fit(log)
-t2 = time.perf_counter()
-print(json.dumps({"read_s": t1 - t0, "fit_s": t2 - t1,
+print(json.dumps({"read_s": t1 - t0, "fit_s": time.perf_counter() - t1,
                   "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
                   "k1": r.parameters["k1"].value, "rms_counts": r.rms_residual_rad / r.resolution_rad}))
 """

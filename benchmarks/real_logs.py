@@ -30,17 +30,15 @@ RATES = {"csf32_flywheel": 250.0, "csf32": 250.0, "csf20": 250.0, "csf14": 250.0
 def scenarios():
     for ratio in (1.0, 50.0):
         log, truth = ind.pendulum_drop(ratio=ratio, frequency_hz=1.0)
-        model = (hdid.Model.default(inertia=truth["inertia"], ratio=ratio).without("stiffness")
-                 .with_effect(library({})["gravity"]))
-        yield f"pendulum drop, ratio {ratio:g}", log, truth, model, "mgl"
+        model = hdid.Model.default(inertia=truth["inertia"], ratio=ratio).without("stiffness")
+        yield f"pendulum drop, ratio {ratio:g}", log, truth, model.with_effect(library({})["gravity"]), "mgl"
     log, truth = ind.ring_down(frequency_hz=5.0)
     yield ("ring-down in motion, analog", log, truth,
            hdid.Model.default(inertia=truth["inertia"], ratio=1.0).without("stribeck"), "k1")
     for gear, rate in RATES.items():
         log, truth = ind.paper_design(gear, rate=rate)
-        yield (f"paper design {gear} ({truth['natural_frequency_hz']:.0f} Hz, {rate:g} Hz)",
-               log, truth, hdid.Model.default(inertia=truth["inertia"], ratio=truth["ratio"]),
-               "k1")
+        yield (f"paper design {gear} ({truth['natural_frequency_hz']:.0f} Hz, {rate:g} Hz)", log, truth,
+               hdid.Model.default(inertia=truth["inertia"], ratio=truth["ratio"]), "k1")
 
 
 def measured():
@@ -54,9 +52,8 @@ def measured():
         yield (f"UR10e {j}", real / "ur10e_hd" / r["file"], ["--add", "torque_offset"]
                + ["--add", "gravity"] * bool(ref["mgl"]), {k: v for k, v in ref.items() if v})
     for k, v in json.loads((real / "sts3215_drop/reference.json").read_text())["setups"].items():
-        yield (f"STS3215 {k}", real / "sts3215_drop" / v["csv"], ["--remove", "stiffness", "--add",
-               "gravity", "--inertia", repr(v["bam_m6_total_inertia_kgm2"])],
-               {"mgl": v["mgl_point_mass_Nm"]})
+        yield (f"STS3215 {k}", real / "sts3215_drop" / v["csv"], ["--remove", "stiffness", "--add", "gravity",
+               "--inertia", repr(v["bam_m6_total_inertia_kgm2"])], {"mgl": v["mgl_point_mass_Nm"]})
 
 
 def judge(result, truth):
