@@ -3,6 +3,14 @@ stds checked against the spread of fits of simulated logs; ``--pairs``: diagnose
 separating experiments checked by simulation.
 
     taskset -c 1 python benchmarks/design_check.py [--n 30] [--pairs [--n-this 5]] [--speed]
+    python benchmarks/design_check.py --pair-logs DIR [--n 10]     # simulate, pickle
+    taskset -c 1 python benchmarks/design_check.py --diagnose-logs DIR [--part I/K]
+    python benchmarks/design_check.py --collect DIR                # into the result
+
+``--pair-logs``/``--diagnose-logs``/``--collect``: ``hdid.diagnose`` (default candidates,
+``design=False``: the separation is computed after the verdict and does not change it) on
+the logs of each pair's separating experiment that ``--pairs`` fits (the same seeds), in
+parts that may run in parallel processes.
 """
 
 from __future__ import annotations
@@ -35,9 +43,16 @@ def main(argv=None) -> int:
                     help="only re-measure the speed of 20 candidates (the rest kept)")
     ap.add_argument("--n-this", type=int, default=5,
                     help="--pairs: simulated logs per form of the log's own design")
+    ap.add_argument("--pair-logs", metavar="DIR", help="simulate --n logs per form, pickle them")
+    ap.add_argument("--diagnose-logs", metavar="DIR", help="diagnose the pickled logs in DIR")
+    ap.add_argument("--part", default="0/1", help="--diagnose-logs: every K-th log from the I-th")
+    ap.add_argument("--collect", metavar="DIR", help="the diagnosed logs' records into the result")
+    ap.add_argument("--label", default="", help="--collect: the run's name (its code, machine)")
     args = parse_or_render(ap, argv, "design_check", render)
     if args is None:
         return 0
+    if args.pair_logs or args.diagnose_logs or args.collect:
+        return pair_diagnoses(args)
     if args.pairs:
         return pairs(args.n, args.n_this)
     import hdid
@@ -47,6 +62,8 @@ def main(argv=None) -> int:
         res = json.loads((RESULTS / "design_check.json").read_text())
         fit = hdid.fit(DATA / "csf8_paper.csv")
         res["speed"], res["speed_src"] = _speed(fit, res.setdefault("loads", [])), src_fingerprint()
+        _write(res)
+        res["speed_separate"] = _speed(fit, res["loads"], separate=("backlash", "hysteresis"))
         _write(res)
         return 0
     res = {"benchmark": "design_check", "src": src_fingerprint(), "cpu": cpu_model(),
@@ -83,10 +100,18 @@ def main(argv=None) -> int:
     return 0
 
 
-def _speed(fit, loads):
-    """Seconds of ``hdid.design`` with 20 candidates: the process's first call, then warm."""
+def _speed(fit, loads, separate=()):
+    """Seconds of ``hdid.design`` with 20 candidates: the process's first call, then warm;
+    ``separate``: two effects, each added to the fit's model and fitted, the pair given
+    as ``separate=`` (the separations as diagnose computes them)."""
     import hdid
     from hdid._design import _candidates
+    from hdid.effects._registry import registry
+
+    vals = fit.model.float_values()
+    pair = [hdid.fit(DATA / "csf8_paper.csv", start_from_model=True,
+                     model=fit.model.with_effect(registry()[k].start_from(vals)))
+            for k in separate] or None
 
     base = _candidates.baseline(fit)
     extra = [dict(name="rate x8", rate=8 * base.rate),
@@ -94,12 +119,16 @@ def _speed(fit, loads):
              dict(name="repeats x3", repeats=3)]
     cands = _candidates.default_candidates(base, fit.model)[1:] + _candidates.load_candidates(extra, base)
     timings = []
-    for label in ("cold", "warm", "warm"):
+    for label in ("first with separate" if pair else "cold", "warm", "warm"):
         loads.append(load(f"before {label}"))
         t = time.perf_counter()
-        d20 = hdid.design(fit, cands, targets=TARGETS)
+        d20 = hdid.design(fit, cands, targets=None if pair else TARGETS, separate=pair)
         timings.append({"call": label, "n_candidates": len(d20.predictions),
                         "seconds": time.perf_counter() - t, **load(label)})
+        if pair:
+            top = d20.best
+            timings[-1].update(separate=list(separate), top=top.experiment.name,
+                               top_2lnlr=list(top.separation), top_kind=top.separation_kind)
     return timings
 
 
@@ -194,6 +223,74 @@ def pairs(n: int, n_this: int) -> int:
     return 0
 
 
+def pair_diagnoses(args) -> int:
+    """``--pair-logs`` / ``--diagnose-logs`` / ``--collect`` (module docstring)."""
+    import pickle
+    from pathlib import Path
+
+    import hdid
+
+    if args.pair_logs:
+        from hdid._design._check import simulate_logs
+        from hdid._diagnosis._separating import experiments_for
+
+        out = Path(args.pair_logs)
+        out.mkdir(parents=True, exist_ok=True)
+        stored = json.loads((RESULTS / "design_check.json").read_text())["pairs"]["rows"]
+        for p, (title, design, seed, keys) in enumerate(PAIRS):
+            _, df = _case_log(design, seed)
+            d = hdid.diagnose(df, candidates=list(keys), design=False)
+            by = {c.key: c for c in d.candidates if c.error is None}
+            fits = [by[k].fit.result() for k in keys]
+            name = next(r for r in stored if r["seed"] == seed)["separating"]["experiment"]
+            e = next(x for x in experiments_for(*fits) if x.name == name)
+            for i, f in enumerate(fits):  # the seeds of --pairs' realised 2 ln LR
+                for k, log in enumerate(simulate_logs(f, e, args.n, seed=seed + i)):
+                    rec = {"pair": title, "truth": keys[i], "log_index": k, "experiment": name}
+                    (out / f"p{p}_{keys[i]}_{k:02d}.pkl").write_bytes(pickle.dumps({**rec, "log": log}))
+            print(title, name, "logs written", flush=True)
+        return 0
+    if args.diagnose_logs:
+        import platform
+
+        import jax
+
+        i, k = map(int, args.part.split("/"))
+        # log 0 of every form first, then log 1, ...: the first logs done cover every form
+        files = sorted(Path(args.diagnose_logs).glob("p*.pkl"), key=lambda f: (f.stem[-2:], f.stem))
+        for f in files[i::k]:
+            if f.with_suffix(".json").exists():
+                continue
+            rec = pickle.loads(f.read_bytes())
+            log = rec.pop("log")
+            rec["load_before"] = load("before")
+            t, c = time.perf_counter(), time.process_time()
+            d = hdid.diagnose(log, design=False)
+            cands = [x for x in d.candidates if x.error is None]
+            named = (cands[0].key if d.verdict == "missing_effect" else
+                     d.verdict if d.verdict != "ambiguous" else
+                     "|".join(s.strip() for s in d.summary.split("ambiguous between ", 1)[-1]
+                              .split(" (")[0].split(",")))
+            rec.update(verdict=d.verdict, named=named, summary=d.summary,
+                       table=[(x.key, x.label, x.delta_bic, x.rms_after_rad / d.floor_rad)
+                              for x in cands[:6]],
+                       rms_before_floor=d.base.rms_residual_rad / d.floor_rad,
+                       wall_s=time.perf_counter() - t, cpu_s=time.process_time() - c,
+                       load_after=load("after"), src=src_fingerprint(), cpu=cpu_model(),
+                       host=platform.node(), jax=jax.__version__)
+            rec["grade"] = ("right" if named == rec["truth"] else "honest" if
+                            rec["truth"] in named.split("|") else "wrong")
+            f.with_suffix(".json").write_text(json.dumps(rec, indent=1, default=str))
+            print(f.stem, d.verdict, named, rec["grade"], f"{rec['wall_s']:.0f} s", flush=True)
+        return 0
+    rows = [json.loads(f.read_text()) for f in sorted(Path(args.collect).glob("p*.json"))]
+    res = json.loads((RESULTS / "design_check.json").read_text())
+    runs = [r for r in res.get("pair_diagnoses", []) if r["label"] != args.label]
+    res["pair_diagnoses"] = runs + [{"label": args.label, "rows": rows}]
+    _write(res)
+    return 0
+
+
 def _write(res):
     (RESULTS / "design_check.json").write_text(json.dumps(res, indent=2, allow_nan=False,
                                                           default=lambda x: None) + "\n")
@@ -214,6 +311,17 @@ def render(res) -> str:
     for t in res.get("speed", []):
         L.append(f"| {t['call']} | {t['n_candidates']} | {t['seconds']:.2f} | "
                  f"{t['load1']:.2f} / {t['load5']:.2f} / {t['load15']:.2f} |")
+    sep = res.get("speed_separate")
+    if sep:
+        L += ["", f"--separate {','.join(sep[0]['separate'])} (fits of this log with each "
+              "added; the separations as diagnose computes them: local refits, then the "
+              "largest fitted globally until it is a value):", "",
+              "| call | candidates | s | top | its 2 ln LR (A, B true) | kind | load 1/5/15 |",
+              "|---|---|---|---|---|---|---|"]
+        for t in sep:
+            L.append(f"| {t['call']} | {t['n_candidates']} | {t['seconds']:.2f} | {t['top']} | "
+                     f"{', '.join(_fmt(x) for x in t['top_2lnlr'])} | {t['top_kind']} | "
+                     f"{t['load1']:.2f} / {t['load5']:.2f} / {t['load15']:.2f} |")
     L += ["", f"## Ranking by {TARGETS} (geometric-mean std ratio to this log)", "", "```",
           res.get("report", ""), "```", ""]
     top = res.get("top")
@@ -276,6 +384,22 @@ def render(res) -> str:
                              f"{real['seconds']:.0f} | {real['load1']:.1f} |")
         L += [""] + [f"- {r['text']} (computed in {r['separation_s']:.0f} s)"
                      for r in pr["rows"]] + [""]
+    for run in res.get("pair_diagnoses", []):
+        L += ["## hdid.diagnose on the separating experiments' logs (default candidates, "
+              f"design=False; --diagnose-logs): {run['label']}", "",
+              "| pair | true form | logs | right | honest (ambiguous, truth in the set) | wrong | "
+              "named when not right | wall s (median) | load |", "|---|---|---|---|---|---|---|---|---|"]
+        groups: dict = {}
+        for r in run["rows"]:
+            groups.setdefault((r["pair"], r["truth"]), []).append(r)
+        for (pair, truth), g in groups.items():
+            n = {k: sum(r["grade"] == k for r in g) for k in ("right", "honest", "wrong")}
+            other = ", ".join(sorted({r["named"] for r in g if r["grade"] != "right"})) or "-"
+            wall = sorted(r["wall_s"] for r in g)[len(g) // 2]
+            loads = [r["load_after"]["load1"] for r in g]
+            L.append(f"| {pair} | {truth} | {len(g)} | {n['right']} | {n['honest']} | {n['wrong']} "
+                     f"| {other} | {wall:.0f} | {min(loads):.1f}-{max(loads):.1f} |")
+        L.append("")
     if res.get("interpretation"):
         L += ["## Interpretation", "", res["interpretation"]]
     return "\n".join(L) + "\n"
