@@ -24,8 +24,7 @@ def src_fingerprint() -> str:
     """Hash of src/hdid/**/*.py, recorded with results (src may change between runs)."""
     h = hashlib.sha256()
     for f in sorted((ROOT / "src" / "hdid").rglob("*.py")):
-        h.update(str(f.relative_to(ROOT)).encode())
-        h.update(f.read_bytes())
+        h.update(str(f.relative_to(ROOT)).encode() + f.read_bytes())
     return h.hexdigest()[:16]
 
 
@@ -54,26 +53,25 @@ def loads() -> list[float]:
 
 
 def machine() -> dict:
-    """The speed results' machine record: date, cores, CPU, python, platform, JAX backend and
-    device, package versions, the source fingerprint and the 1-min load now."""
+    """The speed results' machine record: date, cores, CPU, python, platform, JAX backend and device, package
+    versions, the source fingerprint and the 1-min load now."""
     import importlib
 
     import jax
 
     dev = jax.devices()[0]
     return {"date": time.strftime("%Y-%m-%dT%H:%M:%S"), "nproc": os.cpu_count(), "cpu": cpu_model(),
-            "python": platform.python_version(), "platform": platform.platform(),
-            "backend": jax.default_backend(), "device": str(dev),
-            "device_kind": getattr(dev, "device_kind", "?"), "x64": bool(jax.config.jax_enable_x64),
+            "python": platform.python_version(), "platform": platform.platform(), "backend": jax.default_backend(),
+            "device": str(dev), "device_kind": getattr(dev, "device_kind", "?"), "x64": bool(jax.config.jax_enable_x64),
             "src_fingerprint": src_fingerprint(), "load_start": os.getloadavg()[0],
-            **{m: importlib.import_module(m).__version__
-               for m in ("jax", "jaxlib", "numpy", "scipy", "equinox", "optimistix", "hdid")}}
+            **{m: importlib.import_module(m).__version__ for m in ("jax", "jaxlib", "numpy", "scipy", "equinox",
+                                                                   "optimistix", "hdid")}}
 
 
 def run_meta(**extra) -> dict:
     """Date, CPU, cores, load and source fingerprint for a results file's header."""
-    return {"date": time.strftime("%Y-%m-%d %H:%M"), "cpu": cpu_model(),
-            "cores": os.cpu_count(), "load": load_text(), "src": src_fingerprint(), **extra}
+    return {"date": time.strftime("%Y-%m-%d %H:%M"), "cpu": cpu_model(), "cores": os.cpu_count(), "load": load_text(),
+            "src": src_fingerprint(), **extra}
 
 
 class Clock:
@@ -102,10 +100,9 @@ def write_result(name: str, res, render, indent: int = 2) -> None:
 
 
 def parse_or_render(ap, argv, name, render, indent: int = 2):
-    """Parse ``argv`` with ``--render`` (re-write ``results/<name>.md`` from its JSON, nothing
-    run) and ``--interpretation FILE`` (hand-written markdown stored in the JSON, rendered as
-    its Interpretation section) added: the parsed arguments, or ``None`` after a render.
-    ``name`` may be a callable of the arguments (an ``--out`` option)."""
+    """Parse ``argv`` with ``--render`` (re-write ``results/<name>.md`` from its JSON) and ``--interpretation FILE``
+    (markdown stored in the JSON as its Interpretation) added: the arguments, or ``None`` after a render. ``name``
+    may be a callable of the arguments (an ``--out`` option)."""
     ap.add_argument("--render", action="store_true",
                     help="re-write the markdown from the stored JSON instead of running")
     ap.add_argument("--interpretation", metavar="FILE",

@@ -19,6 +19,8 @@ from pathlib import Path
 import numpy as np
 from _common import RESULTS, ROOT
 
+import hdid
+
 sys.path.insert(0, str(ROOT / "tests"))
 import independent as ind  # noqa: E402  (pure numpy/scipy, no hdid)
 
@@ -59,8 +61,6 @@ def make(design: str, seed: int):
 
 
 def fit_one(design: str, seed: int) -> dict:
-    import hdid
-
     df, truth = make(design, seed)
     t0, row = time.perf_counter(), {"design": design, "seed": seed, "truth": truth["params"]}
     try:
@@ -90,8 +90,7 @@ def _slim(row: dict) -> dict:
 
 
 def _save(rows: list[dict]) -> None:
-    body = ",\n".join(json.dumps(_slim(r), default=float) for r in rows)
-    OUT.write_text('{"rows": [\n' + body + "\n]}\n")
+    OUT.write_text('{"rows": [\n' + ",\n".join(json.dumps(_slim(r), default=float) for r in rows) + "\n]}\n")
     OUT.with_suffix(".md").write_text(render(rows))
 
 
@@ -129,7 +128,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("designs", nargs="*", default=["paper", "rich"])
     ap.add_argument("--seeds", default="0:200", help="first:stop (log indices)")
-    ap.add_argument("--only", default="", help="comma-separated log indices instead of --seeds (e.g. an earlier run's misses)")
+    ap.add_argument("--only", default="", help="log indices, comma-separated, instead of --seeds (e.g. earlier misses)")
     ap.add_argument("--label", default="after")
     ap.add_argument("--append", action="store_true", help="keep the rows already stored")
     ap.add_argument("--report", action="store_true", help="only rewrite the .md")
@@ -140,20 +139,17 @@ def main(argv=None) -> int:
         return 0
     if not a.append:
         rows = [r for r in rows if r.get("label") != a.label]
-    import hdid
-
-    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=Path(hdid.__file__).parent,
-                          capture_output=True, text=True).stdout.strip()
+    src = Path(hdid.__file__).parent
+    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=src, capture_output=True, text=True).stdout.strip()
     lo, hi = (int(x) for x in a.seeds.split(":"))
     seeds = [int(x) for x in a.only.split(",")] if a.only else range(lo, hi)
     for seed in seeds:
         for design in a.designs:
             if any(r.get("label") == a.label and r["design"] == design and r["seed"] == seed for r in rows):
                 continue
-            rows.append(row := fit_one(design, seed) | dict(label=a.label, hdid=str(Path(hdid.__file__).parent),
-                                                             commit=head, load1=os.getloadavg()[0]))
-            print(f"{a.label} {design} {seed}: ratio {row['ratio']:.3f} "
-                  f"{row['wall_s']:.1f} s load {row['load1']:.2f} "
+            rows.append(row := fit_one(design, seed) | dict(label=a.label, hdid=str(src), commit=head,
+                                                             load1=os.getloadavg()[0]))
+            print(f"{a.label} {design} {seed}: ratio {row['ratio']:.3f} {row['wall_s']:.1f} s load {row['load1']:.2f} "
                   f"{row.get('restarted_from') or ''} {row.get('error', '')}", flush=True)
             _save(rows)
     _save(rows)

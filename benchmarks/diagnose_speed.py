@@ -102,8 +102,7 @@ def main(argv=None) -> int:
     ap.add_argument("--core", type=int, default=1)
     ap.add_argument("--log", default=str(LOG))
     ap.add_argument("--runs", default="cold,warm", help="cache states, in order")
-    args = parse_or_render(ap, argv, NAME, render)
-    if args is None:
+    if (args := parse_or_render(ap, argv, NAME, render)) is None:
         return 0
     res = {"meta": run_meta(), "log": args.log, "core": args.core, "rows": []}
     for spec in args.code or [f"this={ROOT / 'src'}"]:

@@ -127,8 +127,7 @@ def render(res: dict) -> str:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=4, help="logs in the recovery study (1 = shipped only)")
-    args = parse_or_render(ap, argv, "driven_joint", render)
-    if args is None:
+    if (args := parse_or_render(ap, argv, "driven_joint", render)) is None:
         return
     res = {"meta": run_meta(), "recovery": recovery(args.seeds), "narrowing": narrowing()}
     res["meta"]["load_end"] = load_text()

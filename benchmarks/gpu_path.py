@@ -166,8 +166,7 @@ def main(argv=None):
                     help="the run it replaces in gpu_path.json (gpu: checked against the cpu run)")
     ap.add_argument("--log-dir", default=str(_common.ROOT / "benchmarks" / "_cache" / "batch_logs"))
     ap.add_argument("--n-logs", type=int, nargs="+", default=[100, 1000])
-    args = parse_or_render(ap, argv, "gpu_path", render, indent=1)
-    if args is None:
+    if (args := parse_or_render(ap, argv, "gpu_path", render, indent=1)) is None:
         return 0
     results = _common.stored("gpu_path")
     measure(args, results.get("cpu") if args.tag == "gpu" else None,

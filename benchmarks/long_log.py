@@ -54,13 +54,11 @@ def one(n: int, timeout: float, tmp: Path) -> dict:
 
 def render(res: dict) -> str:
     meta = res["meta"]
-    lines = [
-        "# Fit time and peak memory vs log length (`benchmarks/long_log.py`)", "",
-        f"{meta['date']}, {meta['cpu']}, CPU affinity {meta['affinity']}, src {meta['src']}; "
-        f"4 runs at 10 kHz; each fit in a fresh process, cold (compile included, no cache).", "",
-        "| samples/run | rows | CSV [MB] | read [s] | fit [s] | peak RSS [MB] | k1 | RMS [counts] | load avg before | status |",
-        "|---|---|---|---|---|---|---|---|---|---|",
-    ]
+    lines = ["# Fit time and peak memory vs log length (`benchmarks/long_log.py`)", "",
+             f"{meta['date']}, {meta['cpu']}, CPU affinity {meta['affinity']}, src {meta['src']}; "
+             f"4 runs at 10 kHz; each fit in a fresh process, cold (compile included, no cache).", "",
+             "| samples/run | rows | CSV [MB] | read [s] | fit [s] | peak RSS [MB] | k1 | RMS [counts] | load avg before "
+             "| status |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in res["rows"]:
         f = lambda k, fmt: (format(r[k], fmt) if k in r else "–")  # noqa: E731
         lines.append(f"| {r['samples_per_run']} | {r['rows']} | {f('mb', '.2f')} | {f('read_s', '.2f')} | "
@@ -73,8 +71,7 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--samples", default="1000,2500,5000,10000,25000", help="samples per run, comma-separated")
     ap.add_argument("--timeout", type=float, default=600.0, help="per fit [s]")
-    args = parse_or_render(ap, argv, "long_log", render)
-    if args is None:
+    if (args := parse_or_render(ap, argv, "long_log", render)) is None:
         return
     rows = []
     with tempfile.TemporaryDirectory() as tmp:

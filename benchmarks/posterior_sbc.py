@@ -128,14 +128,12 @@ def run_one(gen, design_name, seed, max_steps, method="emcee,smc", noise="prior"
             "prior": "default", "band_rejects": notes["band_rejects"], "truth_notes": notes}
     t0 = time.perf_counter()
     fit = hdid.fit(df, inertia=truth["inertia"])
-    base["fit_s"] = time.perf_counter() - t0
-    t1 = time.perf_counter()
+    base["fit_s"], t1 = time.perf_counter() - t0, time.perf_counter()
     dens = posterior_density(fit, prior=prior)
     modes = sampled_modes(fit, "auto", seed % 1000, dens.u_fit, dens.lin, dens.lp.gauss_prior)
     modes_s = time.perf_counter() - t1
-    tv = {n: float(truth[n]) for n in REPORTED if n in truth}
-    tv["stick_band_halfwidth_rad"] = float(info["stick_band_halfwidth"])
-    tv["noise_sigma_rad"] = notes["noise_sigma_rad"]
+    tv = {**{n: float(truth[n]) for n in REPORTED if n in truth}, "noise_sigma_rad": notes["noise_sigma_rad"],
+          "stick_band_halfwidth_rad": float(info["stick_band_halfwidth"])}
     outs = []
     for m in method.split(","):
         out, t1 = dict(base, load_start=_common.loads()), time.perf_counter()
@@ -146,9 +144,8 @@ def run_one(gen, design_name, seed, max_steps, method="emcee,smc", noise="prior"
         c = diag["convergence"]
         out.update(steps=int(post.chain.shape[0]), converged=bool(post.converged), rhat_max=c["rhat_max"],
                    met_by=c.get("met_by"), ess_bulk_min=c["ess_bulk_min"], ess_tail_min=c["ess_tail_min"],
-                   tau_max=diag["tau_max"], compile_s=post.compile_s, stage_s=post.stage_s,
-                   mode_search_s=modes_s, n_modes=len(post.modes),
-                   move_acceptance=diag["move_acceptance"], warnings=list(post.warnings),
+                   tau_max=diag["tau_max"], compile_s=post.compile_s, stage_s=post.stage_s, mode_search_s=modes_s,
+                   n_modes=len(post.modes), move_acceptance=diag["move_acceptance"], warnings=list(post.warnings),
                    widths=post.to_dict()["posterior_width"], method=post.method,
                    smc={k: v for k, v in post.smc.items() if k != "betas"})
         values, q = {**post.samples, **post.derived}, {}
@@ -224,17 +221,15 @@ def _render(res, all_logs, method=None):
     for n in REPORTED:
         rs = {des: [r["quantities"][n]["cover95"] for r in logs if r["design"] == des] for des in ("paper", "rich")}
         cells = [f"{sum(c)}/{len(c)}" if c else "–" for c in rs.values()]
-        k = sum(r["quantities"][n]["cover95"] for r in logs)
-        k68 = sum(r["quantities"][n]["cover68"] for r in logs)
+        k, k68 = (sum(r["quantities"][n][c] for r in logs) for c in ("cover95", "cover68"))
         lo, hi = _wilson(k, len(logs))
         if n in CHECKED:
             tot_k, tot_n = tot_k + k, tot_n + len(logs)
-        L.append(f"| {n}{'' if n in CHECKED else ' (not in the pooled figure)'} | {cells[0]} | "
-                 f"{cells[1]} | {k}/{len(logs)} = {k / len(logs):.0%} [{lo:.0%}, {hi:.0%}] | "
-                 f"{k68 / len(logs):.0%} |")
+        L.append(f"| {n}{'' if n in CHECKED else ' (not in the pooled figure)'} | {cells[0]} | {cells[1]} | "
+                 f"{k}/{len(logs)} = {k / len(logs):.0%} [{lo:.0%}, {hi:.0%}] | {k68 / len(logs):.0%} |")
     lo, hi = _wilson(tot_k, tot_n)
-    L.append(f"\nPooled 95 % coverage over k1, k2, tau_c, tau_s, c_v and the band: "
-             f"{tot_k}/{tot_n} = {tot_k / tot_n:.1%} [{lo:.1%}, {hi:.1%}].\n")
+    L.append(f"\nPooled 95 % coverage over k1, k2, tau_c, tau_s, c_v and the band: {tot_k}/{tot_n} = "
+             f"{tot_k / tot_n:.1%} [{lo:.1%}, {hi:.1%}].\n")
     for des in ("paper", "rich", None):
         rs = [r for r in conv if des in (None, r["design"])]
         k, m = sum(r["quantities"][n]["cover95"] for r in rs for n in CHECKED), len(rs) * len(CHECKED)
@@ -246,17 +241,15 @@ def _render(res, all_logs, method=None):
     L += [f"## Rank of the truth among the draws ({BINS} bins, counts; uniform if calibrated)\n",
           "| quantity | " + " | ".join(f"{i / BINS:.1f}" for i in range(BINS)) + " |", "|---|" + "---|" * BINS]
     for n in REPORTED:
-        h = [0] * BINS
-        for r in logs:
-            h[min(BINS - 1, int(r["quantities"][n]["rank"] * BINS))] += 1
+        h = [sum(min(BINS - 1, int(r["quantities"][n]["rank"] * BINS)) == b for r in logs) for b in range(BINS)]
         L.append(f"| {n} | " + " | ".join(str(c) for c in h) + " |")
     wr = {}
     for n, w in ((n, w) for r in logs for n, w in (r.get("widths") or {}).items()):
         wr.setdefault(n, []).append(w["posterior_over_prior_width"])
     if wr:
         L += ["\n## What the data narrowed: posterior sd / prior sd (transformed space)\n",
-              "Median over the logs [min, max]; ≤ 0.71 'measured' (the data carry at least "
-              "half the precision), > 0.89 'assumed' (the prior sets the interval).\n",
+              "Median over the logs [min, max]; ≤ 0.71 'measured' (the data carry at least half the precision), "
+              "> 0.89 'assumed' (the prior sets the interval).\n",
               "| parameter | median | min | max |", "|---|---|---|---|"]
         for n, v in wr.items():
             L.append(f"| {n} | {statistics.median(v):.2f} | {min(v):.2f} | {max(v):.2f} |")
@@ -282,14 +275,13 @@ SAMPLERS = ("emcee", "smc")
 
 
 def run_cli(sampler, log, out, timeout):
-    """One ``hdid fit LOG --posterior --sampler SAMPLER`` process: its wall time, the
-    posterior's own (``sample_posterior``) and its convergence, from the JSON it writes."""
-    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
-    t0, r = time.perf_counter(), {"load_start": _common.loads()}
+    """One ``hdid fit LOG --posterior --sampler SAMPLER`` process: its wall time, the posterior's own
+    (``sample_posterior``) and its convergence, from the JSON it writes."""
+    env, t0, r = dict(os.environ, PYTHONPATH=str(ROOT / "src")), time.perf_counter(), {"load_start": _common.loads()}
     try:
-        p = subprocess.run([sys.executable, "-c", "from hdid.cli import main; main()", "fit",
-                            str(log), "--posterior", "--sampler", sampler, "-q", "--json",
-                            str(out)], env=env, capture_output=True, text=True, timeout=timeout)
+        p = subprocess.run([sys.executable, "-c", "from hdid.cli import main; main()", "fit", str(log), "--posterior",
+                            "--sampler", sampler, "-q", "--json", str(out)], env=env, capture_output=True, text=True,
+                           timeout=timeout)
         rc, err = p.returncode, p.stderr[-2000:]
     except subprocess.TimeoutExpired:
         rc, err = "timeout", ""
@@ -339,8 +331,7 @@ def render_cli(res):
 
 
 def main_cli(args, gen):
-    """``--cli``: the shipped paper log and ``--logs``−1 drawn ones, ``--repeats`` processes
-    each per sampler, alternating."""
+    """``--cli``: the shipped paper log and ``--logs``−1 drawn ones, ``--repeats`` processes each per sampler."""
     tmp, logs = Path(tempfile.mkdtemp()), [("csf8_paper.csv", DATA / "csf8_paper.csv")]
     for seed in range(args.seed0, args.seed0 + args.logs - 1):
         logs.append((f"paper_{seed}.csv", tmp / f"paper_{seed}.csv"))
@@ -348,8 +339,7 @@ def main_cli(args, gen):
     full = _common.stored(args.name)
     full["cli"] = res = {"generated": time.strftime("%Y-%m-%dT%H:%M:%S"), "src": _common.src_fingerprint(), "rows": []}
     for name, path in logs:
-        for _ in range(args.repeats):
-            row = {"log": name}
+        for row in ({"log": name} for _ in range(args.repeats)):
             for k in SAMPLERS:
                 row[k] = run_cli(k, path, tmp / f"{k}.json", args.timeout)
                 print(name, k, {x: row[k].get(x) for x in ("process_s", "posterior_s", "converged", "rc")},
@@ -366,19 +356,16 @@ def main(argv=None):
     ap.add_argument("--max-steps", type=int, default=20000, help="emcee's chain length cap")
     ap.add_argument("--budget-min", type=float, default=600.0, help="start no log after this")
     ap.add_argument("--name", default="posterior_sbc", help="results/NAME.{json,md}")
-    ap.add_argument("--method", default="emcee,smc",
-                    help="samplers, comma-separated (each log's fit and optima shared)")
+    ap.add_argument("--method", default="emcee,smc", help="samplers, comma-separated (one fit and optima a log)")
     ap.add_argument("--noise", choices=("prior", "moving", "none"), default="prior",
-                    help="the logs' noise before rounding: from the sampler's prior, or none")
+                    help="noise before rounding: the sampler's σ_n prior, that after each release only, or none")
     ap.add_argument("--shard", default="0/1", help="K/N: run every N-th log from the K-th")
     ap.add_argument("--merge", nargs="+", metavar="JSON", help="join shards' results into NAME")
-    ap.add_argument("--cli", action="store_true", help="time the CLI process instead (the "
-                    "result's CLI-speed section): --logs, --repeats, --timeout")
+    ap.add_argument("--cli", action="store_true", help="time the CLI process instead: --logs, --repeats, --timeout")
     ap.add_argument("--logs", type=int, default=1, help="--cli: the shipped log and N-1 drawn ones")
     ap.add_argument("--repeats", type=int, default=3, help="--cli: runs per log and sampler")
     ap.add_argument("--timeout", type=float, default=900, help="--cli: per process [s]")
-    args = _common.parse_or_render(ap, argv, lambda a: a.name, render, indent=1)
-    if args is None:
+    if (args := _common.parse_or_render(ap, argv, lambda a: a.name, render, indent=1)) is None:
         return
     from hdid.reference import logs as gen
 
@@ -405,7 +392,8 @@ def main(argv=None):
         try:
             rs = run_one(gen, name, seed, args.max_steps, args.method, args.noise)
         except Exception:  # record and go on
-            rs = [{"design": name, "seed": seed, "method": m, "error": traceback.format_exc()} for m in args.method.split(",")]
+            rs = [{"design": name, "seed": seed, "method": m, "error": traceback.format_exc()}
+                  for m in args.method.split(",")]
         res["logs"].extend(rs)
         _common.write_result(args.name, res, render, indent=1)
         for r in rs:

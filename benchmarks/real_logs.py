@@ -115,11 +115,9 @@ def render(res: dict) -> str:
              "|---|---|---|---|---|---|"]
     for r in res["rows"]:
         if r["error"]:
-            lines.append(f"| {r['scenario']} | {r['key']} | error: {r['error']} | no | | "
-                         f"{r['wall_s']:.0f} ({r['load']:.1f}) |")
+            lines.append(f"| {r['scenario']} | {r['key']} | error: {r['error']} | no | | {r['wall_s']:.0f} ({r['load']:.1f}) |")
             continue
-        ps = {p["name"]: p for p in r["parameters"]}
-        k = ps[r["key"]]
+        k = {p["name"]: p for p in r["parameters"]}[r["key"]]
         bad = [f"{p['name']} (z {p['z']:+.1f})" for p in r["parameters"] if not p["ok"]]
         lines.append(f"| {r['scenario']} | {r['key']} | {k['fit']:.5g} ± {k['std']:.2g} / "
                      f"{k['truth']:.5g} | {'yes' if not bad else 'no'} | {', '.join(bad)} | "

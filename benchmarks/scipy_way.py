@@ -12,9 +12,8 @@ from scipy.optimize import least_squares
 #: Fitted shared parameters, in this order (all positive, fitted as logarithms).
 PARAM_NAMES = ("k1", "k2", "tau_c", "tau_s", "v_s", "delta", "c_v")
 
-#: Default physical bounds: the Stribeck exponent is kept in a plausible range (on quantized
-#: 250 Hz data an unbounded fit drifts to δ ≫ 10, a step-shaped Stribeck curve that fits the
-#: rounding of the rest readings, and needs hundreds of iterations to get there).
+#: Default physical bounds: the Stribeck exponent in a plausible range (on quantized 250 Hz data an unbounded fit
+#: drifts to δ ≫ 10, a step-shaped Stribeck curve fitting the rest readings' rounding, in hundreds of iterations).
 DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {"delta": (0.25, 4.0)}
 
 
@@ -30,11 +29,10 @@ MAX_RHS_CALLS = 50_000
 def simulate_run_scipy(time_s: np.ndarray, *, theta0: float, t_release: float,
                        params: Mapping[str, float], inertia: float, ratio: float = 100.0,
                        eps: float = 1e-4) -> np.ndarray:
-    """Physical WG angle [rad] at the sorted times ``time_s`` [s] of one release from
-    ``theta0`` (from the spring's zero) at ``t_release``, with ``params`` (``k1, k2, tau_c,
-    tau_s, v_s, delta, c_v``), the WG ``inertia`` [kg m²], gear ``ratio`` and the ``tanh``
-    sign smoothing at velocity ``eps`` [rad/s]; LSODA at rtol 1e-6, atol 1e-9. NaN after
-    the release if the integration failed or ran over :data:`MAX_RHS_CALLS`."""
+    """Physical WG angle [rad] at the sorted times ``time_s`` [s] of one release from ``theta0`` (from the spring's
+    zero) at ``t_release``, with ``params`` (``k1, k2, tau_c, tau_s, v_s, delta, c_v``), the WG ``inertia`` [kg m²],
+    gear ``ratio`` and the ``tanh`` sign smoothing at velocity ``eps`` [rad/s]; LSODA at rtol 1e-6, atol 1e-9.
+    NaN after the release if the integration failed or ran over :data:`MAX_RHS_CALLS`."""
     k1, k2, tc, ts, vs, dl, cv = (float(params[n]) for n in PARAM_NAMES)
     N, inv_i, tanh, exp, calls = float(ratio), 1.0 / float(inertia), math.tanh, math.exp, [0]
 
@@ -91,21 +89,19 @@ def guess_offsets(runs: Sequence[Mapping]) -> dict[str, float]:
     return out
 
 
-#: ``least_squares``' relative finite-difference step (absolute below 1: 0.1 ms for release
-#: times, 0.1 mrad for angles; ≈ 0.05 % for the log-parameters). LSODA at rtol 1e-6 makes
-#: the default ``sqrt(eps_machine)`` useless; 1e-3 gave worse fits (coarser, biased
-#: Jacobian), 3e-3 sent the first step to absurd parameters.
+#: ``least_squares``' relative finite-difference step (absolute below 1: 0.1 ms for release times, 0.1 mrad for
+#: angles; ≈ 0.05 % for the log-parameters). LSODA at rtol 1e-6 makes the default ``sqrt(eps_machine)`` useless;
+#: 1e-3 gave worse fits (coarser, biased Jacobian), 3e-3 sent the first step to absurd parameters.
 DIFF_STEP = 1e-4
 
 
 def fit_scipy(runs: list[dict], x0: dict, inertia: float, ratio: float = 100.0, *,
               eps: float = 1e-4, max_nfev: int | None = 200) -> dict:
-    """Fit the free-motion model to all ``runs`` of a log (:func:`runs_from_dataframe`) with
-    scipy only, from ``x0`` (positive ``k1, k2, tau_c, tau_s, v_s, delta, c_v``, fitted as
-    logarithms; ``k1`` and ``tau_c`` should be within a few tens of percent: a wrong number
-    of reversals is a local minimum), ``inertia`` [kg m²] fixed, ``eps`` the ``tanh``
-    smoothing velocity [rad/s]. Returns ``params``, ``runs`` (``t_release``, ``theta0``,
-    ``theta0_enc``), ``offsets``, ``nfev``, ``n_simulations``, ``wall_s``, ``rms`` [rad], ``success``."""
+    """Fit the free-motion model to all ``runs`` of a log (:func:`runs_from_dataframe`) with scipy only, from ``x0``
+    (positive ``k1, k2, tau_c, tau_s, v_s, delta, c_v``, fitted as logarithms; ``k1`` and ``tau_c`` within a few tens
+    of percent: a wrong number of reversals is a local minimum), ``inertia`` [kg m²] fixed, ``eps`` the ``tanh``
+    smoothing velocity [rad/s]. Returns ``params``, ``runs`` (``t_release``, ``theta0``, ``theta0_enc``),
+    ``offsets``, ``nfev``, ``n_simulations``, ``wall_s``, ``rms`` [rad], ``success``."""
     t_start = time.perf_counter()
     if missing := [n for n in PARAM_NAMES if n not in x0]:
         raise ValueError(f"x0 lacks {missing}")
