@@ -106,8 +106,7 @@ def render(rows: list[dict]) -> str:
     for r in rows:
         groups.setdefault((r.get("label", "?"), r["design"]), []).append(r)
     for (label, design), g in sorted(groups.items()):
-        ratio = np.array([x["ratio"] for x in g], dtype=float)
-        err = sum("error" in x for x in g)
+        ratio, err = np.array([x["ratio"] for x in g], dtype=float), sum("error" in x for x in g)
         above = int(np.sum(ratio[np.isfinite(ratio)] > ABOVE))
         won = Counter(x["restarted_from"] for x in g if x.get("restarted_from"))
         loads = [x.get("load1") for x in g if x.get("load1") is not None]
@@ -117,10 +116,8 @@ def render(rows: list[dict]) -> str:
             f"{np.median(loads) if loads else math.nan:.2f} | "
             f"{', '.join(f'{k} {v}' for k, v in sorted(won.items())) or '—'} |")
     out += ["", "Logs above 1.5× (label, design, seed: ratio):", ""]
-    for r in rows:
-        if not r["ratio"] <= ABOVE:
-            out.append(f"- {r.get('label')}, {r['design']}, {r['seed']}: "
-                       f"{r['ratio']:.3f} {r.get('error', '')}")
+    out += [f"- {r.get('label')}, {r['design']}, {r['seed']}: {r['ratio']:.3f} {r.get('error', '')}"
+            for r in rows if not r["ratio"] <= ABOVE]
     return "\n".join(out) + "\n"
 
 

@@ -107,8 +107,7 @@ def render(res: dict) -> str:
     lines += ["", "Relative errors of the shipped log's fit:", "",
               "| parameter | truth | fit | rel. error | rel. std |", "|---|---|---|---|---|"]
     r0 = rec[0]
-    for n in PHYSICAL:
-        p = r0["params"][n]
+    for n, p in ((n, r0["params"][n]) for n in PHYSICAL):
         lines.append(f"| {n} | {p['truth']:.4g} | {p['value']:.5g} | "
                      f"{(p['value'] - p['truth']) / p['truth']:+.2%} | {p['std'] / abs(p['value']):.2%} |")
     for n, c in r0["positional"].items():
@@ -116,11 +115,11 @@ def render(res: dict) -> str:
                      f"{(c['value'] - c['truth']) / abs(c['truth']):+.1%} | {c['std'] / abs(c['truth']):.1%} of truth |")
     lines += ["", "## Narrowing: relative standard error per parameter", "",
               "| case | " + " | ".join(PHYSICAL) + " |", "|" + "---|" * (len(PHYSICAL) + 1)]
-    for label, c in nar["cases"].items():
-        lines.append(f"| {label} | " + " | ".join(_fmt(c["rel_std"][n]) for n in PHYSICAL) + " |")
-    lines += ["", "∞: not identifiable from that log (a null direction of its Fisher matrix); "
-              "fixed: held at the model's value because the log cannot see it; —: not in that "
-              "model. A′ is conditional on the datasheet inertia being exact.", ""]
+    lines += [f"| {label} | " + " | ".join(_fmt(c["rel_std"][n]) for n in PHYSICAL) + " |"
+              for label, c in nar["cases"].items()]
+    lines += ["", "∞: not identifiable from that log (a null direction of its Fisher matrix); fixed: held at the "
+              "model's value because the log cannot see it; —: not in that model. A′ is conditional on the "
+              "datasheet inertia being exact.", ""]
     return "\n".join(lines + interpretation_section(res))
 
 

@@ -68,7 +68,7 @@ def measure(args, ref, save) -> dict:
     res |= {"positions": pos.tolist(), "logp_at_positions": lp0.tolist()}
     if ref:
         res["logp_max_abs_diff_vs_reference"] = float(np.max(np.abs(lp0 - ref["logp_at_positions"])))
-    timings = {}
+    res["logp_batch"] = timings = {}
     for W in WALKERS:
         X = jnp.asarray(np.resize(pos, (W, pos.shape[1])))
         with Clock() as c:
@@ -76,7 +76,6 @@ def measure(args, ref, save) -> dict:
         t = _per_call(lambda: jax.block_until_ready(batch(X)))
         timings[str(W)] = t = t | {"compile_s": c.wall, "us_per_walker": t["median_s"] / W * 1e6}
         print(f"batch W={W}: {t['median_s'] * 1e3:.2f} ms", flush=True)
-    res["logp_batch"] = timings
     save(res)
 
     # 3. sampler: the default walkers and 8× as many

@@ -176,26 +176,23 @@ def _wilson(k, n, z=1.959963984540054):
 
 def _steps(r):
     """emcee: kept steps; SMC: runs × particles, SMC steps (temperatures), log-Z sd."""
-    if r.get("method") == "smc":
-        m = r["smc"]
-        return (f"SMC {m['n_runs']}×{m['n_particles']}, {m['steps']} ({m['temperatures']}), "
-                f"sd log Z {m['log_evidence_sd']:.2f}")
-    return str(r["steps"])
+    m = r.get("smc") or {}
+    return (f"SMC {m['n_runs']}×{m['n_particles']}, {m['steps']} ({m['temperatures']}), sd log Z "
+            f"{m['log_evidence_sd']:.2f}" if r.get("method") == "smc" else str(r["steps"]))
 
 
 def render(res):
     cli = "\n" + render_cli(res["cli"]) if "cli" in res else ""
     for key, sub in res.get("checks", {}).items():  # diagnostic runs kept beside the result
-        cli = f"\n# Check: {key}\n\n{sub.get('about', '')}\n\n" + _render(sub, sub["logs"], sub["options"]["method"]) + cli
+        cli = f"\n# Check: {key}\n\n{sub.get('about', '')}\n\n{_render(sub, sub['logs'], sub['options']['method'])}{cli}"
     if "logs" not in res:
         return cli.lstrip("\n")
     methods = list(dict.fromkeys(r.get("method") or res["options"].get("method", "emcee") for r in res["logs"]))
     if len(methods) <= 1:
         return _render(res, res["logs"]) + cli
-    head = (f"# Posterior calibration, samplers side by side: {', '.join(methods)}\n\n"
-            "Each log is fitted once and its optima found once; every sampler gets the same "
-            "fit and optima (time of that search is counted in each sampler's time).\n\n"
-            + "\n".join(_common.interpretation_section(res)))
+    head = (f"# Posterior calibration, samplers side by side: {', '.join(methods)}\n\nEach log is fitted once and its "
+            "optima found once; every sampler gets the same fit and optima (time of that search is counted in each "
+            "sampler's time).\n\n" + "\n".join(_common.interpretation_section(res)))
     return head + "\n".join(_render(res, [r for r in res["logs"] if (r.get("method") or "emcee") == m], m)
                             for m in methods) + cli
 

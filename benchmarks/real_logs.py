@@ -97,17 +97,16 @@ def main(argv=None):
             row.update(parameters=judge(res, truth), warnings=res.warnings,
                        rms_over_floor=res.rms_residual_rad / res.quantization_floor_rad)
         out.append(row)
-        print(label, f"{wall:.0f} s", "error: " + err if err else
-              ", ".join(f"{p['name']} z={p['z']:+.1f}{'*' if p['flagged'] else ''}"
-                        for p in row["parameters"]), flush=True)
+        print(label, f"{wall:.0f} s", "error: " + err if err else ", ".join(
+            f"{p['name']} z={p['z']:+.1f}{'*' if p['flagged'] else ''}" for p in row["parameters"]), flush=True)
     write_result("real_logs", {"meta": run_meta(), "rows": out, "measured": stored("real_logs").get("measured", [])},
                  render, indent=1)
 
 
 def render(res: dict) -> str:
     lines = ["# hdid on logs from an independent generator (issue 16)", "",
-             "`python benchmarks/real_logs.py`; z = (fit − truth)/std; * = named in a warning; "
-             "ok = |z| ≤ 3 or flagged. Wall time includes the compile (load average beside it)."
+             "`python benchmarks/real_logs.py`; z = (fit − truth)/std; * = named in a warning; ok = |z| ≤ 3 or "
+             "flagged. Wall time includes the compile (load average beside it)."
              + (f" {res['meta']['note']}" if res["meta"].get("note") else "")
              + (" Measured {date} on {cpu}, load {load}, src {src}.".format(**res["meta"])
                 if "date" in res["meta"] else ""),
@@ -115,13 +114,13 @@ def render(res: dict) -> str:
              "|---|---|---|---|---|---|"]
     for r in res["rows"]:
         if r["error"]:
-            lines.append(f"| {r['scenario']} | {r['key']} | error: {r['error']} | no | | {r['wall_s']:.0f} ({r['load']:.1f}) |")
+            lines.append(f"| {r['scenario']} | {r['key']} | error: {r['error']} | no | | {r['wall_s']:.0f} "
+                         f"({r['load']:.1f}) |")
             continue
         k = {p["name"]: p for p in r["parameters"]}[r["key"]]
         bad = [f"{p['name']} (z {p['z']:+.1f})" for p in r["parameters"] if not p["ok"]]
-        lines.append(f"| {r['scenario']} | {r['key']} | {k['fit']:.5g} ± {k['std']:.2g} / "
-                     f"{k['truth']:.5g} | {'yes' if not bad else 'no'} | {', '.join(bad)} | "
-                     f"{r['wall_s']:.0f} ({r['load']:.1f}) |")
+        lines.append(f"| {r['scenario']} | {r['key']} | {k['fit']:.5g} ± {k['std']:.2g} / {k['truth']:.5g} | "
+                     f"{'yes' if not bad else 'no'} | {', '.join(bad)} | {r['wall_s']:.0f} ({r['load']:.1f}) |")
     if res.get("measured"):
         lines += ["", "## Measured logs (`--measured`): fit (fit/reference − 1; theta_g: fit − "
                   "reference)", "", "| log | fit vs reference | RMS/floor | wall [s] (load) |",

@@ -61,9 +61,9 @@ def simulate_run_scipy(time_s: np.ndarray, *, theta0: float, t_release: float,
 
 
 def runs_from_dataframe(df) -> list[dict]:
-    """Split a ``run,setup,time,theta`` log (radians) into the ``runs`` of :func:`fit_scipy`:
-    ``theta0_enc`` is the first reading, ``t_release0`` half a sample after the last sample
-    that still reads the held value (meant for noiseless, quantized logs)."""
+    """Split a ``run,setup,time,theta`` log (radians) into the ``runs`` of :func:`fit_scipy`: ``theta0_enc`` is
+    the first reading, ``t_release0`` half a sample after the last one still reading the held value (noiseless,
+    quantized logs)."""
     runs = []
     for run_id, g in df.groupby("run", sort=True):
         g = g.sort_values("time")
@@ -76,8 +76,8 @@ def runs_from_dataframe(df) -> list[dict]:
 
 
 def guess_offsets(runs: Sequence[Mapping]) -> dict[str, float]:
-    """Crude per-set-up encoder offset: the midpoint between rest readings of opposite
-    releases (one direction only: their mean, off by up to the stick band's half-width)."""
+    """Crude per-set-up encoder offset: the midpoint between rest readings of opposite releases (one direction
+    only: their mean, off by up to the stick band's half-width)."""
     out: dict[str, float] = {}
     for setup in dict.fromkeys(str(r["setup"]) for r in runs):
         finals = {+1: [], -1: []}
