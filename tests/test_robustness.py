@@ -47,3 +47,23 @@ def test_noisy_quantized_log_fits_and_bracket_holds_truth(noisy):
     lo, hi = res.band_bracket
     band = stick_band_halfwidth(TRUTH["k1"], TRUTH["k2"], TRUTH["tau_s"], 100.0)
     assert lo <= band <= hi
+
+
+def test_overflowing_sensitivities_are_a_one_line_fit_error(monkeypatch):
+    # A noisy paper log (posterior_sbc seed 40000, sensor noise 1.4 steps) ended its fit
+    # with sensitivities of 9e163 in a stuck stretch: finite, but JᵀJ overflows and numpy's
+    # eigh raised "Eigenvalues did not converge" (a traceback). The same J planted here
+    # (one column ×1e160 at the optimum) must give hdid's one-line FitError instead.
+    from hdid._fitting import _fit
+
+    real = _fit._stored_analysis
+
+    def huge(problem, u):
+        pre = dict(real(problem, u))
+        J, r = map(np.asarray, pre["jacobian"])
+        pre["jacobian"] = (J * np.where(np.arange(J.shape[1]) == 0, 1e160, 1.0), r)
+        return pre
+
+    monkeypatch.setattr(_fit, "_stored_analysis", huge)
+    with pytest.raises(hdid.FitError, match="diverged .*overflowing"):
+        hdid.fit(ROOT / "data" / "synthetic" / "csf8_paper.csv", nested=False)

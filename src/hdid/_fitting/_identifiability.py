@@ -73,14 +73,14 @@ def analyse(
     labels = unknown_labels(problem, prep)
     warnings: list[str] = list(getattr(prep, "log_notes", ()))  # split / still runs
     s2, s2_used, dof = _noise(problem, prep, r, warnings)
-    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(r))):
+    with np.errstate(over="ignore", invalid="ignore"):  # |J| ~ 1e164 overflows JᵀJ
+        finite = np.isfinite(r).all() and np.isfinite(J).all() and np.isfinite(J.T @ J).all()
+    if not finite:
         from .._errors import FitError
-
         raise FitError(
-            f"{prep.source}: the fit diverged (non-finite residuals or sensitivities at its "
-            "optimum); check the units (time in s, angles in rad or --resolution), the ratio "
-            "and the inertia, or fix parameters the log cannot determine"
-        )
+            f"{prep.source}: the fit diverged (non-finite or overflowing residuals or "
+            "sensitivities at its optimum); check the units (time in s, angles in rad or "
+            "--resolution), the ratio and the inertia, or fix parameters the log cannot determine")
     fisher_data, cov, null, std_u, std_u_data = _uncertainty(problem, J, s2_used)
     flags = _identifiability(problem, labels, J, fisher_data, std_u, std_u_data, warnings)
     corr = _correlations(labels, P, cov, std_u, warnings)

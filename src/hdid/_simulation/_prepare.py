@@ -13,6 +13,7 @@ import numpy as np
 
 from .._errors import LogError
 from .._log import Log
+from ._tails import oscillates
 
 #: Shortest bracket [s] allowed before the last sample at the hold reading for the
 #: release instant (a release just outside the stick band starts slowly); the bracket is
@@ -441,7 +442,11 @@ def search_weight(prep: Prepared) -> np.ndarray:
             w[i, :n] = 1.0 / math.sqrt(n)
             continue
         free_tail = min(int(prep.tail_start[i]) + FULL_WEIGHT_TAIL, n)
-        if stopped[i] and n > free_tail:
+        # (a tail that goes on swinging at the log's frequency is a viscous ring-down under
+        # the noise, not a stop: full weight, :func:`._tails.oscillates`)
+        if stopped[i] and n > free_tail and not oscillates(
+                prep.times[i, prep.tail_start[i]:n], prep.theta[i, prep.tail_start[i]:n],
+                prep.frequency_hz):
             w[i, free_tail:n] = 1.0 / math.sqrt(n - free_tail)
     return w
 
