@@ -169,3 +169,26 @@ def test_held_story_reads_the_frequency_from_turns_not_from_noisy_stops():
     # stop without a turn, timed where the noise last left the rest reading, made it
     # 0.05–0.17 f_n on 3 of these 6 logs (the sweep's own: 3.7 Hz, 7.5× the noise).
     assert all(0.5 < f < 2.0 for f in found), found
+
+
+
+def test_batch_fits_a_noisy_log_as_hdid_fit_does(tmp_path):
+    # fit_many's batch path has no polish of its own: a log on no grid (search weights ≠
+    # the likelihood's) goes through hdid.fit itself. The log of the module's plant held
+    # 40 ms before each release (so no run moves from its first sample, which took the
+    # other route already). Same computation in one process: equal up to the order of
+    # sums (1e-9 relative); the batch's unpolished search ended at 440× the noise.
+    df = make_log(TRUTH, amplitudes=AMPLITUDES, fs=1000.0, duration=0.5, hold=0.04,
+                  offsets_by_setup={"A": 0.035}, seed=11, quantize=False, noise_std=SIGMA)
+    path = tmp_path / "noisy_held.csv"
+    pd.DataFrame({"run": df["run"], "setup": df["setup"],
+                  "time": [f"{v:.6f}" for v in df["time"]],
+                  "theta": [f"{v:.8f}" for v in df["theta"]]}).to_csv(path, index=False)
+    res = hdid.fit(path, inertia=TRUTH["inertia"])
+    assert res.resolution_source == "noise" and not res.first_reading_held
+    row = hdid.fit_many([path], inertia=TRUTH["inertia"]).iloc[0]
+    assert row["error"] is None, row["error"]
+    assert math.isclose(row["rms_residual_rad"], res.rms_residual_rad, rel_tol=1e-9), (
+        row["rms_residual_rad"], res.rms_residual_rad)
+    for name in ("k1", "tau_c", "c_v"):
+        assert math.isclose(row[name], res.parameters[name].value, rel_tol=1e-9), name

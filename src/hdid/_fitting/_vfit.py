@@ -5,7 +5,10 @@ Every log runs :func:`hdid.fit`'s steps — the grid of starts
 time through the one-lane program of its model structure (:mod:`hdid._fitting._one_lane`,
 the schedule :class:`hdid._fitting._lm._Schedule`), the restart of an optimum that holds
 runs the log shows moving, then the analysis at the best start — so a log gets the fit it
-gets alone, up to rounding (below). There is no driver of the batch's own.
+gets alone, up to rounding (below). There is no driver of the batch's own. Logs that
+:func:`hdid.fit` fits in more than one pass — runs that move from their first samples (both
+stories of the first reading), logs on no grid (the search's weights, then the polish in
+the likelihood's, :mod:`hdid._fitting._polish`) — go through :func:`hdid.fit` itself.
 
 Programs are shared across logs by *length bucket*: each log's runs are padded (last
 sample repeated, weight 0: zero-length intervals and zero residuals) to a multiple of
@@ -44,6 +47,7 @@ from .._errors import HdidError
 from .._log import Log, read_log
 from .._problems import _programs
 from .._problems._problem import Problem
+from .._simulation._prepare import search_weight
 from . import _first_reading
 from ._fit import _finish, _setup, _stored_analysis, _untrapped, fit, nested_check
 from ._limits import above_floor, needs_check, reached_floor
@@ -219,9 +223,12 @@ def _fit_wave(items, idx, outcomes, pool, buckets: set, timing, lanes, bracket, 
                 done(i, exc)
                 continue
             # runs that move from their first samples: hdid.fit weighs both stories of
-            # their first readings (:mod:`hdid._fitting._first_reading`)
-            if _first_reading.candidates(items[i], setups[i].prep,
-                                         setup_opts.get("release_time")):
+            # their first readings (:mod:`hdid._fitting._first_reading`); logs on no grid
+            # (noise): hdid.fit searches in other weights than the likelihood's and
+            # polishes (:mod:`hdid._fitting._polish`) — both through hdid.fit itself
+            if (search_weight(setups[i].prep) is not setups[i].prep.weight
+                    or _first_reading.candidates(items[i], setups[i].prep,
+                                                 setup_opts.get("release_time"))):
                 del setups[i]
                 nested = options.get("nested")
                 fit_opts = {**options, "nested": "auto" if nested is None else nested}
