@@ -192,3 +192,41 @@ def test_batch_fits_a_noisy_log_as_hdid_fit_does(tmp_path):
         row["rms_residual_rad"], res.rms_residual_rad)
     for name in ("k1", "tau_c", "c_v"):
         assert math.isclose(row[name], res.parameters[name].value, rel_tol=1e-9), name
+
+
+# ------------------------------------------- noise ahead of an encoder's rounding
+
+#: the paper design's encoder step (make_log's 4000 counts/rev) [rad]
+PAPER_STEP = 2 * math.pi / 4000
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_noise_of_a_step_and_more_before_the_rounding_is_noise_not_the_grid(seed):
+    # The readings lie on the encoder's grid, but noise of 1.4 steps ahead of the
+    # rounding makes still stretches jump by 2 steps and more; half their differences are
+    # still 0 or ±1 step, so their median-absolute noise (1.05 steps) cannot tell it from
+    # an encoder's flicker, and the grid (σ = step/√12, 4.8× too small) was kept.
+    from hdid.reference.logs import PAPER_DESIGN
+
+    s = 1.4 * PAPER_STEP
+    df = make_log(TRUTH_CSF8, **dict(PAPER_DESIGN, seed=seed), noise_std=s)
+    prep = prepare(hdid.read_log(df))
+    assert prep.resolution_source == "noise"
+    # the readings' error, Sheppard: √(s² + step²/12), from the fraction p ≈ 0.45 of the
+    # still stretches' ~90 differences that jump ≥ 2 steps (binomial sd ~0.05 in p, ~10 %
+    # in σ; 4 sd and the model's approximations): within 1.5× — the grid was 4.8× small
+    want = math.sqrt(s**2 + PAPER_STEP**2 / 12)
+    got = prep.resolution / math.sqrt(12.0)
+    assert want / 1.5 <= got <= 1.5 * want, (got / want)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_noise_well_below_a_step_keeps_the_encoder_grid(seed):
+    # noise of 0.2 steps: a still gear reads one level or flickers between two; the
+    # readings' error √(s² + step²/12) is within 1.2× of the grid's step/√12: keep it
+    from hdid.reference.logs import PAPER_DESIGN
+
+    df = make_log(TRUTH_CSF8, **dict(PAPER_DESIGN, seed=seed), noise_std=0.2 * PAPER_STEP)
+    prep = prepare(hdid.read_log(df))
+    assert prep.resolution_source == "estimated" and prep.quantized
+    assert math.isclose(prep.resolution, PAPER_STEP, rel_tol=1e-9)

@@ -147,6 +147,52 @@ class Prepared:
         return d if self.still is None else np.where(self.still, 0.0, d)
 
 
+def _still_pieces(runs):
+    """First differences of every run's head and tail (``m`` samples each, ``m`` a tenth
+    of the run within 4–50) and the run each belongs to: the still stretches, where the
+    run holds or rests, of :func:`noise_sigma` and :func:`grid_noise`."""
+    pieces, owner = [], []
+    for k, run in enumerate(runs):
+        th = np.asarray(run.theta, dtype=float)
+        m = max(4, min(50, len(th) // 10))
+        for seg in (th[:m], th[-m:]):
+            d = np.diff(seg)
+            if d.size >= 3:
+                pieces.append(d)
+                owner.append(k)
+    return pieces, np.asarray(owner, dtype=int)
+
+
+def grid_noise(runs, step: float) -> float:
+    """Error σ [log units] of readings on a grid of ``step`` whose still stretches jump by
+    two steps or more, 0 where they do not.
+
+    An encoder's still gear reads one level, or flickers between two adjacent ones (its
+    reading's error ≤ step/2, σ = step/√12 on average): no first difference of a still
+    stretch is 2 steps or more. Noise ``s`` ahead of the rounding gives readings of error
+    σ ≈ √(s² + step²/12) (Sheppard) and differences ~ N(0, 2σ²), so a fraction
+    ``p = 2·Q(1.5·step / (√2·σ))`` of them round to 2 steps or more: σ follows from ``p``.
+    ``p`` from the still stretches' differences: per run the stiller of head and tail (one
+    of them may move), the median over runs (a few runs may move at both ends), then
+    pooled over the stretches within :data:`STILL_SPREAD` of that (as :func:`noise_sigma`). The
+    median-absolute differences cannot tell this noise from flicker: at 1.4 steps of
+    noise half the differences are 0 or ±1 step, as for a flicker between two levels."""
+    from scipy.special import ndtri
+
+    pieces, owner = _still_pieces(runs)
+    if not pieces:
+        return 0.0
+    jumps = [np.abs(d) >= 1.5 * step for d in pieces]
+    frac = np.array([float(np.mean(j)) for j in jumps])
+    ref = float(np.median([frac[owner == k].min() for k in np.unique(owner)]))
+    if ref <= 0.0:
+        return 0.0
+    # pooled over the stretches within STILL_SPREAD of it (the smaller of two estimates
+    # from ~11 differences each is biased low: σ 0.73× at 1.4 steps)
+    p = float(np.mean(np.concatenate([j for j, f in zip(jumps, frac) if f <= STILL_SPREAD * ref])))
+    return 1.5 * step / (math.sqrt(2.0) * float(ndtri(1.0 - min(p, 0.99) / 2.0)))
+
+
 def noise_sigma(runs, step: float | None, still_only: bool = False) -> float:
     """Noise standard deviation of the readings [log units], robustly.
 
@@ -155,16 +201,8 @@ def noise_sigma(runs, step: float | None, still_only: bool = False) -> float:
     differences (variance ``20·σ²`` for white noise; an upper bound where the motion is
     coarsely sampled). Never below ``1e-4`` of the log's angle span (the simulator's accuracy).
     """
-    pieces, owner = [], []
-    for k, run in enumerate(runs):
-        th = np.asarray(run.theta, dtype=float)
-        n = len(th)
-        m = max(4, min(50, n // 10))
-        for seg in (th[:m], th[-m:]):
-            d = np.diff(seg)
-            if d.size >= 3:
-                pieces.append(d - np.median(d))
-                owner.append(k)
+    pieces, owner = _still_pieces(runs)
+    pieces = [d - np.median(d) for d in pieces]
     span = max(float(np.ptp(np.concatenate([r.theta for r in runs]))), 1e-300)
     sig_still = np.inf
     if pieces:
@@ -239,9 +277,15 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
         source = "given" if getattr(log, "resolution_source", None) == "given" else "estimated"
         # A grid found in the readings may be the printing precision of a noisy analog
         # sensor, not an encoder: then the still stretches wander over many levels.
-        if source == "estimated" and noise_sigma(runs, None, still_only=True) > 2.0 * step:
-            step = noise_sigma(runs, None) * math.sqrt(12.0)
-            source = "noise"
+        # Or noise ahead of an encoder's rounding: its still stretches jump by 2 steps or
+        # more; noise below step/2 (σ within 2× step/√12) keeps the grid (:func:`grid_noise`)
+        if source == "estimated":
+            if noise_sigma(runs, None, still_only=True) > 2.0 * step:
+                step = noise_sigma(runs, None) * math.sqrt(12.0)
+                source = "noise"
+            elif (jumps := grid_noise(runs, step)) > 2.0 * step / math.sqrt(12.0):
+                step = jumps * math.sqrt(12.0)  # (the readings' error, rounding included)
+                source = "noise"
     else:
         # (never below the printing's own rounding, print unit/√12)
         step = max(noise_sigma(runs, None) * math.sqrt(12.0),
