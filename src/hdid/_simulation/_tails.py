@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import stats
+from scipy import special
 
 #: False-alarm probability of the oscillation test on a tail of pure noise: a stuck tail
 #: is read as moving (and searched at full weight, as the likelihood weighs it) in one
@@ -53,4 +53,4 @@ def oscillates(t: np.ndarray, th: np.ndarray, frequency_hz: float) -> bool:
     if rss1 <= 1e-12 * rss0:  # the trend and sinusoid explain the tail exactly
         return True
     F = ((rss0 - rss1) / 3.0) / (rss1 / (n - 4))
-    return bool(stats.f.sf(F, 3, n - 4) < FALSE_ALARM)
+    return bool(special.fdtrc(3, n - 4, F) < FALSE_ALARM)  # F(3, n-4) upper tail
