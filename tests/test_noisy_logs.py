@@ -230,3 +230,19 @@ def test_noise_well_below_a_step_keeps_the_encoder_grid(seed):
     prep = prepare(hdid.read_log(df))
     assert prep.resolution_source == "estimated" and prep.quantized
     assert math.isclose(prep.resolution, PAPER_STEP, rel_tol=1e-9)
+
+
+def test_a_noisy_log_far_above_its_noise_says_so(noisy_fit):
+    # A noise-model log has no quantization floor; its floor is the readings' noise σ, taken
+    # from the still readings (not from the fit). A fit at 3.9× that noise (a poorer basin
+    # of a 1.4-step-noise paper log) used to carry no warning at all. Factor 3 is the
+    # encoder logs' rule (RESIDUAL_FLOOR_FACTOR); 1.0× is the fit at the noise.
+    from hdid._fitting._identifiability import plausibility_warnings
+
+    path, res = noisy_fit
+    prep = prepare(hdid.read_log(path))
+    sigma = prep.resolution / math.sqrt(12.0)
+    values = {n: p.value for n, p in res.parameters.items()}
+    far = plausibility_warnings(prep, res.model, values, 3.9 * sigma)
+    assert any("3.9× the readings' noise" in w for w in far), far
+    assert not any("× the" in w for w in plausibility_warnings(prep, res.model, values, sigma))

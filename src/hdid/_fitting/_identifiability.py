@@ -467,14 +467,14 @@ def plausibility_warnings(prep: Prepared, model, values, rms: float) -> list[str
             "mrad or counts (convert to rad, or --counts-per-rev), or is the ratio wrong "
             "(--ratio)?"
         )
-    wrong_step = (step_against_readings(prep.theta, prep.lengths, prep.resolution, rms,
-                                        RESIDUAL_FLOOR_FACTOR) if prep.quantized else None)
-    if wrong_step:
+    if wrong_step := (step_against_readings(prep.theta, prep.lengths, prep.resolution, rms,
+                                            RESIDUAL_FLOOR_FACTOR) if prep.quantized else None):
         out.append(wrong_step)
-    elif prep.quantized and math.isfinite(rms) and rms > RESIDUAL_FLOOR_FACTOR * prep.resolution / math.sqrt(12):
-        out.append(
+    elif math.isfinite(rms) and rms > RESIDUAL_FLOOR_FACTOR * prep.resolution / math.sqrt(12):
+        out.append(  # (a noise model's resolution is σ·√12, σ from the still readings)
             f"the RMS residual is {rms / (prep.resolution / math.sqrt(12)):.3g}× the "
-            "quantization floor: the model does not describe this log, and the standard "
+            + ("quantization floor" if prep.quantized else "readings' noise")
+            + ": the model does not describe this log, and the standard "
             "errors (which assume it does) are not trustworthy — a poorer basin (more "
             "--starts, or a warm --start), a missing effect (try `hdid diagnose`), wrong units, "
             "a wrong resolution or noise beyond the sensor's step"

@@ -1,0 +1,101 @@
+"""The readings' noise, from the log alone: the still stretches (holds and stuck tails)
+pooled, and the jumps of readings on a grid that an encoder's still gear never makes.
+
+:func:`hdid._simulation._prepare.prepare` uses them to choose between an encoder grid and
+a noise model, and to set the weights. NumPy (and scipy.special) only.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+#: Still stretches whose noise estimate lies within this factor of the runs' typical one
+#: are pooled (:func:`noise_sigma`): ~10 differences each put a still stretch's estimate
+#: within about 0.5–2× σ; a moving stretch is orders of magnitude above.
+STILL_SPREAD = 3.0
+
+
+def _still_pieces(runs):
+    """First differences of every run's head and tail (``m`` samples each, ``m`` a tenth
+    of the run within 4–50) and the run each belongs to: the still stretches, where the
+    run holds or rests, of :func:`noise_sigma` and :func:`grid_noise`."""
+    pieces, owner = [], []
+    for k, run in enumerate(runs):
+        th = np.asarray(run.theta, dtype=float)
+        m = max(4, min(50, len(th) // 10))
+        for seg in (th[:m], th[-m:]):
+            d = np.diff(seg)
+            if d.size >= 3:
+                pieces.append(d)
+                owner.append(k)
+    return pieces, np.asarray(owner, dtype=int)
+
+
+def grid_noise(runs, step: float) -> float:
+    """Error σ [log units] of readings on a grid of ``step`` whose still stretches jump by
+    two steps or more, 0 where they do not.
+
+    An encoder's still gear reads one level, or flickers between two adjacent ones (its
+    reading's error ≤ step/2, σ = step/√12 on average): no first difference of a still
+    stretch is 2 steps or more. Noise ``s`` ahead of the rounding gives readings of error
+    σ ≈ √(s² + step²/12) (Sheppard) and differences ~ N(0, 2σ²), so a fraction
+    ``p = 2·Q(1.5·step / (√2·σ))`` of them round to 2 steps or more: σ follows from ``p``.
+    ``p`` from the still stretches' differences: per run the stiller of head and tail (one
+    of them may move), the median over runs (a few runs may move at both ends), then
+    pooled over the stretches within :data:`STILL_SPREAD` of that (as :func:`noise_sigma`). The
+    median-absolute differences cannot tell this noise from flicker: at 1.4 steps of
+    noise half the differences are 0 or ±1 step, as for a flicker between two levels."""
+    from scipy.special import ndtri
+
+    pieces, owner = _still_pieces(runs)
+    if not pieces:
+        return 0.0
+    jumps = [np.abs(d) >= 1.5 * step for d in pieces]
+    frac = np.array([float(np.mean(j)) for j in jumps])
+    ref = float(np.median([frac[owner == k].min() for k in np.unique(owner)]))
+    if ref <= 0.0:
+        return 0.0
+    # pooled over the stretches within STILL_SPREAD of it (the smaller of two estimates
+    # from ~11 differences each is biased low: σ 0.73× at 1.4 steps)
+    p = float(np.mean(np.concatenate([j for j, f in zip(jumps, frac) if f <= STILL_SPREAD * ref])))
+    return 1.5 * step / (math.sqrt(2.0) * float(ndtri(1.0 - min(p, 0.99) / 2.0)))
+
+
+def noise_sigma(runs, step: float | None, still_only: bool = False) -> float:
+    """Noise standard deviation of the readings [log units], robustly.
+
+    From the still stretches (hold, stuck tail: runs of samples within a few MADs of each
+    other at the start and end of every run) where there are any, else from the third
+    differences (variance ``20·σ²`` for white noise; an upper bound where the motion is
+    coarsely sampled). Never below ``1e-4`` of the log's angle span (the simulator's accuracy).
+    """
+    pieces, owner = _still_pieces(runs)
+    pieces = [d - np.median(d) for d in pieces]
+    span = max(float(np.ptp(np.concatenate([r.theta for r in runs]))), 1e-300)
+    sig_still = np.inf
+    if pieces:
+        # first differences of a still stretch: variance 2σ². The smaller of the head's
+        # and tail's estimates per run (one of them may move); the stretches within
+        # STILL_SPREAD of the runs' median of those, pooled: the smallest of a few
+        # estimates from ~10 differences each is biased low (a 66 Hz log at 250 Hz: 0.53 σ,
+        # and its stuck tails then looked like motion)
+        mads = np.array([1.4826 * float(np.median(np.abs(d))) / math.sqrt(2) for d in pieces])
+        owner = np.asarray(owner)
+        per_run = [float(np.min(mads[owner == k])) for k in np.unique(owner)]
+        ref = float(np.median(per_run))
+        kept = [d for d, e in zip(pieces, mads) if e <= STILL_SPREAD * ref]
+        sig_still = 1.4826 * float(np.median(np.abs(np.concatenate(kept)))) / math.sqrt(2)
+    if still_only:  # (nan where the still stretches say nothing)
+        return sig_still if np.isfinite(sig_still) else float("nan")
+    d3 = np.concatenate([np.diff(np.asarray(r.theta, float), 3) for r in runs if len(r.theta) > 4])
+    sig_d3 = 1.4826 * float(np.median(np.abs(d3))) / math.sqrt(20.0) if d3.size else np.inf
+    # Both are upper bounds where the "still" stretches move (a ring-down has none) or the
+    # motion is coarse: the smaller positive one.
+    positive = [x for x in (sig_still, sig_d3) if np.isfinite(x) and x > 0]
+    sig = min(positive) if positive else 0.0
+    # The simulator's own error (RK4 substeps: 1.9e-5 rad on a 0.157 rad swing,
+    # docs/decisions/simulator-scheme.md) is ~1e-4 of the swing; weights finer than
+    # what the model can resolve only make the fit ill-conditioned (a noiseless log).
+    return max(sig, 1e-4 * span)
