@@ -11,6 +11,7 @@ from .._covariance import null_in_u, scaled_covariance, undetermined_scaled
 from .._log._resolution import step_against_readings
 from .._problems._evaluate import dense as _dense
 from .._problems._evaluate import jacobian as _jacobian
+from .._simulation._aliasing import aliasing_warning
 from .._simulation._prepare import Prepared
 from .._problems._problem import Problem
 from .._results._result import FitResult
@@ -89,7 +90,8 @@ def analyse(
     runs, rms_all, offset = _run_summaries(problem, prep, u, std_u, pre)
     bracket = _run_warnings(prep, runs, values, model, derived, bracket, warnings)
     warnings += _trust_warnings(problem, u, params, std_u, values)
-    warnings += plausibility_warnings(prep, model, values, rms_all)
+    warnings += plausibility_warnings(prep, model, values, rms_all,
+                                      derived.get("natural_frequency_hz", (math.nan,))[0])
 
     return FitResult(
         source=prep.source,
@@ -440,9 +442,10 @@ def _shape_warnings(problem: Problem, flags: dict[str, str]) -> list[str]:
 RESIDUAL_FLOOR_FACTOR = 3.0
 
 
-def plausibility_warnings(prep: Prepared, model, values, rms: float) -> list[str]:
+def plausibility_warnings(prep: Prepared, model, values, rms: float,
+                          fitted_hz: float = math.nan) -> list[str]:
     """Warn when the log's numbers are implausible for the declared units (time in s,
-    angles in rad): a wrong unit otherwise gives a confident-looking fit."""
+    angles in rad) or its sampling (the fitted swing ``fitted_hz`` aliased)."""
     out = []
     fs = 1.0 / prep.sample_period
     if fs < 5.0:
@@ -450,12 +453,8 @@ def plausibility_warnings(prep: Prepared, model, values, rms: float) -> list[str
             f"the sample rate is {fs:.3g} Hz: implausibly low for this test if time is in "
             "seconds (a log in milliseconds reads as 1000× slower): convert time to seconds"
         )
-    f_n = prep.frequency_hz
-    if math.isfinite(f_n) and f_n > 0.5 * fs:
-        out.append(
-            f"the log oscillates at about {f_n:.3g} Hz, above half the sample rate: the swing is "
-            "not resolved; log faster"
-        )
+    if aliased := aliasing_warning(prep.sample_period, fitted_hz, prep.frequency_hz):
+        out.append(aliased)
     amp = float(np.max(np.abs(prep.hold - prep.rest))) if prep.n_runs else 0.0
     has_gravity = any(e.name == "gravity" for e in model.effects)
     if (not has_gravity and ("k1" in values and model.ratio > 1 and amp / model.ratio > 0.05

@@ -166,6 +166,34 @@ def turning_points(th: np.ndarray, threshold: float) -> list[int]:
     return out
 
 
+def _lead_level(th: np.ndarray, still: float) -> float | None:
+    """The level a run is held at from its first sample, or None where it starts moving.
+
+    A hold is a stretch of readings within ``still`` (the flicker, or 5σ of noise) of one
+    level: the first three readings agree, or the first five lie within ``still`` of their
+    median — a difference of two noisy readings has √2σ, so a 3.5σ excursion of one of them
+    (in most logs of ~100 held readings a run) breaks the pairwise test. One of the five
+    may be a lone noise spike beyond that.
+    A smooth motion cannot put one off-level reading between agreeing ones, so a spike at
+    the second or third reading is one; a first reading off the others' level is a spike
+    only on the side away from the motion that follows (a ring-down cut just before a
+    turning point comes from the side it returns to)."""
+    n = len(th)
+    if n >= 3 and abs(th[1] - th[0]) <= still and abs(th[2] - th[0]) <= still:
+        return float(th[0])
+    if n < 5:
+        return None
+    mid = float(np.median(th[:5]))
+    off = np.flatnonzero(np.abs(th[:5] - mid) > still)
+    if off.size == 0 or (off.size == 1 and off[0] in (1, 2)):
+        return mid
+    if off.size == 1 and off[0] == 0:
+        far = th[int(np.argmax(np.abs(th - mid)))]
+        if np.sign(th[0] - mid) != np.sign(far - mid):
+            return mid
+    return None
+
+
 def _vertex(t: np.ndarray, th: np.ndarray, i: int) -> float:
     """Time of the extremum near sample ``i`` (parabola through its neighbours)."""
     if 0 < i < len(th) - 1:
@@ -239,14 +267,18 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
         # starts in motion (a ring-down, a log cut after the release) — unless the fit found
         # that its first reading is a hold, the release falling in the first interval
         # (:mod:`hdid._fitting._first_reading`).
-        held = (n >= 3 and abs(th[1] - th[0]) <= still and abs(th[2] - th[0]) <= still
-                ) or run.name in log.first_reading_held
+        level = _lead_level(th, still)
+        held = level is not None or run.name in log.first_reading_held
         if held:
+            level = th[0] if level is None else level
             # the hold's level from its own readings: the leading stretch within the
-            # flicker of the first (a short pre-trigger hold has fewer than 10 samples)
-            off_hold = np.flatnonzero(np.abs(th - th[0]) > still)
+            # flicker of its level (a short pre-trigger hold has fewer than 10 samples),
+            # a lone noise spike skipped (the hold ends where the readings leave for good)
+            off_lvl = np.abs(th - level) > still
+            off_hold = np.flatnonzero(off_lvl & np.append(off_lvl[1:], off_lvl[-1:]))
             n_lead = int(off_hold[0]) if off_hold.size else n
             head = th[: min(max(3, min(10, n // 10)), n_lead)]
+            head = head[np.abs(head - level) <= still]
             h = float(np.median(head))
             noise = 1.4826 * float(np.median(np.abs(head - h)))
             thr = max(1.5 * step, 5.0 * noise) if quantized else max(6.0 * sigma, 5.0 * noise)
