@@ -4,6 +4,7 @@
     python benchmarks/real_logs.py            # ≈ 10 fits, each compiling its own program
     python benchmarks/real_logs.py --render   # results/real_logs.md from its JSON
     python benchmarks/real_logs.py --measured # + the measured logs of ../shared/data/real
+    python benchmarks/real_logs.py --sts [EFFECT ...]  # the STS3215 drops, base model and + each effect
 """
 
 import argparse
@@ -15,7 +16,7 @@ import sys
 import tempfile
 import time
 
-from _common import ROOT, parse_or_render, run_meta, stored, write_result
+from _common import ROOT, interpretation_section, parse_or_render, run_meta, stored, write_result
 
 sys.path.insert(0, str(ROOT / "tests"))
 
@@ -67,10 +68,52 @@ def judge(result, truth):
     return rows
 
 
+def sts_rows(add: tuple[str, ...]):
+    """The eight STS3215 set-ups fitted with only what a user knows (``--remove stiffness --add
+    gravity --inertia I``, I = the lab's armature + m·l²) plus the effects ``add``: RMS/floor,
+    its sample-to-sample part (residual minus its 5-sample running mean, scaled by √(5/4):
+    what no smooth model can follow — the servo's readings are its own samples, taken up to one
+    of its cycles before the host's timestamp) and the armature the fit implies,
+    ``m·g·l·I/mgl_fit − m·l²`` (one constant across set-ups if the model is right)."""
+    import numpy as np
+
+    real = ROOT.parent / "shared" / "data" / "real" / "sts3215_drop"
+    for k, v in json.loads((real / "reference.json").read_text())["setups"].items():
+        model = (hdid.Model.default(inertia=v["bam_m6_total_inertia_kgm2"], ratio=1.0).without("stiffness")
+                 .with_effect(library({})["gravity"]))
+        for key in add:
+            model = model.with_effect(library({"mgl": v["mgl_point_mass_Nm"]})[key])
+        load, t0 = os.getloadavg()[0], time.perf_counter()
+        res = hdid.fit(real / v["csv"], model)
+        wall = time.perf_counter() - t0
+        fr, floor = res.residuals(), res.quantization_floor_rad
+        fast = np.concatenate([(r := d.residual_rad.to_numpy()) - np.convolve(r, np.ones(5) / 5, "same")
+                               for _, d in fr.groupby("run", sort=False)])
+        w = np.concatenate([d.weight.to_numpy() for _, d in fr.groupby("run", sort=False)])
+        mgl = res.parameters["mgl"].value
+        m_l2 = v["mass_kg"] * v["length_m"] ** 2
+        yield dict(setup=k, add=list(add), rms=res.rms_residual_rad / floor,
+                   fast=float(np.sqrt(1.25 * np.sum(w * fast**2) / np.sum(w)) / floor),
+                   mgl=mgl, mgl_point=v["mgl_point_mass_Nm"], m_l2=m_l2,
+                   armature=v["mgl_point_mass_Nm"] * v["bam_m6_total_inertia_kgm2"] / mgl - m_l2,
+                   parameters={n: e.value for n, e in res.parameters.items()},
+                   warnings=res.warnings, wall_s=wall, load=load)
+        print(k, add, f"rms {res.rms_residual_rad / floor:.1f}x, mgl {mgl:.4g}, {wall:.0f} s", flush=True)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--measured", action="store_true", help="fit the measured logs instead")
+    ap.add_argument("--sts", nargs="*", metavar="EFFECT",
+                    help="fit the STS3215 drops with the base model plus these effects (none: the base)")
     if (args := parse_or_render(ap, argv, "real_logs", render)) is None:
+        return
+    if args.sts is not None:  # one variant's rows replace that variant's in the stored result
+        res, add = stored("real_logs"), tuple(args.sts)
+        rows = [r for r in res.get("sts", []) if tuple(r["add"]) != add]
+        for row in sts_rows(add):
+            rows.append({**row, "meta": run_meta()})
+            write_result("real_logs", {**res, "sts": rows}, render, indent=1)
         return
     if args.measured:  # rows added to the stored result, one fit (a CLI process) each
         res = {**stored("real_logs"), "measured": []}
@@ -128,7 +171,43 @@ def render(res: dict) -> str:
                       f"{k} {a:.4g} ({a - b:+.3f})" if k == "theta_g" else f"{k} {a:.4g} "
                       f"({a / b - 1:+.0%})" for k, (a, b) in m["vs"].items()) + f" | {m['rms']:.1f}"
                   f" | {m['wall_s']:.0f} ({m['load']:.1f}) |" for m in res["measured"]]
-    return "\n".join(lines) + "\n"
+    if res.get("sts"):
+        lines += sts_section(res["sts"])
+    return "\n".join(lines + [""] + interpretation_section(res)).rstrip("\n") + "\n"
+
+
+def sts_section(rows: list[dict]) -> list[str]:
+    """The STS3215 drops per model variant: RMS/floor and its sample-to-sample part, m·g·l's
+    error against the point mass, and the armature each fit implies (its spread across the
+    eight set-ups is the test: one gear, one armature)."""
+    import statistics
+
+    out = ["", "## STS3215 drops by model (`--sts [EFFECT ...]`)", "",
+           "RMS/floor and its sample-to-sample part (the residual minus its 5-sample running mean, "
+           "×√(5/4): what no smooth trajectory follows); mgl against m·g·l of the point mass; the "
+           "armature the fit implies, m·g·l·I/mgl − m·l² (I the lab's total inertia, fixed in the fit).",
+           "", "| set-up | model | RMS/floor | sample-to-sample | mgl (vs m·g·l) | armature [kg m²] | added "
+           "| wall [s] (load) |", "|---|---|---|---|---|---|---|---|"]
+    variants = []
+    for r in rows:
+        name = "base" + "".join(f" + {a}" for a in r["add"])
+        variants += [name] * (name not in variants)
+        added = ", ".join(f"{k} {r['parameters'][k]:.3g}" for k in r["parameters"]
+                          if k not in ("tau_c", "tau_s", "v_s", "delta", "c_v", "mgl", "inertia"))
+        out.append(f"| {r['setup']} | {name} | {r['rms']:.1f} | {r['fast']:.1f} | {r['mgl']:.4g} "
+                   f"({r['mgl'] / r['mgl_point'] - 1:+.1%}) | {r['armature']:.4f} | {added} | "
+                   f"{r['wall_s']:.0f} ({r['load']:.1f}) |")
+    out += ["", "| model | set-ups | RMS/floor (median) | mgl error (range) | armature mean ± sd (sd/mean) |",
+            "|---|---|---|---|---|"]
+    for name in variants:
+        sel = [r for r in rows if "base" + "".join(f" + {a}" for a in r["add"]) == name]
+        arm = [r["armature"] for r in sel]
+        err = [r["mgl"] / r["mgl_point"] - 1 for r in sel]
+        sd = statistics.stdev(arm) if len(arm) > 1 else float("nan")
+        out.append(f"| {name} | {len(sel)} | {statistics.median(r['rms'] for r in sel):.1f} | "
+                   f"{min(err):+.1%} … {max(err):+.1%} | {statistics.mean(arm):.4f} ± {sd:.4f} "
+                   f"({sd / statistics.mean(arm):.1%}) |")
+    return out
 
 
 if __name__ == "__main__":

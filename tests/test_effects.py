@@ -250,3 +250,63 @@ def test_coulomb_is_stribeck_at_equal_levels_and_decays_linearly_in_hdid():
     assert rest <= tau_c / k
     assert abs(rest - abs(0.157 - 2 * (len(amps) + 1) * tau_c / k)) < 2e-5 * 0.157
     assert np.ptp(theta[-200:]) == 0.0  # stuck, not creeping
+
+
+def test_gravity_friction_torque_and_candidate_against_numpy():
+    from hdid.effects.gravity_friction import GravityLoadFriction
+
+    rng = np.random.default_rng(28)
+    for ratio in (1.0, 50.0):
+        e = library({"c_g": 0.07})["gravity_friction"]
+        assert isinstance(e, GravityLoadFriction) and e.name == "gravity_friction"
+        for theta, omega, s in zip(rng.uniform(-3, 3, 20) * ratio, rng.normal(0, 5, 20),
+                                   rng.choice([-1.0, 0.0, 1.0], 20)):
+            m = _motion(theta, omega, s, ratio)
+            # sliding: −s·c_g·|sin(θ/N)|/N, opposing the motion; at rest none, and it holds
+            # the same amount (a dry friction whose level follows the gravity torque)
+            want = 0.07 * abs(np.sin(theta / ratio)) / ratio
+            assert float(e.torque(m, None)) == pytest.approx(-s * want, rel=1e-13, abs=1e-300)
+            assert float(e.holding_torque(m, None)) == pytest.approx(want, rel=1e-13)
+    # its start follows the pendulum's m·g·l (a tenth), never a catalog number
+    assert float(library({"mgl": 2.0})["gravity_friction"].c_g) == pytest.approx(0.2)
+    # diagnose tries it only on a model that holds a pendulum
+    cand = [c for c in hdid.effects._candidate.candidates(hdid.effects.registry())
+            if c.key == "gravity_friction"][0]
+    pendulum = hdid.Model.default(inertia=1e-3, ratio=1.0).without("stiffness").with_effect(
+        library({"mgl": 1.0})["gravity"])
+    assert cand.applies(pendulum) and not cand.applies(hdid.Model.default())
+    assert not cand.applies(pendulum.with_effect(e))
+
+
+@pytest.mark.parametrize("ratio", [1.0, 50.0])
+def test_gravity_friction_half_swings_in_hdid_against_the_energy_balance(ratio):
+    # A pendulum with Coulomb friction tau and gravity-load friction c_g only: from a turning
+    # point a to the next, b, on the other side of the hanging angle, the work of friction
+    # equals the potential energy lost (output angles):
+    #   mgl·(cos b − cos a) = tau·|b − a| + c_g·((1 − cos a) + (1 − cos b))
+    # (∫|sin x| dx across zero). Solved for b by scipy's brentq, swing after swing, and
+    # compared with the turning points hdid.simulate finds.
+    from scipy.optimize import brentq
+
+    mgl, I_out, tau, c_g = 1.5, 0.05, 0.02, 0.25
+    model = hdid.Model(effects=(library({"mgl": mgl})["gravity"],
+                                library({"tau_c": tau / ratio})["coulomb"],
+                                library({"c_g": c_g})["gravity_friction"]),
+                       inertia=I_out / ratio**2, ratio=ratio)
+    t = np.arange(0.0, 3.0, 2e-4)  # ~3 half-swings of a 0.87 Hz pendulum
+    x = np.asarray(hdid.simulate(model, t, -1.3 * ratio, 0.0)) / ratio
+    peaks = [i for i in range(1, len(t) - 1) if (x[i] - x[i - 1]) * (x[i + 1] - x[i]) < 0
+             and abs(x[i + 1] - x[i - 1]) > 0]
+    got = np.abs(x[peaks])
+    a, want = -1.3, []
+    for _ in range(len(got)):
+        # |b − a| = |a| + |b|: the swing crosses the hanging angle
+        f = lambda B: (mgl * (np.cos(B) - np.cos(a)) - tau * (abs(a) + B)  # noqa: E731
+                       - c_g * (2 - np.cos(a) - np.cos(B)))
+        b = brentq(f, 1e-9, abs(a))
+        want.append(b)
+        a = b
+    assert len(got) >= 3
+    # turning points on a 0.2 ms grid: at most θ̈·dt²/8 ≈ 1e-7 rad low; RK4 far below. Without
+    # c_g the first turning point would be 0.16 rad farther out (1.30 → 1.13 instead of 0.97)
+    np.testing.assert_allclose(got, want, rtol=0, atol=2e-6)

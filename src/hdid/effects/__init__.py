@@ -21,6 +21,7 @@ from .asymmetric_viscous import AsymmetricViscousFriction
 from .backlash import FreePlayStiffness
 from .coulomb import CoulombFriction
 from .gravity import Gravity
+from .gravity_friction import GravityLoadFriction
 from .hysteresis import DahlHysteresis
 from .kinematic_error import KinematicErrorStiffness
 from .linear_stiffness import LinearStiffness
@@ -68,6 +69,7 @@ __all__ = [
     "DahlHysteresis",
     "FreePlayStiffness",
     "Gravity",
+    "GravityLoadFriction",
     "KinematicErrorStiffness",
     "LinearStiffness",
     "LoadDependentFriction",
