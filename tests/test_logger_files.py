@@ -113,7 +113,7 @@ def test_rows_are_numbered_in_the_file_below_a_preamble(tmp_path, paper):
     """Messages name the row as the file numbers it: 2 preamble lines move row 101 to 103."""
     text = paper[0]
     lines = text.splitlines()
-    lines[100] = lines[100].rsplit(",", 1)[0] + ","  # file row 101: theta empty
+    lines[100] = lines[100].rsplit(",", 1)[0] + ",0.1x"  # file row 101: theta no number
     path = _write(tmp_path / "hole.csv", "# station 4\nDate: x\n" + "\n".join(lines) + "\n")
     with pytest.raises(LogError) as err:
         read_log(path)

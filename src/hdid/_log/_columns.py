@@ -9,7 +9,7 @@ import pandas as pd
 
 from .. import _units
 from .._errors import LogError
-from ._headers import header_key
+from ._headers import by_alias, header_key
 from ._names import (
     _COUNTS, _COUNTS_HINT, _COUNTS_LOOKING_MAX, _EXPECTED_COLUMNS, _INTEGER_TOL,
     _KNOWN_COLUMNS, _LOAD_TORQUE, _MOTOR, _MOTOR_CURRENT, _MOTOR_HINT, _MOTOR_TORQUE,
@@ -83,7 +83,10 @@ def _find_columns(
         key = header_key(name)[0]
         if key not in _KNOWN_COLUMNS:
             continue
-        if key in index:
+        if key in index and by_alias(name) != by_alias(table.names[index[key]]):
+            if by_alias(name):  # ``theta`` and ``position``: the canonical name wins
+                continue
+        elif key in index:
             raise LogError(
                 f"column appears twice (columns {index[key] + 1} and {i + 1}) — rename or "
                 "drop one of them",

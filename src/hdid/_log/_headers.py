@@ -18,8 +18,10 @@ from ._names import _KNOWN_COLUMNS, _THETA, _THETA_OUT, _TIME
 
 #: Angle columns, which may be given in encoder counts (``theta_cts``).
 _ANGLES = (_THETA, _THETA_OUT)
-#: Short names loggers give a known column.
-_ALIASES = {"t": _TIME}
+#: Other names loggers give a known column: a bare ``t``, LabVIEW's ``X_Value`` (the
+#: time of an ``.lvm`` file), a drive's ``Position`` or ``pos``. A column named by its
+#: canonical name wins over one named by an alias.
+_ALIASES = {"t": _TIME, "x_value": _TIME, "pos": _THETA, "position": _THETA}
 
 
 def _canonical(base: str) -> str:
@@ -52,3 +54,12 @@ def header_key(name: str) -> tuple[str, str | None]:
 def is_known(name: str) -> bool:
     """Whether a header cell names one of hdid's columns."""
     return header_key(name)[0] in _KNOWN_COLUMNS
+
+
+def by_alias(name: str) -> bool:
+    """Whether a header cell names its column by an alias (``Position [deg]``), not by its
+    canonical name."""
+    base, unit = _units.split(name)
+    key = re.sub(r"[\s\-]+", "_", base.strip().lower())
+    head = key.rpartition("_")[0]
+    return key in _ALIASES or (unit is None and head in _ALIASES)

@@ -16,10 +16,14 @@ from ._names import (
     _THETA_OUT, _TIME,
 )
 from ._dropouts import find_dropouts
+from ._gaps import drop_missing_readings, wide_to_long
 from ._layout import runs_of_repeated_headers
 from ._revolutions import REVOLUTION, unwrap_revolutions
 from ._rollover import unwrap_rollover
-from ._time_order import repeated_rows, repeated_rows_note, runs_at_restarts, take_rows
+from ._time_order import (
+    group_interleaved, repeated_rows, repeated_rows_note, runs_at_restarts, take_rows,
+)
+from ._timer import time_print_unit, unwrap_timer, uniform_stamps
 from ._timestamps import timestamp_seconds
 from ._types import Log, Run
 from ._resolution import column_print_units, find_step
@@ -149,7 +153,11 @@ def read_log(
         path, torque_constant, "torque constant", "pass the motor's torque constant in N m/A"
     )
     table = _load_frame(source) if path is None else _load_csv(path)
+    # one angle column per run, a reading the logger missed (hdid._log._gaps)
+    table, gap_notes = wide_to_long(table, _missing_cells)
     cols = _find_columns(table, cpr, out_cpr, kt)
+    table, note = drop_missing_readings(table, cols[_THETA], cols[_TIME], _missing_cells)
+    table.notes = list(table.notes) + gap_notes + note
     unit_scale = _column_scales(table, cols, cpr, out_cpr)
     if given_step is not None:  # in theta's units, as the header gives them
         given_step *= unit_scale[_THETA]
@@ -185,6 +193,7 @@ def read_log(
     # (hdid._log._timestamps)
     time = timestamp_seconds(table.columns[cols[_TIME]],
                              lambda m, pos: fail(m, _TIME, pos))
+    stamped = time is not None
     if time is None:
         time = cells.numbers(cols[_TIME])
     else:
@@ -197,6 +206,8 @@ def read_log(
     if driven and run_labels is not None:
         _check_not_mixed(table, cols[_MOTOR], run_labels)
     cells.raise_first()
+    # a logger's timer register that rolls over (hdid._log._timer), in its own ticks
+    time, timer_note = unwrap_timer(time, table.lines, name(_TIME))
     time, theta = time * unit_scale[_TIME], theta * unit_scale[_THETA]
     if inertia is not None:
         inertia = inertia * unit_scale[_INERTIA]
@@ -210,7 +221,18 @@ def read_log(
         motor = motor * kt
 
     # -- rows written twice, a clock that restarts (hdid._log._time_order) --------
-    order_notes = []
+    order_notes = [timer_note] if timer_note else []
+    # runs written interleaved row by row, each row with its run label
+    order, note = group_interleaved(run_labels, time, table.lines)
+    if order is not None:
+        order_notes.append(note)
+        run_labels, setups, time, theta, inertia, motor, theta_out, load = (
+            None if v is None else v[order]
+            for v in (run_labels, setups, time, theta, inertia, motor, theta_out, load))
+        take_rows(table, order)
+    # stamps coarser than a fixed-rate logger's sampling (hdid._log._timer): before the
+    # rows written twice, which a held reading stamped twice would look like
+    time = _uniform_stamps(time, run_labels, table, cols, unit_scale, stamped, order_notes)
     twice = repeated_rows([run_labels, setups, time, theta, inertia, motor, theta_out, load])
     if twice.size:
         order_notes.append(repeated_rows_note(table.lines, twice))
@@ -224,6 +246,8 @@ def read_log(
         run_labels, restart_notes = runs_at_restarts(time, run_labels, table.lines,
                                                      min_samples_per_run)
         order_notes += restart_notes
+        time = _uniform_stamps(time, run_labels, table, cols, unit_scale, stamped,
+                               order_notes)
 
     # -- counts vs. radians (a count register that rolls over is unwrapped first) ------
     rollover_notes = []
@@ -343,6 +367,21 @@ def read_log(
         print_unit=print_unit,
         resolution_note=resolution_note,
     )
+
+
+def _uniform_stamps(time, run_labels, table, cols, unit_scale, stamped, notes):
+    """:func:`._timer.uniform_stamps` over the runs as labelled so far (notes appended)."""
+    if stamped:
+        return time
+    block_start = np.zeros(time.size, dtype=bool)
+    block_start[:1] = True
+    if run_labels is not None:
+        block_start[1:] = run_labels[1:] != run_labels[:-1]
+    time, stamp_notes = uniform_stamps(
+        time, block_start, lambda: time_print_unit(table.columns[cols[_TIME]], unit_scale[_TIME]),
+        table.lines, run_labels)
+    notes += stamp_notes
+    return time
 
 
 def _check_not_mixed(table: _Table, col: int, run_labels: np.ndarray) -> None:

@@ -125,6 +125,25 @@ def _read_text(path, err) -> str:
         ) from None
 
 
+def _workbook_text(path: str, err) -> str:
+    """The first sheet of an Excel workbook (``.xlsx``) as CSV text, read with openpyxl
+    (an optional dependency: without it, the error says how to get it)."""
+    try:
+        import openpyxl  # noqa: F401
+    except ImportError:
+        raise err("this is an Excel workbook and the package that reads it is not "
+                  "installed — pip install openpyxl, or export the sheet as CSV") from None
+    try:
+        frame = pd.read_excel(path, sheet_name=0, header=None, dtype=object)
+    except Exception as exc:
+        raise err(f"cannot read the Excel workbook ({type(exc).__name__}: {_show(exc, 80)}) "
+                  "— export the sheet as CSV (comma-separated)") from None
+    frame = frame.map(lambda c: "" if c is None or (isinstance(c, float) and c != c)
+                      else c.isoformat() if hasattr(c, "isoformat") else repr(c)
+                      if isinstance(c, float) else str(c))
+    return frame.to_csv(header=False, index=False, lineterminator="\n")
+
+
 def _decimal_commas(values: np.ndarray) -> np.ndarray:
     """Cells like ``0,157`` as ``0.157`` (a ';'- or tab-separated European export)."""
     cells = pd.Series(values, dtype=object)
@@ -137,15 +156,59 @@ def _decimal_commas(values: np.ndarray) -> np.ndarray:
     return cells.to_numpy(dtype=object)
 
 
+#: Digit grouping: ``12,345`` or ``1,234.5`` (',' groups, '.' decimal) and ``12.345`` or
+#: ``1.234,5`` ('.' groups, ',' decimal).
+_GROUPED = {",": re.compile(r"^\s*[-+]?\d{1,3}(?:,\d{3})+(?:\.\d*)?\s*$"),
+            ".": re.compile(r"^\s*[-+]?\d{1,3}(?:\.\d{3})+(?:,\d*)?\s*$")}
+#: A number with a decimal point that is no digit grouping (``0.157``, ``4.0``).
+_DECIMAL_POINT = re.compile(r"^\s*[-+]?\d*\.\d+(?:[eE][-+]?\d+)?\s*$")
+#: A time of day with a decimal comma (``10:00:00,004``: a European export).
+_CLOCK_COMMA = re.compile(r"^\s*\d{1,2}:\d{2}:\d{2},\d+\s*$")
+
+
+def _number_format(raw: list[np.ndarray]) -> list[np.ndarray]:
+    """The cells of a ';'- or tab-separated file with its own number format read as plain
+    numbers: decimal commas (``0,157``, ``10:00:00,004``) and digit grouping (``12,345``
+    where the file's other numbers show a decimal point; ``1.234,5``). A file has one
+    decimal separator: cells that can only be read with a point (``4.0``) and none that
+    can only be read with a comma (``0,1571``) make every comma a grouping mark, and the
+    other way round."""
+    cells = [pd.Series(v, dtype=object).astype(str) for v in raw]
+    point = any(c.str.match(_DECIMAL_POINT).to_numpy().__and__(
+        ~c.str.match(_GROUPED["."]).to_numpy()).any() for c in cells)
+    comma = any(c.str.match(_DECIMAL_COMMA).to_numpy().__and__(
+        ~c.str.match(_GROUPED[","]).to_numpy()).any() for c in cells)
+    out = []
+    for c, values in zip(cells, raw):
+        if point and not comma:  # ',' groups digits
+            hit = c.str.match(_GROUPED[","]).to_numpy()
+            if hit.any():
+                values = values.copy()
+                values[hit] = c[hit].str.replace(",", "", regex=False).to_numpy()
+        else:
+            if comma and not point:  # '.' groups digits
+                hit = c.str.match(_GROUPED["."]).to_numpy()
+                if hit.any():
+                    values = values.copy()
+                    values[hit] = c[hit].str.replace(".", "", regex=False).to_numpy()
+            values = _decimal_commas(values)
+            clock = pd.Series(values, dtype=object).astype(str).str.match(_CLOCK_COMMA)
+            if clock.any():
+                values = values.copy()
+                values[clock.to_numpy()] = [v.replace(",", ".") for v in values[clock.to_numpy()]]
+        out.append(values)
+    return out
+
+
 def _load_csv(path: str | os.PathLike[str]) -> _Table:
     source = os.fspath(path)
     err = lambda message, **kw: LogError(message, path=path, **kw)  # noqa: E731
     suffix = Path(source).suffix.lower()
     if suffix == ".mat":  # MATLAB vectors named like the columns (hdid._log._mat)
         return _load_frame(load_mat_frame(path), source=source, path=path)
-    if suffix in {".xlsx", ".xlsm", ".xls", ".ods"}:
+    if suffix in {".xls", ".ods"}:
         raise err("this is a spreadsheet, not a CSV file — export it as CSV (comma-separated)")
-    text = _read_text(source, err)
+    text = _workbook_text(source, err) if suffix in {".xlsx", ".xlsm"} else _read_text(source, err)
     if not text:
         raise err("file is empty — expected a CSV file with a header line such as 'time,theta'")
     if not text.strip():
@@ -188,7 +251,7 @@ def _load_csv(path: str | os.PathLike[str]) -> _Table:
 
     raw = [frame[col].to_numpy(dtype=object) for col in frame.columns]
     if sep != ",":
-        raw = [_decimal_commas(values) for values in raw]
+        raw = _number_format(raw)
     blank = np.ones(len(frame), dtype=bool)
     for values in raw:
         blank &= values == ""

@@ -99,3 +99,25 @@ def runs_at_restarts(time: np.ndarray, run_labels: np.ndarray | None, lines: np.
     return labels, [f"time restarts at row(s) {shown}{more} and the log has no 'run' column: "
                     f"each stretch is a run ({', '.join(repr(m) for m in names[:6])}"
                     f"{', …' if len(names) > 6 else ''})"]
+
+
+def group_interleaved(run_labels: np.ndarray | None, time: np.ndarray, lines: np.ndarray
+                      ) -> tuple[np.ndarray | None, str | None]:
+    """Row order that groups runs written interleaved (a logger writing several stations'
+    samples row by row, each with its run label), and a note; ``(None, None)`` when the
+    runs are contiguous already, or when some run's time does not increase in file order
+    (the rows are then out of order, not interleaved: the run check names them)."""
+    if run_labels is None or run_labels.size < 2:
+        return None, None
+    codes, uniques = pd.factorize(run_labels)
+    changes = int(np.count_nonzero(codes[1:] != codes[:-1]))
+    if changes == uniques.size - 1:
+        return None, None
+    order = np.argsort(codes, kind="stable")
+    grouped_time, grouped = time[order], codes[order]
+    same = grouped[1:] == grouped[:-1]
+    if np.any(np.diff(grouped_time)[same] <= 0):
+        return None, None
+    first = int(lines[int(np.flatnonzero(codes[1:] != codes[:-1])[0]) + 1])
+    return order, (f"the runs are interleaved row by row (from row {first}, each row labelled "
+                   f"by its run): rows grouped by run, {uniques.size} runs, each in file order")

@@ -21,7 +21,8 @@ from ._table import _cell_text, _show
 
 #: ``YYYY-MM-DD`` then ``T`` or a space and ``hh:mm`` (seconds and fractions optional).
 _ISO = re.compile(r"^\d{4}-\d{2}-\d{2}[T ]\d{1,2}:\d{2}")
-#: A time of day alone: ``10:00:00.004`` (a day's log; past midnight it steps back).
+#: A time of day alone: ``10:00:00.004`` (a day's log; past midnight, where it drops back
+#: by more than half a day, a day is added).
 _CLOCK = re.compile(r"^\d{1,2}:\d{2}:\d{2}(\.\d+)?$")
 
 
@@ -54,4 +55,12 @@ def timestamp_seconds(column, fail) -> np.ndarray | None:
                        "expected (e.g. 2026-11-27T10:00:00.004) — fix the cell or drop the row",
                        pos)
     ns = stamps.to_numpy(dtype="datetime64[ns]").astype(np.int64)
+    if not isinstance(column, pd.Series) or not pd.api.types.is_datetime64_any_dtype(
+            column.dtype):
+        if form != "ISO8601":  # times of day: past midnight the clock reads 00:00 again
+            ns = ns + _DAY_NS * np.cumsum(np.diff(ns, prepend=ns[0]) < -_DAY_NS // 2)
     return (ns - ns[0]).astype(np.float64) * 1e-9
+
+
+#: One day [ns]: a time of day that drops back by more than half of it crossed midnight.
+_DAY_NS = 86_400 * 10**9
