@@ -310,3 +310,30 @@ def test_gravity_friction_half_swings_in_hdid_against_the_energy_balance(ratio):
     # turning points on a 0.2 ms grid: at most θ̈·dt²/8 ≈ 1e-7 rad low; RK4 far below. Without
     # c_g the first turning point would be 0.16 rad farther out (1.30 → 1.13 instead of 0.97)
     np.testing.assert_allclose(got, want, rtol=0, atol=2e-6)
+
+
+def test_back_emf_torque_against_numpy_and_a_coasting_flywheel_in_hdid():
+    rng = np.random.default_rng(29)
+    e = library({"c_e": 0.12, "w_e": 4.0})["back_emf"]
+    assert type(e).__name__ == "BackEmfBraking" and e.name == "back_emf"
+    for theta, omega, s in zip(rng.uniform(-3, 3, 30), rng.normal(0, 6, 30),
+                               rng.choice([-1.0, 0.0, 1.0], 30)):
+        got = float(e.torque(_motion(theta, omega, s, 1.0), None))
+        # a brake with a dead zone: nothing below 4 rad/s, 0.12 N m per rad/s above it
+        want = -np.sign(omega) * 0.12 * max(abs(omega) - 4.0, 0.0)
+        assert got == pytest.approx(want, rel=1e-13, abs=1e-300)
+        assert float(e.holding_torque(_motion(theta, 0.0, 0.0, 1.0), None)) == 0.0
+    # A flywheel (no spring, no friction) let go at omega0 > w_e: I·ω̇ = −c_e·(ω − w_e), so
+    #   ω = w_e + (ω0 − w_e)·exp(−t/τ), θ = w_e·t + (ω0 − w_e)·τ·(1 − exp(−t/τ)), τ = I/c_e,
+    # and once slower than w_e nothing brakes it (ω never falls below w_e)
+    inertia, omega0 = 0.03, 9.0
+    model = hdid.Model(effects=(e,), inertia=inertia, ratio=1.0)
+    t = np.linspace(0.0, 2.0, 401)
+    theta = np.asarray(hdid.simulate(model, t, 0.0, 0.0, omega0=omega0))
+    tau = inertia / 0.12
+    want = 4.0 * t + (omega0 - 4.0) * tau * (1 - np.exp(-t / tau))
+    # RK4 with 0.5 ms substeps on a 0.25 s time constant: (h/τ)^4 ≈ 2e-11 relative per step
+    np.testing.assert_allclose(theta, want, rtol=0, atol=1e-8)
+    cand = [c for c in hdid.effects._candidate.candidates(hdid.effects.registry())
+            if c.key == "back_emf"][0]
+    assert not cand.applies(hdid.Model.default())  # a drop's candidate: a model with gravity

@@ -18,6 +18,7 @@ from ._candidate import Candidate
 from ._registry import keys, registry
 from .asymmetric_friction import AsymmetricStribeckFriction
 from .asymmetric_viscous import AsymmetricViscousFriction
+from .back_emf import BackEmfBraking
 from .backlash import FreePlayStiffness
 from .coulomb import CoulombFriction
 from .gravity import Gravity
@@ -63,6 +64,7 @@ __all__ = [
     "AbstractSpring",
     "AsymmetricStribeckFriction",
     "AsymmetricViscousFriction",
+    "BackEmfBraking",
     "Candidate",
     "CoulombFriction",
     "CubicStiffness",
