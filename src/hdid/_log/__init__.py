@@ -53,7 +53,9 @@ in brackets, after a slash or as a suffix (``time [ms]``, ``t/s``, ``theta_deg``
 :mod:`._headers`); other columns are ignored. What loggers write around the table — a
 preamble, ``#`` comments, a units row, a repeated header, a footer, a last line cut
 mid-write — is found by :mod:`._layout`; a count register that rolls over is unwrapped
-(:mod:`._rollover`); date-times are seconds (:mod:`._timestamps`); a MATLAB ``.mat``
+(:mod:`._rollover`); date-times are seconds (:mod:`._timestamps`); a logger's timer that
+rolls over and stamps coarser than its sampling are read by :mod:`._timer`; one angle
+column per run and a reading the logger missed by :mod:`._gaps`; a MATLAB ``.mat``
 file's vectors are its columns (:mod:`._mat`). :func:`read_log` checks everything and raises
 :class:`~hdid._errors.LogError` with a one-line message naming the file, the
 column and/or the CSV line and the fix. The file is only ever read.

@@ -174,10 +174,18 @@ def _number_format(raw: list[np.ndarray]) -> list[np.ndarray]:
     can only be read with a comma (``0,1571``) make every comma a grouping mark, and the
     other way round."""
     cells = [pd.Series(v, dtype=object).astype(str) for v in raw]
-    point = any(c.str.match(_DECIMAL_POINT).to_numpy().__and__(
-        ~c.str.match(_GROUPED["."]).to_numpy()).any() for c in cells)
-    comma = any(c.str.match(_DECIMAL_COMMA).to_numpy().__and__(
-        ~c.str.match(_GROUPED[","]).to_numpy()).any() for c in cells)
+
+    def only(c: pd.Series, decimal: re.Pattern, grouped: str) -> bool:
+        """Some cell reads only with this decimal separator: a decimal that is no digit
+        grouping of the other kind (``0.1571``), or a grouped number with a decimal part
+        (``1,004.0``)."""
+        other = _GROUPED["." if grouped == "," else ","]
+        both = c.str.match(_GROUPED[grouped]) & c.str.contains("." if grouped == "," else ",",
+                                                               regex=False)
+        return bool((c.str.match(decimal) & ~c.str.match(other)).any() or both.any())
+
+    point = any(only(c, _DECIMAL_POINT, ",") for c in cells)
+    comma = any(only(c, _DECIMAL_COMMA, ".") for c in cells)
     out = []
     for c, values in zip(cells, raw):
         if point and not comma:  # ',' groups digits

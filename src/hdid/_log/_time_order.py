@@ -5,7 +5,11 @@
   every column hdid reads. It holds no second observation — kept, it would be a zero time
   step — so the copy is dropped and the log's notes name it. A repeated time with
   *different* readings is two samples at one instant, which no reading resolves: it stays
-  an error naming the row (:func:`hdid._log._validate.check_within_runs`).
+  an error naming the row (:func:`hdid._log._validate.check_within_runs`) unless the
+  stamps are a fixed-rate logger's, coarser than its sampling (:mod:`._timer`).
+- **Runs interleaved row by row.** Rows labelled by their run but written in turn (several
+  stations logged into one file) are grouped by run, each in file order, when every
+  run's time increases in file order.
 - **A clock that restarts.** Without a ``run`` column, a logger that restarts its clock
   at each release writes time that drops back (to 0, or to the start of the stretch
   before it). Each stretch is then a run of its own (``'1'``, ``'2'``, …; in a file of
