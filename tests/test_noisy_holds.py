@@ -130,3 +130,33 @@ def test_a_swing_above_the_logs_nyquist_frequency_says_so(noisy, tmp_path):
     hits = [w for w in res.warnings if w.startswith("aliased")]
     assert len(hits) == 1 and "sample faster" in hits[0], res.warnings
     assert any(w.startswith("aliased") for w in res.to_dict()["warnings"])
+
+
+QUIET_HOLD = 0.1  # [s]: 100 readings, longer than the 50 a still stretch is read from
+
+
+def _quiet_hold_frame(noise: float, grid: float | None) -> pd.DataFrame:
+    """The 74.6 Hz plant at 1 kHz held 0.1 s, with noise ``noise`` [rad] only after the
+    release (a sensor or drive quiet until the servo-off: every hold repeats one reading),
+    rounded to ``grid`` [rad] when given."""
+    df = make_log(TRUTH, amplitudes=AMPLITUDES, fs=1000.0, duration=0.6, hold=QUIET_HOLD,
+                  offsets_by_setup={"A": OFFSET}, seed=7, quantize=False, noise_std=0.0)
+    rng = np.random.default_rng(7)
+    t = df["time"].to_numpy()
+    th = df["theta"].to_numpy() + np.where(t > QUIET_HOLD, rng.normal(0.0, noise, t.size), 0.0)
+    df["theta"] = np.round(th / grid) * grid if grid else th
+    return df
+
+
+def test_noise_after_quiet_holds_is_read_from_the_stuck_tails(tmp_path):
+    step = 2 * math.pi / 16384
+    s = 1.4 * step  # noise ahead of the rounding (well past the grid/noise switch at ½ step)
+    df = _quiet_hold_frame(s, step)
+    prep = prepare(hdid.read_log(_write(df, tmp_path / "quiet.csv")))
+    assert prep.resolution_source == "noise"
+    # the readings' error: the noise and its rounding (Sheppard: s² + step²/12), from the
+    # four stuck tails' ~200 differences (the jump fraction's relative sd ~10 %): within
+    # 0.7–1.4× of it. The holds, read as the still stretches, said 0: the grid was kept
+    truth = math.sqrt(s**2 + step**2 / 12.0)
+    sigma = prep.resolution / math.sqrt(12.0)
+    assert 0.7 * truth <= sigma <= 1.4 * truth, (sigma / truth)

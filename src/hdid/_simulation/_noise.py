@@ -33,6 +33,34 @@ def _still_pieces(runs):
     return pieces, np.asarray(owner, dtype=int)
 
 
+def _noisy(d: np.ndarray) -> bool:
+    """Whether a stretch's first differences ``d`` are noise about a still level, not
+    motion: white noise's differences are anticorrelated (lag-1 correlation −½), a
+    motion's carry on (+1 for a smooth one); ``Σ d_k d_{k+1} < 0`` and not all zero."""
+    return bool(np.any(d != 0.0)) and float(np.sum(d[:-1] * d[1:])) < 0.0
+
+
+def _per_run(pieces, owner, score) -> tuple[np.ndarray, np.ndarray]:
+    """Each run's still-stretch score (the smaller of its head's and tail's: one of them may
+    move) and which pieces take part. A piece that repeats one reading exactly (all its
+    differences 0) gives way to the run's other piece where that one is noise about a still
+    level (:func:`_noisy`): a hold read before the noise starts (a sensor or drive that is
+    quiet until the release) is clean, and the readings that count — the motion and the
+    stuck tail — carry the tail's noise."""
+    score = np.asarray(score, dtype=float)
+    use = np.ones(len(pieces), dtype=bool)
+    per_run = []
+    for k in np.unique(owner):
+        mine = np.flatnonzero(owner == k)
+        clean = [j for j in mine if not np.any(pieces[j] != 0.0)]
+        noisy = [j for j in mine if _noisy(pieces[j])]
+        if clean and noisy:
+            use[clean] = False
+            mine = np.asarray(noisy)
+        per_run.append(float(np.min(score[mine])))
+    return np.asarray(per_run), use
+
+
 def grid_noise(runs, step: float) -> float:
     """Error σ [log units] of readings on a grid of ``step`` whose still stretches jump by
     two steps or more, 0 where they do not.
@@ -54,12 +82,14 @@ def grid_noise(runs, step: float) -> float:
         return 0.0
     jumps = [np.abs(d) >= 1.5 * step for d in pieces]
     frac = np.array([float(np.mean(j)) for j in jumps])
-    ref = float(np.median([frac[owner == k].min() for k in np.unique(owner)]))
+    per_run, use = _per_run(pieces, owner, frac)
+    ref = float(np.median(per_run))
     if ref <= 0.0:
         return 0.0
     # pooled over the stretches within STILL_SPREAD of it (the smaller of two estimates
     # from ~11 differences each is biased low: σ 0.73× at 1.4 steps)
-    p = float(np.mean(np.concatenate([j for j, f in zip(jumps, frac) if f <= STILL_SPREAD * ref])))
+    p = float(np.mean(np.concatenate([j for j, f, ok in zip(jumps, frac, use)
+                                      if ok and f <= STILL_SPREAD * ref])))
     return 1.5 * step / (math.sqrt(2.0) * float(ndtri(1.0 - min(p, 0.99) / 2.0)))
 
 
@@ -72,7 +102,6 @@ def noise_sigma(runs, step: float | None, still_only: bool = False) -> float:
     coarsely sampled). Never below ``1e-4`` of the log's angle span (the simulator's accuracy).
     """
     pieces, owner = _still_pieces(runs)
-    pieces = [d - np.median(d) for d in pieces]
     span = max(float(np.ptp(np.concatenate([r.theta for r in runs]))), 1e-300)
     sig_still = np.inf
     if pieces:
@@ -81,11 +110,13 @@ def noise_sigma(runs, step: float | None, still_only: bool = False) -> float:
         # STILL_SPREAD of the runs' median of those, pooled: the smallest of a few
         # estimates from ~10 differences each is biased low (a 66 Hz log at 250 Hz: 0.53 σ,
         # and its stuck tails then looked like motion)
-        mads = np.array([1.4826 * float(np.median(np.abs(d))) / math.sqrt(2) for d in pieces])
-        owner = np.asarray(owner)
-        per_run = [float(np.min(mads[owner == k])) for k in np.unique(owner)]
+        # (each piece about its own median difference: a slow creep's steady step is
+        # not noise)
+        centred = [d - np.median(d) for d in pieces]
+        mads = np.array([1.4826 * float(np.median(np.abs(d))) / math.sqrt(2) for d in centred])
+        per_run, use = _per_run(pieces, owner, mads)
         ref = float(np.median(per_run))
-        kept = [d for d, e in zip(pieces, mads) if e <= STILL_SPREAD * ref]
+        kept = [d for d, e, ok in zip(centred, mads, use) if ok and e <= STILL_SPREAD * ref]
         sig_still = 1.4826 * float(np.median(np.abs(np.concatenate(kept)))) / math.sqrt(2)
     if still_only:  # (nan where the still stretches say nothing)
         return sig_still if np.isfinite(sig_still) else float("nan")
