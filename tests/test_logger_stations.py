@@ -86,6 +86,18 @@ def test_a_32_bit_microsecond_timer_wraps_inside_a_run_without_run_column(tmp_pa
     assert "32-bit timer" in _note(log, "timer")
 
 
+def test_a_millisecond_timer_printed_in_seconds_that_rolls_over(tmp_path, paper):
+    """The same uint16 ms timer written as seconds (``65.532``, then ``0.000``): its tick is
+    the printed 0.001 s, its length 65.536 s."""
+    frame, ref = paper
+    ms = np.rint(frame["time"].to_numpy() * 1e3).astype(np.int64)
+    ms = (ms + 65_300 + 700 * (frame["run"].to_numpy() - 1)) % 65_536
+    out = frame.assign(time=[f"{v / 1e3:.3f}" for v in ms])
+    log = read_log(_csv(tmp_path / "sec.csv", out, fmt={"theta": ".12g"}))
+    assert_same_log(log, ref, time_tol=1e-9)
+    _note(log, "16-bit timer")
+
+
 def test_a_timer_wrap_and_a_clock_restart_are_told_apart(tmp_path, paper):
     """No run column: run 1's ms timer wraps (65 535 → 0), then the clock is restarted at
     run 2's release (back to 0 from mid-range). The wrap continues the run; the restart

@@ -9,7 +9,9 @@ sampling.
   (``+2**bits``), the step is an ordinary sample step — positive and at most
   ``BREAK_STEPS`` of the log's median step, the same rate on both sides. A restart drops to
   near zero from anywhere, and undone it would leave a step of thousands of samples. Only
-  whole-number time columns (a counter's ticks) whose values fit the register are read so.
+  a time column of whole ticks (whole numbers, or a counter printed in another unit:
+  a millisecond timer in seconds, ``65.532``, ticks by 0.001) whose values fit the
+  register is read so.
 - **Stamps coarser than the sampling.** A fixed-rate logger sampling faster than its
   timestamps resolve (4 kHz stamped to 1 ms) writes each time several times, each with a
   different reading. Where every stamp of a run is its sample's instant cut to the print
@@ -38,7 +40,8 @@ def unwrap_timer(time: np.ndarray, rows: np.ndarray, column: str
     naming the wraps (None when there are none)."""
     if time.size < 3 or not np.all(np.isfinite(time)):
         return time, None
-    if np.any(np.abs(time - np.rint(time)) > 1e-9 * np.maximum(1.0, np.abs(time))):
+    tick = _tick(time)
+    if tick is None:
         return time, None  # not a counter's ticks
     steps = np.diff(time)
     ahead = steps[steps > 0]
@@ -50,7 +53,7 @@ def unwrap_timer(time: np.ndarray, rows: np.ndarray, column: str
     wrapped = []
     for i in np.flatnonzero(steps < 0):
         for bits in TIMER_BITS:
-            span = 2.0 ** bits
+            span = 2.0 ** bits * tick
             if not ((lo >= 0 and hi < span) or (lo >= -span / 2 and hi < span / 2)):
                 continue
             undone = steps[i] + span
@@ -67,6 +70,17 @@ def unwrap_timer(time: np.ndarray, rows: np.ndarray, column: str
         f"column {column!r}: the logger's {bits}-bit timer rolls over at row(s) {shown}{more} "
         "(time drops back by the register's length and goes on at the same rate): unwrapped"
     )
+
+
+def _tick(time: np.ndarray) -> float | None:
+    """The counter's tick in the column's units: 1 for whole numbers, else the finest
+    decimal every value is a whole multiple of (a millisecond counter printed in seconds,
+    ``65.532``, ticks by 0.001); None for time that is no count of ticks."""
+    for decimals in range(0, 10):
+        scaled = time * 10.0 ** decimals
+        if np.all(np.abs(scaled - np.rint(scaled)) <= 1e-9 * np.maximum(1.0, np.abs(scaled))):
+            return 10.0 ** -decimals
+    return None
 
 
 def uniform_stamps(time: np.ndarray, block_start: np.ndarray, print_units,
