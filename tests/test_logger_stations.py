@@ -139,6 +139,18 @@ def test_4khz_samples_stamped_to_the_millisecond(tmp_path, fast_log):
     _note(log, "rebuilt")
 
 
+def test_4khz_ms_stamps_with_a_restarted_clock_and_no_run_column(tmp_path, fast_log):
+    """The same stamps without a ``run`` column, the clock restarted at each release: each
+    stretch is rebuilt before rows that repeat (a held reading stamped twice) could be
+    taken as written twice, then split at the restart."""
+    ms = np.floor(fast_log["time"].to_numpy() * 1e3 + 1e-9).astype(np.int64)
+    out = pd.DataFrame({"time [ms]": ms, "theta": fast_log["theta"].to_numpy()})
+    log = read_log(_csv(tmp_path / "restart.csv", out, fmt={"theta": ".12g"}))
+    assert [r.n_samples for r in log.runs] == fast_log.groupby("run").size().tolist()
+    _note(log, "rebuilt")
+    _note(log, "time restarts")
+
+
 def test_a_repeated_stamp_in_a_slower_log_stays_an_error(tmp_path, paper):
     """Guard: a 250 Hz log stamped to 1 ms with one stamp written twice is no faster
     logger (its steps are 4 print units): the row is named."""

@@ -377,6 +377,7 @@ def _uniform_stamps(time, run_labels, table, cols, unit_scale, stamped, notes):
     block_start[:1] = True
     if run_labels is not None:
         block_start[1:] = run_labels[1:] != run_labels[:-1]
+    block_start[1:] |= np.diff(time) < 0  # a clock restarted, before the runs are split
     time, stamp_notes = uniform_stamps(
         time, block_start, lambda: time_print_unit(table.columns[cols[_TIME]], unit_scale[_TIME]),
         table.lines, run_labels)
