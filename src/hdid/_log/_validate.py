@@ -70,8 +70,8 @@ def check_within_runs(setups, inertia, time, within, fail: Fail) -> None:
     if pos is not None:
         if steps[pos] == 0:
             msg = (f"time {time[pos + 1]:.9g} repeats the row above with different readings — "
-                   "two samples at one instant: drop the wrong one, or log time with more "
-                   "digits")
+                   "two samples at one instant (no fixed rate explains the run's stamps): drop "
+                   "the wrong one, or log time with more digits")
         else:
             msg = (
                 f"time {time[pos + 1]:.9g} is not after the previous {time[pos]:.9g} — time must "
