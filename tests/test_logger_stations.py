@@ -238,6 +238,20 @@ def test_a_reading_the_logger_missed_is_dropped(tmp_path, paper):
     assert err.value.row == 42 and err.value.column == "theta"
 
 
+def test_a_driven_row_without_its_reading_stays_an_error(tmp_path):
+    """Guard: a driven row's motor torque acts until the next row, so the row is not
+    dropped (it would change the input): the empty cell is named."""
+    lines = (SYNTH / "driven_csf8.csv").read_text().splitlines()
+    cells = lines[40].split(",")
+    cells[2] = ""  # theta
+    lines[40] = ",".join(cells)
+    path = tmp_path / "driven.csv"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(LogError) as err:
+        read_log(path)
+    assert err.value.row == 41 and err.value.column == "theta"
+
+
 def test_an_infinite_reading_stays_an_error(tmp_path, paper):
     """Guard: 'inf' is no missed read (an overflow, a parse of garbage): named."""
     out = paper[0].assign(theta=[f"{v:.12g}" for v in paper[0]["theta"]])

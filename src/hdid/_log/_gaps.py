@@ -13,7 +13,8 @@ side, and a reading the logger could not take.
   model is evaluated at the logged times, so a missing sample is a dropped one — and the
   row is dropped with a note. Only lone misses are read so (the rows on both sides of it
   hold readings) and at most :data:`MAX_MISSING_FRACTION` of the rows; more, or a missing
-  time, stays the error that names the cell.
+  time, stays the error that names the cell. A driven log's rows are never dropped (the
+  motor torque of a row acts until the next one: dropping it would change the input).
 """
 
 from __future__ import annotations

@@ -156,7 +156,9 @@ def read_log(
     # one angle column per run, a reading the logger missed (hdid._log._gaps)
     table, gap_notes = wide_to_long(table, _missing_cells)
     cols = _find_columns(table, cpr, out_cpr, kt)
-    table, note = drop_missing_readings(table, cols[_THETA], cols[_TIME], _missing_cells)
+    note = []
+    if _MOTOR not in cols:  # a driven row's torque acts until the next row: never dropped
+        table, note = drop_missing_readings(table, cols[_THETA], cols[_TIME], _missing_cells)
     table.notes = list(table.notes) + gap_notes + note
     unit_scale = _column_scales(table, cols, cpr, out_cpr)
     if given_step is not None:  # in theta's units, as the header gives them
