@@ -47,11 +47,13 @@ def experiments_for(fit_a, fit_b):
     return out
 
 
-def separating(a, b, best_of: int = BEST_OF, include: tuple[int, ...] = (0,)) -> dict:
+def separating(a, b, best_of: int = BEST_OF, include: tuple[int, ...] = (0,),
+               certify: int = 0) -> dict:
     """The experiment that separates candidates ``a`` and ``b``
     (:class:`~hdid._diagnosis._result.CandidateResult` with their refits): a JSON-ready
-    record, ``text`` its report line. ``best_of``, ``include``: the experiments whose rival
-    is fitted globally (:func:`hdid._design._separate.separations`)."""
+    record, ``text`` its report line. ``best_of``, ``include``, ``certify``: the
+    experiments whose rival is fitted globally (:func:`hdid._design._separate.separations`;
+    ``certify``: then the largest upper bound, while one is above the largest value)."""
     from .._design._separate import separations
 
     rec = {"forms": [a.key, b.key], "variants": [a.label, b.label],
@@ -61,7 +63,8 @@ def separating(a, b, best_of: int = BEST_OF, include: tuple[int, ...] = (0,)) ->
     def compute():
         fa = a.result if a.result is not None else a.fit.result()
         fb = b.result if b.result is not None else b.fit.result()
-        return separations(fa, fb, experiments_for(fa, fb), best_of=best_of, include=include)
+        return separations(fa, fb, experiments_for(fa, fb), best_of=best_of, include=include,
+                           certify=certify)
 
     seps = computed(rec, label, "the separating experiment", compute)
     if seps is None:
