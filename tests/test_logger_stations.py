@@ -275,6 +275,19 @@ def test_digit_grouping_in_a_tab_separated_export(tmp_path, counts):
     assert_same_log(log, ref, time_tol=1e-9, theta_offset=True)
 
 
+def test_counts_grouped_where_no_number_shows_its_decimal_separator(tmp_path, counts):
+    """Counts ``12,108`` in a tab file whose other numbers are whole too: the comma may be
+    a decimal comma (a European export) or a grouping mark, and is read as the decimal, as
+    before; the error then says how to write the counts."""
+    frame, _ = counts
+    out = frame.assign(theta=frame["theta"] + 12_000, time=np.rint(frame["time"] * 1e3))
+    out = out.rename(columns={"time": "time [ms]"})
+    with pytest.raises(LogError) as err:
+        read_log(_csv(tmp_path / "grouped.tsv", out, sep="\t",
+                      fmt={"time [ms]": ".0f", "theta": ",d"}), counts_per_rev=CPR)
+    assert err.value.row == 2 and "without digit grouping" in str(err.value)
+
+
 def test_european_grouping_and_decimal_comma(tmp_path, paper):
     """A ';' export with '.' grouping digits and ',' the decimal (``1.004,0`` ms):
     before, the grouped cells were text."""
@@ -355,3 +368,21 @@ def test_an_excel_workbook_without_openpyxl_says_how(tmp_path, monkeypatch):
         read_log(path)
     msg = str(err.value)
     assert "log.xlsx" in msg and "pip install openpyxl" in msg and "\n" not in msg
+
+
+def test_hdid_fit_on_a_workbook_without_openpyxl_is_one_line_exit_2(tmp_path):
+    """The command line, as a user without openpyxl runs it: exit 2, one line naming the
+    file and the fix, no traceback (the library's error above, through the CLI)."""
+    import subprocess
+
+    from synthetic import ROOT
+
+    path = tmp_path / "log.xlsx"
+    path.write_bytes(b"PK\x03\x04" + bytes(64))
+    code = ("import sys, runpy; sys.modules['openpyxl'] = None; "
+            "sys.argv = ['hdid'] + sys.argv[1:]; runpy.run_module('hdid.cli', run_name='__main__')")
+    proc = subprocess.run([sys.executable, "-c", code, "fit", str(path)], capture_output=True,
+                          text=True, cwd=ROOT)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "log.xlsx" in lines[0] and "pip install openpyxl" in lines[0]

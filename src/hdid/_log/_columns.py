@@ -263,9 +263,13 @@ def _to_radians(values, cpr, fail, column: str, encoder: str, option: str, hint:
     if cpr is not None:
         pos = _first(~integral)
         if pos is not None:
+            v = float(values[pos]) * 1000.0
+            grouped = (f", or write the counts without digit grouping if {values[pos]:.9g} is "
+                       f"{v:.0f} (a ',' between thousands in a file without decimal points "
+                       "reads as a decimal comma)" if abs(v - round(v)) < 1e-6 else "")
             raise fail(
                 f"value {values[pos]:.9g} is not a whole number of {encoder} counts — drop "
-                f"{option} if {column} is already in radians",
+                f"{option} if {column} is already in radians{grouped}",
                 column,
                 pos,
             )
