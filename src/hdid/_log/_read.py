@@ -118,7 +118,13 @@ def read_log(
     Raw counts from a 16-, 24- or 32-bit register that rolls over are unwrapped (noted),
     and so is a single-turn angle that wraps at one revolution (:mod:`._revolutions`).
     A row that repeats the one above exactly is dropped; without a ``run`` column, time
-    that drops back starts a new run (:mod:`._time_order`; both noted).
+    that drops back starts a new run (:mod:`._time_order`; both noted). A logger's 16- or
+    32-bit timer that rolls over is unwrapped, and stamps coarser than a fixed-rate
+    logger's sampling (4 kHz stamped to 1 ms) are rebuilt as uniform steps where every
+    stamp lies within one print unit of them (:mod:`._timer`). Runs interleaved row by row
+    are grouped by their labels; one angle column per run (``theta_1``, ``theta_2``) is
+    read as runs, and a lone reading the logger missed (an empty or NaN cell with its
+    time, free-motion logs) is a dropped sample (:mod:`._gaps`); all noted.
     Two held runs of one set-up at one reading that move off in opposite directions (a
     counter zeroed at each release) are an error.
 
