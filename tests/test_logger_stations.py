@@ -351,6 +351,35 @@ def test_a_labview_lvm_file(tmp_path, paper):
     np.testing.assert_allclose(log.runs[0].theta, ref.runs[0].theta, rtol=0, atol=1e-12)
 
 
+def _lvm_segment(run, x_value: str) -> str:
+    """One segment of an .lvm file: the channel header (X0, Delta_X) and the samples, the
+    X_Value column written empty (``"empty"``) or not at all (``"absent"``)."""
+    head = ("Channels\t1\t\nSamples\t%d\t\nX_Dimension\tTime\t\nX0\t0.0000000000000000E+0\t\n"
+            "Delta_X\t0.004000\t\n***End_of_Header***\t\t\n" % len(run))
+    if x_value == "empty":
+        return head + "X_Value\ttheta\tComment\n" + "".join(f"\t{v:.12g}\n" for v in run)
+    return head + "theta\tComment\n" + "".join(f"{v:.12g}\n" for v in run)
+
+
+@pytest.mark.parametrize("x_value", ["empty", "absent"])
+def test_a_labview_file_whose_rows_lack_their_times(tmp_path, paper, x_value):
+    """LabVIEW's "Empty time column" (X_Value cells left empty) and ``X_Columns No`` (no
+    X_Value column): each sample's time is X0 + k·Delta_X of its segment's header; two
+    segments, two runs (before: an empty cell, or no time column)."""
+    frame, ref = paper
+    head = ("LabVIEW Measurement\t\nWriter_Version\t2\nSeparator\tTab\nDecimal_Separator\t.\n"
+            f"X_Columns\t{'One' if x_value == 'empty' else 'No'}\n***End_of_Header***\t\n\n")
+    body = "".join(_lvm_segment(frame[frame["run"] == k]["theta"].to_numpy(), x_value)
+                   for k in (1, 2))
+    path = tmp_path / "bench.lvm"
+    path.write_text(head + body)
+    log = read_log(path)
+    assert [r.n_samples for r in log.runs] == [r.n_samples for r in ref.runs[:2]]
+    for a, b in zip(log.runs, ref.runs[:2]):
+        np.testing.assert_allclose(a.time - a.time[0], b.time - b.time[0], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(a.theta, b.theta, rtol=0, atol=1e-12)
+
+
 def test_an_excel_workbook(tmp_path, paper):
     pytest.importorskip("openpyxl")
     frame, ref = paper

@@ -14,6 +14,7 @@ import pandas as pd
 
 from .._errors import LogError
 from . import _layout
+from ._lvm import fill_lvm_time
 from ._mat import load_mat_frame
 from ._names import _NA_TOKENS
 
@@ -217,6 +218,7 @@ def _load_csv(path: str | os.PathLike[str]) -> _Table:
     if suffix in {".xls", ".ods"}:
         raise err("this is a spreadsheet, not a CSV file — export it as CSV (comma-separated)")
     text = _workbook_text(source, err) if suffix in {".xlsx", ".xlsm"} else _read_text(source, err)
+    text = fill_lvm_time(text)  # a LabVIEW file whose rows lack their times (hdid._log._lvm)
     if not text:
         raise err("file is empty — expected a CSV file with a header line such as 'time,theta'")
     if not text.strip():
