@@ -106,7 +106,7 @@ def main(argv=None):
     ap.add_argument("--measured", action="store_true", help="fit the measured logs instead")
     ap.add_argument("--sts", nargs="*", metavar="EFFECT",
                     help="fit the STS3215 drops with the base model plus these effects (none: the base)")
-    if (args := parse_or_render(ap, argv, "real_logs", render)) is None:
+    if (args := parse_or_render(ap, argv, "real_logs", render, indent=1)) is None:
         return
     if args.sts is not None:  # one variant's rows replace that variant's in the stored result
         res, add = stored("real_logs"), tuple(args.sts)

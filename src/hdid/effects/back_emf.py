@@ -34,7 +34,8 @@ class BackEmfBraking(AbstractEffect):
 
     c_e: Float[ArrayLike, ""] = parameter(
         "N m s/rad", "braking torque per rad/s above the threshold speed (≤ k_t·k_e/R)",
-        start=lambda s: 0.5 * s.torque / s.speed)
+        # at the log's peak speed the brake starts equal to its ring-down's friction
+        start=lambda s: 2.0 * s.torque / s.speed)
     w_e: Float[ArrayLike, ""] = parameter(
         "rad/s", "threshold speed: the supply plus two diode drops over the back-EMF constant",
         start=lambda s: 0.5 * s.speed)
