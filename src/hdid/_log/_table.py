@@ -173,38 +173,51 @@ def _number_format(raw: list[np.ndarray]) -> list[np.ndarray]:
     where the file's other numbers show a decimal point; ``1.234,5``). A file has one
     decimal separator: cells that can only be read with a point (``4.0``) and none that
     can only be read with a comma (``0,1571``) make every comma a grouping mark, and the
-    other way round."""
+    other way round. Only the cells holding the mark in question are matched."""
     cells = [pd.Series(v, dtype=object).astype(str) for v in raw]
+    commas = [c.str.contains(",", regex=False).to_numpy() for c in cells]
+    if not any(m.any() for m in commas):
+        return raw  # no decimal comma, no ',' grouping, hence no '.' grouping either
+    dots = [c.str.contains(".", regex=False).to_numpy() for c in cells]
 
-    def only(c: pd.Series, decimal: re.Pattern, grouped: str) -> bool:
-        """Some cell reads only with this decimal separator: a decimal that is no digit
-        grouping of the other kind (``0.1571``), or a grouped number with a decimal part
-        (``1,004.0``)."""
-        other = _GROUPED["." if grouped == "," else ","]
-        both = c.str.match(_GROUPED[grouped]) & c.str.contains("." if grouped == "," else ",",
-                                                               regex=False)
-        return bool((c.str.match(decimal) & ~c.str.match(other)).any() or both.any())
+    def only(mark: str) -> bool:
+        """Some cell reads only with ``mark`` as the decimal separator: a decimal that is
+        no digit grouping of the other kind (``0.1571``), or a grouped number with a
+        decimal part (``1,004.0``)."""
+        other = "," if mark == "." else "."
+        decimal = _DECIMAL_POINT if mark == "." else _DECIMAL_COMMA
+        for c, dot, comma in zip(cells, dots, commas):
+            has, has_other = (dot, comma) if mark == "." else (comma, dot)
+            sub = c[has]
+            if sub.empty:
+                continue
+            if (sub.str.match(decimal) & ~sub.str.match(_GROUPED[mark])).any():
+                return True
+            both = c[has & has_other]
+            if not both.empty and both.str.match(_GROUPED[other]).any():
+                return True
+        return False
 
-    point = any(only(c, _DECIMAL_POINT, ",") for c in cells)
-    comma = any(only(c, _DECIMAL_COMMA, ".") for c in cells)
+    point, comma = only("."), only(",")
     out = []
-    for c, values in zip(cells, raw):
+    for c, values, dot, has_comma in zip(cells, raw, dots, commas):
         if point and not comma:  # ',' groups digits
-            hit = c.str.match(_GROUPED[","]).to_numpy()
-            if hit.any():
+            if has_comma.any():
+                hit = np.flatnonzero(has_comma)[c[has_comma].str.match(_GROUPED[","]).to_numpy()]
                 values = values.copy()
-                values[hit] = c[hit].str.replace(",", "", regex=False).to_numpy()
-        else:
-            if comma and not point:  # '.' groups digits
-                hit = c.str.match(_GROUPED["."]).to_numpy()
-                if hit.any():
-                    values = values.copy()
-                    values[hit] = c[hit].str.replace(".", "", regex=False).to_numpy()
+                values[hit] = c.iloc[hit].str.replace(",", "", regex=False).to_numpy()
+        elif has_comma.any():
+            if comma and not point and dot.any():  # '.' groups digits
+                hit = np.flatnonzero(dot)[c[dot].str.match(_GROUPED["."]).to_numpy()]
+                values = values.copy()
+                values[hit] = c.iloc[hit].str.replace(".", "", regex=False).to_numpy()
             values = _decimal_commas(values)
-            clock = pd.Series(values, dtype=object).astype(str).str.match(_CLOCK_COMMA)
+            text = pd.Series(values, dtype=object).astype(str)
+            clock = text.str.contains(":", regex=False).to_numpy().copy()
             if clock.any():
+                clock[clock] = text[clock].str.match(_CLOCK_COMMA).to_numpy()
                 values = values.copy()
-                values[clock.to_numpy()] = [v.replace(",", ".") for v in values[clock.to_numpy()]]
+                values[clock] = [v.replace(",", ".") for v in values[clock]]
         out.append(values)
     return out
 
