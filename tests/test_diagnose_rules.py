@@ -467,3 +467,42 @@ def test_an_order_replaced_in_one_set_up_is_the_set_up_of_that_order():
         b, tb = jax.tree_util.tree_flatten(s7.problem)
         assert ta == tb and all(np.array_equal(np.asarray(x), np.asarray(y)) for x, y in zip(a, b))
         assert D._effect_of(got.model, key).order == 7.0 and got.model.float_values() == s7.model.float_values()
+
+
+def test_a_fine_encoders_sparse_levels_are_not_taken_for_its_step(monkeypatch):
+    """Diagnose's wrong-step guard (:func:`hdid._diagnosis._wrong_step.readings_step`)
+    takes the readings' smallest gap as the step only where every level lies on that
+    gap's grid. A fine encoder read at a low rate (64 000 counts/rev at 250 Hz: the
+    backlash–soft_windup experiment) may never show adjacent counts: its smallest gap was
+    15–37 steps and, taken as the step, turned a 17× misfit into "adequate". Here a run's
+    levels 0, 37, 81, 140, 176, 203 steps (smallest gap 27, 37/27 off its grid by 0.37)
+    with a residual 10× the given step's floor (within the guard's 3× of the gap's floor):
+    the given step stays. Levels 0, 8, 24, 48, 80 steps (an 8-step encoder given as 1
+    step) still switch to 8 steps. Fails without the grid check (the first case is
+    refitted with the gap as the step)."""
+    import dataclasses
+
+    from hdid._diagnosis import _wrong_step as W
+    from hdid._fitting import _refit
+
+    step = 2 * math.pi / 64000
+    calls = []
+    monkeypatch.setattr(_refit, "setup", lambda log, *a: calls.append(log.resolution) or "setup")
+    monkeypatch.setattr(_refit, "grid", lambda *a: "grid")
+    monkeypatch.setattr(_refit, "run", lambda *a: "refit")
+
+    def guard(levels):
+        theta = np.array([[lv * step for lv in levels] + [levels[-1] * step] * 4])
+        prep = SimpleNamespace(quantized=True, theta=theta, lengths=[theta.shape[1]],
+                               resolution=step)
+        current = SimpleNamespace(rms_rad=lambda: 10 * step / math.sqrt(12.0))
+        log = dataclasses.make_dataclass(
+            "L", [("resolution", float), ("resolution_source", str)])(step, "given")
+        return W.readings_step(log, None, {}, SimpleNamespace(prep=prep), "grid0", current,
+                               lambda m: None, 1)
+
+    _, _, fit, warning = guard([0, 37, 81, 140, 176, 203])
+    assert warning is None and not calls, (warning, calls)
+    _, _, fit, warning = guard([0, 8, 24, 48, 80])
+    assert warning is not None and fit == "refit"
+    assert calls == [pytest.approx(8 * step)]
