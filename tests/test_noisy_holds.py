@@ -160,3 +160,20 @@ def test_noise_after_quiet_holds_is_read_from_the_stuck_tails(tmp_path):
     truth = math.sqrt(s**2 + step**2 / 12.0)
     sigma = prep.resolution / math.sqrt(12.0)
     assert 0.7 * truth <= sigma <= 1.4 * truth, (sigma / truth)
+
+
+def test_a_hardening_spring_swings_above_nyquist_although_its_small_swing_does_not():
+    # posterior_sbc's paper seed 40000: k1 284, k2 5.26e9 N·m/rad³, a 0.157 rad release
+    # through a 100:1 gear (1.57e-3 rad twist), inertia 7e-7 at the input, logged at 250 Hz.
+    # Small swings: f₀ = √(k1/(I·N²))/2π = 32 Hz, 7.8 samples a period. The Duffing backbone
+    # (f₀·√(1 + ¾k2A²/k1), k2A²/k1 = 45) puts the largest swings at ~190 Hz, above 125 Hz:
+    # its readings flip sign sample to sample, and the fit ended in an aliased basin (3.7×)
+    from hdid._simulation._aliasing import aliasing_warning, swing_hz
+
+    k1, k2, twist = 283.6, 5.26e9, 0.157 / 100.0
+    f0 = math.sqrt(k1 / (7e-7 * 100.0**2)) / (2 * math.pi)
+    f = swing_hz(f0, {"k1": k1, "k2": k2}, twist)
+    assert 180.0 < f < 200.0  # (√(1 + 0.75·45.0) = 5.89 × 32.0 Hz = 189 Hz)
+    assert aliasing_warning(1 / 250.0, f0, math.nan) is None
+    w = aliasing_warning(1 / 250.0, f, math.nan)
+    assert w is not None and "above the log's Nyquist" in w and "sample faster" in w

@@ -11,7 +11,7 @@ from .._covariance import null_in_u, scaled_covariance, undetermined_scaled
 from .._log._resolution import step_against_readings
 from .._problems._evaluate import dense as _dense
 from .._problems._evaluate import jacobian as _jacobian
-from .._simulation._aliasing import aliasing_warning
+from .._simulation._aliasing import aliasing_warning, swing_hz
 from .._simulation._prepare import Prepared
 from .._problems._problem import Problem
 from .._results._result import FitResult
@@ -453,9 +453,10 @@ def plausibility_warnings(prep: Prepared, model, values, rms: float,
             f"the sample rate is {fs:.3g} Hz: implausibly low for this test if time is in "
             "seconds (a log in milliseconds reads as 1000× slower): convert time to seconds"
         )
-    if aliased := aliasing_warning(prep.sample_period, fitted_hz, prep.frequency_hz):
-        out.append(aliased)
     amp = float(np.max(np.abs(prep.hold - prep.rest))) if prep.n_runs else 0.0
+    if aliased := aliasing_warning(prep.sample_period, swing_hz(
+            fitted_hz, values, amp / model.ratio), prep.frequency_hz):
+        out.append(aliased)
     has_gravity = any(e.name == "gravity" for e in model.effects)
     if (not has_gravity and ("k1" in values and model.ratio > 1 and amp / model.ratio > 0.05
                              or amp > math.pi)):

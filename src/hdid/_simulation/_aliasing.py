@@ -21,9 +21,22 @@ MIN_SAMPLES_PER_PERIOD = 2.5
 ASK_SAMPLES_PER_PERIOD = 10.0
 
 
+def swing_hz(linear_hz: float, values: dict, twist: float) -> float:
+    """The frequency [Hz] of a swing of amplitude ``twist`` [rad at the spring] on a
+    hardening spring ``k1·d + k2·d³`` whose small-swing frequency is ``linear_hz``: the
+    Duffing backbone, ``f = f₀·√(1 + ¾·k2·A²/k1)`` (first harmonic balance). A cubic term
+    that dominates the largest swings (a posterior draw with k2·A²/k1 ≈ 45 at 32 Hz)
+    swings them at ~190 Hz: above a 250 Hz log's Nyquist frequency although ``f₀`` is not."""
+    k1, k2 = values.get("k1"), values.get("k2")
+    if not (k1 and k2 and k1 > 0 and k2 > 0 and math.isfinite(twist)):
+        return linear_hz
+    return linear_hz * math.sqrt(1.0 + 0.75 * k2 * twist**2 / k1)
+
+
 def aliasing_warning(sample_period: float, fitted_hz: float, log_hz: float) -> str | None:
-    """The warning for a log whose swing — the fitted natural frequency ``fitted_hz`` [Hz],
-    or the log's own turning-point frequency ``log_hz`` — has fewer than
+    """The warning for a log whose swing — the fitted one ``fitted_hz`` [Hz] (the natural
+    frequency, hardened at the log's largest swing: :func:`swing_hz`), or the log's own
+    turning-point frequency ``log_hz`` — has fewer than
     :data:`MIN_SAMPLES_PER_PERIOD` samples ``sample_period`` [s] apart a period; None
     otherwise (or where neither frequency is known)."""
     if not (sample_period > 0 and math.isfinite(sample_period)):
@@ -38,7 +51,7 @@ def aliasing_warning(sample_period: float, fitted_hz: float, log_hz: float) -> s
         return None
     where = ("above the log's Nyquist frequency" if per_period < 2.0
              else "near the log's Nyquist frequency")
-    which = "fitted natural frequency" if f == fitted_hz else "log's own swing"
+    which = "fitted swing" if f == fitted_hz else "log's own swing"
     return (
         f"aliased: the {which} {f:.4g} Hz is {where} ({0.5 * fs:.4g} Hz at {fs:.4g} Hz "
         f"sampling: {per_period:.2g} samples a period): the readings do not resolve the swing, "
