@@ -92,11 +92,14 @@ def inside_cut(values, ratio, design):
 def draw_noise(gen, seed, noise="prior"):
     """The log's noise σ_n [rad] before rounding: ``"prior"``, from the sampler's prior
     (log-uniform on ``density.SIGMA_BOUNDS`` steps, its own stream); ``"moving"``, the same after
-    each release only (:func:`draw_log`: the holds noiseless); ``"none"``, 0 (rounding alone)."""
+    each release only (:func:`draw_log`: the holds noiseless); ``"none"``, 0 (rounding alone);
+    ``"analog"``, ``step/√12`` on readings left unrounded (:func:`draw_log`)."""
     from hdid._posterior.density import SIGMA_BOUNDS
 
     if noise == "none":
         return 0.0
+    if noise == "analog":
+        return 2 * math.pi / gen.COUNTS_PER_REV / math.sqrt(12)
     lo, hi = (math.log(b * 2 * math.pi / gen.COUNTS_PER_REV) for b in SIGMA_BOUNDS)
     return math.exp(np.random.default_rng([seed, 1]).uniform(lo, hi))
 
@@ -104,11 +107,14 @@ def draw_noise(gen, seed, noise="prior"):
 def draw_log(gen, design_name, seed, noise="prior"):
     """The calibration's log ``seed`` of a design (``"paper"`` / ``"rich"``): ``(truth, log,
     generator info, notes)``, the truth drawn by :func:`draw_default` from ``rng(seed)``,
-    the noise by :func:`draw_noise`."""
+    the noise by :func:`draw_noise`. ``noise="analog"``: the readings are not rounded (every
+    reading at full weight, Gaussian noise: the sampler's likelihood is then the generator's
+    exactly, a check that rounding is not what miscalibrates)."""
     design = _design(gen, design_name)
     truth, band_rejects, order_rejects = draw_default(gen, np.random.default_rng(seed), design_name, design)
     sigma = draw_noise(gen, seed, noise)
-    df, info = gen.make_log(truth, **dict(design, seed=seed), noise_std=sigma, return_truth=True)
+    df, info = gen.make_log(truth, **dict(design, seed=seed), noise_std=sigma, return_truth=True,
+                            quantize=noise != "analog")
     if noise == "moving":  # the holds read as without noise (the same release instants)
         clean = gen.make_log(truth, **dict(design, seed=seed))
         held = df.time.to_numpy() <= df.run.map({r["run"]: r["t_release"] for r in info["runs"]}).to_numpy()
@@ -354,8 +360,9 @@ def main(argv=None):
     ap.add_argument("--budget-min", type=float, default=600.0, help="start no log after this")
     ap.add_argument("--name", default="posterior_sbc", help="results/NAME.{json,md}")
     ap.add_argument("--method", default="emcee,smc", help="samplers, comma-separated (one fit and optima a log)")
-    ap.add_argument("--noise", choices=("prior", "moving", "none"), default="prior",
-                    help="noise before rounding: the sampler's σ_n prior, that after each release only, or none")
+    ap.add_argument("--noise", choices=("prior", "moving", "none", "analog"), default="prior",
+                    help="noise before rounding: the sampler's σ_n prior, that after each release only, or none; "
+                         "analog: step/√12 on unrounded readings (the likelihood exact)")
     ap.add_argument("--shard", default="0/1", help="K/N: run every N-th log from the K-th")
     ap.add_argument("--merge", nargs="+", metavar="JSON", help="join shards' results into NAME")
     ap.add_argument("--cli", action="store_true", help="time the CLI process instead: --logs, --repeats, --timeout")
