@@ -222,6 +222,22 @@ def test_one_column_per_run_side_by_side(tmp_path, paper):
     _note(log, "one angle column per run")
 
 
+def test_one_column_per_run_below_a_text_preamble(tmp_path, paper):
+    """The wide export under a station's preamble (``Operator: kb``, a blank line): the
+    header is the line naming a time and the per-run angle columns, not the first text
+    line (read before as a 2-cell header: 'row 4 has 5 cells')."""
+    frame, ref = paper
+    wide = pd.DataFrame({"time [s]": frame[frame["run"] == 1]["time"].to_numpy()})
+    for k, run in frame.groupby("run"):
+        wide[f"theta_{k} [deg]"] = [f"{v:.12g}" for v in np.degrees(run["theta"].to_numpy())]
+    path = _csv(tmp_path / "wide.csv", wide, sep="\t", fmt={"time [s]": ".12g"})
+    path.write_text("# station 2, test rig\nOperator: kb\n\n" + path.read_text())
+    log = read_log(path)
+    assert [r.name for r in log.runs] == ["1", "2", "3", "4"]
+    for a, b in zip(log.runs, ref.runs):  # the same readings (12 digits printed)
+        np.testing.assert_allclose(a.theta, b.theta, rtol=0, atol=1e-12)
+
+
 def test_a_reading_the_logger_missed_is_dropped(tmp_path, paper):
     """An empty cell and a 'NaN' with their times (failed reads) are dropped samples, named
     in a note (an error before); two misses in a row stay the error naming the first."""

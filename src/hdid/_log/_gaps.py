@@ -19,20 +19,16 @@ side, and a reading the logger could not take.
 
 from __future__ import annotations
 
-import re
 
 import numpy as np
 import pandas as pd
 
 from ._headers import header_key
-from ._names import _THETA, _TIME
+from ._names import _RUN_COLUMN, _THETA, _TIME
 from ._table import _Table
 
 #: Most rows that may lack their reading (a logger's failed reads) before it is an error.
 MAX_MISSING_FRACTION = 0.01
-#: An angle column labelled with its run: ``theta_1``, ``theta run 2``, ``position_run_a``
-#: (a number, or a label after ``run``: ``pos_cmd`` and ``pos_act`` are no runs).
-_RUN_COLUMN = re.compile(r"^(?:theta|pos|position)_?(?:run_?([0-9a-z]+)|([0-9]+))$")
 
 
 def wide_to_long(table: _Table, missing) -> tuple[_Table, list[str]]:

@@ -19,7 +19,7 @@ import numpy as np
 
 from .. import _units
 from ._headers import header_key
-from ._names import _COUNTS, _NA_TOKENS, _THETA, _TIME
+from ._names import _COUNTS, _NA_TOKENS, _RUN_COLUMN, _THETA, _TIME
 
 #: Lines searched for the header below a preamble.
 _HEADER_SEARCH_LINES = 200
@@ -74,8 +74,11 @@ def _uncommented(line: str) -> str:
 
 
 def _names_time_and_angle(line: str) -> bool:
-    keys = {header_key(c)[0] for c in _cells(line, _line_sep(line))}
-    return _TIME in keys and (_THETA in keys or _COUNTS in keys)
+    """A time column and an angle column, or two or more angle columns labelled with
+    their runs (a wide export: ``time [s], theta_1 [deg], theta_2 [deg]``)."""
+    keys = [header_key(c)[0] for c in _cells(line, _line_sep(line))]
+    wide = sum(_RUN_COLUMN.match(k) is not None for k in keys) >= 2
+    return _TIME in keys and (_THETA in keys or _COUNTS in keys or wide)
 
 
 def find_header(lines: list[str]) -> tuple[int, str]:

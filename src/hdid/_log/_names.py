@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 
 #: Canonical column names.
 _TIME, _THETA, _COUNTS, _RUN, _SETUP, _INERTIA = (
@@ -55,3 +57,7 @@ _EXPECTED_COLUMNS = (
     "'setup', 'added_inertia'; driven logs: 'motor_torque' (or 'motor_current'), "
     "'theta_out' (or 'output_counts'), 'load_torque'"
 )
+
+#: An angle column labelled with its run: ``theta_1``, ``theta run 2``, ``position_run_a``
+#: (a number, or a label after ``run``: ``pos_cmd`` and ``pos_act`` are no runs).
+_RUN_COLUMN = re.compile(r"^(?:theta|pos|position)_?(?:run_?([0-9a-z]+)|([0-9]+))$")
