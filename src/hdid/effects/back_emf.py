@@ -61,9 +61,12 @@ class BackEmfBraking(AbstractEffect):
     @classmethod
     def start_from(cls, values: dict[str, float]) -> BackEmfBraking:
         """Starting values for ``--add back_emf`` (see :func:`hdid.effects.library`):
-        the given ones, else a viscous coefficient's worth above 1 rad/s (the fit's
-        ``start`` rules replace them from the log's own speed and friction)."""
-        return cls(c_e=values.get("c_e", values.get("c_v", 0.1)), w_e=values.get("w_e", 1.0))
+        the given ones, else a brake of a thousandth of the model's viscous coefficient
+        above 1 rad/s — nearly the model without it, so that a warm start from a fitted
+        model (``diagnose``) begins where that model ended, with a gradient that can grow
+        it (a fresh fit's ``start`` rules replace both from the log's speed and friction)."""
+        return cls(c_e=values.get("c_e", 1e-3 * values.get("c_v", 0.1)),
+                   w_e=values.get("w_e", 1.0))
 
     def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
         del state
