@@ -238,6 +238,31 @@ def test_one_column_per_run_below_a_text_preamble(tmp_path, paper):
         np.testing.assert_allclose(a.theta, b.theta, rtol=0, atol=1e-12)
 
 
+def test_a_fine_encoder_sampled_slowly_still_tells_its_step(tmp_path):
+    """2^17 counts/rev at 250 Hz on a 57 Hz gear: each release swings through six samples
+    before it sticks, so no two levels of a run lie closer than hundreds of counts (more
+    than the 64 divisors of the closest gap tried before: 'the readings lie on no grid',
+    and the noise taken as 6x the floor). Printed to 1e-7 deg, the runs' two dozen levels tell
+    the grid: a wrong one passes all by chance with probability ~(2e-9/4.8e-5) per level."""
+    from hdid._log._resolution import MAX_STEP_DIVISOR
+    q = 2 * np.pi / 2**17
+    t = np.arange(40) / 250.0
+    rows = []
+    for k, (a, band) in enumerate([(0.3, 0.06), (-0.3, 0.05), (0.21, 0.04), (-0.17, 0.03)]):
+        swing = a * np.cos(2 * np.pi * 57 * t) * np.exp(-9 * t)
+        swing[t >= 6 / 250] = swing[5]  # stuck after six samples
+        theta = np.round((np.concatenate([[a] * 3, swing]) + 1.2345) / q)  # counts
+        rows += [(k + 1, i * 4.0, f"{np.degrees(c * q):.7f}") for i, c in enumerate(theta)]
+        gaps = np.diff(np.unique(theta))
+        assert gaps.min() > MAX_STEP_DIVISOR  # the case: no close levels in any run
+    path = tmp_path / "sparse.csv"
+    body = "".join(f"{r},{t:.3f},{v}\n" for r, t, v in rows)
+    path.write_text("run,time [ms],theta [deg]\n" + body)
+    log = read_log(path)
+    # the printing (1e-7 deg = 1.7e-9 rad) bounds the step's error far below 1e-4 of it
+    assert log.resolution == pytest.approx(q, rel=1e-4)
+
+
 def test_a_reading_the_logger_missed_is_dropped(tmp_path, paper):
     """An empty cell and a 'NaN' with their times (failed reads) are dropped samples, named
     in a note (an error before); two misses in a row stay the error naming the first."""

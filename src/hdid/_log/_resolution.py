@@ -120,6 +120,12 @@ def _precision_of(raw: np.ndarray) -> PrintPrecision | None:
 
 #: Largest divisor of the smallest gap between reading levels tried as the step.
 MAX_STEP_DIVISOR = 64
+#: ... and for a log of few levels (at most :data:`SPARSE_LEVELS` differences): a fine
+#: encoder sampled slowly (2^17 counts/rev at 250 Hz, a swing of six samples) never
+#: shows two levels a few counts apart, its closest hundreds of counts apart; finely
+#: printed, its levels still tell the grid (the chance test counts the grids tried).
+MAX_SPARSE_DIVISOR = 4096
+SPARSE_LEVELS = 2000
 #: The log tells a grid when a wrong grid passes every level by chance less often than this.
 FALSE_GRID_CHANCE = 1e-6
 #: Smallest encoder step, in print units, reported as found (see the module notes).
@@ -244,7 +250,8 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
     i0 = int(np.argmin(g))
     g0, t0 = float(g[i0]), float(gt[i0])
     coarse = False
-    for k in range(1, MAX_STEP_DIVISOR + 1):
+    k_max = MAX_SPARSE_DIVISOR if d.size <= SPARSE_LEVELS else MAX_STEP_DIVISOR
+    for k in range(1, k_max + 1):
         qlo, qhi = max((g0 - t0) / k, 0.0), (g0 + t0) / k
         if qhi < MIN_STEP_PER_PRINT_UNIT * float(np.median(t)) or qlo <= 0.0:
             coarse = True  # finer grids only get closer to the print unit
@@ -264,7 +271,7 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
         # largest multiple's precision)
         per = np.minimum(2.0 * t[used] / q, 1.0)
         log_chance = float(np.sum(np.log10(per))) if per.size else 0.0
-        trials = MAX_STEP_DIVISOR * max(float(m.max()), 1.0)
+        trials = max(k, MAX_STEP_DIVISOR) * max(float(m.max()), 1.0)
         if log_chance + math.log10(trials) < math.log10(FALSE_GRID_CHANCE):
             # a few readings off a coarser grid that all others lie on (._grid_outliers)
             coarse_grid = coarser_grid(q, x, run_levels, merge, MAX_STEP_DIVISOR,
