@@ -18,6 +18,7 @@ import pandas as pd
 import pytest
 
 import hdid
+from hdid._simulation._noise import grid_noise
 from hdid._simulation._prepare import prepare
 from hdid.reference.logs import TRUTH_CSF8, make_log
 
@@ -177,3 +178,25 @@ def test_a_hardening_spring_swings_above_nyquist_although_its_small_swing_does_n
     assert aliasing_warning(1 / 250.0, f0, math.nan) is None
     w = aliasing_warning(1 / 250.0, f, math.nan)
     assert w is not None and "above the log's Nyquist" in w and "sample faster" in w
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_an_encoder_log_without_holds_keeps_its_grid(seed, tmp_path):
+    # Each run cut at its first moving sample (a logger started by the motion): its head is
+    # the swing (74.6 Hz at 250 Hz: differences of tens of counts, anticorrelated at lag 1
+    # like noise's), its tail one stuck count. Motion is no still stretch: the tail's clean
+    # level says the readings are the 4000-count encoder's, exactly (grid_noise 0). Read as
+    # noise, the log was fitted with a noise model of ~1.5 steps (and the fit at 1.2x that)
+    df = make_log(TRUTH, amplitudes=AMPLITUDES, fs=FS, duration=0.5, hold=HOLD,
+                  offsets_by_setup={"A": OFFSET}, seed=seed, quantize=True)
+    cut = []
+    for _, g in df.groupby("run", sort=True):
+        th = g["theta"].to_numpy()
+        cut.append(g.iloc[int(np.flatnonzero(th != th[0])[0]):])
+    log = hdid.read_log(_write(pd.concat(cut), tmp_path / "no_hold.csv"))
+    step = 2 * math.pi / 4000
+    assert grid_noise(log.runs, log.resolution) == 0.0
+    prep = prepare(log)
+    assert prep.resolution_source != "noise"
+    # the step found in readings printed to 1e-8 rad: within 1e-6 of 2π/4000
+    assert abs(prep.resolution - step) <= 1e-6 * step

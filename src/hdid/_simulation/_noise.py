@@ -33,30 +33,59 @@ def _still_pieces(runs):
     return pieces, np.asarray(owner, dtype=int)
 
 
+#: A still stretch's readings span at most this many of its own noise σ (estimated from its
+#: differences' MAD): the range of ≤ 50 Gaussian readings is 4.5σ on average (3.1σ for
+#: 10), above 7σ about once in a thousand; the MAD reads σ low from ~10 differences (0.6×
+#: at -2 sd) or from differences rounded to whole steps (1.4 steps of noise: median |d| of
+#: 1 step, σ 0.73×). Motion (a run cut at its first moving sample swings by tens of steps,
+#: most of its differences already 0 once stuck) spans far more.
+STILL_RANGE = 10.0
+
+
+#: Largest |lag-k autocorrelation| (k = 2, 3) of a still stretch's first differences: white
+#: noise's are 0 (sd 1/√n, ≤ 0.14 for 50 differences: 0.45 is 3 sd there), a sampled swing's
+#: are cos(2πkf/fs), never all small together (at f = 3/8 fs, where lag 2's is 0, lag 3's
+#: is 0.71).
+STILL_LAG = 0.45
+
+
 def _noisy(d: np.ndarray) -> bool:
     """Whether a stretch's first differences ``d`` are noise about a still level, not
-    motion: white noise's differences are anticorrelated (lag-1 correlation −½), a
-    motion's carry on (+1 for a smooth one); ``Σ d_k d_{k+1} < 0`` and not all zero."""
-    return bool(np.any(d != 0.0)) and float(np.sum(d[:-1] * d[1:])) < 0.0
+    motion. White noise's differences are anticorrelated at lag 1 (−½) and uncorrelated
+    beyond; a smooth motion's carry on (lag 1 +1), a swing sampled a few times a period
+    correlates at every lag (a 60 Hz swing at 250 Hz has lag-1 anticorrelated differences
+    too). And the readings stay near one level: their range within :data:`STILL_RANGE` of
+    the σ its differences' MAD gives (a motion that stops within the stretch)."""
+    if d.size < 4 or not np.any(d != 0.0):
+        return False
+    c = d - float(np.mean(d))
+    var = float(np.sum(c * c))
+    if var <= 0.0 or float(np.sum(d[:-1] * d[1:])) >= 0.0:
+        return False
+    if any(abs(float(np.sum(c[:-k] * c[k:]))) > STILL_LAG * var for k in (2, 3)):
+        return False
+    sig = 1.4826 * float(np.median(np.abs(d - np.median(d)))) / math.sqrt(2.0)
+    level = np.concatenate([[0.0], np.cumsum(d)])
+    return bool(float(np.ptp(level)) <= STILL_RANGE * sig)
 
 
 def _per_run(pieces, owner, score) -> tuple[np.ndarray, np.ndarray]:
     """Each run's still-stretch score (the smaller of its head's and tail's: one of them may
-    move) and which pieces take part. A piece that repeats one reading exactly (all its
-    differences 0) gives way to the run's other piece where that one is noise about a still
-    level (:func:`_noisy`): a hold read before the noise starts (a sensor or drive that is
-    quiet until the release) is clean, and the readings that count — the motion and the
-    stuck tail — carry the tail's noise."""
+    move) and which pieces take part. A head that repeats one reading exactly (all its
+    differences 0) gives way to the run's tail where that one is noise about a still level
+    (:func:`_noisy`): a hold read before the noise starts (a sensor or drive that is quiet
+    until the release) is clean, and the readings that count — the motion and the stuck
+    tail — carry the tail's noise. Never the other way round: a run cut at its first
+    moving sample (no hold) starts with motion and may end on one clean level."""
     score = np.asarray(score, dtype=float)
     use = np.ones(len(pieces), dtype=bool)
     per_run = []
     for k in np.unique(owner):
         mine = np.flatnonzero(owner == k)
-        clean = [j for j in mine if not np.any(pieces[j] != 0.0)]
-        noisy = [j for j in mine if _noisy(pieces[j])]
-        if clean and noisy:
-            use[clean] = False
-            mine = np.asarray(noisy)
+        if (len(mine) == 2 and not np.any(pieces[mine[0]] != 0.0)
+                and _noisy(pieces[mine[1]])):
+            use[mine[0]] = False
+            mine = mine[1:]
         per_run.append(float(np.min(score[mine])))
     return np.asarray(per_run), use
 
