@@ -238,6 +238,26 @@ def test_one_column_per_run_below_a_text_preamble(tmp_path, paper):
         np.testing.assert_allclose(a.theta, b.theta, rtol=0, atol=1e-12)
 
 
+def test_one_column_per_run_with_its_units_in_a_units_row(tmp_path, paper):
+    """The wide export with bare names (``time, theta_1, theta_2``) and a units row
+    (``ms, deg, deg``): each run's column takes the row's angle unit. Before, the units
+    row set only the time's unit and the degrees were read as radians (57x the swing;
+    the fit diverged)."""
+    frame, ref = paper
+    wide = pd.DataFrame({"time": frame[frame["run"] == 1]["time"].to_numpy() * 1e3})
+    for k, run in frame.groupby("run"):
+        wide[f"theta_{k}"] = [f"{v:.12g}" for v in np.degrees(run["theta"].to_numpy())]
+    units = ",".join(["ms"] + ["deg"] * 4)
+    path = _csv(tmp_path / "wide.csv", wide, fmt={"time": ".12g"})
+    head, body = path.read_text().split("\n", 1)
+    path.write_text(head + "\n" + units + "\n" + body)
+    log = read_log(path)
+    assert [r.name for r in log.runs] == ["1", "2", "3", "4"]
+    for a, b in zip(log.runs, ref.runs):  # the same readings (12 digits printed)
+        np.testing.assert_allclose(a.theta, b.theta, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(a.time, b.time, rtol=0, atol=1e-12)
+
+
 def test_a_fine_encoder_sampled_slowly_still_tells_its_step(tmp_path):
     """2^17 counts/rev at 250 Hz on a 57 Hz gear: each release swings through six samples
     before it sticks, so no two levels of a run lie closer than hundreds of counts (more

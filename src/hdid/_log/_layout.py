@@ -253,7 +253,9 @@ def units_row(names: list[str], raw: list[np.ndarray], keep: np.ndarray
     if any(_NUMBER.match(c) for c in row if c):
         return names, keep
     units = [c[1:-1].strip() if c[:1] in "[(" and c[-1:] in "])" else c for c in row]
-    keys = [header_key(n) for n in names]
+    # an angle column per run (``theta_1``) takes an angle's units, as ``theta`` does
+    keys = [(_THETA if _RUN_COLUMN.match(k) else k, unit)
+            for k, unit in (header_key(n) for n in names)]
     if not any(k in (_TIME, _THETA) and unit is None and u and _units.scale(k, u) is not None
                for (k, unit), u in zip(keys, units)):
         return names, keep
