@@ -283,6 +283,23 @@ def test_a_fine_encoder_sampled_slowly_still_tells_its_step(tmp_path):
     assert log.resolution == pytest.approx(q, rel=1e-4)
 
 
+def test_an_encoder_step_48_print_units_wide_is_told(tmp_path):
+    """2^17 counts/rev printed to 1e-6 rad (the step is 48 print units), the middle level
+    thousands of counts from the others (a stuck tail between the swing's extremes): the
+    closest gap's interval (±2 %) places no difference from the middle level, so the grid
+    was 'not told from chance'. The gaps between neighbouring levels (1, 2, 4, … counts)
+    narrow the interval first; a wrong grid passes each level with chance ~2e-6/4.8e-5."""
+    q = 2 * np.pi / 2**17
+    ladder = 3000 + np.cumsum([0, 1, 2, 4, 8, 16, 32, 64, 128, 256, 512])
+    counts = np.concatenate([-ladder[::-1], [0], ladder + 7])
+    theta = (counts + 17_000) * q
+    body = "".join(f"{0.004 * i:.3f},{v:.6f}\n" for i, v in enumerate(theta))
+    path = tmp_path / "rad6.csv"
+    path.write_text("time,theta\n" + body)
+    # the printing (5e-7 rad a reading) over differences of ~4000 steps: rel. 1e-5
+    assert read_log(path).resolution == pytest.approx(q, rel=1e-4)
+
+
 def test_a_reading_the_logger_missed_is_dropped(tmp_path, paper):
     """An empty cell and a 'NaN' with their times (failed reads) are dropped samples, named
     in a note (an error before); two misses in a row stay the error naming the first."""

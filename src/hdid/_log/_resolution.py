@@ -256,7 +256,14 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
         if qhi < MIN_STEP_PER_PRINT_UNIT * float(np.median(t)) or qlo <= 0.0:
             coarse = True  # finer grids only get closer to the print unit
             break
-        placed = _place(d, t, qlo, qhi)
+        # the gaps between neighbouring levels narrow the interval first: a swing's
+        # levels lie far (tens of steps) from the middle one, beyond what the closest
+        # gap's interval places, while neighbours often lie a few steps apart. Only
+        # the differences from the middle level count in the chance below.
+        narrowed = _place(g, gt, qlo, qhi)
+        if narrowed is None:
+            continue
+        placed = _place(d, t, narrowed[0], narrowed[1])
         if placed is None:
             continue
         qlo, qhi, m = placed
