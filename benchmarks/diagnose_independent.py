@@ -358,7 +358,41 @@ def render(res: dict) -> str:
                   *_suite_lines(res["fixed_plant"]["records"], "fixed plant, ")]
     if "floor_rule" in res:
         lines += _floor_rule_lines(res["floor_rule"])
+    if "driver_refits" in res:
+        lines += _driver_lines(res)
     return "\n".join(lines) + "\n"
+
+
+def _driver_lines(res: dict) -> list[str]:
+    """``driver_refits``: the drawn logs where a strong candidate's refit stayed above 1.3×
+    the floor (the only ones hdid.fit's driver refits act on), diagnosed again; the
+    suite's rates with those rows replaced."""
+    part = res["driver_refits"]
+    m, after = part["meta"], {(r["design"], r["seed"]): r for r in part["records"]}
+    L = ["# Rates with the driver refits (`--driver-refits`)", "",
+         f"{m.get('cpu', '')}; src {m.get('src', '')}; load {m.get('load', '')} → "
+         f"{m.get('load_end', '?')}. " + m.get("note", ""), "",
+         "| design | seed | hidden | before | after | grade before → after | s |",
+         "|---|---|---|---|---|---|---|"]
+    old = {(r["design"], r["seed"]): r for r in res["records"]}
+    for key, r in after.items():
+        b = old[key]
+        L.append(f"| {key[0]} | {key[1]} | {r['hidden']} | {b['named']} | {r.get('named', 'FAILED')} "
+                 f"| {_grade(b)} → {_grade(r) if 'error' not in r else 'failed'} "
+                 f"| {r.get('wall_s', math.nan):.0f} |")
+    L += ["", "| design | logs | right before → after | honest | wrong | false alarms (none) |",
+          "|---|---|---|---|---|---|"]
+    for design in ("rich", "paper"):
+        rows = [r for r in res["records"] if r["design"] == design and "error" not in r]
+        new = [after.get((r["design"], r["seed"]), r) for r in rows]
+        new = [r for r in new if "error" not in r]
+        g0 = [_grade(r) for r in rows]
+        g1 = [_grade(r) for r in new]
+        fa = [sum(r["hidden"] == "none" and r["verdict"] != "adequate" for r in x) for x in (rows, new)]
+        L.append(f"| {design} | {len(rows)} | {g0.count('right')} → {g1.count('right')} | "
+                 f"{g0.count('honest')} → {g1.count('honest')} | {g0.count('wrong')} → "
+                 f"{g1.count('wrong')} | {fa[0]} → {fa[1]} |")
+    return [*L, ""]
 
 
 def main(argv=None) -> None:
@@ -377,9 +411,13 @@ def main(argv=None) -> None:
     ap.add_argument("--floor-rule", action="store_true",
                     help="re-diagnose the stored logs the floor-level rule can change")
     ap.add_argument("--seeds", help="with --floor-rule: only these seeds (comma-separated)")
+    ap.add_argument("--driver-refits", metavar="JSON",
+                    help="store re-diagnosed records ({meta, records}) as that section")
     args = parse_or_render(ap, argv, NAME, render)
     if args is None:
         return
+    if args.driver_refits:
+        return store("driver_refits", json.loads(open(args.driver_refits).read()))
     if args.floor_rule:
         return floor_rule({int(x) for x in args.seeds.split(",")} if args.seeds else None)
     designs, seed0 = args.designs or ["rich", "paper"], args.seed0
