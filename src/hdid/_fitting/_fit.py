@@ -19,7 +19,7 @@ from .._problems import _programs
 from ._identifiability import MOVED_COUNTS, analyse
 from .._log import Log, read_log
 from .._models._model import Model
-from . import _first_reading, _limits, _polish
+from . import _cubic_restart, _first_reading, _limits, _polish
 from .._simulation._prepare import Prepared, offset_guess, prepare
 from .._problems._problem import OFFSET_SCALE_REL, Problem, build_problem
 from .._results._result import FitResult
@@ -149,6 +149,20 @@ def fit(
                   release_time=release_time, max_substep=max_substep, n_starts=n_starts,
                   max_steps=max_steps, lanes=len(U0))
     result = nested_check(result, log, search, solutions=(U, costs, ok, steps), **checks)
+    # a cubic gone to 0 (its log gradient vanishes there): restarts at smaller shares,
+    # kept where they end lower (then the limits are checked against the new optimum)
+    more = _cubic_restart.restart_rows(problem, model, log_scales(
+        prep, model, np.asarray(problem.offset0)), result.u)
+    if more is not None:
+        U1, c1, ok1, s1 = _local_fits(problem, np.concatenate(
+            [np.asarray(result.u, dtype=float)[None, :], more]), max_steps)
+        if np.min(np.where(np.isfinite(c1[1:]), c1[1:], np.inf)) < c1[0] * (
+                1.0 - _limits.SAME_MARGIN):
+            U, costs = np.concatenate([U, U1]), np.concatenate([costs, c1])
+            ok, steps = np.concatenate([ok, ok1]), np.concatenate([steps, s1])
+            result = _finish(search, U, costs, ok, steps, t_start)
+            result = nested_check(result, log, search, solutions=(U, costs, ok, steps),
+                                  **checks)
     if search is not setup:
         result = _polish.polished(
             result, setup.problem, (U, costs, ok, steps), lambda U0: _local_fits(

@@ -1,0 +1,48 @@
+"""Restarts of a fit whose cubic stiffness has gone to its lower end (``k2 → 0``).
+
+``k2`` is fitted in log (it is positive), so near 0 its gradient vanishes: a fit started at
+``k2``'s start (17 % of the spring torque at the largest twist) on a log whose cubic is
+0.1 % of it overshoots into the ``k2 → 0`` basin and stays there, ``k1`` absorbing the cubic
+(a 42 Hz sweep log, 1 kHz: ``k2`` at 1e-5 of its truth, ``k1`` 12.6 sd off, the RMS 40× its
+value with ``k2`` at the truth). No start of the grid sits near such a small cubic, and
+the linear-spring limit (:mod:`._limits`) restarts from ``k2 ≈ 0`` itself. So a fit whose
+cubic share at the largest twist, ``k2·A²/k1``, is below :data:`GONE_SHARE` restarts the
+full model from the shares of :data:`RESTART_SHARES`; the caller keeps a restart that ends
+lower. (The log's own backbone, ``f² = f₀²·(1 + ¾·(k2/k1)·A²)`` from the half-periods
+between turning points, does not say where: that plant's cubic moves f² by 0.1 % across its
+swings, under the ~2 % scatter of half-periods timed at 1 kHz, and a paper-size plant's
+friction stops it within one or two half-swings.) NumPy only (the local fits are the
+caller's).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..effects.stiffness import CubicStiffness
+from ._limits import with_values
+
+#: Cubic share ``k2·A²/k1`` at the largest twist below which ``k2`` has gone to its lower
+#: end: it shifts that swing's frequency by less than 1e-4 (¾ of the share), under what
+#: a log's timing resolves.
+GONE_SHARE = 1e-4
+#: Shares the restarts put the cubic at: the decades between :data:`GONE_SHARE` and the
+#: start's 0.17 that a descent from the start skips.
+RESTART_SHARES = (1e-2, 1e-3)
+
+
+def restart_rows(problem, model, scales, u) -> np.ndarray | None:
+    """Full-model starts from ``u`` with ``k2`` at the restart shares, or ``None`` where the
+    model has no free cubic or ``k2`` has not gone to its lower end at ``u``."""
+    if type(model.spring) is not CubicStiffness or "k2" not in problem.free:
+        return None
+    v = {**model.float_values(), **problem.values_np(np.asarray(u))}
+    k1, k2, twist = float(v["k1"]), float(v["k2"]), float(scales.twist)
+    if not (k1 > 0 and twist > 0 and math.isfinite(k2)):
+        return None
+    if k2 * twist**2 / k1 >= GONE_SHARE:
+        return None
+    return np.asarray([with_values(problem, model, u, {"k2": s * k1 / twist**2})
+                       for s in RESTART_SHARES])
