@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 #: A repository path: a top-level folder of the repository, then a path (``{a,b}``
 #: alternatives allowed), as prose, comments and code-style quotes write it.
 _PATH = re.compile(
-    r"(?<![\w./-])((?:src|tests|data|benchmarks|calibration|notebooks|docs|\.ci)/[\w./{},-]*[\w}])")
+    r"(?<![\w./-])((?:src|tests|data|benchmarks|calibration|notebooks|docs|\.ci)/[\w./{},*$-]*[\w}*])")
 #: A citation of a section of the former benchmark diary, by file ("benchmarks/README.md,
 #: section "…"") or by issue ("issue 17, section "…"").
 _DIARY = re.compile(r'benchmarks/README(?:\.md)?[,;]?\s+(?:issue\s+\d+,\s*)?(?:sections?\s+)?"'

@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from ..effects.stiffness import CubicStiffness
-from ._limits import with_values
+from ._limits import SAME_MARGIN, with_values
 
 #: Cubic share ``k2·A²/k1`` at the largest twist below which ``k2`` has gone to its lower
 #: end: it shifts that swing's frequency by less than 1e-4 (¾ of the share), under what
@@ -46,3 +46,21 @@ def restart_rows(problem, model, scales, u) -> np.ndarray | None:
         return None
     return np.asarray([with_values(problem, model, u, {"k2": s * k1 / twist**2})
                        for s in RESTART_SHARES])
+
+
+def restarted(result, problem, model, scales, solutions, local_fits, finish):
+    """``result`` with the restarts of :func:`restart_rows` run by ``local_fits`` (rows →
+    ``(U, costs, ok, steps)``, the optimum's row first), kept where one ends lower than the
+    optimum by more than the limits' same-optimum margin: then ``finish(solutions)``
+    assembles the result again from all local fits (its limits checked anew). Returns the
+    result and the local fits ``solutions`` ``(U, costs, ok, steps)``, extended if kept."""
+    more = restart_rows(problem, model, scales, result.u)
+    if more is None:
+        return result, solutions
+    new = local_fits(np.concatenate([np.asarray(result.u, dtype=float)[None, :], more]))
+    costs = np.asarray(new[1])
+    if not np.min(np.where(np.isfinite(costs[1:]), costs[1:], np.inf)) < costs[0] * (
+            1.0 - SAME_MARGIN):
+        return result, solutions
+    solutions = tuple(np.concatenate([a, b]) for a, b in zip(solutions, new))
+    return finish(solutions), solutions

@@ -141,28 +141,17 @@ def fit(
     retry = _untrapped(problem, prep, U[int(np.argmin(np.where(np.isfinite(costs), costs,
                                                                 np.inf)))])
     if retry is not None:
-        U1, c1, ok1, s1 = _local_fits(problem, retry[None, :], max_steps)
-        U, costs = np.concatenate([U, U1]), np.concatenate([costs, c1])
-        ok, steps = np.concatenate([ok, ok1]), np.concatenate([steps, s1])
+        U, costs, ok, steps = (np.concatenate(p) for p in zip(
+            (U, costs, ok, steps), _local_fits(problem, retry[None, :], max_steps)))
     result = _finish(search, U, costs, ok, steps, t_start)
     checks = dict(nested=nested, fix=fix, inertia_prior=inertia_prior,
                   release_time=release_time, max_substep=max_substep, n_starts=n_starts,
                   max_steps=max_steps, lanes=len(U0))
     result = nested_check(result, log, search, solutions=(U, costs, ok, steps), **checks)
-    # a cubic gone to 0 (its log gradient vanishes there): restarts at smaller shares,
-    # kept where they end lower (then the limits are checked against the new optimum)
-    more = _cubic_restart.restart_rows(problem, model, log_scales(
-        prep, model, np.asarray(problem.offset0)), result.u)
-    if more is not None:
-        U1, c1, ok1, s1 = _local_fits(problem, np.concatenate(
-            [np.asarray(result.u, dtype=float)[None, :], more]), max_steps)
-        if np.min(np.where(np.isfinite(c1[1:]), c1[1:], np.inf)) < c1[0] * (
-                1.0 - _limits.SAME_MARGIN):
-            U, costs = np.concatenate([U, U1]), np.concatenate([costs, c1])
-            ok, steps = np.concatenate([ok, ok1]), np.concatenate([steps, s1])
-            result = _finish(search, U, costs, ok, steps, t_start)
-            result = nested_check(result, log, search, solutions=(U, costs, ok, steps),
-                                  **checks)
+    result, (U, costs, ok, steps) = _cubic_restart.restarted(
+        result, problem, model, log_scales(prep, model, np.asarray(problem.offset0)),
+        (U, costs, ok, steps), lambda U0: _local_fits(problem, U0, max_steps), lambda sol:
+        nested_check(_finish(search, *sol, t_start), log, search, solutions=sol, **checks))
     if search is not setup:
         result = _polish.polished(
             result, setup.problem, (U, costs, ok, steps), lambda U0: _local_fits(
@@ -274,10 +263,8 @@ def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", f
 
 
 def _local_fits(problem: Problem, U0, max_steps: int):
-    """Levenberg–Marquardt from every row of ``U0`` (:func:`hdid._fitting._lm._local_fits`'s
-    schedule), one start at a time through the one-lane program of the problem's
-    structure (:mod:`hdid._fitting._one_lane`: the simulator's event branch stays a
-    branch): ``(U, costs, ok, steps)``."""
+    """Levenberg–Marquardt from every row of ``U0``, one start at a time through the one-lane
+    program of the problem's structure (:mod:`._one_lane`): ``(U, costs, ok, steps)``."""
     return _one_lane(problem, U0, max_steps)[:4]
 
 
@@ -294,8 +281,7 @@ def _data_rms(problem: Problem, u, cost: float) -> float:
 def trapped_runs(problem: Problem, prep: Prepared, u) -> np.ndarray:
     """Runs the model never releases at ``u`` (exact stick: speed 0 at every sample)
     although the log shows them moving (rest ≠ hold by more than ``MOVED_COUNTS``)."""
-    # Jitted: an eager call compiled a fresh `while` program on every fit (its loop body
-    # is a new closure each time), ~140 memory mappings that were never freed.
+    # jitted (an eager call compiled a fresh `while` program every fit and leaked its maps)
     _, omega, _ = _stored_dense(problem, u)
     moved = np.abs(prep.rest - prep.hold) > MOVED_COUNTS * prep.resolution
     return np.flatnonzero(moved & (np.max(np.abs(omega), axis=1) == 0.0))
