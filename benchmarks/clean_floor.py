@@ -29,8 +29,7 @@ OUT = RESULTS / "clean_floor.json"
 ABOVE = 1.5
 K2_CATALOG = 6.5e7
 DESIGNS = {
-    "paper": dict(amps=[0.157, -0.157, 0.157, -0.157], rate=250.0, duration=0.5,
-                  setups=["A", "A", "B", "B"]),
+    "paper": dict(amps=[0.157, -0.157, 0.157, -0.157], rate=250.0, duration=0.5, setups=["A", "A", "B", "B"]),
     "rich": dict(amps=[0.157, -0.157, 0.12, -0.12, 0.08, -0.08, 0.05, -0.05], rate=1000.0,
                  duration=0.3, setups=["A", "A", "A", "A", "B", "B", "B", "B"]),
 }
@@ -98,8 +97,7 @@ def render(rows: list[dict]) -> str:
     out = ["# Clean logs from an independent simulator: fits above 1.5× the floor", "",
            "See `benchmarks/clean_floor.py` for the plant ranges and designs. One row per (label, design); a fit "
            f"counts as *above* when its RMS residual exceeds {ABOVE}× the quantization floor (step/√12), *error* "
-           "when it raised.", "",
-           "| label | design | logs | above 1.5× | rate | errors | median ratio | max ratio "
+           "when it raised.", "", "| label | design | logs | above 1.5× | rate | errors | median ratio | max ratio "
            "| median wall [s] | load (1 min) | limit restarts that won |",
            "|---|---|---|---|---|---|---|---|---|---|---|"]
     groups: dict = {}

@@ -1,16 +1,14 @@
-"""``hdid design`` on the shipped paper log: ranking, speed of 20 candidates, and the predicted
-stds checked against the spread of fits of simulated logs; ``--pairs``: diagnose's
-separating experiments checked by simulation.
+"""``hdid design`` on the shipped paper log: ranking, speed of 20 candidates, and the predicted stds checked against
+the spread of fits of simulated logs; ``--pairs``: diagnose's separating experiments checked by simulation.
 
     taskset -c 1 python benchmarks/design_check.py [--n 30] [--pairs [--n-this 5]] [--speed]
     python benchmarks/design_check.py --pair-logs DIR [--n 10]     # simulate, pickle
     taskset -c 1 python benchmarks/design_check.py --diagnose-logs DIR [--part I/K]
     python benchmarks/design_check.py --collect DIR                # into the result
 
-``--pair-logs``/``--diagnose-logs``/``--collect``: ``hdid.diagnose`` (default candidates,
-``design=False``: the separation is computed after the verdict and does not change it) on
-the logs of each pair's separating experiment that ``--pairs`` fits (the same seeds), in
-parts that may run in parallel processes.
+``--pair-logs``/``--diagnose-logs``/``--collect``: ``hdid.diagnose`` (default candidates, ``design=False``: the
+separation is computed after the verdict and does not change it) on the logs of each pair's separating experiment that
+``--pairs`` fits (the same seeds), in parts that may run in parallel processes.
 """
 
 from __future__ import annotations
@@ -27,12 +25,11 @@ QUANTITIES = ("k1", "tau_c", "tau_s", "stick_band_halfwidth_rad")
 TARGETS = "tau_c,tau_s,v_s,band"
 
 
-#: (name, design, seed, the two forms): the issue's two confusable pairs — ripple vs
-#: kinematic error on a 2 kHz rich log (seed 8805: a hidden ripple named kinematic_error
-#: order 10), backlash vs hysteresis on the paper design (seed 9902: a hidden hysteresis
-#: named among hysteresis / backlash / soft_windup / kinematic_error).
-#: Backlash vs soft windup on the same log: the backlash logs of the backlash–hysteresis
-#: experiment were told apart from hysteresis but were ambiguous with soft_windup.
+#: (name, design, seed, the two forms): the issue's two confusable pairs — ripple vs kinematic error on a 2 kHz rich
+#: log (seed 8805: a hidden ripple named kinematic_error order 10), backlash vs hysteresis on the paper design (seed
+#: 9902: a hidden hysteresis named among hysteresis / backlash / soft_windup / kinematic_error). Backlash vs soft
+#: windup on the same log: the backlash logs of the backlash–hysteresis experiment were told apart from hysteresis but
+#: were ambiguous with soft_windup.
 PAIRS = (("ripple vs kinematic_error, rich 2 kHz", "rich", 8805, ("ripple", "kinematic_error")),
          ("backlash vs hysteresis, paper", "paper", 9902, ("backlash", "hysteresis")),
          ("backlash vs soft_windup, paper", "paper", 9902, ("backlash", "soft_windup")))
@@ -42,10 +39,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--n", type=int, default=30, help="simulated logs per check (per form)")
     ap.add_argument("--pairs", action="store_true", help="only the separating-experiment check")
-    ap.add_argument("--speed", action="store_true",
-                    help="only re-measure the speed of 20 candidates (the rest kept)")
-    ap.add_argument("--n-this", type=int, default=5,
-                    help="--pairs: simulated logs per form of the log's own design")
+    ap.add_argument("--speed", action="store_true", help="only re-measure the speed of 20 candidates (the rest kept)")
+    ap.add_argument("--n-this", type=int, default=5, help="--pairs: simulated logs per form of the log's own design")
     ap.add_argument("--pair-logs", metavar="DIR", help="simulate --n logs per form, pickle them")
     ap.add_argument("--diagnose-logs", metavar="DIR", help="diagnose the pickled logs in DIR")
     ap.add_argument("--part", default="0/1", help="--diagnose-logs: every K-th log from the I-th")
@@ -86,8 +81,7 @@ def main(argv=None) -> int:
     best, keys = d.best, ("tau_c", "tau_s", "v_s", "stick_band_halfwidth_rad")
     res["top"] = {"name": best.experiment.name, "describe": best.experiment.describe(),
                   "std": {k: _rank.std_of(best, k) for k in keys},
-                  "std_this_log": {k: _rank.std_of(d.current, k) for k in keys},
-                  "linearisation": best.honesty}
+                  "std_this_log": {k: _rank.std_of(d.current, k) for k in keys}, "linearisation": best.honesty}
     res["checks"] = []
     for p in (best, d.current):
         names = tuple(dict.fromkeys([*p.names, "stick_band_halfwidth_rad"]))
@@ -117,8 +111,7 @@ def _speed(fit, loads, separate=()):
 
     vals = fit.model.float_values()
     pair = [hdid.fit(DATA / "csf8_paper.csv", start_from_model=True,
-                     model=fit.model.with_effect(registry()[k].start_from(vals)))
-            for k in separate] or None
+                     model=fit.model.with_effect(registry()[k].start_from(vals))) for k in separate] or None
 
     base = _candidates.baseline(fit)
     extra = [dict(name="rate x8", rate=8 * base.rate),
@@ -166,8 +159,7 @@ def _realised(fits, e, n, seed):
         other = fits[1 - i]
         vals, wins = [], 0
         for log in simulate_logs(truth, e, n, seed=seed + i):
-            # both forms at their best orders where position-periodic, as the
-            # separation's global refit fits the rival
+            # both forms at their best orders where position-periodic, as the separation's global refit fits the rival
             rt, ro = best_rival_fit(log, truth, e), best_rival_fit(log, other, e)
             if rt is None or ro is None:  # a failed fit is a result too
                 print("  fit failed", flush=True)
@@ -179,8 +171,7 @@ def _realised(fits, e, n, seed):
         out["ab"[i] + "_true"] = {"n": int(v.size), "mean": float(v.mean()) if v.size else None,
                                   "median": float(np.median(v)) if v.size else None,
                                   "sd": float(v.std(ddof=1)) if v.size > 1 else None,
-                                  "min": float(v.min()) if v.size else None,
-                                  "true_form_lower_chi2": int(wins)}
+                                  "min": float(v.min()) if v.size else None, "true_form_lower_chi2": int(wins)}
     return out
 
 
@@ -285,13 +276,11 @@ def pair_diagnoses(args) -> int:
             t, c = time.perf_counter(), time.process_time()
             d = hdid.diagnose(log, design=False)
             cands = [x for x in d.candidates if x.error is None]
-            named = (cands[0].key if d.verdict == "missing_effect" else
-                     d.verdict if d.verdict != "ambiguous" else
+            named = (cands[0].key if d.verdict == "missing_effect" else d.verdict if d.verdict != "ambiguous" else
                      "|".join(s.strip() for s in d.summary.split("ambiguous between ", 1)[-1]
                               .split(" (")[0].split(",")))
             rec.update(verdict=d.verdict, named=named, summary=d.summary,
-                       table=[(x.key, x.label, x.delta_bic, x.rms_after_rad / d.floor_rad)
-                              for x in cands[:6]],
+                       table=[(x.key, x.label, x.delta_bic, x.rms_after_rad / d.floor_rad) for x in cands[:6]],
                        rms_before_floor=d.base.rms_residual_rad / d.floor_rad,
                        wall_s=time.perf_counter() - t, cpu_s=time.process_time() - c,
                        load_after=load("after"), src=src_fingerprint(), cpu=cpu_model(),
@@ -331,9 +320,8 @@ def render(res) -> str:
                  f"{t['load1']:.2f} / {t['load5']:.2f} / {t['load15']:.2f} |")
     sep = res.get("speed_separate")
     if sep:
-        L += ["", f"--separate {','.join(sep[0]['separate'])} (fits of this log with each "
-              "added; the separations as diagnose computes them: local refits, then the "
-              "largest fitted globally until it is a value):", "",
+        L += ["", f"--separate {','.join(sep[0]['separate'])} (fits of this log with each added; the separations as "
+                  "diagnose computes them: local refits, then the largest fitted globally until it is a value):", "",
               "| call | candidates | s | top | its 2 ln LR (A, B true) | kind | load 1/5/15 |",
               "|---|---|---|---|---|---|---|"]
         for t in sep:
@@ -366,12 +354,11 @@ def render(res) -> str:
         srcs = ", ".join(dict.fromkeys(r.get("src", pr.get("src", "?")) for r in pr["rows"]))
         L += [f"## Separating experiments confirmed by simulation (--pairs, src {srcs}, "
               f"{pr['cpu']}; logs per form: the n after the slash in 'realised')", "",
-              "Predicted: λ, the rival's χ² fitted globally (hdid.fit's multi-start driver) to "
-              "the other form's noise-free readings, and a noisy log's 2·ln LR, λ + (k_true − "
-              "k_rival) ± √(4λ + 2 tr((P_A − P_B)²)) (locally refitted upper bound in "
-              "brackets). Realised: χ²(other form) − χ²(true form) of hdid.fit on logs "
-              "simulated from each fitted form (median; mean ± sd; how many logs the true "
-              "form fits better); ratio = predicted mean / realised median.", "",
+              "Predicted: λ, the rival's χ² fitted globally (hdid.fit's multi-start driver) to the other form's "
+              "noise-free readings, and a noisy log's 2·ln LR, λ + (k_true − k_rival) ± √(4λ + 2 tr((P_A − P_B)²)) "
+              "(locally refitted upper bound in brackets). Realised: χ²(other form) − χ²(true form) of hdid.fit on "
+              "logs simulated from each fitted form (median; mean ± sd; how many logs the true form fits better); "
+              "ratio = predicted mean / realised median.", "",
               "| pair (log) | experiment | form true | predicted | realised | ratio | s | load |",
               "|---|---|---|---|---|---|---|---|"]
         for r in pr["rows"]:
@@ -389,17 +376,14 @@ def render(res) -> str:
                         tl = s_.get("this_log", {})
                         mean = tl.get(key, {}).get("mean")
                         pred = (f"λ {_fmt(tl.get('lambda', {}).get(key))}: {_fmt(mean)} ± "
-                                f"{_fmt(tl.get(key, {}).get('sd'))}" if tl else
-                                f"{_fmt(s_.get('this_log_2lnlr'))}")
+                                f"{_fmt(tl.get(key, {}).get('sd'))}" if tl else f"{_fmt(s_.get('this_log_2lnlr'))}")
                     med = q.get("median")
-                    ratio = (mean / med if isinstance(mean, (int, float)) and med
-                             and math.isfinite(mean) else None)
+                    ratio = (mean / med if isinstance(mean, (int, float)) and med and math.isfinite(mean) else None)
                     cell = ("n/a" if q.get("mean") is None else
                             f"{_fmt(med)}; {_fmt(q['mean'])} ± {_fmt(q.get('sd'))}; "
                             f"{q['true_form_lower_chi2']}/{q['n']}")
-                    L.append(f"| {r['title']} (seed {r['seed']}, hidden {r['hidden']}) | {name} "
-                             f"| {form} | {pred} | {cell} | {_fmt(ratio)} | "
-                             f"{real['seconds']:.0f} | {real['load1']:.1f} |")
+                    L.append(f"| {r['title']} (seed {r['seed']}, hidden {r['hidden']}) | {name} | {form} | {pred} | "
+                             f"{cell} | {_fmt(ratio)} | {real['seconds']:.0f} | {real['load1']:.1f} |")
         L += [""] + [f"- {r['text']} (computed in {r['separation_s']:.0f} s"
                      + (f", the {r['certify']} largest upper bounds also fitted globally"
                         if r.get("certify") else "") + ")" for r in pr["rows"]] + [""]

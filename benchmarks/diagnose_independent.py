@@ -1,8 +1,7 @@
-"""``hdid diagnose`` on hidden-effect suites, verdicts graded right / honest / wrong with the
-confusion per design: plants, designs and effect sizes drawn per log (never tuned on);
-``--fixed-plant``: the shipped plant with each effect hidden in turn (``--removed``: a base
-piece switched off in the model instead); ``--floor-rule``: the stored logs the floor-level
-rule can change, diagnosed again. All three are sections of one result.
+"""``hdid diagnose`` on hidden-effect suites, verdicts graded right / honest / wrong with the confusion per design:
+plants, designs and effect sizes drawn per log (never tuned on); ``--fixed-plant``: the shipped plant with each
+effect hidden in turn (``--removed``: a base piece switched off in the model instead); ``--floor-rule``: the stored
+logs the floor-level rule can change, diagnosed again. All three are sections of one result.
 
     taskset -c 1 python benchmarks/diagnose_independent.py [rich|paper ...] [--per N]
     taskset -c 1 python benchmarks/diagnose_independent.py --fixed-plant [--removed] [rich|paper ...]
@@ -29,10 +28,9 @@ HIDDEN = ("none", "backlash", "hysteresis", "asymmetric_friction", "load_frictio
 N = 100.0
 SAMPLES = 300  # per run, rich design (hold 40 samples): the calibration's rich shape
 SEED0 = {"rich": 8800, "paper": 9800}
-#: ``--fixed-plant``: the shipped plant (``logs.TRUTH_CSF8``) with each effect at its
-#: ``logs.HIDDEN`` size; seeds 7100+ (7500+ with ``--removed``). The rich design's smallest
-#: release is 0.07 rad, not the shipped rich log's 0.05: with a hidden 0.02 rad dead zone
-#: (or load-dependent friction) a 0.05 rad release does not overcome static friction.
+#: ``--fixed-plant``: the shipped plant (``logs.TRUTH_CSF8``) with each effect at its ``logs.HIDDEN`` size; seeds
+#: 7100+ (7500+ with ``--removed``). The rich design's smallest release is 0.07 rad, not the shipped rich log's 0.05:
+#: with a hidden 0.02 rad dead zone (or load-dependent friction) a 0.05 rad release does not overcome static friction.
 FIXED_SEED0 = {"rich": 7100, "paper": 7200}
 RICH = dict(amplitudes=[0.157, -0.157, 0.13, -0.13, 0.10, -0.10, 0.07, -0.07], fs=1000.0,
             duration=0.3, hold=0.04, offsets_by_setup={"A": 0.005})
@@ -48,8 +46,7 @@ def draw(design: str, seed: int) -> tuple[dict, dict]:
         mid = np.sort(rng.uniform(a_min + 0.02, a_max - 0.02, 2))[::-1]
         mags = [a_max, *mid, a_min]
         fs = float(rng.choice([500.0, 1000.0, 2000.0]))
-        des = dict(amplitudes=[s * a for a in mags for s in (1, -1)], fs=fs,
-                   duration=SAMPLES / fs, hold=40 / fs,
+        des = dict(amplitudes=[s * a for a in mags for s in (1, -1)], fs=fs, duration=SAMPLES / fs, hold=40 / fs,
                    offsets_by_setup={"A": float(rng.uniform(-0.02, 0.02))})
     else:
         a_min = 0.157
@@ -87,8 +84,7 @@ def hidden_params(name: str, truth: dict, design: dict, rng) -> dict:
         d = a_max / N
         t_max = k1 * d + truth["k2"] * d**3
         return {"K1": rng.uniform(0.55, 0.7) * k1, "K2": rng.uniform(1.0, 1.1) * k1,
-                "K3": 1.25 * k1, "T1": rng.uniform(0.08, 0.15) * t_max,
-                "dT12": rng.uniform(0.3, 0.4) * t_max}
+                "K3": 1.25 * k1, "T1": rng.uniform(0.08, 0.15) * t_max, "dT12": rng.uniform(0.3, 0.4) * t_max}
     if name == "kinematic_error":
         return {"ke_a": rng.choice([-1, 1]) * rng.uniform(1.5e-4, 2.5e-4),
                 "ke_b": rng.choice([-1, 1]) * rng.uniform(1.5e-4, 2.5e-4), "order": 2.0}
@@ -106,8 +102,7 @@ def suite_log(design: str, seed: int, name: str) -> tuple[dict, dict, dict]:
 
 def make_log(truth: dict, des: dict, hp: dict, seed: int, name: str):
     kw = logs.reference_kwargs(name, truth, **hp) if name != "none" else None
-    return logs.make_log(truth, **{k: v for k, v in des.items() if k != "gear_factor"},
-                         seed=seed, hidden=kw)
+    return logs.make_log(truth, **{k: v for k, v in des.items() if k != "gear_factor"}, seed=seed, hidden=kw)
 
 
 def fixed_log(design: str) -> tuple[dict, dict, dict]:
@@ -134,8 +129,7 @@ def run_design(design: str, records: list, meta: dict, save, jobs) -> None:
         piece = name.split(":")[1] if name.startswith("removed:") else None
         rec = {"design": design, "hidden": name, "seed": seed,
                "expected": piece or (None if name == "quadratic_drag" else name),
-               "truth": truth, "hidden_params": hp, "design_params": dict(des),
-               "load1_before": os.getloadavg()[0],
+               "truth": truth, "hidden_params": hp, "design_params": dict(des), "load1_before": os.getloadavg()[0],
                # which code ran it (rows of several runs share the results file)
                "code": os.environ.get("HDID_BENCH_CODE", meta.get("src", ""))}
         records.append(rec)
@@ -157,8 +151,7 @@ def run_design(design: str, records: list, meta: dict, save, jobs) -> None:
             "candidates": [{"effect": c.key, "variant": c.label, "delta_bic": c.delta_bic,
                             "rms_after_floor": c.rms_after_rad / d.floor_rad,
                             "adequate_after": c.adequate_after, "moving_after_floor": c.moving_ratio_after}
-                           for c in cands],
-            "warnings": d.warnings, "notes": d.notes, "scanned": d.scanned,
+                           for c in cands], "warnings": d.warnings, "notes": d.notes, "scanned": d.scanned,
             "wall_s": clock.wall, "cpu_s": clock.cpu,
             "compile_s": d.timing.get("compile_s"), "load1_after": os.getloadavg()[0],
         })
@@ -169,8 +162,7 @@ def run_design(design: str, records: list, meta: dict, save, jobs) -> None:
 
 
 def _named(d) -> str:
-    """What the verdict names: the effect for ``missing_effect``, ``A|B`` for ambiguous,
-    else the verdict itself."""
+    """What the verdict names: the effect for ``missing_effect``, ``A|B`` for ambiguous, else the verdict itself."""
     if d.verdict == "missing_effect":
         return d.candidates[0].key
     if d.verdict == "ambiguous":
@@ -204,10 +196,9 @@ def _grade(r) -> str:
 
 
 def floor_rule(seeds: set | None) -> None:
-    """``--floor-rule``: the stored drawn logs the floor-level rule
-    (:func:`hdid._diagnosis._verdict._rivals`) can change (the best strong and at the floor,
-    a strong candidate of another family at the floor more than ΔBIC 10 behind), diagnosed
-    again with every strong candidate of their record, ``design=False``."""
+    """``--floor-rule``: the stored drawn logs the floor-level rule (:func:`hdid._diagnosis._verdict._rivals`) can
+    change (the best strong and at the floor, a strong candidate of another family at the floor more than ΔBIC 10
+    behind), diagnosed again with every strong candidate of their record, ``design=False``."""
     import hdid
 
     todo = []
@@ -231,8 +222,7 @@ def floor_rule(seeds: set | None) -> None:
             "design": design, "seed": seed, "hidden": name, "candidates": keys,
             "before": {"verdict": rec["verdict"], "named": rec["named"]},
             "after": {"verdict": d.verdict, "named": _named(d), "summary": d.summary},
-            "table": [(c.key, c.delta_bic, c.rms_after_rad / d.floor_rad)
-                      for c in d.candidates if c.error is None],
+            "table": [(c.key, c.delta_bic, c.rms_after_rad / d.floor_rad) for c in d.candidates if c.error is None],
             "wall_s": clock.wall, "load1": os.getloadavg()[0]})
         print(design, seed, name, rec["named"], "->", _named(d), flush=True)
         store("floor_rule", res)
@@ -250,18 +240,16 @@ def store(key: str | None, part: dict) -> None:
 def _floor_rule_lines(res: dict) -> list[str]:
     m = res["meta"]
     L = ["# The floor-level rule on the drawn suite (affected logs only, `--floor-rule`)", "",
-         f"{m.get('cpu', '')}; src {m.get('src', '')}; `{m.get('command', '')}`. "
-         "Before: the drawn suite's stored verdict (above); after: diagnose with the "
-         "candidates listed, design=False. Every other log of the suite cannot change "
-         "verdict (the notes of benchmarks/README.md).", "",
+         f"{m.get('cpu', '')}; src {m.get('src', '')}; `{m.get('command', '')}`. Before: the drawn suite's stored "
+         "verdict (above); after: diagnose with the candidates listed, design=False. Every other log of the suite "
+         "cannot change verdict (the notes of benchmarks/README.md).", "",
          *([m["note"], ""] if m.get("note") else []),
          "| design | seed | hidden | candidates | before | after | ΔBIC (RMS/floor) after | s | load |",
          "|---|---|---|---|---|---|---|---|---|"]
     for r in res["rows"]:
         tab = ", ".join(f"{k} {b:.1f} ({x:.2f})" for k, b, x in r["table"])
-        L.append(f"| {r['design']} | {r['seed']} | {r['hidden']} | {', '.join(r['candidates'])} "
-                 f"| {r['before']['named']} | {r['after']['named']} | {tab} | "
-                 f"{r['wall_s']:.0f} | {r['load1']:.1f} |")
+        L.append(f"| {r['design']} | {r['seed']} | {r['hidden']} | {', '.join(r['candidates'])} | "
+                 f"{r['before']['named']} | {r['after']['named']} | {tab} | {r['wall_s']:.0f} | {r['load1']:.1f} |")
     return [*L, ""]
 
 
@@ -296,10 +284,8 @@ def _suite_lines(records: list, title: str) -> list[str]:
         first = [r for r in lib if r["top"] == r["expected"]]
         floor = [r for r in first if r["candidates"][0]["rms_after_floor"] <= 1.3]
         cpu = [r["cpu_s"] for r in ok if "cpu_s" in r]
-        lines += ["",
-                  f"- verdict follows the truth: {sum(_grade(r) == 'right' for r in ok)}/{len(ok)} right, "
-                  f"{sum(_grade(r) == 'honest' for r in ok)} honest, "
-                  f"{sum(_grade(r) == 'wrong' for r in ok)} wrong",
+        lines += ["", f"- verdict follows the truth: {sum(_grade(r) == 'right' for r in ok)}/{len(ok)} right, "
+                  f"{sum(_grade(r) == 'honest' for r in ok)} honest, {sum(_grade(r) == 'wrong' for r in ok)} wrong",
                   f"- detectable (base RMS > 1.3× floor) library effects: "
                   f"{sum(r['rms_before_floor'] > 1.3 for r in lib)}/{len(lib)}, of which named "
                   f"alone {sum(r['rms_before_floor'] > 1.3 and _grade(r) == 'right' for r in lib)}",
@@ -309,7 +295,7 @@ def _suite_lines(records: list, title: str) -> list[str]:
                   "- nothing hidden: " + ", ".join(r["verdict"] for r in ok if r["hidden"] == "none"),
                   "- outside effect (ω|ω| drag): " + ", ".join(
                       f"{r['verdict']} ({r['named']})" for r in ok if r["expected"] is None),
-                  *([f"- base piece switched off in the model, named: "
+                  *(["- base piece switched off in the model, named: "
                      + ", ".join(f"{r['expected']} → {r['named']}" for r in removed)] if removed else []),
                   f"- median diagnose wall s {np.median([r['wall_s'] for r in ok]):.0f}"
                   + (f" (CPU {np.median(cpu):.0f})" if cpu else "") if ok else "",
@@ -329,32 +315,29 @@ def _suite_lines(records: list, title: str) -> list[str]:
 
 def render(res: dict) -> str:
     meta = res["meta"]
-    lines = [f"# `diagnose` on an independent-parameter hidden-effect suite", "",
+    lines = ["# `diagnose` on an independent-parameter hidden-effect suite", "",
              f"Run {meta['date']} on {meta['cpu']} ({meta['cores']} cores, shared), pinned to "
              f"core 0; load at start {meta['load']}" + (f", at end {meta['load_end']}"
                                                        if meta.get("load_end") else "")
              + f"; src {meta['src']}. `{meta.get('cmd', '')}`", "",
              *([f"Note: {meta['note']}. Column `code`: the branch each row was run on.", ""]
                if meta.get("note") else []),
-             "Each log draws its plant, design and hidden-effect magnitude (see the script's "
-             "docstring; seeds 8800+). `named` = what the verdict names (`A|B` = ambiguous "
-             "between them). RMS in quantization floors (step/√12); `after` = the first "
-             "candidate's refit. Grade: ✓ = right (adequate on nothing hidden, the hidden "
-             "effect named alone, no confident name for the outside effect unless its "
-             "stand-in reaches the floor); ~ = honest but not the name (adequate where the "
-             "base is already at the floor, so the log cannot show the effect; ambiguous "
-             "between candidates including the truth; the same-family look-alike named with "
-             "the tie noted); ✗ = wrong.", "", *_suite_lines(res["records"], "")]
+             "Each log draws its plant, design and hidden-effect magnitude (see the script's docstring; seeds "
+             "8800+). `named` = what the verdict names (`A|B` = ambiguous between them). RMS in quantization floors "
+             "(step/√12); `after` = the first candidate's refit. Grade: ✓ = right (adequate on nothing hidden, the "
+             "hidden effect named alone, no confident name for the outside effect unless its stand-in reaches the "
+             "floor); ~ = honest but not the name (adequate where the base is already at the floor, so the log "
+             "cannot show the effect; ambiguous between candidates including the truth; the same-family look-alike "
+             "named with the tie noted); ✗ = wrong.", "", *_suite_lines(res["records"], "")]
     if "fixed_plant" in res:
         m = res["fixed_plant"]["meta"]
         lines += ["# The shipped plant, each effect hidden in turn (`--fixed-plant`)", "",
                   f"Run {m['date']} on {m['cpu']} ({m['cores']} cores), load {m['load']} → "
                   f"{m.get('load_end', '?')}; src {m['src']}. `{m.get('cmd', '')}`", "",
                   *([f"Note: {m['note']}", ""] if m.get("note") else []),
-                  "The CSF-8 plant of the shipped logs (`hdid.reference.logs.TRUTH_CSF8`), each "
-                  "effect of `hdid.reference.logs.HIDDEN` at its default size; `removed:P` = "
-                  "nothing hidden, base piece P switched off in the model (`stiffness`: a "
-                  "linear spring). Columns and grades as above.", "",
+                  "The CSF-8 plant of the shipped logs (`hdid.reference.logs.TRUTH_CSF8`), each effect of "
+                  "`hdid.reference.logs.HIDDEN` at its default size; `removed:P` = nothing hidden, base piece P "
+                  "switched off in the model (`stiffness`: a linear spring). Columns and grades as above.", "",
                   *_suite_lines(res["fixed_plant"]["records"], "fixed plant, ")]
     if "floor_rule" in res:
         lines += _floor_rule_lines(res["floor_rule"])
@@ -364,22 +347,19 @@ def render(res: dict) -> str:
 
 
 def _driver_lines(res: dict) -> list[str]:
-    """``driver_refits``: the drawn logs where a strong candidate's refit stayed above 1.3×
-    the floor (the only ones hdid.fit's driver refits act on), diagnosed again; the
-    suite's rates with those rows replaced."""
+    """``driver_refits``: the drawn logs where a strong candidate's refit stayed above 1.3× the floor (the only ones
+    hdid.fit's driver refits act on), diagnosed again; the suite's rates with those rows replaced."""
     part = res["driver_refits"]
     m, after = part["meta"], {(r["design"], r["seed"]): r for r in part["records"]}
     L = ["# Rates with the driver refits (`--driver-refits`)", "",
          f"{m.get('cpu', '')}; src {m.get('src', '')}; load {m.get('load', '')} → "
          f"{m.get('load_end', '?')}. " + m.get("note", ""), "",
-         "| design | seed | hidden | before | after | grade before → after | s |",
-         "|---|---|---|---|---|---|---|"]
+         "| design | seed | hidden | before | after | grade before → after | s |", "|---|---|---|---|---|---|---|"]
     old = {(r["design"], r["seed"]): r for r in res["records"]}
     for key, r in after.items():
         b = old[key]
-        L.append(f"| {key[0]} | {key[1]} | {r['hidden']} | {b['named']} | {r.get('named', 'FAILED')} "
-                 f"| {_grade(b)} → {_grade(r) if 'error' not in r else 'failed'} "
-                 f"| {r.get('wall_s', math.nan):.0f} |")
+        L.append(f"| {key[0]} | {key[1]} | {r['hidden']} | {b['named']} | {r.get('named', 'FAILED')} | {_grade(b)} → "
+                 f"{_grade(r) if 'error' not in r else 'failed'} | {r.get('wall_s', math.nan):.0f} |")
     L += ["", "| design | logs | right before → after | honest | wrong | false alarms (none) |",
           "|---|---|---|---|---|---|"]
     for design in ("rich", "paper"):
@@ -389,9 +369,8 @@ def _driver_lines(res: dict) -> list[str]:
         g0 = [_grade(r) for r in rows]
         g1 = [_grade(r) for r in new]
         fa = [sum(r["hidden"] == "none" and r["verdict"] != "adequate" for r in x) for x in (rows, new)]
-        L.append(f"| {design} | {len(rows)} | {g0.count('right')} → {g1.count('right')} | "
-                 f"{g0.count('honest')} → {g1.count('honest')} | {g0.count('wrong')} → "
-                 f"{g1.count('wrong')} | {fa[0]} → {fa[1]} |")
+        L.append(f"| {design} | {len(rows)} | {g0.count('right')} → {g1.count('right')} | {g0.count('honest')} → "
+                 f"{g1.count('honest')} | {g0.count('wrong')} → {g1.count('wrong')} | {fa[0]} → {fa[1]} |")
     return [*L, ""]
 
 
@@ -400,8 +379,7 @@ def main(argv=None) -> None:
     ap.add_argument("designs", nargs="*", metavar="rich|paper",
                     help="designs to run (default both); their earlier records are replaced")
     ap.add_argument("--per", type=int, default=1, help="logs per hidden effect and design")
-    ap.add_argument("--seed0", type=int,
-                    help="a further batch (seeds S, S+1, …) added to the earlier records")
+    ap.add_argument("--seed0", type=int, help="a further batch (seeds S, S+1, …) added to the earlier records")
     ap.add_argument("--only", help="EFFECT,…: rerun those logs, every other record kept")
     ap.add_argument("--fresh", action="store_true", help="drop the earlier records")
     ap.add_argument("--fixed-plant", action="store_true",

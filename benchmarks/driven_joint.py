@@ -65,9 +65,8 @@ def narrowing() -> dict:
     runs = [("A free-motion alone, inertia free", lambda: hdid.fit(free, free_inertia=True)),
         ("A' free-motion alone, inertia fixed at datasheet", lambda: hdid.fit(free)),
         ("B driven alone", lambda: hdid.fit_driven(driven)),
-        # without the output encoder the output friction is not seen (it looks like WG
-        # Coulomb friction, the report's note says): held at its given (datasheet) value,
-        # here the truth, as the inertia is in A'
+        # without the output encoder the output friction is not seen (it looks like WG Coulomb friction, the report's
+        # note says): held at its given (datasheet) value, here the truth, as the inertia is in A'
         ("C driven alone, no output encoder, tau_fout given",
          lambda: hdid.fit_driven(wg_only, fix={"tau_fout": truth["tau_fout"]})),
         ("D joint free-motion + driven", lambda: hdid.fit_joint([free, driven])),

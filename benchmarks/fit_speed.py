@@ -37,8 +37,7 @@ FIT_MODULES = "hdid.cli, hdid._fitting._fit, hdid._log"
 
 def _stats(xs):
     xs = [float(x) for x in xs]
-    return {"median": statistics.median(xs), "min": min(xs), "max": max(xs), "n": len(xs),
-            "all": xs}
+    return {"median": statistics.median(xs), "min": min(xs), "max": max(xs), "n": len(xs), "all": xs}
 
 
 def _timed(cmd, env, cpu_out=None):
@@ -97,8 +96,7 @@ def _make_logs(tmp: Path) -> list[dict]:
     truth = json.loads((DATA / "truth.json").read_text())["csf8_paper.csv"]
     logs = [{"name": "csf8_paper.csv", "path": LOG, "truth": truth, "seed": truth["seed"]}]
     for seed in EXTRA_SEEDS:
-        df, truth = gen.make_log(gen.TRUTH_CSF8, **dict(gen.PAPER_DESIGN, seed=seed),
-                                 return_truth=True)
+        df, truth = gen.make_log(gen.TRUTH_CSF8, **dict(gen.PAPER_DESIGN, seed=seed), return_truth=True)
         path = tmp / f"paper_seed{seed}.csv"
         df.to_csv(path, index=False, float_format="%.12g", lineterminator="\n")
         logs.append({"name": f"paper design, seed {seed}", "path": path, "truth": truth, "seed": seed})
@@ -213,9 +211,8 @@ def render(res: dict) -> str:
              warm["load_after"], sp["load_before"], sp["load_after"]]
     L.append("| load average (1/5/15 min) | " + "; ".join(
         f"{x['tag']}: {x['load1']:.2f}/{x['load5']:.2f}/{x['load15']:.2f}" for x in loads) + " |")
-    L.append("\nThe 2 cores are shared with other engineers' test runs: a 1-min load above 2 "
-             "means the benchmark got less than a full core at times; minima are the better "
-             "estimate of the unloaded cost.\n")
+    L.append("\nThe 2 cores are shared with other engineers' test runs: a 1-min load above 2 means the benchmark got "
+             "less than a full core at times; minima are the better estimate of the unloaded cost.\n")
 
     w0, s0, cb = warm["per_log"][0]["fit_s"], sp["per_log"][0]["fit_s"], cli["cold_with_cache_s"]
     ratio_med = s0["median"] / w0["median"]
@@ -241,8 +238,7 @@ def render(res: dict) -> str:
           "| what | wall median | wall min | CPU median (user+sys) | n |\n|---|---|---|---|---|"]
     modules = cli.get("import_fit_modules", "hdid.cli, hdid._fit, hdid._io")  # as measured
     for name, st, cp in [
-        ("`hdid --help`", cli["help_s"], None),
-        ("`python -c pass`", cli["python_startup_s"], None),
+        ("`hdid --help`", cli["help_s"], None), ("`python -c pass`", cli["python_startup_s"], None),
         ("`python -c 'import hdid, jax'`", cli["import_hdid_jax_s"], None),
         (f"`python -c 'import {modules}'` (all fit imports)", cli["import_hdid_fit_s"], None),
         ("**cold CLI, empty cache** (true cold)", cli["cold_empty_cache_s"], cli["cold_empty_cache_cpu_s"]),
@@ -266,10 +262,9 @@ def render(res: dict) -> str:
                  f"{a['fit_s']['n']} | {_ms(b['fit_s']['median'])} | {_ms(b['fit_s']['min'])} |")
     L += ["", "## The scipy way vs hdid, per log: speed and accuracy\n",
           f"scipy start: {sp['start']}. x0 = " + ", ".join(f"{k} {v:g}" for k, v in sp["x0"].items()) + ".\n",
-          "RMS (ref) = unweighted RMS over all samples of the exact event-driven reference "
-          "simulation with the fitted values minus the logged readings (same judge for "
-          "both; the truth scores the quantization floor). Parameter errors are relative to "
-          "the truth.\n",
+          "RMS (ref) = unweighted RMS over all samples of the exact event-driven reference simulation with the "
+          "fitted values minus the logged readings (same judge for both; the truth scores the quantization floor). "
+          "Parameter errors are relative to the truth.\n",
           "| log | method | time median (min, n) | ratio scipy/hdid | RMS (ref) [counts] | "
           "k1 err | k2 err | tau_c err | tau_s err | c_v err |\n|---|---|---|---|---|---|---|---|---|---|"]
     for i, log in enumerate(res["accuracy"]):
@@ -312,9 +307,8 @@ def _notes(res) -> list[str]:
                  f"{cb['n']} calls: most of it is single-threaded Python tracing, which is what "
                  "the load from other processes slows down most.")
     w, n1 = warm["per_log"][0]["fit_s"]["median"], warm["n_starts_1"][0]["fit_s"]["median"]
-    notes.append(f"n_starts=1 is {w / n1:.1f}× faster than the default n_starts=4 on "
-                 "csf8_paper.csv, but its first call compiles again (the starts are vmapped, "
-                 "so the batch size is part of the compiled shape).")
+    notes.append(f"n_starts=1 is {w / n1:.1f}× faster than the default n_starts=4 on csf8_paper.csv, but its first "
+                 "call compiles again (the starts are vmapped, so the batch size is part of the compiled shape).")
     return notes
 
 
@@ -326,9 +320,8 @@ PHASES = {"read_log": "read the log", "_setup": "prepare + problem", "_grid_star
 
 
 def child_profile(reps: int) -> dict:
-    """In this process (pinned by the caller): ``reps`` warm fits of LOG, each phase timed;
-    in a tree with the one-lane engine also its program calls and one forward pass,
-    Jacobian and LM linear-algebra step alone."""
+    """In this process (pinned by the caller): ``reps`` warm fits of LOG, each phase timed; in a tree with the
+    one-lane engine also its program calls and one forward pass, Jacobian and LM linear-algebra step alone."""
     import jax
     import numpy as np
 
@@ -414,16 +407,14 @@ def child_profile(reps: int) -> dict:
 
 
 def bench_profile(trees: dict, reps: int, rounds: int) -> dict:
-    """:func:`child_profile` in a fresh process per tree, pinned to one core, the trees
-    alternating for ``rounds`` rounds; load (``uptime``) recorded around each (the cold
-    command per tree: :func:`bench_cold`)."""
+    """:func:`child_profile` in a fresh process per tree, pinned to one core, the trees alternating for ``rounds``
+    rounds; load (``uptime``) recorded around each (the cold command per tree: :func:`bench_cold`)."""
     res = {"trees": {}, "rounds": [], "core": 1, "reps": reps}
     for k in range(rounds):
         for label, src in trees.items():
             before = load(f"{label} {k} start")
             env = os.environ | {"PYTHONPATH": str(src)}
-            cmd = ["taskset", "-c", "1", sys.executable, str(Path(__file__).resolve()),
-                   "--child", str(reps)]
+            cmd = ["taskset", "-c", "1", sys.executable, str(Path(__file__).resolve()), "--child", str(reps)]
             p = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=ROOT)
             if p.returncode != 0:
                 raise RuntimeError(f"{label}: {p.stderr[-2000:]}")
@@ -441,17 +432,15 @@ def bench_profile(trees: dict, reps: int, rounds: int) -> dict:
                          for ph in (*PHASES, "band_bracket")},
             "phases_cpu_s": {ph: statistics.median(r.get("phases_cpu", {}).get(ph, 0.0) for r in rows)
                              for ph in (*PHASES, "band_bracket")},
-            "nested_false_s": statistics.median(x["nested_false_s"] for x in res["rounds"]
-                                                if x["tree"] == label)}
+            "nested_false_s": statistics.median(x["nested_false_s"] for x in res["rounds"] if x["tree"] == label)}
     return res
 
 
 def bench_cold(trees: dict, rounds: int) -> dict:
-    """Cold ``hdid fit LOG`` (a new process) per tree, pinned to one core, trees alternating:
-    one run in an empty cache (``HDID_CACHE_DIR=<tmp>``: a fresh environment), then
-    ``rounds`` with the persistent cache warm (after one that fills it); wall, CPU (user +
-    sys, all threads), 1-min load; and whether the report (timing masked) and the JSON
-    (``wall_time_s`` left out) are the same for every tree."""
+    """Cold ``hdid fit LOG`` (a new process) per tree, pinned to one core, trees alternating: one run in an empty
+    cache (``HDID_CACHE_DIR=<tmp>``: a fresh environment), then ``rounds`` with the persistent cache warm (after one
+    that fills it); wall, CPU (user + sys, all threads), 1-min load; and whether the report (timing masked) and the
+    JSON (``wall_time_s`` left out) are the same for every tree."""
     import re
 
     hdid = _hdid()
@@ -519,8 +508,7 @@ def render_profile(pr: dict) -> list[str]:
              for n in names) + "); medians. Load (1-min) before each process: "
          + ", ".join(f"{x['tree']} {x['load_before']['load1']:.1f}" for x in pr["rounds"])
          + ". The machine is shared: compare the trees by their ratio, not the absolute times.\n",
-         "| phase | " + " | ".join(f"{n}: wall; CPU" for n in names) + " |",
-        "|---|" + "---|" * len(names)]
+         "| phase | " + " | ".join(f"{n}: wall; CPU" for n in names) + " |", "|---|" + "---|" * len(names)]
 
     def cell(n, ph):
         c = trees[n].get("phases_cpu_s", {}).get(ph)
@@ -604,8 +592,7 @@ def main(argv=None) -> None:
         res["accuracy"] = []
         for i, log in enumerate(logs):
             truth_fit = {"params": {n: log["truth"]["params"][n] for n in PHYS},
-                         "runs": [{k: r[k] for k in ("t_release", "theta0", "offset")}
-                                  for r in log["truth"]["runs"]]}
+                         "runs": [{k: r[k] for k in ("t_release", "theta0", "offset")} for r in log["truth"]["runs"]]}
             entry = {"name": log["name"], "seed": log["seed"], "truth": judge(log, truth_fit),
                      "hdid": judge(log, res["warm"]["per_log"][i]["result"]),
                      "hdid_n_starts_1": judge(log, res["warm"]["n_starts_1"][i]["result"])}

@@ -1,5 +1,4 @@
-"""Fit time and peak memory against log length: what sets the CLI's refusal threshold
-(``MAX_SAMPLES_PER_RUN``).
+"""Fit time and peak memory against log length: what sets the CLI's refusal threshold (``MAX_SAMPLES_PER_RUN``).
 
     taskset -c 0 python benchmarks/long_log.py --samples 1000,2500,5000,10000,25000
     python benchmarks/long_log.py --render      # results/long_log.md from its JSON

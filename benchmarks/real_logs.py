@@ -69,11 +69,10 @@ def judge(result, truth):
 
 
 def sts_rows(add: tuple[str, ...]):
-    """The eight STS3215 set-ups fitted with only what a user knows (``--remove stiffness --add
-    gravity --inertia I``, I = the lab's armature + m·l²) plus the effects ``add``: RMS/floor,
-    its sample-to-sample part (residual minus its 5-sample running mean, scaled by √(5/4):
-    what no smooth model can follow — the servo's readings are its own samples, taken up to one
-    of its cycles before the host's timestamp) and the armature the fit implies,
+    """The eight STS3215 set-ups fitted with only what a user knows (``--remove stiffness --add gravity --inertia I``,
+    I = the lab's armature + m·l²) plus the effects ``add``: RMS/floor, its sample-to-sample part (residual minus its
+    5-sample running mean, scaled by √(5/4): what no smooth model can follow — the servo's readings are its own
+    samples, taken up to one of its cycles before the host's timestamp) and the armature the fit implies,
     ``m·g·l·I/mgl_fit − m·l²`` (one constant across set-ups if the model is right)."""
     import numpy as np
 
@@ -204,9 +203,8 @@ def sts_section(rows: list[dict]) -> list[str]:
         arm = [r["armature"] for r in sel]
         err = [r["mgl"] / r["mgl_point"] - 1 for r in sel]
         sd = statistics.stdev(arm) if len(arm) > 1 else float("nan")
-        out.append(f"| {name} | {len(sel)} | {statistics.median(r['rms'] for r in sel):.1f} | "
-                   f"{min(err):+.1%} … {max(err):+.1%} | {statistics.mean(arm):.4f} ± {sd:.4f} "
-                   f"({sd / statistics.mean(arm):.1%}) |")
+        out.append(f"| {name} | {len(sel)} | {statistics.median(r['rms'] for r in sel):.1f} | {min(err):+.1%} … "
+                   f"{max(err):+.1%} | {statistics.mean(arm):.4f} ± {sd:.4f} ({sd / statistics.mean(arm):.1%}) |")
     return out
 
 
