@@ -35,7 +35,8 @@ DESIGNS = {
     "paper": ([0.157, -0.157, 0.157, -0.157], 250.0, 0.5),
     "short 0.25 s": ([0.157, -0.157, 0.157, -0.157], 250.0, 0.25),
     "long 1.0 s": ([0.157, -0.157, 0.157, -0.157], 250.0, 1.0),
-    "1 kHz": ([0.157, -0.157, 0.157, -0.157], 1000.0, 0.5), "2 runs": ([0.157, -0.157], 250.0, 0.5),
+    "1 kHz": ([0.157, -0.157, 0.157, -0.157], 1000.0, 0.5),
+    "2 runs": ([0.157, -0.157], 250.0, 0.5),
     "8 runs": ([0.157, -0.157, 0.12, -0.12, 0.08, -0.08, 0.05, -0.05], 250.0, 0.5),
 }
 
@@ -63,8 +64,7 @@ def make_logs(design: str, n: int, log_dir: Path) -> list[str]:
         if not p.exists():
             df = logs.make_log(truth_of(i), amplitudes=amps, fs=fs, duration=duration, hold=0.04,
                               offsets_by_setup={"A": 0.012, "B": -0.020}, seed=1000 + i)
-            tmp = p.with_suffix(".tmp")
-            df.to_csv(tmp, index=False)
+            df.to_csv(tmp := p.with_suffix(".tmp"), index=False)
             tmp.replace(p)
         paths.append(str(p))
     return paths
@@ -82,8 +82,7 @@ def worker(cfg: dict) -> dict:
     import hdid
 
     out = {"config": cfg, "load_before": load("start")}
-    paths = cfg["paths"]
-    warm, timed = paths[:WARMUP], paths[WARMUP:]
+    warm, timed = cfg["paths"][:WARMUP], cfg["paths"][WARMUP:]
     if cfg["mode"] == "scipy":
         import pandas as pd
         import scipy_way as sw
@@ -104,10 +103,8 @@ def worker(cfg: dict) -> dict:
         out.update(first_call_s=first.wall, first_call_timing=timing)
         with Clock() as c:
             table = hdid.fit_many(timed, **opts)
-        out.update(total_s=c.wall, cpu_s=c.cpu, timing=table.attrs["timing"])
-        out.update(_quality(cfg, timed, table))
-    return out | {"n": len(timed), "maxrss_mb": max(out.get("maxrss_mb", 0.0), _usage()[1]),
-                  "load_after": load("end")}
+        out.update(total_s=c.wall, cpu_s=c.cpu, timing=table.attrs["timing"], **_quality(cfg, timed, table))
+    return out | {"n": len(timed), "maxrss_mb": max(out.get("maxrss_mb", 0.0), _usage()[1]), "load_after": load("end")}
 
 
 def _quality(cfg: dict, timed: list, table) -> dict:
@@ -116,12 +113,9 @@ def _quality(cfg: dict, timed: list, table) -> dict:
            "errors": [e for e in table["error"] if isinstance(e, str)][:3]}
     cols = [c for c in ("k1", "tau_c", "rms_residual_counts") if c in table]
     out["summary"] = {c: float(table[c].median()) for c in cols}
-    # Quality per log: best χ² (to compare the vectorised fit with fit() on the same
-    # logs) and, for the paper design, the error against the truth in standard errors.
-    per = []
+    per = []  # best χ² (the vectorised fit vs fit() on the same logs); paper design: z against the truth
     for path, r in zip(timed, table.itertuples()):
-        res = r.result
-        if res is None:
+        if (res := r.result) is None:
             per.append(None)
             continue
         i = int(Path(path).stem[3:])
@@ -154,21 +148,17 @@ def _workers_run(cfg: dict, warm: list, timed: list, t_imp: float) -> dict:
     client = Client(cluster)
     try:
         client.run(lambda: hdid.fit_many(warm) is not None)
-        out["first_call_s"] = time.perf_counter() - t
-        out["first_call_timing"] = {"compile_s": float("nan")}
-        before = client.run(_usage)
-        c0 = _usage()[0]
-        t = time.perf_counter()
+        out.update(first_call_s=time.perf_counter() - t, first_call_timing={"compile_s": float("nan")})
+        before, c0, t = client.run(_usage), _usage()[0], time.perf_counter()
         from hdid._fitting._batch import CHUNKS_PER_WORKER
 
         chunk = max(1, -(-len(timed) // (CHUNKS_PER_WORKER * W)))  # as fit_many(workers=W)
         table = hdid.fit_many(timed, client=client, chunk_size=chunk)
         out["total_s"] = time.perf_counter() - t
         after = client.run(_usage)
-        out["cpu_s"] = (_usage()[0] - c0) + sum(after[k][0] - before[k][0] for k in after)
-        out["maxrss_mb"] = max(v[1] for v in after.values())
-        out["timing"] = table.attrs["timing"]
-        out.update(_quality(cfg, timed, table))
+        out.update(cpu_s=(_usage()[0] - c0) + sum(after[k][0] - before[k][0] for k in after),
+                   maxrss_mb=max(v[1] for v in after.values()), timing=table.attrs["timing"],
+                   **_quality(cfg, timed, table))
     finally:
         client.close()
         cluster.close()
@@ -185,9 +175,7 @@ def run_worker(cfg: dict, cache_dir: Path, timeout: float = 3600) -> dict:
                        capture_output=True, text=True, cwd=ROOT / "benchmarks", timeout=timeout)
     if p.returncode != 0:
         raise RuntimeError(f"worker {cfg['label']} failed:\n{p.stdout[-3000:]}\n{p.stderr[-3000:]}")
-    res = json.loads(p.stdout.strip().splitlines()[-1])
-    res["process_s"] = time.perf_counter() - t
-    return res
+    return json.loads(p.stdout.strip().splitlines()[-1]) | {"process_s": time.perf_counter() - t}
 
 
 def measure(args) -> dict:
@@ -204,9 +192,7 @@ def measure(args) -> dict:
     res["log_generation_s"] = time.perf_counter() - t
 
     def go(label, mode, n, design="paper", paths=None, **extra):
-        if args.only and not any(label.startswith(o) for o in args.only):
-            return None
-        if args.skip and any(label.startswith(o) for o in args.skip):
+        if any(map(label.startswith, args.skip or ())) or (args.only and not any(map(label.startswith, args.only))):
             return None
         paths = paths or make_logs(design, WARMUP + n, log_dir)
         cfg = {"label": label, "mode": mode, "design": design, "paths": paths[: WARMUP + n], **extra}
@@ -239,8 +225,7 @@ def measure(args) -> dict:
     for design in ("short 0.25 s", "long 1.0 s", "1 kHz", "2 runs", "8 runs"):
         go(f"design {design}, 20 logs", "vectorized", 20, design=design)
     go("design paper, 20 logs", "vectorized", 20, paths=paper)
-    res["script_s"] = time.perf_counter() - t_script
-    res["load_end"] = load("script end")
+    res |= {"script_s": time.perf_counter() - t_script, "load_end": load("script end")}
     shutil.rmtree(cache, ignore_errors=True)
     return res
 
@@ -316,15 +301,13 @@ def render(res: dict) -> str:
     cref = max(with_cpu, key=lambda r: r["n"]) if with_cpu else None
     cb, cs = (_cpu_per_log(cref) if cref else None), _cpu_per_log(scipy)
     if cb and cs:
-        L.append(f"| … by CPU time per log (less sensitive to the other jobs; vectorised: "
-                 f"'{cref['config']['label']}') | {cs / cb:.1f}× "
-                 f"({cs:.2f} s vs {cb * 1e3:.0f} ms) | {'✓' if cs / cb >= GOAL_RATIO else '✗'} |")
+        L.append(f"| … by CPU time per log (less sensitive to the other jobs; vectorised: '{cref['config']['label']}') "
+                 f"| {cs / cb:.1f}× ({cs:.2f} s vs {cb * 1e3:.0f} ms) | {'✓' if cs / cb >= GOAL_RATIO else '✗'} |")
     L.append("")
     if wk:
-        L += ["Several cores (`fit_many(workers=2)` / `hdid fit --workers 2`): logs are split "
-              "into about 8 chunks per worker process (as `workers=2` does); the timed call runs on a cluster whose "
-              "workers have each fitted 2 logs already (*first call*: cluster start plus every "
-              "worker's trace/compile or cache read).\n",
+        L += ["Several cores (`fit_many(workers=2)` / `hdid fit --workers 2`): logs are split into about 8 chunks per "
+              "worker process (as `workers=2` does); the timed call runs on a cluster whose workers have each fitted 2 "
+              "logs already (*first call*: cluster start plus every worker's trace/compile or cache read).\n",
               "| N logs | wall | logs/s | CPU per log (all processes) | speed-up vs one "
               "process | first call | peak RSS (a worker) | load |\n|---|---|---|---|---|---|---|---|"]
         for r in sorted(wk, key=lambda r: r["n"]):

@@ -55,8 +55,7 @@ def make(design: str, seed: int):
     offsets = {s: float(rng.uniform(-0.03, 0.03)) for s in sorted(set(d["setups"]))}
     phases = rng.uniform(0.0, 1.0, len(d["amps"]))
     return ind.make_log(plant, d["amps"], rate=d["rate"], duration=d["duration"], hold=0.04,
-                        setups=d["setups"], offsets=offsets, counts_per_rev=4000,
-                        release_phase=list(phases), seed=seed)
+                        setups=d["setups"], offsets=offsets, counts_per_rev=4000, release_phase=list(phases), seed=seed)
 
 
 def fit_one(design: str, seed: int) -> dict:
@@ -108,11 +107,10 @@ def render(rows: list[dict]) -> str:
         above = int(np.sum(ratio[np.isfinite(ratio)] > ABOVE))
         won = Counter(x["restarted_from"] for x in g if x.get("restarted_from"))
         loads = [x.get("load1") for x in g if x.get("load1") is not None]
-        out.append(
-            f"| {label} | {design} | {len(g)} | {above} | {100 * above / len(g):.1f} % | {err} | "
-            f"{np.nanmedian(ratio):.3f} | {np.nanmax(ratio):.3f} | {np.median([x['wall_s'] for x in g]):.1f} | "
-            f"{np.median(loads) if loads else math.nan:.2f} | "
-            f"{', '.join(f'{k} {v}' for k, v in sorted(won.items())) or '—'} |")
+        out.append(f"| {label} | {design} | {len(g)} | {above} | {100 * above / len(g):.1f} % | {err} | "
+                   f"{np.nanmedian(ratio):.3f} | {np.nanmax(ratio):.3f} | {np.median([x['wall_s'] for x in g]):.1f} | "
+                   f"{np.median(loads) if loads else math.nan:.2f} | "
+                   f"{', '.join(f'{k} {v}' for k, v in sorted(won.items())) or '—'} |")
     out += ["", "Logs above 1.5× (label, design, seed: ratio):", ""]
     out += [f"- {r.get('label')}, {r['design']}, {r['seed']}: {r['ratio']:.3f} {r.get('error', '')}"
             for r in rows if not r["ratio"] <= ABOVE]
@@ -136,8 +134,7 @@ def main(argv=None) -> int:
         rows = [r for r in rows if r.get("label") != a.label]
     src = Path(hdid.__file__).parent
     head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=src, capture_output=True, text=True).stdout.strip()
-    lo, hi = (int(x) for x in a.seeds.split(":"))
-    seeds = [int(x) for x in a.only.split(",")] if a.only else range(lo, hi)
+    seeds = [int(x) for x in a.only.split(",")] if a.only else range(*(int(x) for x in a.seeds.split(":")))
     for seed in seeds:
         for design in a.designs:
             if any(r.get("label") == a.label and r["design"] == design and r["seed"] == seed for r in rows):

@@ -88,12 +88,9 @@ def main(argv=None) -> int:
         pred = {k: _rank.std_of(p, k) for k in names}
         res["loads"].append(load(f"before check {p.experiment.name}"))
         c = _check.run(fit, p.experiment, pred, args.n, seed=1, names=names)
-        row = c.to_dict()
-        row["linearisation"] = p.honesty
-        row["within_25pct"] = {k: (abs(c.ratio(k) - 1.0) <= 0.25 if math.isfinite(c.ratio(k))
-                                   else None) for k in QUANTITIES}
-        row["load"] = load(f"after check {p.experiment.name}")
-        res["checks"].append(row)
+        res["checks"].append(c.to_dict() | {"linearisation": p.honesty, "within_25pct": {
+            k: (abs(c.ratio(k) - 1.0) <= 0.25 if math.isfinite(c.ratio(k)) else None) for k in QUANTITIES},
+            "load": load(f"after check {p.experiment.name}")})
         _write(res)
     res["loads"].append(load("end"))
     _write(res)
@@ -126,8 +123,7 @@ def _speed(fit, loads, separate=()):
         timings.append({"call": label, "n_candidates": len(d20.predictions),
                         "seconds": time.perf_counter() - t, **load(label)})
         if pair:
-            top = d20.best
-            timings[-1].update(separate=list(separate), top=top.experiment.name,
+            timings[-1].update(separate=list(separate), top=(top := d20.best).experiment.name,
                                top_2lnlr=list(top.separation), top_kind=top.separation_kind)
     return timings
 
@@ -196,11 +192,9 @@ def pairs(n: int, n_this: int, only=None, certify: int = 0) -> int:
                "diagnose_s": dt, "load_before": load("before separation")}
         t = time.perf_counter()
         rec = separating(a, b, certify=certify)
-        row["certify"] = certify
-        row["separation_s"] = time.perf_counter() - t
-        row["load_after_separation"] = load("after separation")
-        row["separating"] = {k: v for k, v in rec.items() if k != "text"}
-        row["text"] = rec["text"]
+        row.update(certify=certify, separation_s=time.perf_counter() - t,
+                   load_after_separation=load("after separation"),
+                   separating={k: v for k, v in rec.items() if k != "text"}, text=rec["text"])
         print(title, "->", rec["text"], f"({row['separation_s']:.0f} s)", flush=True)
         _write_row(row)
         fa, fb = a.fit.result(), b.fit.result()
@@ -220,8 +214,7 @@ def pairs(n: int, n_this: int, only=None, certify: int = 0) -> int:
 
 
 def _write_row(row):
-    """``row`` into the stored ``pairs`` rows (re-read first: pairs may run in parallel
-    processes), in PAIRS' order."""
+    """``row`` into the stored ``pairs`` rows (re-read first: pairs may run in parallel processes), in PAIRS' order."""
     res = json.loads((RESULTS / "design_check.json").read_text())
     pr = res.setdefault("pairs", {"cpu": cpu_model(), "rows": []})
     pr["rows"] = [r for r in pr["rows"] if r["title"] != row["title"]] + [row]

@@ -18,7 +18,7 @@ import os
 import sys
 
 import numpy as np
-from _common import RESULTS, Clock, load_text, parse_or_render, run_meta, write_result
+from _common import RESULTS, Clock, load_text, parse_or_render, run_meta, stored, write_result
 
 from hdid.reference import logs
 
@@ -144,17 +144,14 @@ def run_design(design: str, records: list, meta: dict, save, jobs) -> None:
             save()
             continue
         cands = [c for c in d.candidates if c.error is None]
-        rec.update({
-            "verdict": d.verdict, "summary": d.summary, "named": _named(d),
-            "top": cands[0].key if cands else None, "top_dbic": cands[0].delta_bic if cands else None,
-            "rms_before_floor": d.base.rms_residual_rad / d.floor_rad,
-            "candidates": [{"effect": c.key, "variant": c.label, "delta_bic": c.delta_bic,
-                            "rms_after_floor": c.rms_after_rad / d.floor_rad,
-                            "adequate_after": c.adequate_after, "moving_after_floor": c.moving_ratio_after}
-                           for c in cands], "warnings": d.warnings, "notes": d.notes, "scanned": d.scanned,
-            "wall_s": clock.wall, "cpu_s": clock.cpu,
-            "compile_s": d.timing.get("compile_s"), "load1_after": os.getloadavg()[0],
-        })
+        rec |= {"verdict": d.verdict, "summary": d.summary, "named": _named(d),
+                "top": cands[0].key if cands else None, "top_dbic": cands[0].delta_bic if cands else None,
+                "rms_before_floor": d.base.rms_residual_rad / d.floor_rad,
+                "candidates": [{"effect": c.key, "variant": c.label, "delta_bic": c.delta_bic,
+                                "rms_after_floor": c.rms_after_rad / d.floor_rad, "adequate_after": c.adequate_after,
+                                "moving_after_floor": c.moving_ratio_after} for c in cands],
+                "warnings": d.warnings, "notes": d.notes, "scanned": d.scanned, "wall_s": clock.wall,
+                "cpu_s": clock.cpu, "compile_s": d.timing.get("compile_s"), "load1_after": os.getloadavg()[0]}
         save()
         c0s = ", ".join(f"{c['effect']} {c['delta_bic']:.0f}" for c in rec["candidates"][:3])
         print(f"{design} {name:20s} {d.verdict:15s} named {rec['named']} RMS {rec['rms_before_floor']:.2f} "
@@ -211,8 +208,7 @@ def floor_rule(seeds: set | None) -> None:
                 and FAMILY.get(x["effect"], x["effect"]) != fam and x["delta_bic"] - c[0]["delta_bic"] >= 10]
         if gaps and (not seeds or r["seed"] in seeds):
             todo.append((min(gaps), r, [x["effect"] for x in c]))
-    res = {"meta": run_meta(command="python benchmarks/diagnose_independent.py "
-                            + " ".join(sys.argv[1:])), "rows": []}
+    res = {"meta": run_meta(command="python benchmarks/diagnose_independent.py " + " ".join(sys.argv[1:])), "rows": []}
     for _, rec, keys in sorted(todo, key=lambda x: x[0]):  # the likeliest to change first
         design, seed, name = rec["design"], rec["seed"], rec["hidden"]
         truth, des, hp = suite_log(design, seed, name)
@@ -231,8 +227,7 @@ def floor_rule(seeds: set | None) -> None:
 def store(key: str | None, part: dict) -> None:
     """Write one section of the result (``None``: the drawn suite's ``meta`` and ``records``,
     at the top level where the calibrations read them), keeping the others."""
-    path = RESULTS / f"{NAME}.json"
-    res = json.loads(path.read_text()) if path.exists() else {}
+    res = stored(NAME)
     res.update(part if key is None else {key: part})
     write_result(NAME, res, render)
 
@@ -242,8 +237,7 @@ def _floor_rule_lines(res: dict) -> list[str]:
     L = ["# The floor-level rule on the drawn suite (affected logs only, `--floor-rule`)", "",
          f"{m.get('cpu', '')}; src {m.get('src', '')}; `{m.get('command', '')}`. Before: the drawn suite's stored "
          "verdict (above); after: diagnose with the candidates listed, design=False. Every other log of the suite "
-         "cannot change verdict (the notes of benchmarks/README.md).", "",
-         *([m["note"], ""] if m.get("note") else []),
+         "cannot change verdict (the notes of benchmarks/README.md).", "", *([m["note"], ""] if m.get("note") else []),
          "| design | seed | hidden | candidates | before | after | ΔBIC (RMS/floor) after | s | load |",
          "|---|---|---|---|---|---|---|---|---|"]
     for r in res["rows"]:
@@ -272,13 +266,12 @@ def _suite_lines(records: list, title: str) -> list[str]:
                              f"| | | | | | | {r.get('code', '')} |")
                 continue
             c0 = r["candidates"][0] if r["candidates"] else {}
-            lines.append(
-                f"| {r['hidden']} | {r['seed']} | {dp['gear_factor']:.2f} | {dp['fs']:g} | "
-                f"{tr['v_s']:.1f} | {tr['delta']:.2f} | {r['verdict']} | {r['named']} | "
-                f"{c0.get('variant', '')} ({c0.get('delta_bic', math.nan):.0f}) | "
-                f"{r['rms_before_floor']:.2f} → {c0.get('rms_after_floor', math.nan):.2f} | "
-                f"{ {'right': '✓', 'honest': '~', 'wrong': '✗'}[_grade(r)]} | {r['wall_s']:.0f} | "
-                f"{format(r['load1_after'], '.1f') if 'load1_after' in r else ''} | {r.get('code', '')} |")
+            lines.append(f"| {r['hidden']} | {r['seed']} | {dp['gear_factor']:.2f} | {dp['fs']:g} | "
+                         f"{tr['v_s']:.1f} | {tr['delta']:.2f} | {r['verdict']} | {r['named']} | "
+                         f"{c0.get('variant', '')} ({c0.get('delta_bic', math.nan):.0f}) | "
+                         f"{r['rms_before_floor']:.2f} → {c0.get('rms_after_floor', math.nan):.2f} | "
+                         f"{ {'right': '✓', 'honest': '~', 'wrong': '✗'}[_grade(r)]} | {r['wall_s']:.0f} | "
+                         f"{format(r['load1_after'], '.1f') if 'load1_after' in r else ''} | {r.get('code', '')} |")
         removed = [r for r in ok if r["hidden"].startswith("removed:")]
         lib = [r for r in ok if r["expected"] not in (None, "none") and r not in removed]
         first = [r for r in lib if r["top"] == r["expected"]]
@@ -317,8 +310,7 @@ def render(res: dict) -> str:
     meta = res["meta"]
     lines = ["# `diagnose` on an independent-parameter hidden-effect suite", "",
              f"Run {meta['date']} on {meta['cpu']} ({meta['cores']} cores, shared), pinned to "
-             f"core 0; load at start {meta['load']}" + (f", at end {meta['load_end']}"
-                                                       if meta.get("load_end") else "")
+             f"core 0; load at start {meta['load']}" + (f", at end {meta['load_end']}" if meta.get("load_end") else "")
              + f"; src {meta['src']}. `{meta.get('cmd', '')}`", "",
              *([f"Note: {meta['note']}. Column `code`: the branch each row was run on.", ""]
                if meta.get("note") else []),
@@ -364,10 +356,8 @@ def _driver_lines(res: dict) -> list[str]:
           "|---|---|---|---|---|---|"]
     for design in ("rich", "paper"):
         rows = [r for r in res["records"] if r["design"] == design and "error" not in r]
-        new = [after.get((r["design"], r["seed"]), r) for r in rows]
-        new = [r for r in new if "error" not in r]
-        g0 = [_grade(r) for r in rows]
-        g1 = [_grade(r) for r in new]
+        new = [x for r in rows if "error" not in (x := after.get((r["design"], r["seed"]), r))]
+        g0, g1 = ([_grade(r) for r in x] for x in (rows, new))
         fa = [sum(r["hidden"] == "none" and r["verdict"] != "adequate" for r in x) for x in (rows, new)]
         L.append(f"| {design} | {len(rows)} | {g0.count('right')} → {g1.count('right')} | {g0.count('honest')} → "
                  f"{g1.count('honest')} | {g0.count('wrong')} → {g1.count('wrong')} | {fa[0]} → {fa[1]} |")
@@ -405,8 +395,7 @@ def main(argv=None) -> None:
     cores = ",".join(map(str, sorted(os.sched_getaffinity(0))))  # the cores it ran on
     meta = run_meta(cmd=f"taskset -c {cores} python benchmarks/diagnose_independent.py "
                         + " ".join(argv if argv is not None else sys.argv[1:]))
-    path = RESULTS / f"{NAME}.json"
-    prev = json.loads(path.read_text()) if path.exists() else {}
+    prev = stored(NAME)
     part = prev.get("fixed_plant", {}) if args.fixed_plant else prev  # the section replaced
     if args.fixed_plant:
         names = [f"removed:{p}" for p in REMOVED] if args.removed else HIDDEN

@@ -63,31 +63,27 @@ def summarize_programs(progs: list[dict]) -> dict:
 
 def render(res: dict) -> str:
     m = res["meta"]
-    lines = [
-        f"# `hdid diagnose {Path(res['log']).name}`: time per code, cold and warm", "",
-        f"Measured {m['date']} on {m['cpu']} ({m['cores']} cores, shared), each process pinned to core {res['core']} "
-        f"with its own cache folder; load average (1/5/15 min) at start {m['load']}, at end "
-        f"{m.get('load_end', '?')}. Source fingerprint of this checkout {m['src']}. \"cold\" = empty cache; \"warm\" "
-        "= a second process with the cache the first left. Compile = JAX tracing, lowering and compiling or reading "
-        "its cache (diagnose's own `timing`); the program store's rows say how many programs were read from it or "
-        "traced, and the seconds of each.", "",
-        "| code | cache | wall s | CPU s | compile s | fitting s | programs (store) | load start → end | verdict (first candidates) |",
-        "|---|---|---|---|---|---|---|---|---|",
-    ]
+    lines = [f"# `hdid diagnose {Path(res['log']).name}`: time per code, cold and warm", "",
+             f"Measured {m['date']} on {m['cpu']} ({m['cores']} cores, shared), each process pinned to core "
+             f"{res['core']} with its own cache folder; load average (1/5/15 min) at start {m['load']}, at end "
+             f"{m.get('load_end', '?')}. Source fingerprint of this checkout {m['src']}. \"cold\" = empty cache; "
+             "\"warm\" = a second process with the cache the first left. Compile = JAX tracing, lowering and compiling "
+             "or reading its cache (diagnose's own `timing`); the program store's rows say how many programs were read "
+             "from it or traced, and the seconds of each.", "",
+             "| code | cache | wall s | CPU s | compile s | fitting s | programs (store) | load start → end | verdict "
+             "(first candidates) |", "|---|---|---|---|---|---|---|---|---|"]
     for r in res["rows"]:
         if "error" in r:
-            lines.append(f"| {r['code']} | {r['cache']} | {r['process_wall_s']:.0f} | — | — | — | — "
-                         f"| {r['load_start']} → {r['load_end']} | error: "
-                         f"{r['error'].strip().splitlines()[-1][:120]} |")
+            lines.append(f"| {r['code']} | {r['cache']} | {r['process_wall_s']:.0f} | — | — | — | — | "
+                         f"{r['load_start']} → {r['load_end']} | error: {r['error'].strip().splitlines()[-1][:120]} |")
             continue
         t = r["timing"]
         prog = "; ".join(f"{k} {v['n']}: {v['prepare_s']:.1f} + {v['compile_s']:.1f} s"
                          for k, v in sorted(summarize_programs(r.get("programs", [])).items())) or "—"
         cands = ", ".join(f"{lb} {d:.1f}" for lb, d in r["candidates"][:3])
-        lines.append(
-            f"| {r['code']} | {r['cache']} | {r['process_wall_s']:.1f} | {r['cpu_s']:.1f} | "
-            f"{t.get('compile_s', float('nan')):.1f} | {t.get('run_s', float('nan')):.1f} | {prog} | "
-            f"{r['load_start']} → {r['load_end']} | {r['verdict']} ({cands}) |")
+        lines.append(f"| {r['code']} | {r['cache']} | {r['process_wall_s']:.1f} | {r['cpu_s']:.1f} | "
+                     f"{t.get('compile_s', float('nan')):.1f} | {t.get('run_s', float('nan')):.1f} | {prog} | "
+                     f"{r['load_start']} → {r['load_end']} | {r['verdict']} ({cands}) |")
     lines += ["", "Programs column: `how n: prepare + compile s` — `stored`: read from the "
               "program store, `traced`: traced and lowered in this process, `jit`: the store "
               "off or failed; compile = XLA compile or a read of JAX's persistent cache.", "",

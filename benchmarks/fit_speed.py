@@ -97,8 +97,7 @@ def _make_logs(tmp: Path) -> list[dict]:
     logs = [{"name": "csf8_paper.csv", "path": LOG, "truth": truth, "seed": truth["seed"]}]
     for seed in EXTRA_SEEDS:
         df, truth = gen.make_log(gen.TRUTH_CSF8, **dict(gen.PAPER_DESIGN, seed=seed), return_truth=True)
-        path = tmp / f"paper_seed{seed}.csv"
-        df.to_csv(path, index=False, float_format="%.12g", lineterminator="\n")
+        df.to_csv(path := tmp / f"paper_seed{seed}.csv", index=False, float_format="%.12g", lineterminator="\n")
         logs.append({"name": f"paper design, seed {seed}", "path": path, "truth": truth, "seed": seed})
     return logs
 
@@ -191,10 +190,6 @@ def _ms(x):
     return f"{x * 1e3:.0f} ms" if x < 1 else f"{x:.2f} s"
 
 
-def _pct(x):
-    return f"{x * 100:+.1f} %"
-
-
 def _ok(c):
     return "✓" if c else "✗"
 
@@ -278,11 +273,10 @@ def render(res: dict) -> str:
                 ratio = (f"{st['median'] / hw['fit_s']['median']:.1f}× wall, "
                          f"{row['cpu_s']['median'] / hw['cpu_s']['median']:.1f}× CPU")
             L.append(f"| | {meth} | {_ms(st['median'])} (min {_ms(st['min'])}, n={st['n']}) | {ratio} | "
-                     f"{a['rms_ref_counts']:.3f} | " + " | ".join(_pct(a["rel_err"][k]) for k in
+                     f"{a['rms_ref_counts']:.3f} | " + " | ".join(f"{a['rel_err'][k] * 100:+.1f} %" for k in
                                                            ("k1", "k2", "tau_c", "tau_s", "c_v")) + " |")
-    L += ["", "scipy details: " + "; ".join(
-        f"{p['name']}: nfev {p['nfev']}, {p['n_simulations']} ODE solves, success "
-        f"{p['success']}" for p in sp["per_log"]) + ".\n"]
+    L += ["", "scipy details: " + "; ".join(f"{p['name']}: nfev {p['nfev']}, {p['n_simulations']} ODE solves, success "
+                                            f"{p['success']}" for p in sp["per_log"]) + ".\n"]
     if res.get("profile"):
         L += render_profile(res["profile"])
     if res.get("cold"):
@@ -370,9 +364,8 @@ def child_profile(reps: int) -> dict:
     clock = _clock()
     rows = []
     for _ in range(reps):
-        acc.clear()
-        cpu.clear()
-        calls.clear()
+        for x in (acc, cpu, calls):
+            x.clear()
         mark = clock.mark()
         with Clock() as c:
             r = hdid.fit(str(LOG))
@@ -470,16 +463,14 @@ def bench_cold(trees: dict, rounds: int) -> dict:
                     same[label] = (re.sub(r"; [0-9.]+ s\n", "\n", p.stdout.replace(str(js), "OUT")),
                                    json.dumps(d, sort_keys=True))
     res = {label: {"cold_cli_s": _stats(o["wall"]), "cold_cli_cpu_s": _stats(o["cpu"]),
-                   "load": o["load"], "empty_cache": o["empty"], "src": str(trees[label])}
-           for label, o in out.items()}
+                   "load": o["load"], "empty_cache": o["empty"], "src": str(trees[label])} for label, o in out.items()}
     first = next(iter(same.values()))
     return {"trees": res, "same_report": all(v[0] == first[0] for v in same.values()),
             "same_json": all(v[1] == first[1] for v in same.values()), "rounds": rounds}
 
 
 def render_cold(c: dict) -> list[str]:
-    names = list(c["trees"])
-    T = c["trees"]
+    names = list(T := c["trees"])
     L = [f"## Cold command ({c['date']}: `hdid fit {LOG.name}`, a new process, one core pinned, "
          f"trees alternating, {c['rounds']} runs each with the caches warm)\n",
          "| | " + " | ".join(names) + " |", "|---|" + "---|" * len(names),
@@ -498,8 +489,7 @@ def render_cold(c: dict) -> list[str]:
 
 
 def render_profile(pr: dict) -> list[str]:
-    trees = pr["trees"]
-    names = list(trees)
+    names = list(trees := pr["trees"])
     L = [f"## Where a warm fit's time goes ({pr['date']}, one core pinned, "
          f"{pr['reps']} fits × {len(pr['rounds']) // len(names)} rounds per tree)\n",
          "Each tree in a fresh process (`taskset -c 1`), after two warm-up fits (no tracing "
@@ -511,8 +501,7 @@ def render_profile(pr: dict) -> list[str]:
          "| phase | " + " | ".join(f"{n}: wall; CPU" for n in names) + " |", "|---|" + "---|" * len(names)]
 
     def cell(n, ph):
-        c = trees[n].get("phases_cpu_s", {}).get(ph)
-        w = trees[n]["phases_s"].get(ph)
+        c, w = trees[n].get("phases_cpu_s", {}).get(ph), trees[n]["phases_s"].get(ph)
         return (_ms(w) if w is not None else "–") + (f"; {_ms(c)}" if c is not None else "")
 
     for ph, text in {**PHASES, "band_bracket": "… of the analysis: the stick-band bracket"}.items():
@@ -532,8 +521,7 @@ def render_profile(pr: dict) -> list[str]:
                  "in CPU time (medians; CPU time is the less load-sensitive of the two).")
     last = [x for x in pr["rounds"] if "forward_ms" in x]
     if last:
-        x = last[-1]
-        r = x["rows"][-1]
+        x, r = last[-1], last[-1]["rows"][-1]
         L += ["", f"Inside the Levenberg–Marquardt calls ({x['tree']}, one fit): {r['solve_calls']} "
               f"program calls, {r['iterations']} iterations, {_ms(r['solve_s'])} of compute "
               f"({r['solve_s'] / max(r['iterations'], 1) * 1e3:.2f} ms an iteration); one forward "

@@ -39,8 +39,7 @@ def one(n: int, timeout: float, tmp: Path) -> dict:
                overwrite=True)
     row = {"samples_per_run": n, "rows": len(AMPLITUDES) * n, "mb": path.stat().st_size / 1e6,
            "simulate_s": time.perf_counter() - t}
-    env = {**os.environ, "HDID_NO_CACHE": "1", "JAX_PLATFORMS": "cpu"}
-    t = time.perf_counter()
+    env, t = {**os.environ, "HDID_NO_CACHE": "1", "JAX_PLATFORMS": "cpu"}, time.perf_counter()
     try:
         out = subprocess.run([sys.executable, "-c", CHILD, str(path)], capture_output=True,
                              text=True, timeout=timeout, env=env)

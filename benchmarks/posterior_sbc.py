@@ -289,8 +289,7 @@ def run_cli(sampler, log, out, timeout):
     r.update(process_s=time.perf_counter() - t0, rc=rc, load_end=_common.loads())
     if rc != 0:
         return r | {"stderr": err}
-    full = json.loads(Path(out).read_text())
-    d = full["posterior_diagnostics"]
+    d = (full := json.loads(Path(out).read_text()))["posterior_diagnostics"]
     c = d.get("convergence") or {}
     return r | {"posterior_s": d["wall_time_s"], "converged": d["converged"],
                 **{k: d.get(k) for k in ("compile_s", "mode_search_s", "burn_in")}, "steps": d.get("n_steps"),
@@ -315,10 +314,9 @@ def render_cli(res):
             emcee = k == "emcee"
             steps = f"{r['steps']} (+{r['burn_in']})" if emcee else "–"
             L.append(
-                f"| {row['log']} | {k} | {r['process_s']:.0f} | {r['posterior_s']:.0f} | {f(r['compile_s'], '.1f')} "
-                f"| {f(r['mode_search_s'], '.1f')} | {'yes' if r['converged'] else 'NO'} ({r.get('met_by') or '–'}) "
-                f"| {steps} | {f(r['rhat_max'], '.3f')} | "
-                f"{f(r['ess_bulk_min'], '.0f')}/{f(r['ess_tail_min'], '.0f')} | "
+                f"| {row['log']} | {k} | {r['process_s']:.0f} | {r['posterior_s']:.0f} | {f(r['compile_s'], '.1f')} | "
+                f"{f(r['mode_search_s'], '.1f')} | {'yes' if r['converged'] else 'NO'} ({r.get('met_by') or '–'}) | "
+                f"{steps} | {f(r['rhat_max'], '.3f')} | {f(r['ess_bulk_min'], '.0f')}/{f(r['ess_tail_min'], '.0f')} | "
                 f"{f(r['chain_in_tau'], '.1f') if emcee else '–'} | "
                 f"{1e3 * r['band95'][0]:.1f}–{1e3 * r['band95'][1]:.1f} | {r['load_start'][0]} → {r['load_end'][0]} |")
     for k, ok in ((k, [row[k] for row in res["rows"] if row.get(k, {}).get("rc") == 0]) for k in SAMPLERS):
