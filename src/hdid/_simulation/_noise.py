@@ -33,6 +33,13 @@ def _still_pieces(runs):
     return pieces, np.asarray(owner, dtype=int)
 
 
+#: A run whose range is under this many noise σ could be read as never leaving its hold
+#: (:func:`hdid._simulation._prepare.prepare`: 5–6 σ from one level, either side): where
+#: every run is and no still stretch is noise, the σ is checked against the swing's own
+#: prediction (:func:`noise_sigma`). Ring-downs read right span 50–250 σ.
+SWING_RANGE = 20.0
+
+
 #: A still stretch's readings span at most this many of its own noise σ (estimated from its
 #: differences' MAD): the range of ≤ 50 Gaussian readings is 4.5σ on average (3.1σ for
 #: 10), above 7σ about once in a thousand; the MAD reads σ low from ~10 differences (0.6×
@@ -151,11 +158,46 @@ def noise_sigma(runs, step: float | None, still_only: bool = False) -> float:
         return sig_still if np.isfinite(sig_still) else float("nan")
     d3 = np.concatenate([np.diff(np.asarray(r.theta, float), 3) for r in runs if len(r.theta) > 4])
     sig_d3 = 1.4826 * float(np.median(np.abs(d3))) / math.sqrt(20.0) if d3.size else np.inf
-    # Both are upper bounds where the "still" stretches move (a ring-down has none) or the
-    # motion is coarse: the smaller positive one.
-    positive = [x for x in (sig_still, sig_d3) if np.isfinite(x) and x > 0]
+    # Where no head or tail is noise about one level (:func:`_noisy`: every run swings
+    # from its first reading to its last, a ring-down the log cuts at both ends) and every
+    # run's range is within SWING_RANGE of the estimate, both took the swing for noise — at
+    # 3.6 samples a period a 44 mrad swing read as 20 mrad of noise against 0.73, and
+    # prepare found no run moving — and the swing's own prediction says more
+    # (:func:`_ar2_sigma`).
+    sig_ar2 = np.inf
+    rough = min([x for x in (sig_still, sig_d3) if np.isfinite(x)], default=np.inf)
+    if (pieces and np.isfinite(rough) and not any(_noisy(d) for d in pieces)
+            and max(float(np.ptp(r.theta)) for r in runs) < SWING_RANGE * rough):
+        sig_ar2 = _ar2_sigma(runs)
+    # All are upper bounds where the "still" stretches move (a ring-down has none) or the
+    # motion is coarse: the smallest positive one.
+    positive = [x for x in (sig_still, sig_d3, sig_ar2) if np.isfinite(x) and x > 0]
     sig = min(positive) if positive else 0.0
     # The simulator's own error (RK4 substeps: 1.9e-5 rad on a 0.157 rad swing,
     # docs/decisions/simulator-scheme.md) is ~1e-4 of the swing; weights finer than
     # what the model can resolve only make the fit ill-conditioned (a noiseless log).
     return max(sig, 1e-4 * span)
+
+
+def _ar2_sigma(runs) -> float:
+    """Noise σ [log units] from how well each run's readings follow from their two
+    predecessors: ``θₙ = a₁θₙ₋₁ + a₂θₙ₋₂ + c`` holds exactly for a damped sinusoid (a
+    viscous ring-down, ``a₁ = 2r·cos ωh``, ``a₂ = −r²``) at any sampling rate, and for a
+    Coulomb ring-down between its turns. White noise σ on the readings leaves residuals
+    ``eₙ − a₁eₙ₋₁ − a₂eₙ₋₂`` of standard deviation ``σ·√(1 + a₁² + a₂²)``; their MAD (a
+    few switches of a Coulomb centre are outliers) over all runs, least squares per run
+    of ≥ 8 readings. An upper bound where the motion follows no such recurrence; inf
+    where no run is long enough."""
+    scaled = []
+    for r in runs:
+        th = np.asarray(r.theta, dtype=float)
+        if th.size < 8:
+            continue
+        A = np.column_stack([th[1:-1], th[:-2], np.ones(th.size - 2)])
+        coef, *_ = np.linalg.lstsq(A, th[2:], rcond=None)
+        res = th[2:] - A @ coef
+        scaled.append(res / math.sqrt(1.0 + coef[0] ** 2 + coef[1] ** 2))
+    if not scaled:
+        return np.inf
+    e = np.concatenate(scaled)
+    return 1.4826 * float(np.median(np.abs(e - np.median(e))))

@@ -338,8 +338,12 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
             half_periods.extend(np.diff(tt))
         elif len(tt) == 1 and not moving[i]:
             half_periods.append(tt[0] - 0.5 * (t[k0] + t[min(k0 + 1, n - 1)]))
-        elif not moving[i] and tail_start < n:
-            # reached rest without a turn: the stop (a Coulomb stop is a turning point)
+        elif not tt and tail_start < n:
+            # reached rest without a turn: the stop (a Coulomb stop is a turning point);
+            # from the first reading where the log starts after the release (a bound: the
+            # release came earlier). Without it a log whose every run starts moving and
+            # stops before a turn had no frequency but its length's (0.24 Hz for a 38 Hz
+            # plant logged 1 s), and ~1 s stuck tails read as a pause at a turn
             stops.append(max(t[min(tail_start, n - 1)] - t[k0], dt))
     # (on an encoder the stop is the first sample at the rest count; with noise it is
     # where the noise last left the rest reading, late by up to the tail: there a stop

@@ -1,0 +1,72 @@
+"""Logs like the world test's (independent stations, plants drawn at random) that the data
+preparation misread: written here by the reference simulator (:mod:`hdid.reference.logs`),
+the logger started after the release (its first readings cut), analog noise printed to
+five decimals. Cheap: :func:`hdid._simulation._prepare.prepare` only, no fit.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import hdid
+from hdid._simulation._prepare import prepare
+from hdid.reference.logs import TRUTH_CSF8, make_log
+
+
+def _late_log(truth, amplitudes, fs, duration, noise, seed, cut=2):
+    """A log of the reference simulator whose logger starts ``cut`` samples after the
+    servo-off (no hold: every run starts moving), readings printed to 1e-5 rad."""
+    df = make_log(truth, amplitudes=amplitudes, fs=fs, duration=duration, hold=0.0,
+                  offsets_by_setup={"A": -0.135}, seed=seed, quantize=False, noise_std=noise)
+    df = df[df.groupby("run").cumcount() >= cut]
+    return hdid.read_log(df.assign(theta=[float(f"{v:.5f}") for v in df["theta"]]))
+
+
+def _fn(truth) -> float:
+    return math.sqrt(truth["k1"] / (truth["inertia"] * truth["ratio"] ** 2)) / (2 * math.pi)
+
+
+#: a nearly frictionless 35 Hz gear logged at 125 Hz (3.6 samples a period) for 1.2 s: a
+#: ring-down the log cuts at both ends (no hold, no stuck tail)
+SWING = dict(TRUTH_CSF8, k1=3300.0, k2=1e6, tau_c=2.6e-5, tau_s=2.6e-5, v_s=1.8, c_v=0.0,
+             inertia=2.67e-6, ratio=160.0)
+SWING_NOISE = 7.3e-4  # [rad]: the 44 mrad swing is 60x this
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_swing_sampled_a_few_times_a_period_is_motion_not_flicker(seed):
+    log = _late_log(SWING, [-0.044, 0.044], 125.0, 1.2, SWING_NOISE, seed)
+    # Before: every head and tail of the runs swings, their differences' MAD (~20 mrad)
+    # was taken for the noise, 5 sigma of it spans the whole swing: "no run moves more
+    # than its readings' flicker" (exit 2).
+    prep = prepare(log)
+    assert not np.any(prep.still)
+    sigma = prep.resolution / math.sqrt(12.0)
+    # the two-step recurrence of a damped sine is exact, so its residuals are the noise:
+    # the MAD of ~270 of them scatters by ~7 % (4 sd: 28 %); the weak cubic, the friction
+    # and the five-decimal printing only add (an upper bound): within 0.6-2x
+    assert 0.6 * SWING_NOISE < sigma < 2.0 * SWING_NOISE, sigma
+    # the start grid is centred on the log's frequency and spans 0.25-6.7x it
+    assert 0.5 < prep.frequency_hz / _fn(SWING) < 2.0, prep.frequency_hz
+
+
+#: a 38.6 Hz gear (12:1 of its stick band per swing) that stops within 15-30 ms of the
+#: release, before a full swing, then rests ~1 s; logged at 500 Hz with 1 % noise
+QUICK_STOP = dict(TRUTH_CSF8, k1=20.6, k2=1e3, tau_c=1.9e-3, tau_s=2.5e-3, v_s=1.0, c_v=0.0,
+                  inertia=3.9e-7, ratio=30.0)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_runs_that_stop_before_a_full_swing_after_a_late_start_are_at_rest(seed):
+    log = _late_log(QUICK_STOP, [-0.3, 0.35, -0.25, 0.3, -0.28], 500.0, 1.05, 9.6e-3, seed)
+    prep = prepare(log)
+    # Before: no run counted as a half period (a moving start's stop was not timed), the
+    # frequency fell back to the log's length (0.24 Hz, 0.006 f_n) and ~1 s of rest (500
+    # readings) read as a pause at a turn: "the log ends before the motion stops".
+    assert not np.any(prep.ends_moving), prep.ends_moving
+    # the stops, timed from the first reading and where the noise last left the rest
+    # reading, bound the half period; the start grid spans 0.25-6.7x the frequency
+    assert 0.5 < prep.frequency_hz / _fn(QUICK_STOP) < 2.0, prep.frequency_hz
