@@ -29,6 +29,7 @@ import numpy as np
 import pandas as pd
 
 from ._grid_outliers import coarser_grid
+from ._step_scan import Budget, offset_chance, steps_in
 
 
 # ------------------------------------------------------------------ print precision
@@ -128,6 +129,9 @@ MAX_SPARSE_DIVISOR = 4096
 SPARSE_LEVELS = 2000
 #: The log tells a grid when a wrong grid passes every level by chance less often than this.
 FALSE_GRID_CHANCE = 1e-6
+#: Tests (a level difference against a candidate interval of the step) the bisection
+#: (._step_scan) may spend on one log before it is said not to tell its grid: ~0.1 s.
+SCAN_BUDGET = 1e7
 #: Smallest encoder step, in print units, reported as found (see the module notes).
 MIN_STEP_PER_PRINT_UNIT = 4.0
 #: Readings closer than this fraction of the largest |reading| are one level (floating
@@ -225,7 +229,7 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
         return StepFinding(None, None, "too few readings to find a grid")
     merge = MERGE_REL * max(float(np.max(np.abs(x[ok]))), np.finfo(float).tiny)
     unit = float(np.max(p[ok])) if print_unit is not None else None
-    d_all, t_all, gaps, run_levels = [], [], [], []
+    d_all, t_all, gaps, run_levels, signed = [], [], [], [], []
     n_levels = 0
     for a, b in bounds:
         keep = ok[a:b]
@@ -242,6 +246,7 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
         others = np.arange(lv.size) != ref
         d_all.append(np.abs(lv[others] - lv[ref]))
         t_all.append(tl[others] + tl[ref])
+        signed.append((lv, tl, others, np.sign(lv[others] - lv[ref])))
     if not gaps or (n_levels <= 2 and ok.sum() < 3):
         return StepFinding(None, unit, "fewer than two reading levels: no grid to find")
     d, t = np.concatenate(d_all), np.concatenate(t_all)
@@ -249,7 +254,7 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
     gt = np.concatenate([tt for _, tt in gaps])
     i0 = int(np.argmin(g))
     g0, t0 = float(g[i0]), float(gt[i0])
-    coarse = False
+    coarse, untold, budget = False, None, Budget(SCAN_BUDGET)
     k_max = MAX_SPARSE_DIVISOR if d.size <= SPARSE_LEVELS else MAX_STEP_DIVISOR
     for k in range(1, k_max + 1):
         qlo, qhi = max((g0 - t0) / k, 0.0), (g0 + t0) / k
@@ -279,7 +284,16 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
         per = np.minimum(2.0 * t[used] / q, 1.0)
         log_chance = float(np.sum(np.log10(per))) if per.size else 0.0
         trials = max(k, MAX_STEP_DIVISOR) * max(float(m.max()), 1.0)
-        if log_chance + math.log10(trials) < math.log10(FALSE_GRID_CHANCE):
+        told = log_chance + math.log10(trials) < math.log10(FALSE_GRID_CHANCE)
+        if not told:
+            # every multiple resolved by bisection, one offset per run (._step_scan)
+            by_offsets = _by_offsets(signed, d, t, qlo, qhi, k, budget)
+            untold = untold or _untold(n_levels, q, unit, unit_name)
+            if by_offsets == "none":
+                continue  # no grid in this interval after all: try a finer one
+            if isinstance(by_offsets, float) and by_offsets >= MIN_STEP_PER_PRINT_UNIT * (unit or 0.0):
+                q, told = by_offsets, True
+        if told:
             # a few readings off a coarser grid that all others lie on (._grid_outliers)
             coarse_grid = coarser_grid(q, x, run_levels, merge, MAX_STEP_DIVISOR,
                                        FALSE_GRID_CHANCE)
@@ -289,12 +303,9 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
                                tuple(int(i) for i in coarse_grid.off),
                                tuple(float(v) for v in coarse_grid.off_by),
                                coarse_grid.log10_chance)
-        return StepFinding(
-            None, unit,
-            f"the readings' {n_levels} levels fit a grid of {q:.4g} {unit_name} but do not "
-            "tell it from chance" + (f" at a print unit of {unit:.3g} {unit_name}"
-                                     if unit else ""),
-        )
+        return untold or _untold(n_levels, q, unit, unit_name)
+    if untold is not None:  # the first interval that fit, though not every level
+        return untold
     if coarse and unit:
         return StepFinding(
             None, unit,
@@ -303,6 +314,60 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
             "no encoder grid can be told from the printing",
         )
     return StepFinding(None, unit, "the readings lie on no grid")
+
+
+def _untold(n_levels: int, q: float, unit, unit_name: str) -> StepFinding:
+    """No step: the levels fit a grid ``q`` but do not tell it from chance."""
+    return StepFinding(
+        None, unit,
+        f"the readings' {n_levels} levels fit a grid of {q:.4g} {unit_name} but do not "
+        "tell it from chance" + (f" at a print unit of {unit:.3g} {unit_name}" if unit else ""),
+    )
+
+
+def _by_offsets(signed, d: np.ndarray, t: np.ndarray, qlo: float, qhi: float, k: int,
+                budget: Budget):
+    """The step in ``[qlo, qhi]`` told with every level's multiple resolved
+    (:func:`._step_scan.steps_in`) and one offset per run (:func:`._step_scan.offset_chance`),
+    ``"none"`` where no grid in the interval fits every level, or ``None`` where one fits
+    but is not told from chance (or too many fit)."""
+    threshold = math.log10(FALSE_GRID_CHANCE)
+    # the best a grid here can do: every level placed at the coarsest step, the fewest trials
+    best = sum(math.log10(lv.size) + float(np.sum(np.log10(np.minimum(2.0 * tl / qhi, 1.0)))
+                                           - np.log10(np.minimum(2.0 * tl / qhi, 1.0)).max())
+               for lv, tl, _, _ in signed)
+    trials = max(k, MAX_STEP_DIVISOR) * max(float(d.max()) / qhi, 1.0)
+    if best + math.log10(trials) >= threshold:
+        return None
+    intervals = steps_in(d, t, qlo, qhi, budget)
+    if intervals is None:
+        return None
+    if not intervals:
+        return "none"
+    found = None
+    for a, b in intervals:
+        placed = _place(d, t, a, b)
+        if placed is None or np.any(placed[2] < 1):
+            continue
+        m, at = placed[2], 0
+        levels, tols, multiples = [], [], []
+        for lv, tl, others, sign in signed:
+            mult = np.zeros(lv.size)
+            mult[others] = sign * m[at:at + sign.size]
+            at += sign.size
+            levels.append(lv)
+            tols.append(tl)
+            multiples.append(mult)
+        fit = offset_chance(levels, tols, multiples, placed[0], placed[1])
+        if fit is None:
+            continue
+        q, log_chance = fit
+        log_chance += math.log10(max(k, MAX_STEP_DIVISOR) * float(m.max()))
+        if found is None or log_chance < found[1]:
+            found = (q, log_chance)
+    if found is None:
+        return "none"
+    return found[0] if found[1] < threshold else None
 
 
 def estimate_resolution(theta: np.ndarray, *, print_unit=None, starts=None) -> float | None:

@@ -229,16 +229,24 @@ def check_shared_zero(theta, rows, names, setups, fail: Fail) -> None:
     contradict that: from one held angle the spring (or gravity) pushes one way. That is
     the signature of a counter zeroed at each release (every run starts at 0); it is an
     error naming both runs, with the fix, rather than a fit of one spring to two zeros.
-    ``rows`` holds each run's row positions (read dropouts already left out)."""
+    ``rows`` holds each run's row positions (read dropouts already left out).
+
+    A run's direction is the side its readings swing to: released from a held angle, a
+    damped swing never comes back beyond it (it has less energy at every later turn), so
+    readings on the far side are the sensor's noise alone. The first reading off the held
+    level is not the direction: 0.3 steps of noise ahead of an encoder's rounding flicker
+    the held level by one count either way before the release. A run whose far side
+    reaches more than half its swing (a run that never leaves its noise) tells no
+    direction."""
     first_move: dict[tuple[str, float], tuple[int, float]] = {}
     for k, run_rows in enumerate(rows):
         held = theta[run_rows]
         if held.size < 3 or held[1] != held[0]:
             continue  # a run already moving at its first reading says nothing here
-        moved = np.flatnonzero(held != held[0])
-        if moved.size == 0:
-            continue  # never moves: a rest point inside the stick band
-        direction = float(np.sign(held[moved[0]] - held[0]))
+        up, down = float(np.max(held - held[0])), float(np.max(held[0] - held))
+        if max(up, down) <= 0.0 or min(up, down) > 0.5 * max(up, down):
+            continue  # never moves (a rest point in the stick band), or moves within noise
+        direction = 1.0 if up > down else -1.0
         setup = "1" if setups is None else str(setups[run_rows[0]])
         key = (setup, float(held[0]))
         if key in first_move and first_move[key][1] != direction:
