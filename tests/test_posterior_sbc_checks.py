@@ -3,6 +3,7 @@ the readings the sampler's likelihood describes exactly (docs/decisions/sbc-tau-
 
 from __future__ import annotations
 
+import json
 import math
 import sys
 from pathlib import Path
@@ -31,3 +32,16 @@ def test_analog_logs_are_unrounded_with_the_rounding_variance_as_gaussian_noise(
     resid = held.theta - held.groupby("run").theta.transform("mean")
     sd = math.sqrt(float(np.sum(resid**2)) / (len(held) - held.run.nunique()))
     assert sd == pytest.approx(step / math.sqrt(12), rel=0.35)
+
+
+def test_shards_put_paper_logs_first_and_start_no_log_past_their_end(tmp_path, monkeypatch):
+    """The sharded calibration (devrun's 16-core plan): ``--paper-first`` orders every paper
+    log before any rich one, and ``--end-by`` starts no log expected to end past it (recorded
+    as skipped, none run): a shard cut by its hard timeout keeps whole logs only."""
+    monkeypatch.setattr(S._common, "RESULTS", tmp_path)
+    S.main(["--paper-logs", "2", "--rich-logs", "2", "--seed0", "100", "--paper-first", "--end-by", "1",
+            "--expect-s", "paper:5,rich:5", "--shard", "0/1", "--name", "t"])
+    res = json.loads((tmp_path / "t.json").read_text())
+    assert res["logs"] == []
+    assert [(s["design"], s["seed"]) for s in res["skipped"]] == [
+        ("paper", 100), ("paper", 101), ("rich", 1100), ("rich", 1101)]
