@@ -4,6 +4,15 @@ result (a ``cpu`` and a ``gpu`` run; the GPU run checked against the stored CPU 
     python benchmarks/gpu_path.py --tag cpu      # JAX_PLATFORMS=cpu forces the CPU
     python benchmarks/gpu_path.py --tag gpu      # on a machine with a GPU, after the CPU run
     python benchmarks/gpu_path.py --render       # gpu_path.md from gpu_path.json
+
+Section 5, ``fit_many`` with logs as lanes against one start a call (the crossover by batch
+size), one process per backend, the results merged into gpu_path.json:
+
+    python benchmarks/gpu_path.py --make-logs /tmp/logs.pkl --distinct 256
+    python benchmarks/gpu_path.py --crossover /tmp/logs.pkl --modes logs --out gpu.json
+    JAX_PLATFORMS=cpu python benchmarks/gpu_path.py --crossover /tmp/logs.pkl --modes one logs \\
+        --sizes 100 1000 --out cpu.json
+    python benchmarks/gpu_path.py --merge gpu.json cpu.json
 """
 
 import argparse
@@ -14,6 +23,8 @@ from pathlib import Path
 
 import _common
 from _common import RESULTS, Clock, parse_or_render, write_result
+
+import hdid
 
 LOG = _common.DATA / "csf8_paper.csv"
 WALKERS = (1, 18, 36, 144, 1024, 8192)
@@ -113,6 +124,101 @@ def measure(args, ref, save) -> dict:
     return res
 
 
+# ---------------------------------------------------------------- 5. logs as lanes: the crossover
+
+DESIGN = "paper"
+SAVED = ("k1", "tau_c", "tau_s", "c_v")
+
+
+def make_logs(path: str, n: int, procs: int) -> None:
+    """``n`` distinct paper-design logs (batch_speed's truths and seeds) as DataFrames,
+    pickled to ``path``; made with ``procs`` processes."""
+    import multiprocessing
+    import pickle
+
+    # spawn, not fork: this process has imported JAX (threads)
+    with multiprocessing.get_context("spawn").Pool(procs) as pool:
+        dfs = pool.map(_one_log, range(n))
+    Path(path).write_bytes(pickle.dumps(dfs))
+
+
+def _one_log(i):
+    import batch_speed
+    from hdid.reference import logs
+
+    amps, fs, duration = batch_speed.DESIGNS[DESIGN]
+    return logs.make_log(batch_speed.truth_of(i), amplitudes=amps, fs=fs, duration=duration, hold=0.04,
+                         offsets_by_setup={"A": 0.012, "B": -0.020}, seed=1000 + i)
+
+
+def crossover(args) -> dict:
+    """``fit_many`` over ``args.sizes`` logs (log i = distinct log i mod D) for each mode
+    (``logs``: logs as lanes, ``one``: one start a call, today's default on a CPU), within
+    ``args.budget_s``; the JSON rewritten to ``args.out`` after every row."""
+    import json
+    import pickle
+
+    import numpy as np
+
+    t_end = time.perf_counter() + args.budget_s
+    dfs = pickle.loads(Path(args.logs).read_bytes())
+    res = {"generated": time.strftime("%Y-%m-%dT%H:%M:%S"), "machine": _common.machine(),
+           "distinct_logs": len(dfs), "budget_s": args.budget_s, "width": args.width, "modes": {}}
+
+    def save():
+        tmp = Path(args.out).with_suffix(".tmp")
+        tmp.write_text(json.dumps(res, indent=1))
+        tmp.replace(args.out)
+
+    save()
+    kw = {"logs": {"lanes": "logs", **({"lane_width": args.width} if args.width else {})}, "one": {"lanes": 1}}
+    for size in args.sizes:
+        for mode in args.modes:
+            n = size
+            rec = res["modes"].setdefault(mode, {"runs": []})
+            left = t_end - time.perf_counter()
+            if "first_call_s" not in rec:
+                if left < 30:
+                    continue
+                with Clock() as c:
+                    hdid.fit_many(dfs[:2], **kw[mode])
+                rec["first_call_s"] = c.wall
+                print(mode, "first call", round(c.wall, 1), flush=True)
+                save()
+                left = t_end - time.perf_counter()
+            if rec["runs"]:  # the last run's time per log, scaled: skip what cannot finish
+                last = rec["runs"][-1]
+                rate = last["wall_s"] / last["n_logs"]
+                if rate * n > 0.85 * left:
+                    m = int(0.85 * left / rate) // 100 * 100
+                    if m <= last["n_logs"]:
+                        rec.setdefault("skipped", []).append({"n_logs": n, "estimate_s": rate * n, "left_s": left})
+                        print(mode, n, "skipped", rate * n, left, flush=True)
+                        save()
+                        continue
+                    rec.setdefault("reduced", []).append({"n_logs": n, "to": m})
+                    n = m
+            items = [dfs[i % len(dfs)] for i in range(n)]
+            load0 = os.getloadavg()[0]
+            with Clock() as c:
+                table = hdid.fit_many(items, **kw[mode])
+            tm = table.attrs["timing"]
+            run = {"n_logs": n, "wall_s": c.wall, "cpu_s": c.cpu, "logs_per_s": n / c.wall,
+                   "errors": int(table["error"].notna().sum()), "k1_median": float(np.nanmedian(table["k1"])),
+                   "load_before": load0, "load_after": os.getloadavg()[0],
+                   "timing": {k: v for k, v in tm.items() if isinstance(v, (int, float, str))}}
+            if n <= len(dfs):  # each log's fit, for the comparison across modes and machines
+                best = [r.starts.costs[r.starts.best] if r is not None else None for r in table["result"]]
+                run["per_log"] = {"cost": [None if b is None else float(b) for b in best],
+                                  **{k: [None if v != v else float(v) for v in table[k]] for k in SAVED}}
+            rec["runs"].append(run)
+            print(mode, {k: v for k, v in run.items() if k != "per_log"}, flush=True)
+            save()
+    res["load_end"] = os.getloadavg()[0]
+    save()
+    return res
+
+
 def render(results: dict) -> str:
     cpu, gpu = results.get("cpu"), results.get("gpu")
     cols = [(t, r) for t, r in (("CPU", cpu), ("GPU", gpu)) if r]
@@ -156,7 +262,69 @@ def render(results: dict) -> str:
         for q in r["fit_many"]["runs"]:
             L.append(f"| {t} | {q['n_logs']} | {q['wall_s']:.1f} s | {q['logs_per_s']:.1f} | "
                      f"{q['errors']} | {q['k1_median']:.1f} |")
+    if results.get("crossover"):
+        L += render_crossover(results["crossover"])
     return "\n".join([*L, "", *_common.interpretation_section(results)])
+
+
+MODE_NAMES = {"logs": "logs as lanes", "one": "one start a call"}
+
+
+def render_crossover(cross: dict) -> list[str]:
+    """Section 5 from the ``--crossover`` runs (keyed by backend)."""
+    L = ["", "## 5. `fit_many` with logs as lanes (`lanes=\"logs\"`) vs one start a call: the crossover", ""]
+    for b, r in cross.items():
+        m = r["machine"]
+        L.append(f"- **{b.upper()}** run: generated {r['generated']}; device {m['device_kind']}, {m['nproc']} CPU cores "
+                 f"({m['cpu']}), python {m['python']}, jax {m['jax']}, src {m['src_fingerprint']}; "
+                 f"{r['distinct_logs']} distinct paper logs (log i of a batch is distinct log i mod "
+                 f"{r['distinct_logs']}), lanes per call {r['width'] or 'by backend'}, budget {r['budget_s']:.0f} s.")
+    L += ["", "| backend | mode | logs | wall | logs/s | setup | grid | LM | analysis | compile in run | LM iterations "
+          "| errors | median k1 | load |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for b, r in cross.items():
+        for mode, rec in r["modes"].items():
+            if "first_call_s" in rec:
+                L.append(f"| {b.upper()} | {MODE_NAMES[mode]} | first call, 2 logs | {rec['first_call_s']:.1f} s "
+                         "| | | | | | | | | | |")
+            for q in rec["runs"]:
+                t = q["timing"]
+                L.append(f"| {b.upper()} | {MODE_NAMES[mode]} | {q['n_logs']} | {q['wall_s']:.1f} s | "
+                         f"{q['logs_per_s']:.1f} | {t['setup_s']:.1f} s | {t['grid_s']:.1f} s | {t['solve_s']:.1f} s | "
+                         f"{t['analyse_s']:.1f} s | {t['compile_s']:.1f} s | {t['lane_steps']} | {q['errors']} | "
+                         f"{q['k1_median']:.1f} | {q['load_before']:.1f}→{q['load_after']:.1f} |")
+            for sk in rec.get("skipped", []):
+                L.append(f"\n{b.upper()} {MODE_NAMES[mode]}, {sk['n_logs']} logs: not run (estimated "
+                         f"{sk['estimate_s']:.0f} s, {sk['left_s']:.0f} s of the budget left).")
+            for rd in rec.get("reduced", []):
+                L.append(f"\n{b.upper()} {MODE_NAMES[mode]}: {rd['n_logs']} logs cut to {rd['to']} to fit the budget.")
+    sizes = sorted({q["n_logs"] for r in cross.values() for rec in r["modes"].values() for q in rec["runs"]})
+    rate = {(b, mode, q["n_logs"]): q["logs_per_s"] for b, r in cross.items() for mode, rec in r["modes"].items()
+            for q in rec["runs"]}
+    cols = [(b, mode) for b, r in cross.items() for mode in r["modes"]]
+    L += ["", "logs/s by batch size (the crossover):", "",
+          "| logs | " + " | ".join(f"{b.upper()} {MODE_NAMES[mo]}" for b, mo in cols) + " |",
+          "|---|" + "---|" * len(cols)]
+    for n in sizes:
+        L.append(f"| {n} | " + " | ".join(f"{rate[(b, mo, n)]:.1f}" if (b, mo, n) in rate else "–"
+                                         for b, mo in cols) + " |")
+    per = [(f"{b.upper()} {MODE_NAMES[mode]}", q["per_log"]) for b, r in cross.items()
+           for mode, rec in r["modes"].items() for q in rec["runs"] if "per_log" in q]
+    if len(per) > 1:
+        L += ["", "Same fits: each run's per-log results against the first's (the logs both fitted):", "",
+              "| run | vs | logs | max rel. diff of χ² | max rel. diff of k1, tau_c, tau_s, c_v | logs > 1e-6 |",
+              "|---|---|---|---|---|---|"]
+        (n0, p0) = per[0]
+        for name, p in per[1:]:
+            k = min(len(p0["cost"]), len(p["cost"]))
+            dc, dp, bad = 0.0, 0.0, 0
+            for i in range(k):
+                if p0["cost"][i] is None or p["cost"][i] is None:
+                    continue
+                c = abs(p["cost"][i] - p0["cost"][i]) / abs(p0["cost"][i])
+                d = max(abs(p[x][i] - p0[x][i]) / abs(p0[x][i]) for x in SAVED)
+                dc, dp, bad = max(dc, c), max(dp, d), bad + (max(c, d) > 1e-6)
+            L.append(f"| {name} | {n0} | {k} | {dc:.1e} | {dp:.1e} | {bad} |")
+    return L
 
 
 def main(argv=None):
@@ -165,7 +333,33 @@ def main(argv=None):
                     help="the run it replaces in gpu_path.json (gpu: checked against the cpu run)")
     ap.add_argument("--log-dir", default=str(_common.ROOT / "benchmarks" / "_cache" / "batch_logs"))
     ap.add_argument("--n-logs", type=int, nargs="+", default=[100, 1000])
+    ap.add_argument("--make-logs", metavar="FILE", help="only make --distinct paper logs, pickled to FILE")
+    ap.add_argument("--procs", type=int, default=2, help="with --make-logs: processes")
+    ap.add_argument("--distinct", type=int, default=256, help="with --make-logs: distinct logs")
+    ap.add_argument("--crossover", metavar="FILE", dest="logs",
+                    help="only the batch crossover (section 5) on the pickled logs FILE; results to --out")
+    ap.add_argument("--out", default="crossover.json", help="with --crossover: the JSON written")
+    ap.add_argument("--modes", nargs="+", default=["logs"], choices=("logs", "one"))
+    ap.add_argument("--sizes", type=int, nargs="+", default=[100, 1000, 10000])
+    ap.add_argument("--budget-s", type=float, default=300.0, help="with --crossover: wall budget")
+    ap.add_argument("--width", type=int, default=None, help="with --crossover: lanes per call (default: by backend)")
+    ap.add_argument("--merge", nargs="+", metavar="FILE",
+                    help="store --crossover results (JSON files) in gpu_path.json under 'crossover' and render")
     if (args := parse_or_render(ap, argv, "gpu_path", render, indent=1)) is None:
+        return 0
+    if args.make_logs:
+        make_logs(args.make_logs, args.distinct, args.procs)
+        return 0
+    if args.logs:
+        crossover(args)
+        return 0
+    if args.merge:
+        import json
+
+        results = _common.stored("gpu_path")
+        runs = [json.loads(Path(f).read_text()) for f in args.merge]
+        results["crossover"] = {r["machine"]["backend"]: r for r in runs}
+        write_result("gpu_path", results, render, indent=1)
         return 0
     results = _common.stored("gpu_path")
     measure(args, results.get("cpu") if args.tag == "gpu" else None,

@@ -10,7 +10,7 @@ from typing import Any
 
 from .._config import float64
 from ._fit import fit
-from ._vfit import DEFAULT_LANES, LOG_ERRORS, error_text, fit_batch
+from ._vfit import LOG_ERRORS, error_text, fit_batch
 
 #: Logs per dask task (each worker runs the batch fit on its chunk).
 DASK_CHUNK = 64
@@ -58,7 +58,10 @@ def fit_many(
         :func:`hdid.fit`: wider calls are vmapped, and a vmapped simulator runs its
         event branch as a select) and threads fitting logs (default 1: JAX runs one CPU
         program at a time per process, so more threads do not add cores; use ``workers``
-        for that).
+        for that). ``lanes="logs"``: the logs of a length bucket fitted together, every
+        call ``lane_width`` (log, start) lanes (:mod:`hdid._fitting._log_lanes`; the same
+        fits up to rounding) — the default where JAX's backend is a GPU, where a call
+        costs about the same for one lane as for thousands.
     workers:
         Local worker processes, one thread each (a ``dask.distributed.LocalCluster``
         started and closed by this call; needs ``pip install "hdid[dask]"``): the way to
@@ -173,7 +176,7 @@ def _fit_vectorized(items, names, bar, band_bracket, lanes, threads, options):
             bar.update(1)
 
     outcomes, timing = fit_batch(
-        items, lanes=lanes or DEFAULT_LANES, threads=threads, bracket=band_bracket,
+        items, lanes=lanes, threads=threads, bracket=band_bracket,
         on_done=done, **options,
     )
     rows = [_row(name, res, band_bracket) for name, res in zip(names, outcomes)]
