@@ -119,6 +119,8 @@ class _Lanes:
         self.stacked = [jnp.asarray(np.stack([np.asarray(x[i]) for x in leaves]))
                         for i in range(len(leaves[0]))]
         self.width = int(width)
+        #: residual rows of a lane: the data, then one prior row per physical parameter
+        self.rows = int(math.prod(problems[0].times.shape)) + problems[0].n_physical
 
     def problems(self, logs):
         return jax.tree_util.tree_unflatten(self.treedef, _gather(self.stacked, jnp.asarray(logs)))
@@ -160,7 +162,7 @@ class _Lanes:
             groups.setdefault(int(g), []).append(i)
         groups = {g: np.asarray(r) for g, r in groups.items()}
         sched = {g: _Schedule(len(r), max_steps) for g, r in groups.items()}
-        m = None
+        m = self.rows  # (the state is empty: every call starts from its points)
         lane_steps = 0
         while True:
             tasks = {g: t for g, s in sched.items() if (t := s.next()) is not None}
@@ -173,9 +175,6 @@ class _Lanes:
             costs, done, steps = np.full(N, np.inf), np.zeros(N, bool), np.zeros(N, int)
             for take, h in self.chunks(rows):
                 probs = self.problems(log_of[take])
-                if m is None:
-                    m = jax.eval_shape(lambda p, u: _lane_map(lambda q, v: q.residuals(v))(p, u),
-                                       probs, jnp.asarray(U[take])).shape[1]
                 on = np.arange(self.width) < h
                 state = LMState(*(jnp.asarray(f) for f in LMState.empty(self.width, m, n)))
                 U2, c2, d2, s2, _ = _lane_solve(probs, jnp.asarray(U[take]), jnp.asarray(on),
