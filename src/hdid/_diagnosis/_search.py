@@ -83,10 +83,10 @@ def look_at(current) -> Residual:
 def hints_from(frame) -> dict[str, Any]:
     """What the residual tells the candidates' starts: the ripple orders the periodogram
     finds, and the swing of the wave-generator angle while moving [rad] (which orders
-    complete a period within it)."""
+    complete a period within it); and the frame itself (the reading-age scan reads it)."""
     moving = frame.loc[frame["phase"] == "moving", "theta_wg"]
     swing = float(np.ptp(moving)) if len(moving) else math.inf
-    return {"ripple_orders": _ripple_orders(frame), "swing_rad": swing}
+    return {"ripple_orders": _ripple_orders(frame), "swing_rad": swing, "frame": frame}
 
 
 def grid_points(s: Search, current, floor: float, n_starts: int) -> list:

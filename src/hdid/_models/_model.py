@@ -16,6 +16,7 @@ from ._parameter_set import AbstractParameterSet
 from ..effects import (
     AbstractEffect,
     AbstractFriction,
+    AbstractReading,
     AbstractSpring,
     CubicStiffness,
     Motion,
@@ -158,6 +159,13 @@ class Model(AbstractParameterSet):
         """The model's dry friction law (the effect that is an
         :class:`~hdid.AbstractFriction`: Stribeck, Coulomb, asymmetric), or ``None``."""
         return next((e for e in self.effects if isinstance(e, AbstractFriction)), None)
+
+    @property
+    def reading(self) -> AbstractReading | None:
+        """The model's measurement-side component (an :class:`~hdid.effects.AbstractReading`:
+        at which instant of the motion each reading was taken, e.g. a sample-and-hold
+        device's age), or ``None``: each reading is the state at its timestamp."""
+        return next((e for e in self.effects if isinstance(e, AbstractReading)), None)
 
     def effect(self, name: str) -> AbstractEffect:
         for e in self.effects:

@@ -177,10 +177,15 @@ class Problem(AbstractProblem):
 
     # -- forward model ----------------------------------------------------------------
     def simulate(self, u, times=None, full_output: bool = False):
-        """Simulated WG angle of every run ``(R, T)``, spring-zero frame (no offset)."""
+        """Simulated WG angle of every run ``(R, T)``, spring-zero frame (no offset); with a
+        reading component (:attr:`hdid.Model.reading`) the state at the instants the
+        readings show (e.g. a sample-and-hold device's last sample before each time)."""
         _, t_release, theta0_enc, offset = self.unpack(u)
+        model, times = self.model(u), self.times if times is None else times
+        if model.reading is not None:  # the instants the readings show (a device's samples)
+            times = model.reading.sample_times(times)
         return simulate_runs(
-            per_run(self.model(u), self.n_runs), self.times if times is None else times,
+            per_run(model, self.n_runs), times,
             theta0_enc - offset[self.setup_index], t_release,
             added_inertia=self.added_inertia, max_substep=self.max_substep,
             full_output=full_output, omega0=self.omega0(u) if self.n_moving else None,
@@ -256,8 +261,9 @@ class Problem(AbstractProblem):
             t_release = self.release_lo
         theta0_enc = self.hold + self.theta0_step * local[:, P + 1]
         off = self.offset0[self.setup_index] + self.offset_scale * local[:, P + 2]
+        times = self.times if models.reading is None else models.reading.sample_times(self.times)
         pred = simulate_runs(
-            models, self.times, theta0_enc - off, t_release,
+            models, times, theta0_enc - off, t_release,
             added_inertia=self.added_inertia, max_substep=self.max_substep,
             omega0=self.vel_scale * local[:, P + 3] if self.n_moving else None,
         )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 from pathlib import Path
 
@@ -157,7 +158,12 @@ def fit_cmd(logs, summary_out, json_out, plot_out, inertia, added_inertia, free_
             model = _with_start_values(model, guesses)
         phases.start(f"fitting {len(data.runs)} run(s), {data.n_samples} samples "
                      f"({starts or 6} starts; a fresh environment compiles first, ~20 s)")
-        result = _fit.fit(
+        fit_one = _fit.fit
+        if getattr(getattr(model, "reading", None), "phases", 0) is None:  # --add reading_age
+            from .._fitting._reading_age import fit_with_age
+
+            fit_one = functools.partial(fit_with_age, fit=_fit.fit)
+        result = fit_one(
             data,
             model,
             inertia=inertia,

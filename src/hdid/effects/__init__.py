@@ -15,6 +15,7 @@ from ._base import (
     same_parameter,
 )
 from ._candidate import Candidate
+from ._reading import AbstractReading
 from ._registry import keys, registry
 from .asymmetric_friction import AsymmetricStribeckFriction
 from .asymmetric_viscous import AsymmetricViscousFriction
@@ -27,6 +28,7 @@ from .hysteresis import DahlHysteresis
 from .kinematic_error import KinematicErrorStiffness
 from .linear_stiffness import LinearStiffness
 from .load_friction import LoadDependentFriction
+from .reading_age import ReadingAge
 from .ripple import PositionRipple
 from .soft_windup import ThreeSegmentStiffness
 from .stiffness import CubicStiffness
@@ -61,6 +63,7 @@ def library(values: dict[str, float]) -> dict[str, AbstractEffect]:
 __all__ = [
     "AbstractEffect",
     "AbstractFriction",
+    "AbstractReading",
     "AbstractSpring",
     "AsymmetricStribeckFriction",
     "AsymmetricViscousFriction",
@@ -81,6 +84,7 @@ __all__ = [
     "Motion",
     "Parameter",
     "PositionRipple",
+    "ReadingAge",
     "ScalePrior",
     "Scales",
     "StartValues",
