@@ -75,38 +75,48 @@ def sts_rows(add: tuple[str, ...]):
     I = the lab's armature + m·l²) plus the effects ``add``: RMS/floor, its sample-to-sample part (residual minus its
     5-sample running mean, scaled by √(5/4): what no smooth model can follow — the servo's readings are its own
     samples, taken up to one of its cycles before the host's timestamp) and the armature the fit implies,
-    ``m·g·l·I/mgl_fit − m·l²`` (one constant across set-ups if the model is right)."""
-    import numpy as np
-
+    ``m·g·l·I/mgl_fit − m·l²`` (one constant across set-ups if the model is right). With ``reading_age`` the
+    fit without it is a row too (the clock is scanned on its residuals)."""
     real = ROOT.parent / "shared" / "data" / "real" / "sts3215_drop"
     for k, v in json.loads((real / "reference.json").read_text())["setups"].items():
         model = (hdid.Model.default(inertia=v["bam_m6_total_inertia_kgm2"], ratio=1.0).without("stiffness")
                  .with_effect(library({})["gravity"]))
         for key in (a for a in add if a != "reading_age"):
             model = model.with_effect(library({"mgl": v["mgl_point_mass_Nm"]})[key])
+        fits = []
         load, t0 = os.getloadavg()[0], time.perf_counter()
-        if "reading_age" in add:  # the clock is scanned on a fit without it, then held
-            res = fit_with_age(real / v["csv"], model, rounds=1)
+        res, age = hdid.fit(real / v["csv"], model), {}
+        if "reading_age" in add:  # the clock is scanned on the fit without it, then held
+            fits.append((tuple(a for a in add if a != "reading_age"), res, {},
+                         time.perf_counter() - t0, load))
+            load, t0 = os.getloadavg()[0], time.perf_counter()
+            res = fit_with_age(real / v["csv"], model, base=res)
             scan = res.reading_age_scans[-1]
             age = dict(sample_period=scan.period, run_periods=list(scan.run_periods),
                        scan_gain=1 - scan.sse / scan.sse_none)
-        else:
-            res, age = hdid.fit(real / v["csv"], model), {}
-        wall = time.perf_counter() - t0
-        fr, floor = res.residuals(), res.quantization_floor_rad
-        fast = np.concatenate([(r := d.residual_rad.to_numpy()) - np.convolve(r, np.ones(5) / 5, "same")
-                               for _, d in fr.groupby("run", sort=False)])
-        w = np.concatenate([d.weight.to_numpy() for _, d in fr.groupby("run", sort=False)])
-        mgl = res.parameters["mgl"].value
-        m_l2 = v["mass_kg"] * v["length_m"] ** 2
-        yield dict(setup=k, add=list(add), rms=res.rms_residual_rad / floor,
-                   fast=float(np.sqrt(1.25 * np.sum(w * fast**2) / np.sum(w)) / floor),
-                   mgl=mgl, mgl_point=v["mgl_point_mass_Nm"], m_l2=m_l2,
-                   armature=v["mgl_point_mass_Nm"] * v["bam_m6_total_inertia_kgm2"] / mgl - m_l2,
-                   parameters={n: e.value for n, e in res.parameters.items()}
-                   | ({"P_ms": 1e3 * age["sample_period"]} if age else {}),
-                   warnings=res.warnings, wall_s=wall, load=load, **age)
-        print(k, add, f"rms {res.rms_residual_rad / floor:.1f}x, mgl {mgl:.4g}, {wall:.0f} s", flush=True)
+        fits.append((add, res, age, time.perf_counter() - t0, load))
+        yield from (_sts_row(k, v, *f) for f in fits)
+
+
+def _sts_row(k, v, add, res, age, wall, load):
+    """One row of :func:`sts_rows` from a fit ``res`` of set-up ``k`` (``v``: its reference)."""
+    import numpy as np
+
+    fr, floor = res.residuals(), res.quantization_floor_rad
+    fast = np.concatenate([(r := d.residual_rad.to_numpy()) - np.convolve(r, np.ones(5) / 5, "same")
+                           for _, d in fr.groupby("run", sort=False)])
+    w = np.concatenate([d.weight.to_numpy() for _, d in fr.groupby("run", sort=False)])
+    mgl = res.parameters["mgl"].value
+    m_l2 = v["mass_kg"] * v["length_m"] ** 2
+    row = dict(setup=k, add=list(add), rms=res.rms_residual_rad / floor,
+               fast=float(np.sqrt(1.25 * np.sum(w * fast**2) / np.sum(w)) / floor),
+               mgl=mgl, mgl_point=v["mgl_point_mass_Nm"], m_l2=m_l2,
+               armature=v["mgl_point_mass_Nm"] * v["bam_m6_total_inertia_kgm2"] / mgl - m_l2,
+               parameters={n: e.value for n, e in res.parameters.items()}
+               | ({"P_ms": 1e3 * age["sample_period"]} if age else {}),
+               warnings=res.warnings, wall_s=wall, load=load, **age)
+    print(k, add, f"rms {res.rms_residual_rad / floor:.1f}x, mgl {mgl:.4g}, {wall:.0f} s", flush=True)
+    return row
 
 
 def main(argv=None):
@@ -118,8 +128,10 @@ def main(argv=None):
         return
     if args.sts is not None:  # one variant's rows replace that variant's in the stored result
         res, add = stored("real_logs"), tuple(args.sts)
-        rows = [r for r in res.get("sts", []) if tuple(r["add"]) != add]
-        for row in sts_rows(add):
+        rows, replaced = list(res.get("sts", [])), set()
+        for row in sts_rows(add):  # (with reading_age: the fit without it too)
+            if (key := tuple(row["add"])) not in replaced:
+                rows, _ = [r for r in rows if tuple(r["add"]) != key], replaced.add(key)
             rows.append({**row, "meta": run_meta()})
             write_result("real_logs", {**res, "sts": rows}, render, indent=1)
         return
@@ -200,7 +212,7 @@ def sts_section(rows: list[dict]) -> list[str]:
     for r in rows:
         name = "base" + "".join(f" + {a}" for a in r["add"])
         variants += [name] * (name not in variants)
-        added = ", ".join(f"{k} {r['parameters'][k]:.4g}" for k in r["parameters"]
+        added = ", ".join(f"{k} {r['parameters'][k]:.{4 if k == 'P_ms' else 3}g}" for k in r["parameters"]
                           if k not in ("tau_c", "tau_s", "v_s", "delta", "c_v", "mgl", "inertia"))
         if r.get("run_periods"):  # each run's own best period: one clock if the story holds
             rp = sorted(1e3 * p for p in r["run_periods"])
