@@ -108,6 +108,13 @@ def _find_columns(
                 column=table.names[index[_COUNTS]],
             )
         index[_THETA] = index[_COUNTS]
+    if (_THETA_OUT in index and by_alias(table.names[index[_THETA_OUT]])
+            and _MOTOR_TORQUE not in index and _MOTOR_CURRENT not in index):
+        # a motor-and-output set-up's second encoder (``load_pos``) in a free-motion log:
+        # the fit reads the motor's angle; the output's is not used
+        table.notes = list(table.notes) + [
+            f"column {_show(table.names[index.pop(_THETA_OUT)], 30)} (the output's angle) is "
+            "not used in a free-motion log: the fit reads the motor's angle"]
     _find_driven_columns(table, index, output_counts_per_rev, torque_constant)
     missing = [name for name in (_TIME, _THETA) if name not in index]
     if missing:

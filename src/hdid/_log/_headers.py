@@ -19,9 +19,20 @@ from ._names import _KNOWN_COLUMNS, _THETA, _THETA_OUT, _TIME
 #: Angle columns, which may be given in encoder counts (``theta_cts``).
 _ANGLES = (_THETA, _THETA_OUT)
 #: Other names loggers give a known column: a bare ``t``, LabVIEW's ``X_Value`` (the
-#: time of an ``.lvm`` file), a drive's ``Position`` or ``pos``. A column named by its
-#: canonical name wins over one named by an alias.
-_ALIASES = {"t": _TIME, "x_value": _TIME, "pos": _THETA, "position": _THETA}
+#: time of an ``.lvm`` file), a drive's ``Position`` or ``pos``, the two encoders of a
+#: motor-and-output set-up (``motor_pos``, ``load_pos``). A column named by its canonical
+#: name wins over one named by an alias.
+_ALIASES = {"t": _TIME, "x_value": _TIME, "pos": _THETA, "position": _THETA,
+            # a motor-and-output layout's two encoders
+            **dict.fromkeys(("motor_pos", "motor_position", "motor_angle", "theta_motor"),
+                            _THETA),
+            **dict.fromkeys(("load_pos", "load_position", "load_angle", "theta_load",
+                             "output_pos", "output_position", "output_angle", "out_pos"),
+                            _THETA_OUT)}
+
+
+#: Names that carry their unit: an Arduino sketch's ``millis()`` and ``micros()``.
+_WITH_UNIT = {"millis": (_TIME, "ms"), "micros": (_TIME, "us")}
 
 
 def _canonical(base: str) -> str:
@@ -40,6 +51,8 @@ def header_key(name: str) -> tuple[str, str | None]:
         if _canonical(head) in _KNOWN_COLUMNS or _canonical(head) in _ALIASES:
             base, unit = head, tail.strip()
     key = _canonical(base)
+    if unit is None and key in _WITH_UNIT:
+        return _WITH_UNIT[key]
     if key in _KNOWN_COLUMNS or unit is not None:
         return key, unit
     head, sep, tail = key.rpartition("_")

@@ -81,6 +81,11 @@ def _names_time_and_angle(line: str) -> bool:
     return _TIME in keys and (_THETA in keys or _COUNTS in keys or wide)
 
 
+def _is_ros_header(line: str) -> bool:
+    """``%time,field.header.seq,…``: the header ``rostopic echo -p`` writes, no comment."""
+    return line.startswith("%time") and "field." in line
+
+
 def find_header(lines: list[str]) -> tuple[int, str]:
     """Index of the header line and the delimiter.
 
@@ -93,6 +98,8 @@ def find_header(lines: list[str]) -> tuple[int, str]:
     """
     first = None
     for i, line in enumerate(lines[:_HEADER_SEARCH_LINES]):
+        if _is_ros_header(line):  # ``rostopic echo -p``: '%time' is a column (._tools)
+            return i, _line_sep(line)
         if not line.strip() or _is_comment(line):
             continue
         if first is None:

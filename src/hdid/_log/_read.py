@@ -25,6 +25,7 @@ from ._time_order import (
 )
 from ._timer import time_print_unit, unwrap_timer, uniform_stamps
 from ._timestamps import timestamp_seconds
+from ._tools import tool_columns
 from ._types import Log, Run
 from ._resolution import column_print_units, find_step
 from ._table import _Cells, _Table, _load_csv, _load_frame, _show
@@ -159,6 +160,8 @@ def read_log(
         path, torque_constant, "torque constant", "pass the motor's torque constant in N m/A"
     )
     table = _load_frame(source) if path is None else _load_csv(path)
+    # a ROS topic dump or a PX4 flight-log export: the tool's names and units (._tools)
+    table.notes = list(table.notes) + tool_columns(table)
     # one angle column per run, a reading the logger missed (hdid._log._gaps)
     table, gap_notes = wide_to_long(table, _missing_cells)
     cols = _find_columns(table, cpr, out_cpr, kt)

@@ -16,6 +16,8 @@ from .._errors import LogError
 from . import _layout
 from ._lvm import fill_lvm_time
 from ._mat import load_mat_frame
+from ._scope import scope_header
+from ._serial import from_serial
 from ._names import _NA_TOKENS
 
 
@@ -95,9 +97,10 @@ def _sniff(head: bytes, err) -> None:
         raise err("this is a binary file, not a CSV text file — give the exported CSV log")
 
 
-def _read_text(path, err) -> str:
+def _read_text(path, err, serial: list | None = None) -> str:
     """The file's text (UTF-8, a byte-order mark dropped; a gzip-compressed file
-    uncompressed), or a LogError naming why not."""
+    uncompressed; a serial capture of ``key=value`` records as CSV, its notes and line
+    shift appended to ``serial``: :mod:`._serial`), or a LogError naming why not."""
     try:
         with open(path, "rb") as fh:
             data = fh.read()
@@ -115,6 +118,11 @@ def _read_text(path, err) -> str:
         except (OSError, EOFError, ValueError):
             raise err("this gzip file is damaged or cut short — compress the log again, or "
                       "give the uncompressed CSV file") from None
+    captured = from_serial(data, path)
+    if captured is not None:
+        data = captured[0]
+        if serial is not None:
+            serial.extend(captured[1:])
     _sniff(data[:_SNIFF_BYTES], err)
     try:
         return data.decode("utf-8-sig")
@@ -230,7 +238,10 @@ def _load_csv(path: str | os.PathLike[str]) -> _Table:
         return _load_frame(load_mat_frame(path), source=source, path=path)
     if suffix in {".xls", ".ods"}:
         raise err("this is a spreadsheet, not a CSV file — export it as CSV (comma-separated)")
-    text = _workbook_text(source, err) if suffix in {".xlsx", ".xlsm"} else _read_text(source, err)
+    serial: list = []
+    text = (_workbook_text(source, err) if suffix in {".xlsx", ".xlsm"}
+            else _read_text(source, err, serial))
+    notes, shift = (serial[0], serial[1]) if serial else ([], 0)
     text = fill_lvm_time(text)  # a LabVIEW file whose rows lack their times (hdid._log._lvm)
     if not text:
         raise err("file is empty — expected a CSV file with a header line such as 'time,theta'")
@@ -239,8 +250,8 @@ def _load_csv(path: str | os.PathLike[str]) -> _Table:
     # the header below any preamble; comment, preamble and whitespace-only lines emptied,
     # a cut last line dropped (hdid._log._layout); every row keeps its file line number
     lines = text.split("\n")
+    notes = notes + scope_header(lines)  # a TwinCAT Scope export's header (._scope)
     header_at, sep = _layout.find_header(lines)
-    notes = []
     cut = _layout.cut_last_line(text, lines, header_at, sep)
     if cut is not None:
         notes.append(cut)
@@ -286,7 +297,7 @@ def _load_csv(path: str | os.PathLike[str]) -> _Table:
     names, keep = _layout.units_row(names, raw, nonblank[1:])
     keep, footer = _layout.text_footer(names, raw, keep, header_at)
     notes += [footer] if footer else []
-    rows = keep.astype(np.int64) + 1 + header_at
+    rows = keep.astype(np.int64) + 1 + header_at - shift
     return _Table(source, path, names, [values[keep] for values in raw], rows, notes,
                   repeats + 1, np.searchsorted(repeats + 1, rows))
 
