@@ -506,3 +506,41 @@ def test_a_fine_encoders_sparse_levels_are_not_taken_for_its_step(monkeypatch):
     _, _, fit, warning = guard([0, 8, 24, 48, 80])
     assert warning is not None and fit == "refit"
     assert calls == [pytest.approx(8 * step)]
+
+
+def test_ambiguous_names_the_experiment_that_separates_the_best_from_every_rival(monkeypatch):
+    """With several rivals the experiment named first is the maximin over them (the largest
+    smallest separation), not one pair's best: on paper log 9902 the experiment that
+    separated backlash from hysteresis by 609 left soft wind-up inside the noise on every
+    simulated backlash log. Constructed separations (no fit): experiment X separates the
+    best from rival B by 600 but from C by 3, Y by 40 and 25: Y must be named, its smallest
+    value 25 against C, each rival's value and kind listed; the pairs' own records stay.
+    Fails where each pair's best is named alone (X for B)."""
+    from hdid._diagnosis import _separating as S
+
+    best = SimpleNamespace(key="backlash")
+    rivals = [SimpleNamespace(key="hysteresis"), SimpleNamespace(key="soft_windup")]
+    table = {"hysteresis": {"X": (600.0, True, "x"), "Y": (40.0, True, "y"), "Z": (5.0, False, "z")},
+             "soft_windup": {"X": (3.0, False, "x"), "Y": (25.0, False, "y")}}
+
+    def fake(a, b, **kw):
+        v = table[b.key]
+        top = max(v, key=lambda n: v[n][0])
+        return {"forms": [a.key, b.key], "experiment": top, "expected_2lnlr": v[top][0],
+                "text": f"{a.key} vs {b.key}: {top}", "_values": dict(v)}
+
+    monkeypatch.setattr("hdid._diagnosis._verdict.pairs_to_separate", lambda *a: [(best, r) for r in rivals])
+    monkeypatch.setattr(S, "separating", fake)
+    out = S.for_verdict("ambiguous", [], {}, lambda *a: None)
+    assert [x["experiment"] for x in out] == ["Y", "X", "Y"], out
+    every = out[0]
+    assert every["forms"] == ["backlash", "hysteresis", "soft_windup"] and every["against"] == "every rival"
+    assert every["expected_2lnlr"] == 25.0 and every["reaches_min_separation"]
+    assert every["per_rival"]["hysteresis"] == {"expected_2lnlr": 40.0, "value_kind": "rival fitted globally"}
+    assert every["per_rival"]["soft_windup"]["value_kind"] == "upper bound"
+    assert "against soft_windup" in every["text"] and all("_values" not in x for x in out)
+    # one rival: no combined record (the pair's own is the answer)
+    monkeypatch.setattr("hdid._diagnosis._verdict.pairs_to_separate", lambda *a: [(best, rivals[0])])
+    assert [x["experiment"] for x in S.for_verdict("ambiguous", [], {}, lambda *a: None)] == ["X"]
+    summary = D._separating_summary("ambiguous", out)
+    assert "backlash vs hysteresis and soft_windup: Y, expected 2·ln LR 25 (the smallest over the rivals)" in summary

@@ -360,8 +360,9 @@ def _separating_summary(verdict, separating) -> str:
     if not (separating and verdict == "ambiguous"):
         return ""
     return ". Separating experiment (computed): " + "; ".join(
-        f"{x['forms'][0]} vs {x['forms'][1]}: {x['experiment']}, expected 2·ln LR "
-        f"{x['expected_2lnlr']:.3g}" if "experiment" in x else x["text"]
+        f"{x['forms'][0]} vs {' and '.join(x['forms'][1:])}: {x['experiment']}, expected 2·ln LR "
+        f"{x['expected_2lnlr']:.3g}" + (" (the smallest over the rivals)" if x.get("against") else "")
+        if "experiment" in x else x["text"]
         for x in separating)
 
 

@@ -75,6 +75,9 @@ def separating(a, b, best_of: int = BEST_OF, include: tuple[int, ...] = (0,),
     ranked = sorted(others, key=lambda s: (not s.fitted, not (s.credible and all(s.converged)),
                                            not s.credible, -s.value))
     rec["this_log_2lnlr"] = this.value
+    # every experiment's value, for the one that separates the best from every rival
+    # (:func:`every_rival`; taken out of the record by :func:`for_verdict`)
+    rec["_values"] = {s.experiment.name: (s.value, s.fitted, s.experiment.describe()) for s in others}
     tl = this.to_dict()
     rec["this_log"] = {"lambda": {"a_true": tl["a_true"], "b_true": tl["b_true"]},
                        "value_kind": tl["value_kind"], **tl["noisy_log"]}
@@ -122,6 +125,11 @@ def _text(a, b, s, this) -> str:
         head += (" (the rival refitted locally only: an upper bound"
                  + ("" if s.credible else "; the linearisation is not credible here")
                  + ", confirm by simulation)")
+    if s.fitted and max(len(d) for d in s.draws) > 2:  # the release phase mattered (_separate)
+        parts = [f"{min(v):.3g}–{max(v):.3g} if {k} is true" for k, d in ((a.key, s.draws[0]), (b.key, s.draws[1]))
+                 if (v := [x for x in d if math.isfinite(x)])]
+        head += (f"; it depends on each run's release instant within a sample (λ {', '.join(parts)}, over "
+                 f"{len(s.draws[0])} sets of instants: their mean is given)")
     if s.value < MIN_SEPARATION:
         head += (f"; no default candidate reaches 2·ln LR {MIN_SEPARATION:g}: a longer "
                  "campaign (several of them together) is needed")
@@ -142,4 +150,39 @@ def for_verdict(verdict, rounds, all_cands, say) -> list[dict]:
     for k, (a, b) in enumerate(pairs):
         say(f"  separating experiment for {a.key} vs {b.key} (hdid.design)")
         out.append(separating(a, b) if k == 0 else separating(a, b, best_of=0, include=()))
+    values = [r.pop("_values", None) for r in out]
+    if len(out) > 1 and all(values):
+        every = every_rival(pairs[0][0].key, [b.key for _, b in pairs], values)
+        if every is not None:
+            out.insert(0, every)
     return out
+
+
+def every_rival(best: str, rivals: list[str], values: list[dict]) -> dict | None:
+    """The experiment that separates ``best`` from *every* rival: the largest smallest
+    separation over the rivals (a maximin; ``values`` per rival ``{experiment: (λ, fitted,
+    description)}``, as :func:`separating` computes them), the experiments all pairs
+    computed. One pair's own best may leave another rival inside the noise (backlash vs
+    hysteresis and vs soft wind-up on paper log 9902: the experiment that separates the
+    first pair by 609 left soft wind-up ambiguous on every simulated backlash log).
+    ``None`` where the pairs share no experiment."""
+    names = [n for n in values[0] if all(n in v for v in values[1:])]
+    if not names:
+        return None
+    top = max(names, key=lambda n: min(v[n][0] for v in values))
+    per = {r: {"expected_2lnlr": v[top][0], "value_kind": "rival fitted globally" if v[top][1] else "upper bound"}
+           for r, v in zip(rivals, values)}
+    weakest = min(per, key=lambda r: per[r]["expected_2lnlr"])
+    lam = per[weakest]["expected_2lnlr"]
+    text = (f"to separate {best} from every rival ({', '.join(rivals)}): {top} ({values[0][top][2]}), smallest "
+            f"expected 2·ln LR {lam:.3g} (against {weakest}; "
+            + ", ".join(f"{r} {x['expected_2lnlr']:.3g}" + ("" if x["value_kind"] == "rival fitted globally"
+                                                            else " (upper bound)") for r, x in per.items())
+            + "), computed by hdid.design from the refits")
+    if lam < MIN_SEPARATION:
+        text += (f"; no default candidate separates it from every rival by 2·ln LR {MIN_SEPARATION:g}: "
+                 "several tests together are needed")
+    return {"forms": [best, *rivals], "computed_by": "hdid.design", "against": "every rival",
+            "experiment": top, "description": values[0][top][2], "expected_2lnlr": lam,
+            "value_kind": per[weakest]["value_kind"], "per_rival": per,
+            "reaches_min_separation": bool(lam >= MIN_SEPARATION), "text": text}
