@@ -206,32 +206,54 @@ def test_a_garbled_line_inside_a_capture_is_named(tmp_path, run):
 
 # ------------------------------------------------------------------ PLC scope, PX4
 
-def test_twincat_scope_export(tmp_path, run):
+#: A TwinCAT Scope export's record rows and two channel blocks side by side.
+SCOPE_BLOCK = (
+    "Name\tScope Project\nFile\tC:\\rig\\wg.tcscopex\n"
+    "StartRecord\t133457000000000000\tSaturday, 28. November 2026\t08:01:02\n"
+    "EndRecord\t133457000100000000\tSaturday, 28. November 2026\t08:01:12\n\n"
+    "Name\tActPos\tName\tI_act\nNetId\t5.1.2.3.1.1\tNetId\t5.1.2.3.1.1\n"
+    "Port\t851\tPort\t851\nSampleTime[ms]\t2\tSampleTime[ms]\t2\n"
+    "SymbolBased\tTRUE\tSymbolBased\tTRUE\n"
+    "SymbolName\tMAIN.Axis.Position\tSymbolName\tMAIN.Axis.fCurrent\n"
+    "SymbolComment\t\tSymbolComment\t\nUnit\tdeg\tUnit\tA\n"
+    "Data-Type\tREAL64\tData-Type\tREAL64\nVariableSize\t8\tVariableSize\t8\n")
+
+
+def _degrees(counts) -> list[str]:
+    return [repr(float(v)) for v in counts * 360.0 / CPR]
+
+
+@pytest.mark.parametrize("clock", ["ms", "file time"])
+def test_twincat_scope_export(tmp_path, run, clock):
     """A TwinCAT Scope View CSV export: the record's rows, one block of channel rows
-    (Name, SampleTime[ms], SymbolName, Unit, …) side by side, then per channel a time
-    [ms] and a value, tab-separated with decimal commas and no header line. It reads as
-    the same samples written with hdid's names."""
+    (Name, SampleTime[ms], SymbolName, Unit, …) side by side, then per channel a time and
+    a value, tab-separated with decimal commas and no header line. The time is ms since
+    the first sample or, with "Full Timestamp", a Windows file time (100 ns ticks since
+    1601: 1.3e17, beyond float64's integers). It reads as the same samples written with
+    hdid's names."""
     t, counts = run
-    deg = [repr(float(v)) for v in counts * 360.0 / CPR]
+    deg = _degrees(counts)
     ms = [f"{a * 1e3:.0f}" for a in t]
-    block = ("Name\tScope Project\nFile\tC:\\rig\\wg.tcscopex\n"
-             "StartRecord\t133457000000000000\tSaturday, 28. November 2026\t08:01:02\n"
-             "EndRecord\t133457000100000000\tSaturday, 28. November 2026\t08:01:12\n\n"
-             "Name\tActPos\tName\tI_act\nNetId\t5.1.2.3.1.1\tNetId\t5.1.2.3.1.1\n"
-             "Port\t851\tPort\t851\nSampleTime[ms]\t2\tSampleTime[ms]\t2\n"
-             "SymbolBased\tTRUE\tSymbolBased\tTRUE\n"
-             "SymbolName\tMAIN.Axis.Position\tSymbolName\tMAIN.Axis.fCurrent\n"
-             "SymbolComment\t\tSymbolComment\t\nUnit\tdeg\tUnit\tA\n"
-             "Data-Type\tREAL64\tData-Type\tREAL64\nVariableSize\t8\tVariableSize\t8\n")
+    stamps = ms if clock == "ms" else [str(133_457_000_000_000_123 + round(a * 1e7)) for a in t]
     scope = tmp_path / "scope.csv"
-    scope.write_text(block + "".join(f"{a}\t{v.replace('.', ',')}\t{a}\t0,25\n"
-                                     for a, v in zip(ms, deg)))
+    scope.write_text(SCOPE_BLOCK + "".join(f"{a}\t{v.replace('.', ',')}\t{a}\t0,25\n"
+                                           for a, v in zip(stamps, deg)))
     plain = tmp_path / "plain.csv"
     plain.write_text("time [ms],theta [deg]\n" + "".join(f"{a},{v}\n" for a, v in zip(ms, deg)))
     log = read_log(scope)
     assert_same_log(log, read_log(plain))
     assert log.resolution == pytest.approx(Q, rel=1e-9)
     _note(log, "TwinCAT Scope export")
+
+
+def test_a_twincat_export_without_a_time_per_channel_is_refused(tmp_path, run):
+    """'Timelines: None' writes the values only: one line naming the row and the fix."""
+    t, counts = run
+    scope = tmp_path / "no_time.csv"
+    scope.write_text(SCOPE_BLOCK + "".join(f"{v.replace('.', ',')}\t0,25\n"
+                                           for v in _degrees(counts)))
+    with pytest.raises(LogError, match=r"row 16: .*'Timelines: All'"):
+        read_log(scope)
 
 
 def test_px4_ulog_csv(tmp_path, run, ref):

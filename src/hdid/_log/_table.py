@@ -250,7 +250,7 @@ def _load_csv(path: str | os.PathLike[str]) -> _Table:
     # the header below any preamble; comment, preamble and whitespace-only lines emptied,
     # a cut last line dropped (hdid._log._layout); every row keeps its file line number
     lines = text.split("\n")
-    notes = notes + scope_header(lines)  # a TwinCAT Scope export's header (._scope)
+    notes = notes + scope_header(lines, path)  # a TwinCAT Scope export's header (._scope)
     header_at, sep = _layout.find_header(lines)
     cut = _layout.cut_last_line(text, lines, header_at, sep)
     if cut is not None:
