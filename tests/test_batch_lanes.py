@@ -48,11 +48,23 @@ def test_logs_as_lanes_give_each_log_its_own_fit(fits):
     assert np.all(np.diff(k1) > 0)  # the logs' own order (0.8x < 1x < 1.25x)
 
 
-def test_the_cpu_default_stays_one_start_a_call(fits):
+def test_the_default_stays_one_start_a_call(fits):
     one, _ = fits
-    if _log_lanes.default_lanes() == "logs":
-        pytest.skip("JAX's backend is a GPU: the default is logs as lanes")
     assert one.attrs["timing"]["lanes"] == 1
+
+
+def test_a_call_holds_at_most_a_gibibyte_of_jacobians(fits):
+    _, lanes = fits
+    p = lanes.result[0].problem  # a paper log: 4 runs of 125 samples
+    assert _log_lanes.default_width(p) == _log_lanes.CPU_WIDTH  # far below the bound
+    big = 8 * (p.times.size + p.n_physical) * p.n_unknowns
+    # a bound of 3.5 paper problems' Jacobians: 3 lanes, rounded down to a power of two
+    old = _log_lanes.LANE_JACOBIAN_BYTES
+    try:
+        _log_lanes.LANE_JACOBIAN_BYTES = int(3.5 * big)
+        assert _log_lanes.default_width(p) == 2
+    finally:
+        _log_lanes.LANE_JACOBIAN_BYTES = old
 
 
 def test_an_unknown_lanes_value_is_refused():

@@ -60,8 +60,8 @@ def fit_many(
         program at a time per process, so more threads do not add cores; use ``workers``
         for that). ``lanes="logs"``: the logs of a length bucket fitted together, every
         call ``lane_width`` (log, start) lanes (:mod:`hdid._fitting._log_lanes`; the same
-        fits up to rounding) — the default where JAX's backend is a GPU, where a call
-        costs about the same for one lane as for thousands.
+        fits up to rounding): for a GPU, where a call costs about the same for one lane
+        as for thousands; not the default anywhere until measured on one.
     workers:
         Local worker processes, one thread each (a ``dask.distributed.LocalCluster``
         started and closed by this call; needs ``pip install "hdid[dask]"``): the way to

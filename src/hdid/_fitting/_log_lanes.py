@@ -27,8 +27,8 @@ a Jacobian is computed in an iteration, never in the values, so a log's iterates
 one-lane batch's up to rounding (a vmapped simulator selects where a one-lane one
 branches). Each call starts its lanes from their points (no carried Levenberg–Marquardt
 state: the residuals and Jacobian at a start are recomputed by the same program, the same
-numbers), at one extra Jacobian per lane and call. Selected by ``fit_many(lanes="logs")``;
-the default where JAX's backend is a GPU (:func:`default_lanes`).
+numbers), at one extra Jacobian per lane and call. Selected by ``fit_many(lanes="logs")``
+(not the default: :func:`default_lanes`).
 """
 
 from __future__ import annotations
@@ -47,22 +47,35 @@ from ._starts import _costs, _grid_candidates, with_drop_starts
 
 #: Lanes per call on a GPU (a call costs about the same from 1 to thousands of lanes) and
 #: on a CPU (every lane costs its own arithmetic, and a vmapped simulator pays for the
-#: branches it does not take: keep calls narrow).
+#: branches it does not take: keep calls narrow) — at most; fewer where a call's
+#: Jacobians would pass ``LANE_JACOBIAN_BYTES``.
 GPU_WIDTH = 8192
 CPU_WIDTH = 32
+#: Bytes of one call's Jacobians (lanes × residual rows × unknowns × 8): a Levenberg–
+#: Marquardt iteration holds about four such arrays (J, the trial's, the accepted one,
+#: the forward-mode tangents). 1 GiB: a 4-run 250 Hz paper log (519 × 17) gets 8192
+#: lanes, an 8-run 1 kHz log of 1 s (8008 × 25) 512.
+LANE_JACOBIAN_BYTES = 2**30
 
 
 def default_lanes():
-    """``fit_many``'s default ``lanes``: ``"logs"`` where JAX's default backend is a GPU,
-    else 1 (one start a call, :mod:`hdid._fitting._one_lane`)."""
+    """``fit_many``'s default ``lanes``: 1 (one start a call, :mod:`hdid._fitting._one_lane`)
+    on every backend. Logs as lanes (``"logs"``) are for a GPU but not yet measured on
+    one (``benchmarks/results/gpu_path.md``), so they are asked for, not the default."""
     from ._one_lane import LANES
 
-    return "logs" if jax.default_backend() == "gpu" else LANES
+    return LANES
 
 
-def default_width() -> int:
-    """Lanes per call: :data:`GPU_WIDTH` on a GPU, :data:`CPU_WIDTH` elsewhere."""
-    return GPU_WIDTH if jax.default_backend() == "gpu" else CPU_WIDTH
+def default_width(problem: Problem | None = None) -> int:
+    """Lanes per call: :data:`GPU_WIDTH` where JAX's backend is a GPU, else
+    :data:`CPU_WIDTH`; for ``problem``'s size at most ``LANE_JACOBIAN_BYTES`` of Jacobians
+    a call (a power of two, at least 1)."""
+    width = GPU_WIDTH if jax.default_backend() == "gpu" else CPU_WIDTH
+    if problem is not None:
+        size = 8 * (math.prod(problem.times.shape) + problem.n_physical) * problem.n_unknowns
+        width = min(width, 2 ** max(int(math.floor(math.log2(max(LANE_JACOBIAN_BYTES // size, 1)))), 0))
+    return width
 
 
 # ----------------------------------------------------------------------------- programs

@@ -315,7 +315,6 @@ def _fit_lanes(items, setups: dict, padded: dict, buckets: set, timing, bracket,
     each log's analysis and the batch's limit check (:func:`_nested`) on the host."""
     n_starts = int(options.get("n_starts", 6))
     max_steps = int(options.get("max_steps", 300))
-    width = int(lane_width or _log_lanes.default_width())
     groups: dict = {}
     for i in setups:
         key = _bucket_key(padded[i])
@@ -323,6 +322,7 @@ def _fit_lanes(items, setups: dict, padded: dict, buckets: set, timing, bracket,
         groups.setdefault(key, []).append(i)
     for idx in groups.values():
         t_start = time.perf_counter()
+        width = int(lane_width or _log_lanes.default_width(padded[idx[0]]))
         fitted = _log_lanes.fit_bucket([setups[i] for i in idx], [padded[i] for i in idx],
                                        options, width, timing, lambda n: _Phase(timing, n))
         with _Phase(timing, "analyse"):
