@@ -269,6 +269,28 @@ def test_px4_ulog_csv(tmp_path, run, ref):
     _note(log, "PX4 log")
 
 
+def test_an_integer_timestamp_is_read_in_the_unit_its_size_says(tmp_path, run, ref):
+    """``timestamp,position`` (a rosbag2 export without header fields): 1.7e18 is ns since
+    1970, not PX4's µs since boot (read so, the sample period would be 2 s)."""
+    t, counts = run
+    path = tmp_path / "bag_plain.csv"
+    path.write_text("timestamp,position\n" + "".join(
+        f"{s},{v}\n" for s, v in zip(_stamps(t), _rad(counts))))
+    log = read_log(path)
+    assert_same_log(log, ref, time_tol=1e-12)
+    assert "ns since 1970" in _note(log, "'timestamp'")
+
+
+def test_a_millis_timestamp_is_refused_rather_than_read_as_microseconds(tmp_path, run):
+    """``timestamp`` of millis() (steps of 2): as µs it would be 500 kHz sampling."""
+    t, counts = run
+    path = tmp_path / "ms_stamp.csv"
+    path.write_text("timestamp,counts\n" + "".join(
+        f"{round(a * 1e3) + 700},{b}\n" for a, b in zip(t, counts)))
+    with pytest.raises(LogError, match=r"500 kHz sampling .*'timestamp \[ms\]'"):
+        read_log(path, counts_per_rev=CPR)
+
+
 # ------------------------------------------------------------------ two encoders
 
 def test_a_motor_and_output_encoder_pair_in_a_driven_log(tmp_path, run):

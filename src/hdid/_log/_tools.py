@@ -136,11 +136,33 @@ def _plotjuggler(table, lower: list[str]) -> list[str]:
     return notes
 
 
+#: Integer stamps since 1970 in each unit, now (2017-2049: 1.5e9-2.5e9 s).
+_EPOCH = (("ns", 10**9), ("us", 10**6), ("ms", 10**3), ("s", 1))
+#: Fewest µs between samples of a log stamped in µs since boot (50 kHz): finer steps
+#: are no µs (an Arduino's millis() printed as a 'timestamp').
+_MIN_US_STEP = 20
+
+
 def _px4(table, lower: list[str]) -> list[str]:
-    table.columns[0] = _relative(_integers(table.columns[0]))
-    table.names[0] = f"{_TIME} [us]"
-    notes = ["PX4 log: time from 'timestamp' in µs since boot (ulog's convention), relative "
-             "to the first row"]
+    """An integer ``timestamp`` first column: since 1970 in the unit its size says (a
+    rosbag2 export's ns, 1.7e18), else µs since boot (PX4's ulog)."""
+    ticks = _integers(table.columns[0])
+    first = ticks[0]
+    unit = next((u for u, per_s in _EPOCH if 1.5e9 * per_s <= first <= 2.5e9 * per_s), None)
+    if unit is not None:
+        what = f"in {unit} since 1970 (its size)"
+    else:
+        steps = np.diff(np.asarray(ticks[:1000], dtype=np.float64))
+        step = float(np.median(steps)) if steps.size else 0.0
+        if 0 < step < _MIN_US_STEP:
+            raise LogError(
+                f"'{table.names[0]}' of whole numbers {step:g} apart: as µs since boot (PX4's "
+                f"ulog) that is {1e3 / step:g} kHz sampling — name its unit in the header "
+                "('timestamp [ms]')", path=table.path, column=table.names[0])
+        unit, what = "us", "in µs since boot (PX4 ulog's convention)"
+    table.columns[0] = _relative(ticks)
+    table.names[0] = f"{_TIME} [{unit}]"
+    notes = [f"time from 'timestamp' {what}, relative to the first row"]
     if _PX4_ANGLE in lower and not _has_angle(table):
         at = lower.index(_PX4_ANGLE)
         notes.append(f"PX4 log: angle from '{table.names[at]}' in encoder counts")
