@@ -21,7 +21,7 @@ import math
 import numpy as np
 import pytest
 
-from hdid import read_log
+from hdid import LogError, read_log
 from hdid._log._resolution import find_step
 
 
@@ -126,3 +126,22 @@ def test_held_readings_flickering_with_noise_before_opposite_releases(tmp_path):
         f"{k},A,{s * 1e3:.3f},{v}\n" for k, (t, c) in enumerate(runs, 1) for s, v in zip(t, c)))
     log = read_log(path, counts_per_rev=16384)
     assert [r.n_samples for r in log.runs] == [500] * 4
+
+
+def test_a_counter_zeroed_at_each_release_is_refused_under_noise_too(tmp_path):
+    """Each run's counter zeroed at its hold (every run starts at 0), one swinging up,
+    one down, with the same noise: the first two readings of a run differ (a flicker),
+    which hid the hold before; the reading 3 of the first 5 show is the hold. The
+    one-line error naming both runs (before: read, one offset for two zeros)."""
+    rng = np.random.default_rng(5)
+    runs = world(rng, fs=1000.0, cpr=16384, f_n=60.0, amps=(0.157, -0.157), dur=0.5,
+                 noise_steps=0.32, offset=0.0)
+    for k, (t, c) in enumerate(runs):
+        c -= int(np.median(c[:3]))  # zeroed at its hold
+        c[:4] = (0, 1 - 2 * k, 0, 0)  # the first two readings differ: a flicker
+    path = tmp_path / "zeroed.csv"
+    path.write_text("run,time,theta\n" + "".join(
+        f"{k},{s:.6f},{v}\n" for k, (t, c) in enumerate(runs, 1) for s, v in zip(t, c)))
+    with pytest.raises(LogError, match="opposite directions"):
+        read_log(path, counts_per_rev=16384)
+

@@ -223,6 +223,18 @@ def check_motion(theta, starts, ends, names, resolution: float | None, fail: Fai
             "(released from inside it, they stay stuck)"]
 
 
+def _held_level(held: np.ndarray) -> float | None:
+    """The reading a run is held at before its release: its first, repeated at once, or
+    (noise ahead of the rounding flickers the first readings) the reading that 3 of its
+    first 5 show; ``None`` for a run already moving at its first reading."""
+    if held.size < 3:
+        return None
+    if held[1] == held[0]:
+        return float(held[0])
+    values, counts = np.unique(held[:5], return_counts=True)
+    return float(values[np.argmax(counts)]) if counts.max() >= 3 else None
+
+
 def check_shared_zero(theta, rows, names, setups, fail: Fail) -> None:
     """Runs of one set-up share the encoder's zero (the fit gives each set-up one offset).
     Two of its runs held at the very same reading that move off it in opposite directions
@@ -241,19 +253,20 @@ def check_shared_zero(theta, rows, names, setups, fail: Fail) -> None:
     first_move: dict[tuple[str, float], tuple[int, float]] = {}
     for k, run_rows in enumerate(rows):
         held = theta[run_rows]
-        if held.size < 3 or held[1] != held[0]:
+        level = _held_level(held)
+        if level is None:
             continue  # a run already moving at its first reading says nothing here
-        up, down = float(np.max(held - held[0])), float(np.max(held[0] - held))
+        up, down = float(np.max(held - level)), float(np.max(level - held))
         if max(up, down) <= 0.0 or min(up, down) > 0.5 * max(up, down):
             continue  # never moves (a rest point in the stick band), or moves within noise
         direction = 1.0 if up > down else -1.0
         setup = "1" if setups is None else str(setups[run_rows[0]])
-        key = (setup, float(held[0]))
+        key = (setup, level)
         if key in first_move and first_move[key][1] != direction:
             other = first_move[key][0]
             raise fail(
                 f"runs {_show(names[other])} and {_show(names[k])} of set-up {_show(setup)} are "
-                f"both held at the reading {held[0]:.6g} but move off it in opposite "
+                f"both held at the reading {level:.6g} but move off it in opposite "
                 "directions — one spring cannot push both ways from one angle: the encoder "
                 "was zeroed at each release; give each run its own set-up (a 'setup' column "
                 "holding the run's label)",
