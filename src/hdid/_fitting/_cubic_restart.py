@@ -11,7 +11,11 @@ full model from the shares of :data:`RESTART_SHARES`; the caller keeps a restart
 lower. (The log's own backbone, ``f² = f₀²·(1 + ¾·(k2/k1)·A²)`` from the half-periods
 between turning points, does not say where: that plant's cubic moves f² by 0.1 % across its
 swings, under the ~2 % scatter of half-periods timed at 1 kHz, and a paper-size plant's
-friction stops it within one or two half-swings.) NumPy only (the local fits are the
+friction stops it within one or two half-swings.)
+
+A release instant is mapped onto its bracket by a sigmoid, flat at both ends: an optimum
+whose release sits on an end (:data:`RELEASE_STUCK`) restarts with it :data:`RELEASE_EDGE`
+inside (:func:`release_row`), kept on the same terms. NumPy only (the local fits are the
 caller's).
 """
 
@@ -48,15 +52,46 @@ def restart_rows(problem, model, scales, u) -> np.ndarray | None:
                        for s in RESTART_SHARES])
 
 
+#: Where a release stuck on an end of its bracket restarts: this fraction of the bracket
+#: inside it, where the sigmoid map's slope s(1−s) is a tenth of its peak.
+RELEASE_EDGE = 0.025
+#: A release within this fraction of an end of its bracket is stuck there: the map's slope
+#: is < 1/250 of its peak and Levenberg–Marquardt's step in it vanishes. (A world log, an
+#: 18 Hz gear at 100 Hz released 0.57 ms before its second reading: a limit's restart ran
+#: the release onto that reading, u = 14.7, and the fit ended at 2.98× the quantization
+#: floor, k1 −1.9 %; restarted from RELEASE_EDGE inside: χ² 125 → 1.6.)
+RELEASE_STUCK = 1e-3
+
+
+def release_row(problem, u) -> np.ndarray | None:
+    """A full-model start from ``u`` with its releases stuck on a bracket's end moved
+    :data:`RELEASE_EDGE` inside, or ``None`` where none is stuck (or none is free)."""
+    if not problem.release_free:
+        return None
+    lo, hi = np.asarray(problem.release_lo), np.asarray(problem.release_hi)
+    v = np.array(u, dtype=float)
+    i, j = problem.n_physical, problem.n_physical + problem.n_runs
+    s = 1.0 / (1.0 + np.exp(-v[i:j]))
+    stuck = (np.minimum(s, 1.0 - s) < RELEASE_STUCK) & (hi > lo)
+    if not stuck.any():
+        return None
+    inside = math.log((1.0 - RELEASE_EDGE) / RELEASE_EDGE)  # u at the edge's fraction
+    v[i:j] = np.where(stuck, np.sign(v[i:j]) * inside, v[i:j])
+    return v[None, :]
+
+
 def restarted(result, problem, model, scales, solutions, local_fits, finish):
-    """``result`` with the restarts of :func:`restart_rows` run by ``local_fits`` (rows →
-    ``(U, costs, ok, steps)``, the optimum's row first), kept where one ends lower than the
-    optimum by more than the limits' same-optimum margin: then ``finish(solutions)``
-    assembles the result again from all local fits (its limits checked anew). Returns the
+    """``result`` with the restarts of :func:`restart_rows` and :func:`release_row` run by
+    ``local_fits`` (rows → ``(U, costs, ok, steps)``, the optimum's row first), kept where one
+    ends lower than the optimum by more than the limits' same-optimum margin: then
+    ``finish(solutions)`` assembles the result again from all local fits (its limits checked
+    anew). Returns the
     result and the local fits ``solutions`` ``(U, costs, ok, steps)``, extended if kept."""
-    more = restart_rows(problem, model, scales, result.u)
-    if more is None:
+    more = [r for r in (restart_rows(problem, model, scales, result.u),
+                        release_row(problem, result.u)) if r is not None]
+    if not more:
         return result, solutions
+    more = np.concatenate(more)
     new = local_fits(np.concatenate([np.asarray(result.u, dtype=float)[None, :], more]))
     costs = np.asarray(new[1])
     if not np.min(np.where(np.isfinite(costs[1:]), costs[1:], np.inf)) < costs[0] * (

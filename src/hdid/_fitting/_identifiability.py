@@ -19,6 +19,7 @@ from .._results._summaries import ParameterEstimate, RunSummary, StartSummary
 from .._models._transforms import derivative
 from .._problems._derived import BracketTooCostly, _derived, band_bracket
 from ..effects import StribeckFriction
+from ._limits import FLOOR_TAIL, above_floor
 
 
 #: A direction in the optimiser's space whose data-only standard deviation exceeds this
@@ -478,6 +479,16 @@ def plausibility_warnings(prep: Prepared, model, values, rms: float,
             "errors (which assume it does) are not trustworthy — a poorer basin (more "
             "--starts, or a warm --start), a missing effect (try `hdid diagnose`), wrong units, "
             "a wrong resolution or noise beyond the sensor's step"
+        )
+    elif prep.quantized and math.isfinite(rms) and rms > (
+            above := above_floor(prep.n_effective)) * prep.resolution / math.sqrt(12):
+        out.append(
+            f"the RMS residual is {rms / (prep.resolution / math.sqrt(12)):.3g}× the "
+            f"quantization floor, above the {above:.3g}× that rounding alone leaves over "
+            f"{prep.n_effective:.0f} effective readings (χ² tail {FLOOR_TAIL:g}): the fit has not "
+            "reached the floor — a poorer basin (more --starts, or a warm --start) or a "
+            "missing effect (try `hdid diagnose`); the standard errors are scaled up by the "
+            "residual but still assume the model"
         )
     return out
 
