@@ -137,6 +137,23 @@ def test_moves_factory_gets_the_log_posterior_and_burn_in_hook_is_called(fit, mo
     assert post.chain.shape[0] == 30
 
 
+def test_default_burn_in_is_long_for_a_chain_grown_until_converged(fit, modes, monkeypatch):
+    """A chain grown until converged gets ``BURN_IN`` steps of burn-in (the walkers start
+    at the optima's Laplace width and need thousands of steps to spread along the friction
+    ridge: docs/decisions/emcee-burn-in.md); a fixed-length chain, a quick look, its own
+    length clipped to [``SHORT_BURN_IN``, ``BURN_IN``]; an explicit ``burn_in`` is kept.
+    (The burn-in itself is skipped here: only what the driver asks for is recorded.)"""
+    from hdid._posterior.ensemble import BURN_IN, SHORT_BURN_IN, _Ensemble
+
+    seen = []
+    monkeypatch.setattr(_Ensemble, "burn_in", lambda self, steps, progress: seen.append(steps) or 0)
+    grown = sample_posterior(fit, max_steps=20, chunk=20, seed=1, modes=modes, method="emcee")
+    short = sample_posterior(fit, n_steps=20, seed=1, modes=modes, method="emcee")
+    given = sample_posterior(fit, n_steps=20, burn_in=7, seed=1, modes=modes, method="emcee")
+    assert seen == [BURN_IN, SHORT_BURN_IN, 7]
+    assert (grown.burn_in, short.burn_in, given.burn_in) == (BURN_IN, SHORT_BURN_IN, 7)
+
+
 def test_too_short_chain_does_not_crash(fit, modes):
     # 5 steps: some walkers never move, τ is NaN; the sampler must warn, not crash.
     post = sample_posterior(fit, n_steps=5, burn_in=0, seed=1, modes=modes, method="emcee")

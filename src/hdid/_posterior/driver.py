@@ -7,7 +7,7 @@ import time
 
 from .density import PRIOR_HALF_WIDTH, gaussian_prior
 from .ensemble import (  # noqa: F401 (the constants re-exported: the package, the docs)
-    BURN_IN_STAGES, CHECK_GROWTH, MIN_TAU_MULTIPLE, MODE_GAP, _Ensemble)
+    BURN_IN, BURN_IN_STAGES, CHECK_GROWTH, MIN_TAU_MULTIPLE, MODE_GAP, _Ensemble, default_burn_in)
 from .ensemble import _short_of_tau  # noqa: F401 (re-exported for the diagnostics tests)
 from .errors import PosteriorError, one_line_failures, walkers_enough
 from .priors import finish
@@ -21,7 +21,7 @@ def sample_posterior(
     n_walkers: int | None = None,
     n_steps: int | None = None,
     max_steps: int = 20000,
-    burn_in: int = 400,
+    burn_in: int | None = None,
     chunk: int = 500,
     seed: int = 0,
     progress: bool | None = None,
@@ -71,7 +71,11 @@ def sample_posterior(
     Burn-in (discarded): ``burn_in`` steps of differential evolution plus independence
     Metropolis–Hastings from a t-mixture over the optima (:class:`MixtureProposal`),
     refitted after each of ``BURN_IN_STAGES`` stages; the kept chain uses the last mixture,
-    fixed. (A normalizing flow fitted to the burn-in draws in its place was measured and
+    fixed. Default (:func:`~hdid._posterior.ensemble.default_burn_in`): ``BURN_IN`` = 4000
+    steps for a chain grown until converged — the walkers start at the optima's Laplace
+    width, narrower than the posterior along the friction law's ridge, and need that long
+    to spread over it (docs/decisions/emcee-burn-in.md) — and ``n_steps`` clipped to
+    [400, 4000] for a chain of fixed length. (A normalizing flow fitted to the burn-in draws in its place was measured and
     lost: docs/decisions/normalizing-flow.md; so did emcee in the latent space of a flow
     fitted to an SMC pilot, and that flow as the independence move, under the physical
     priors: the same record.)
@@ -155,6 +159,7 @@ def sample_posterior(
     run = _Ensemble.start(fit, n_walkers, seed, sigma_floor, linear_prior, sample_linear,
                           prior, default_prior, modes, moves)
     t_burn = time.perf_counter()
+    burn_in = default_burn_in(n_steps) if burn_in is None else int(burn_in)
     n_reset = run.burn_in(burn_in, progress)
     t_burn = time.perf_counter() - t_burn
     done, conv, t_kept, t_diag = run.grow(n_steps, max_steps, chunk, progress)

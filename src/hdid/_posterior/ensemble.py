@@ -42,6 +42,17 @@ from .result import BAND, PosteriorResult, _RunNames
 
 #: The burn-in is run in this many stages, the proposal adapted after each.
 BURN_IN_STAGES = 4
+#: Default burn-in [steps] of a chain grown until it converges. The walkers start at the
+#: optima's Laplace width, narrower than the posterior along the Stribeck ridge: after 400
+#: steps the shipped paper log's ensemble spread in v_s and delta was 0.63-0.65 of the kept
+#: chain's, and the kept chain spent its first thousands of steps widening (τ of tau_c
+#: 843-1076 on 10 000 steps after 400; 321-363 on 6 400-8 400 after 2 000-4 000; R-hat
+#: lower on all 4 pairs; 30 000 kept steps: τ 636 after 4 000, 680 after 8 000):
+#: docs/decisions/emcee-burn-in.md.
+BURN_IN = 4000
+#: Burn-in of a chain of fixed length (``n_steps``, a quick look): ``n_steps`` itself
+#: between this and :data:`BURN_IN`.
+SHORT_BURN_IN = 400
 #: The ensemble rule's τ multiple (:data:`~hdid._posterior.diagnostics.TAU_MULTIPLE`).
 MIN_TAU_MULTIPLE = TAU_MULTIPLE
 #: A chain this far (log p) above the least-squares optimum has found another mode
@@ -50,6 +61,12 @@ MODE_GAP = 5.0
 #: The convergence check runs after ``chunk`` steps, then each time the chain has grown by
 #: this factor (at least ``chunk`` more steps): at most ~10 checks up to 20 000 steps.
 CHECK_GROWTH = 1.4
+
+
+def default_burn_in(n_steps: int | None) -> int:
+    """:data:`BURN_IN` for a chain grown until converged; ``n_steps`` clipped to
+    [:data:`SHORT_BURN_IN`, :data:`BURN_IN`] for a chain of fixed length."""
+    return BURN_IN if n_steps is None else min(BURN_IN, max(SHORT_BURN_IN, int(n_steps)))
 
 
 def _no_start(fit):
