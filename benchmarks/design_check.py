@@ -363,7 +363,10 @@ def render(res) -> str:
                     if own:
                         nl = s_.get("noisy_log", {}).get(key, {})
                         mean = nl.get("mean")
-                        pred = (f"λ {_fmt(s_.get(key))}: {_fmt(mean)} ± {_fmt(nl.get('sd'))} "
+                        draws = s_.get("release_draws", {}).get(key) or []
+                        pred = (f"λ {_fmt(s_.get(key))}"
+                                + (f" (mean of {', '.join(map(_fmt, draws))})" if len(draws) > 1 else "")
+                                + f": {_fmt(mean)} ± {_fmt(nl.get('sd'))} "
                                 f"({_fmt(s_.get('locally_refitted', {}).get(key))})")
                     else:
                         tl = s_.get("this_log", {})
