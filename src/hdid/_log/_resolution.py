@@ -291,7 +291,8 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
             untold = untold or _untold(n_levels, q, unit, unit_name)
             if by_offsets == "none":
                 continue  # no grid in this interval after all: try a finer one
-            if isinstance(by_offsets, float) and by_offsets >= MIN_STEP_PER_PRINT_UNIT * (unit or 0.0):
+            if (isinstance(by_offsets, float)
+                    and by_offsets >= MIN_STEP_PER_PRINT_UNIT * (unit or 0.0)):
                 q, told = by_offsets, True
         if told:
             # a few readings off a coarser grid that all others lie on (._grid_outliers)
