@@ -279,17 +279,17 @@ def render_crossover(cross: dict) -> list[str]:
                  f"({m['cpu']}), python {m['python']}, jax {m['jax']}, src {m['src_fingerprint']}; "
                  f"{r['distinct_logs']} distinct paper logs (log i of a batch is distinct log i mod "
                  f"{r['distinct_logs']}), lanes per call {r['width'] or 'by backend'}, budget {r['budget_s']:.0f} s.")
-    L += ["", "| backend | mode | logs | wall | logs/s | setup | grid | LM | analysis | compile in run | LM iterations "
-          "| errors | median k1 | load |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    L += ["", "| backend | mode | logs | wall | logs/s | CPU per log | setup | grid | LM | analysis | compile in run "
+          "| LM iterations | errors | median k1 | load |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for b, r in cross.items():
         for mode, rec in r["modes"].items():
             if "first_call_s" in rec:
                 L.append(f"| {b.upper()} | {MODE_NAMES[mode]} | first call, 2 logs | {rec['first_call_s']:.1f} s "
-                         "| | | | | | | | | | |")
+                         "| | | | | | | | | | | |")
             for q in rec["runs"]:
                 t = q["timing"]
                 L.append(f"| {b.upper()} | {MODE_NAMES[mode]} | {q['n_logs']} | {q['wall_s']:.1f} s | "
-                         f"{q['logs_per_s']:.1f} | {t['setup_s']:.1f} s | {t['grid_s']:.1f} s | {t['solve_s']:.1f} s | "
+                         f"{q['logs_per_s']:.1f} | {q['cpu_s'] / q['n_logs'] * 1e3:.0f} ms | {t['setup_s']:.1f} s | {t['grid_s']:.1f} s | {t['solve_s']:.1f} s | "
                          f"{t['analyse_s']:.1f} s | {t['compile_s']:.1f} s | {t['lane_steps']} | {q['errors']} | "
                          f"{q['k1_median']:.1f} | {q['load_before']:.1f}→{q['load_after']:.1f} |")
             for sk in rec.get("skipped", []):
