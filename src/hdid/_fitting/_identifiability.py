@@ -8,7 +8,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._covariance import null_in_u, scaled_covariance, undetermined_scaled
-from .._log._resolution import step_against_readings
 from .._problems._evaluate import dense as _dense
 from .._problems._evaluate import jacobian as _jacobian
 from .._simulation._aliasing import aliasing_warning, swing_hz
@@ -19,7 +18,7 @@ from .._results._summaries import ParameterEstimate, RunSummary, StartSummary
 from .._models._transforms import derivative
 from .._problems._derived import BracketTooCostly, _derived, band_bracket
 from ..effects import StribeckFriction
-from ._limits import FLOOR_TAIL, above_floor
+from ._floor import RESIDUAL_FLOOR_FACTOR, residual_warnings  # noqa: F401 (re-exported)
 
 
 #: A direction in the optimiser's space whose data-only standard deviation exceeds this
@@ -435,14 +434,6 @@ def _shape_warnings(problem: Problem, flags: dict[str, str]) -> list[str]:
     return out
 
 
-#: An adequate model leaves the rounding of a quantized sensor: RMS ≈ step/√12 (uniform
-#: error; less with stuck stretches — 0.6–0.9× measured at the truth of 4-run paper logs).
-#: Above 3× the fit has not described the log: in 200 generator paper logs three
-#: multistart fits ended in poorer basins at 4.2×, 4.3× and 11.9× while their truths
-#: scored 0.6–0.9×; detectable missing effects in the hidden-effect suites sit at 1.3–32×.
-RESIDUAL_FLOOR_FACTOR = 3.0
-
-
 def plausibility_warnings(prep: Prepared, model, values, rms: float,
                           fitted_hz: float = math.nan) -> list[str]:
     """Warn when the log's numbers are implausible for the declared units (time in s,
@@ -468,28 +459,7 @@ def plausibility_warnings(prep: Prepared, model, values, rms: float,
             "mrad or counts (convert to rad, or --counts-per-rev), or is the ratio wrong "
             "(--ratio)?"
         )
-    if wrong_step := (step_against_readings(prep.theta, prep.lengths, prep.resolution, rms,
-                                            RESIDUAL_FLOOR_FACTOR) if prep.quantized else None):
-        out.append(wrong_step)
-    elif math.isfinite(rms) and rms > RESIDUAL_FLOOR_FACTOR * prep.resolution / math.sqrt(12):
-        out.append(  # (a noise model's resolution is σ·√12, σ from the still readings)
-            f"the RMS residual is {rms / (prep.resolution / math.sqrt(12)):.3g}× the "
-            + ("quantization floor" if prep.quantized else "readings' noise")
-            + ": the model does not describe this log, and the standard "
-            "errors (which assume it does) are not trustworthy — a poorer basin (more "
-            "--starts, or a warm --start), a missing effect (try `hdid diagnose`), wrong units, "
-            "a wrong resolution or noise beyond the sensor's step"
-        )
-    elif prep.quantized and math.isfinite(rms) and rms > (
-            above := above_floor(prep.n_effective)) * prep.resolution / math.sqrt(12):
-        out.append(
-            f"the RMS residual is {rms / (prep.resolution / math.sqrt(12)):.3g}× the "
-            f"quantization floor, above the {above:.3g}× that rounding alone leaves over "
-            f"{prep.n_effective:.0f} effective readings (χ² tail {FLOOR_TAIL:g}): the fit has not "
-            "reached the floor — a poorer basin (more --starts, or a warm --start) or a "
-            "missing effect (try `hdid diagnose`); the standard errors are scaled up by the "
-            "residual but still assume the model"
-        )
+    out += residual_warnings(prep, rms)
     return out
 
 
