@@ -430,3 +430,19 @@ def test_reading_age_scan_finds_the_clock(aged_fits):
     for got, want in zip(np.asarray(found.phases), phases):
         d = (got - want + period / 2) % period - period / 2
         assert abs(d) < period / 8
+
+
+def test_reading_age_from_the_command_line(tmp_path):
+    """``hdid fit LOG --add reading_age``: the fit without it, the scan, the fit with it."""
+    from synthetic import cli_fit_json
+
+    log = tmp_path / "held.csv"
+    _held_log(0.007, (0.0031, 0.0007)).to_csv(log, index=False)
+    out, _ = cli_fit_json(log, tmp_path / "fit.json", "--ratio", "1", "--remove", "stribeck",
+                          "--add", "linear_stiffness", "--inertia", str(AGE_I),
+                          "--add", "reading_age", "-q")
+    assert any(w.startswith("reading_age: the device's clock (P = 7 ms") for w in out["warnings"])
+    rms = (out["rms"]["wg_rad"] / out["rms"]["wg_floor_rad"] if "rms" in out
+           else out["rms_residual_rad"] / out["quantization_floor_rad"])
+    # an exact model leaves the rounding (≤ 1.0× the floor) plus the fitted release's slack
+    assert rms < 1.5, out["warnings"]
