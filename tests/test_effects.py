@@ -446,3 +446,19 @@ def test_reading_age_from_the_command_line(tmp_path):
            else out["rms_residual_rad"] / out["quantization_floor_rad"])
     # an exact model leaves the rounding (≤ 1.0× the floor) plus the fitted release's slack
     assert rms < 1.5, out["warnings"]
+
+
+def test_reading_age_is_tried_by_diagnose_only_where_readings_jump(aged_fits):
+    from hdid.effects import ReadingAge, registry
+    from hdid.effects._candidate import candidates
+
+    plain, aged, period, _ = aged_fits
+    cand = next(c for c in candidates(registry()) if c.key == "reading_age")
+    assert cand.applies(plain.model) and not cand.applies(aged.model)
+    found = cand.variants(plain.model, {}, {"frame": plain.residuals()})
+    assert len(found) == 1 and isinstance(found[0][1].reading, ReadingAge)
+    assert abs(float(found[0][1].reading.sample_period) - period) < 3e-6   # the scan's step
+    # BIC: the period and each run's phase are charged ln n, as fitted parameters
+    assert cand.penalty(400) == pytest.approx(3 * np.log(400))
+    # a log whose residual is at the rounding floor (the aged fit's) has nothing for it
+    assert cand.variants(plain.model, {}, {"frame": aged.residuals()}) == []
