@@ -6,6 +6,9 @@ import hashlib
 import json
 import os
 import platform
+import resource
+import statistics
+import subprocess
 import time
 from pathlib import Path
 
@@ -84,6 +87,29 @@ class Clock:
     def __exit__(self, *exc):
         self.wall = time.perf_counter() - self.w0
         self.cpu = time.process_time() - self.c0
+
+
+def stats(xs) -> dict:
+    """Median, min, max, count and every value of ``xs``."""
+    xs = [float(x) for x in xs]
+    return {"median": statistics.median(xs), "min": min(xs), "max": max(xs), "n": len(xs), "all": xs}
+
+
+def run_timed(cmd, env=None, timeout=None, cwd=ROOT) -> tuple[float, float, str]:
+    """Run ``cmd``: its wall and CPU time (user + sys, all threads) [s] and its stdout; a failure raises
+    ``RuntimeError`` with the command and the tails of its output."""
+    ru0, t = resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
+    p = subprocess.run([str(c) for c in cmd], env=env, capture_output=True, text=True, cwd=cwd, timeout=timeout)
+    wall, ru = time.perf_counter() - t, resource.getrusage(resource.RUSAGE_CHILDREN)
+    if p.returncode != 0:
+        raise RuntimeError(f"{' '.join(map(str, cmd[:4]))} failed (rc {p.returncode}):\n{p.stdout[-3000:]}\n"
+                           f"{p.stderr[-3000:]}")
+    return wall, ru.ru_utime + ru.ru_stime - ru0.ru_utime - ru0.ru_stime, p.stdout
+
+
+def last_json(stdout: str):
+    """The JSON a child process printed as its last line."""
+    return json.loads(stdout.strip().splitlines()[-1])
 
 
 def stored(name: str) -> dict:

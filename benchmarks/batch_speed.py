@@ -53,18 +53,21 @@ def truth_of(i: int) -> dict:
     return truth
 
 
-def make_logs(design: str, n: int, log_dir: Path) -> list[str]:
-    """``n`` logs of a design (cached): truths around the CSF-8 values, seeds 1000+i."""
+def log_frame(design: str, i: int):
+    """Log ``i`` of a design as a DataFrame: truth :func:`truth_of`, seed 1000+i."""
     amps, fs, duration = DESIGNS[design]
+    return logs.make_log(truth_of(i), amplitudes=amps, fs=fs, duration=duration, hold=0.04,
+                         offsets_by_setup={"A": 0.012, "B": -0.020}, seed=1000 + i)
+
+
+def make_logs(design: str, n: int, log_dir: Path) -> list[str]:
+    """``n`` logs of a design (cached CSV files): :func:`log_frame` 0 … n-1."""
     d = log_dir / design.replace(" ", "_").replace(".", "p")
     d.mkdir(parents=True, exist_ok=True)
     paths = []
     for i in range(n):
-        p = d / f"log{i:04d}.csv"
-        if not p.exists():
-            df = logs.make_log(truth_of(i), amplitudes=amps, fs=fs, duration=duration, hold=0.04,
-                              offsets_by_setup={"A": 0.012, "B": -0.020}, seed=1000 + i)
-            df.to_csv(tmp := p.with_suffix(".tmp"), index=False)
+        if not (p := d / f"log{i:04d}.csv").exists():
+            log_frame(design, i).to_csv(tmp := p.with_suffix(".tmp"), index=False)
             tmp.replace(p)
         paths.append(str(p))
     return paths
@@ -166,16 +169,12 @@ def _workers_run(cfg: dict, warm: list, timed: list, t_imp: float) -> dict:
 
 
 def run_worker(cfg: dict, cache_dir: Path, timeout: float = 3600) -> dict:
-    env = dict(os.environ, HDID_CACHE_DIR=str(cache_dir))
-    env.pop("HDID_NO_CACHE", None)
+    env = {k: v for k, v in os.environ.items() if k != "HDID_NO_CACHE"} | {"HDID_CACHE_DIR": str(cache_dir)}
     if cfg.get("tree"):  # another checkout's hdid (its src first on the path)
         env["PYTHONPATH"] = str(Path(cfg["tree"]) / "src")
-    t = time.perf_counter()
-    p = subprocess.run([sys.executable, __file__, "--worker", json.dumps(cfg)], env=env,
-                       capture_output=True, text=True, cwd=ROOT / "benchmarks", timeout=timeout)
-    if p.returncode != 0:
-        raise RuntimeError(f"worker {cfg['label']} failed:\n{p.stdout[-3000:]}\n{p.stderr[-3000:]}")
-    return json.loads(p.stdout.strip().splitlines()[-1]) | {"process_s": time.perf_counter() - t}
+    wall, _, out = _common.run_timed([sys.executable, __file__, "--worker", json.dumps(cfg)], env, timeout,
+                                     cwd=ROOT / "benchmarks")
+    return _common.last_json(out) | {"process_s": wall}
 
 
 def measure(args) -> dict:
@@ -242,8 +241,18 @@ def _cpu_per_log(r):
     return r["cpu_s"] / r["n"] if r.get("cpu_s") is not None else None
 
 
+def _cpu_ms(r):
+    return (_cpu_per_log(r) or float("nan")) * 1e3
+
+
 def _ld(r):
     return f"{r['load_before']['load1']:.1f}→{r['load_after']['load1']:.1f}"
+
+
+def _dchi2(a: dict, b: dict) -> list[float]:
+    """|Δ best χ²| of two runs on the logs both fitted."""
+    x = {p["log"]: p["chi2"] for p in a.get("per_log") or [] if p}
+    return [abs(x[p["log"]] - p["chi2"]) for p in b.get("per_log") or [] if p and p["log"] in x]
 
 
 def render(res: dict) -> str:
@@ -313,8 +322,7 @@ def render(res: dict) -> str:
         for r in sorted(wk, key=lambda r: r["n"]):
             one = _find(res, f"vectorized {r['n']}")
             up = f"{_rate(r) / _rate(one):.2f}×" if one else "—"
-            L.append(f"| {r['n']} | {r['total_s']:.1f} s | {_rate(r):.2f} | "
-                     f"{(_cpu_per_log(r) or float('nan')) * 1e3:.0f} ms | {up} | "
+            L.append(f"| {r['n']} | {r['total_s']:.1f} s | {_rate(r):.2f} | {_cpu_ms(r):.0f} ms | {up} | "
                      f"{r['first_call_s']:.1f} s | {r['maxrss_mb']:.0f} MB | {_ld(r)} |")
         L.append("")
 
@@ -328,9 +336,8 @@ def render(res: dict) -> str:
         lrate = _rate(lp) if lp else loop_rate
         ltxt = f"{lrate:.2f}" + ("" if lp else f" (extrapolated from {max(x['n'] for x in loops)})")
         L.append(f"| {n} | {_rate(r):.2f} ({r['total_s']:.1f} s) | {ltxt} | {scipy_rate:.3f} (extrapolated from "
-                 f"{scipy['n']}) | {_rate(r) / lrate:.1f}× | {_rate(r) / scipy_rate:.0f}× | "
-                 f"{(_cpu_per_log(r) or float('nan')) * 1e3:.0f} ms | {r['maxrss_mb']:.0f} MB | "
-                 f"{r['first_call_s']:.1f} s | {_ld(r)} |")
+                 f"{scipy['n']}) | {_rate(r) / lrate:.1f}× | {_rate(r) / scipy_rate:.0f}× | {_cpu_ms(r):.0f} ms | "
+                 f"{r['maxrss_mb']:.0f} MB | {r['first_call_s']:.1f} s | {_ld(r)} |")
     L.append("")
     for r in loops:
         cpu = _cpu_per_log(r)
@@ -351,13 +358,8 @@ def render(res: dict) -> str:
                  + "). `hdid.fit` always computes the bracket, so the loop's rate includes it.")
     L += ["", "## Same fits: vectorised vs `hdid.fit`, and against the truth\n"]
     lp100 = max(loops, key=lambda r: r["n"])
-    vq = _find(res, f"vectorized {lp100['n']}")
-    if vq and vq.get("per_log") and lp100.get("per_log"):
-        a = {x["log"]: x["chi2"] for x in vq["per_log"] if x}
-        b = {x["log"]: x["chi2"] for x in lp100["per_log"] if x}
-        common = sorted(set(a) & set(b))
-        d = [abs(a[k] - b[k]) for k in common]
-        L.append(f"- best χ² of the vectorised fit vs `hdid.fit`, same {len(common)} logs: max |Δχ²| = {max(d):.2g}, "
+    if (vq := _find(res, f"vectorized {lp100['n']}")) and (d := _dchi2(vq, lp100)):
+        L.append(f"- best χ² of the vectorised fit vs `hdid.fit`, same {len(d)} logs: max |Δχ²| = {max(d):.2g}, "
                  f"logs with |Δχ²| > 0.1: {sum(x > 0.1 for x in d)} (χ² in units of the quantization variance).")
     if big.get("per_log"):
         rows = [x for x in big["per_log"] if x]
@@ -375,33 +377,27 @@ def render(res: dict) -> str:
           "analysis | LM lane-steps | CPU µs per lane-step |\n|---|---|---|---|---|---|---|---|---|"]
     for r in vec:
         t = r["timing"]
-
-        def both(k, t=t):
-            c = t.get(f"{k}_cpu_s")
-            return f"{t[f'{k}_s']:.2f} s" + (f" ({c:.2f})" if c is not None else "")
-
+        both = lambda k, t=t: f"{t[f'{k}_s']:.2f} s" + (  # noqa: E731
+            f" ({c:.2f})" if (c := t.get(f"{k}_cpu_s")) is not None else "")
         L.append(f"| {r['n']} | {t['total_s']:.2f} s | {t['compile_s']:.2f} s | {both('setup')} | {both('grid')} | "
                  f"{both('solve')} | {both('analyse')} | {t['lane_steps']} | "
                  f"{1e6 * t.get('solve_cpu_s', t['solve_s']) / max(t['lane_steps'], 1):.0f} |")
     L += ["", "## Compile time (first call in a fresh process, 2 logs)\n",
           "| persistent cache | first call | of which compile (trace + lower + XLA / cache read) |\n|---|---|---|"]
     for label, what in (("vectorized, cold cache, 1 log", "empty"), ("vectorized, warm cache, 1 log", "populated")):
-        r = _find(res, label)
-        if r:
+        if r := _find(res, label):
             L.append(f"| {what} | {r['first_call_s']:.1f} s | {r['first_call_timing']['compile_s']:.1f} s |")
     L.append("\nIn a warm process (the timed calls above) `compile_s` is 0: one compiled "
              "program per bucket shape is reused for every log.\n")
     L += ["## Cost vs design (20 logs each, vectorised)\n",
           "| design | samples per run | runs | logs/s | ms per log (wall) | CPU ms per log | "
           "first call | peak RSS | load |\n|---|---|---|---|---|---|---|---|---|"]
-    for design in ("paper", "short 0.25 s", "long 1.0 s", "1 kHz", "2 runs", "8 runs"):
-        r = _find(res, f"design {design}, 20 logs")
-        if not r:
+    for design in DESIGNS:
+        if not (r := _find(res, f"design {design}, 20 logs")):
             continue
         amps, fs, dur = DESIGNS[design]
         L.append(f"| {design} | {round(fs * dur)} | {len(amps)} | {_rate(r):.2f} | {1e3 / _rate(r):.0f} | "
-                 f"{(_cpu_per_log(r) or float('nan')) * 1e3:.0f} | {r['first_call_s']:.1f} s | {r['maxrss_mb']:.0f} "
-                 f"MB | {_ld(r)} |")
+                 f"{_cpu_ms(r):.0f} | {r['first_call_s']:.1f} s | {r['maxrss_mb']:.0f} MB | {_ld(r)} |")
     L += ["", "Where the time goes and why the batch is built this way (one lane per program, "
           "processes not threads, what was tried): `docs/decisions/batch-lanes.md`.\n"]
     fails = [(r["config"]["label"], r.get("n_failed", 0), r.get("errors")) for r in res["runs"] if r.get("n_failed")]
@@ -427,9 +423,7 @@ def _before_after(res: dict, after: dict) -> list[str]:
         L.append(f"| {name} | {r['total_s']:.1f} s | {1e3 * r['total_s'] / r['n']:.0f} | "
                  f"{1e3 * _cpu_per_log(r):.0f} | {t['lane_steps']} | {t['grid_cpu_s']:.2f} s | "
                  f"{t['solve_cpu_s']:.2f} s | {t['analyse_cpu_s']:.2f} s | {_ld(r)} |")
-    a = {x["log"]: x for x in after.get("per_log") or [] if x}
-    d = [abs(a[x["log"]]["chi2"] - x["chi2"]) for x in before.get("per_log") or [] if x and x["log"] in a]
-    if d:
+    if d := _dchi2(after, before):
         L.append(f"\nBest χ² after vs before, same {len(d)} logs: max |Δχ²| = {max(d):.2g}, "
                  f"logs with |Δχ²| > 0.1: {sum(v > 0.1 for v in d)} (χ² in units of the "
                  "quantization variance). (Before, the batch's 'LM' time included its grid.)")

@@ -28,11 +28,9 @@ OUT = RESULTS / "clean_floor.json"
 #: a fit above this multiple of the quantization floor has not reached the floor
 ABOVE = 1.5
 K2_CATALOG = 6.5e7
-DESIGNS = {
-    "paper": dict(amps=[0.157, -0.157, 0.157, -0.157], rate=250.0, duration=0.5, setups=["A", "A", "B", "B"]),
-    "rich": dict(amps=[0.157, -0.157, 0.12, -0.12, 0.08, -0.08, 0.05, -0.05], rate=1000.0,
-                 duration=0.3, setups=["A", "A", "A", "A", "B", "B", "B", "B"]),
-}
+DESIGNS = {"paper": dict(amps=[0.157, -0.157, 0.157, -0.157], rate=250.0, duration=0.5, setups=list("AABB")),
+           "rich": dict(amps=[0.157, -0.157, 0.12, -0.12, 0.08, -0.08, 0.05, -0.05], rate=1000.0, duration=0.3,
+                        setups=list("AAAABBBB"))}
 SEED_BASE = {"paper": 330000, "rich": 331000}
 
 
@@ -64,7 +62,8 @@ def fit_one(design: str, seed: int) -> dict:
     try:
         r = hdid.fit(df, resolution=truth["resolution"], ratio=100.0)
     except Exception as exc:  # a failed fit is a row too
-        return row | {"error": f"{type(exc).__name__}: {exc}"[:300], "ratio": math.nan, "wall_s": time.perf_counter() - t0}
+        return row | {"error": f"{type(exc).__name__}: {exc}"[:300], "ratio": math.nan,
+                      "wall_s": time.perf_counter() - t0}
     return row | {"wall_s": time.perf_counter() - t0, "ratio": r.rms_residual_rad / r.quantization_floor_rad,
                   "values": r.values, "limits": getattr(r, "limits", None),
                   "restarted_from": getattr(r, "restarted_from", None), "n_warnings": len(r.warnings)}

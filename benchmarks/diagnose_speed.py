@@ -23,17 +23,13 @@ CHILD = r"""
 import contextlib, json, resource, sys, time
 t0 = time.perf_counter()
 from hdid.cli import main
-out = sys.argv[2]
 with contextlib.suppress(SystemExit):
-    main(["diagnose", sys.argv[1], "--json", out, "--quiet"], standalone_mode=False)
-wall = time.perf_counter() - t0
-ru = resource.getrusage(resource.RUSAGE_SELF)
+    main(["diagnose", sys.argv[1], "--json", sys.argv[2], "--quiet"], standalone_mode=False)
+wall, ru, d = time.perf_counter() - t0, resource.getrusage(resource.RUSAGE_SELF), json.load(open(sys.argv[2]))
 try:
-    from hdid._problems import _programs
-    stats = list(getattr(_programs, "STATS", []))
-except Exception:
+    from hdid._problems._programs import STATS as stats
+except ImportError:
     stats = []
-d = json.load(open(out))
 print("@@" + json.dumps({"wall_s": wall, "cpu_s": ru.ru_utime + ru.ru_stime, "timing": d.get("timing", {}),
                          "verdict": d["verdict"], "summary": d["summary"], "scanned": d.get("scanned", {}),
                          "candidates": [(c["variant"], c["delta_bic"]) for c in d["candidates"]], "programs": stats}))

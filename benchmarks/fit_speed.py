@@ -13,17 +13,16 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import shutil
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 import _common
-from _common import DATA, ROOT, Clock, load
+from _common import DATA, ROOT, Clock, load, run_timed
+from _common import stats as _stats
 
 NAME = "fit_speed"
 LOG = DATA / "csf8_paper.csv"
@@ -33,25 +32,6 @@ EXTRA_SEEDS = (1, 2, 3)
 PHYS = ("k1", "k2", "tau_c", "tau_s", "v_s", "delta", "c_v")
 #: What ``hdid fit`` imports (timed alone, in a subprocess).
 FIT_MODULES = "hdid.cli, hdid._fitting._fit, hdid._log"
-
-
-def _stats(xs):
-    xs = [float(x) for x in xs]
-    return {"median": statistics.median(xs), "min": min(xs), "max": max(xs), "n": len(xs), "all": xs}
-
-
-def _timed(cmd, env, cpu_out=None):
-    """Wall time of a subprocess; its CPU time (user + sys, all threads) goes to cpu_out."""
-    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    t = time.perf_counter()
-    p = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=ROOT)
-    dt = time.perf_counter() - t
-    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if cpu_out is not None:
-        cpu_out.append(ru.ru_utime + ru.ru_stime - ru0.ru_utime - ru0.ru_stime)
-    if p.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd[:3])} failed (rc {p.returncode}):\n{p.stdout}\n{p.stderr}")
-    return dt
 
 
 def _hdid() -> str:
@@ -71,21 +51,21 @@ def bench_cli(cache: Path, reps: dict) -> dict:
     res = {"command": "hdid fit data/synthetic/csf8_paper.csv -q --json OUT",
            "import_fit_modules": FIT_MODULES, "load_before": load("cli start")}
     print("cold CLI, empty cache, then populated ...", flush=True)
-    cold, cold_cpu = [], []
+    cold = []
     for i in range(reps["cold"]):  # each in a fresh cache; the first one is kept
         d = cache if i == 0 else cache.parent / f"cache_cold_{i}"
         shutil.rmtree(d, ignore_errors=True)
         d.mkdir(parents=True)
-        cold.append(_timed(fit_cmd, env | {"HDID_CACHE_DIR": str(d)}, cold_cpu))
-    res |= {"cold_empty_cache_s": _stats(cold), "cold_empty_cache_cpu_s": _stats(cold_cpu),
+        cold.append(run_timed(fit_cmd, env | {"HDID_CACHE_DIR": str(d)}))
+    res |= {"cold_empty_cache_s": _stats(x[0] for x in cold), "cold_empty_cache_cpu_s": _stats(x[1] for x in cold),
             "cache_after_cold": _cache_stats(cache)}
-    wc_cpu = []
-    res["cold_with_cache_s"] = _stats([_timed(fit_cmd, env, wc_cpu) for _ in range(reps["cli"])])
-    res |= {"cold_with_cache_cpu_s": _stats(wc_cpu), "cache_after_runs": _cache_stats(cache)}
+    warm = [run_timed(fit_cmd, env) for _ in range(reps["cli"])]
+    res |= {"cold_with_cache_s": _stats(x[0] for x in warm), "cold_with_cache_cpu_s": _stats(x[1] for x in warm),
+            "cache_after_runs": _cache_stats(cache)}
     for key, cmd in (("help_s", [hdid, "--help"]), ("python_startup_s", [sys.executable, "-c", "pass"]),
                      ("import_hdid_jax_s", [sys.executable, "-c", "import hdid, jax"]),
                      ("import_hdid_fit_s", [sys.executable, "-c", f"import {FIT_MODULES}"])):
-        res[key] = _stats([_timed(cmd, env) for _ in range(reps["small"])])
+        res[key] = _stats([run_timed(cmd, env)[0] for _ in range(reps["small"])])
     res["load_after"] = load("cli end")
     return res
 
@@ -399,32 +379,34 @@ def child_profile(reps: int) -> dict:
     return out
 
 
+def _pinned(trees: dict, rounds, cmd, env=None):
+    """Per round of ``rounds`` and per tree (alternating): ``cmd`` in a new process pinned to core 1 with the tree's
+    ``src`` first on the path (and ``env(label)``): ``(round, label, wall_s, cpu_s, stdout, load before, after)``."""
+    for k in rounds:
+        for label, src in trees.items():
+            before = load(f"{label} {k} start")
+            wall, cpu, out = run_timed(["taskset", "-c", "1", *cmd(label)],
+                                       os.environ | {"PYTHONPATH": str(src)} | (env(k, label) if env else {}))
+            yield k, label, wall, cpu, out, before, load(f"{label} {k} end")
+
+
 def bench_profile(trees: dict, reps: int, rounds: int) -> dict:
     """:func:`child_profile` in a fresh process per tree, pinned to one core, the trees alternating for ``rounds``
     rounds; load (``uptime``) recorded around each (the cold command per tree: :func:`bench_cold`)."""
     res = {"trees": {}, "rounds": [], "core": 1, "reps": reps}
-    for k in range(rounds):
-        for label, src in trees.items():
-            before = load(f"{label} {k} start")
-            env = os.environ | {"PYTHONPATH": str(src)}
-            cmd = ["taskset", "-c", "1", sys.executable, str(Path(__file__).resolve()), "--child", str(reps)]
-            p = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=ROOT)
-            if p.returncode != 0:
-                raise RuntimeError(f"{label}: {p.stderr[-2000:]}")
-            got = json.loads(p.stdout.strip().splitlines()[-1])
-            got["load_before"], got["load_after"] = before, load(f"{label} {k} end")
-            res["rounds"].append({"tree": label, **got})
-            print(f"  {label} round {k}: " + ", ".join(f"{r['wall_s'] * 1e3:.0f}" for r in got["rows"])
-                  + f" ms (load {before['load1']:.1f})", flush=True)
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--child", str(reps)]
+    for k, label, _, _, out, before, after in _pinned(trees, range(rounds), lambda _: cmd):
+        got = _common.last_json(out) | {"load_before": before, "load_after": after}
+        res["rounds"].append({"tree": label, **got})
+        print(f"  {label} round {k}: " + ", ".join(f"{r['wall_s'] * 1e3:.0f}" for r in got["rows"])
+              + f" ms (load {before['load1']:.1f})", flush=True)
     for label in trees:
         rows = [r for x in res["rounds"] if x["tree"] == label for r in x["rows"]]
         res["trees"][label] = {
             "src": str(trees[label]), "wall_s": _stats(r["wall_s"] for r in rows),
             "cpu_s": _stats(r["cpu_s"] for r in rows),
-            "phases_s": {ph: statistics.median(r["phases"].get(ph, 0.0) for r in rows)
-                         for ph in (*PHASES, "band_bracket")},
-            "phases_cpu_s": {ph: statistics.median(r.get("phases_cpu", {}).get(ph, 0.0) for r in rows)
-                             for ph in (*PHASES, "band_bracket")},
+            **{key: {ph: statistics.median(r.get(k, {}).get(ph, 0.0) for r in rows) for ph in (*PHASES, "band_bracket")}
+               for key, k in (("phases_s", "phases"), ("phases_cpu_s", "phases_cpu"))},
             "nested_false_s": statistics.median(x["nested_false_s"] for x in res["rounds"] if x["tree"] == label)}
     return res
 
@@ -433,35 +415,28 @@ def bench_cold(trees: dict, rounds: int) -> dict:
     """Cold ``hdid fit LOG`` (a new process) per tree, pinned to one core, trees alternating: one run in an empty
     cache (``HDID_CACHE_DIR=<tmp>``: a fresh environment), then ``rounds`` with the persistent cache warm (after one
     that fills it); wall, CPU (user + sys, all threads), 1-min load; and whether the report (timing masked) and the
-    JSON (``wall_time_s`` left out) are the same for every tree."""
+    JSON (``wall_time_s`` left out) of the last round are the same for every tree."""
     import re
 
-    hdid = _hdid()
     out = {label: {"wall": [], "cpu": [], "load": [], "empty": None} for label in trees}
     same = {}
     with tempfile.TemporaryDirectory(prefix="hdid_cold_") as tmpd:
-        for k in range(-1, rounds + 1):
-            for label, src in trees.items():
-                env = os.environ | {"PYTHONPATH": str(src)}
-                if k < 0:
-                    env["HDID_CACHE_DIR"] = str(Path(tmpd) / label)
-                js = Path(tmpd) / f"{label}.json"
-                cmd = ["taskset", "-c", "1", hdid, "fit", str(LOG), "--json", str(js)]
-                cpu, l0 = [], os.getloadavg()[0]
-                wall = _timed(cmd, env, cpu)
-                row = {"wall_s": wall, "cpu_s": cpu[0], "load1": (l0 + os.getloadavg()[0]) / 2}
-                print(f"  {label} round {k}: {wall:.2f} s wall, {cpu[0]:.2f} s CPU, load {l0:.1f}", flush=True)
-                if k < 0:
-                    out[label]["empty"] = row
-                elif k > 0:  # (round 0 fills the program store of that tree's source)
-                    for f, key in (("wall", "wall_s"), ("cpu", "cpu_s"), ("load", "load1")):
-                        out[label][f].append(row[key])
-                p = subprocess.run(cmd[3:], env=env, capture_output=True, text=True, cwd=ROOT) if k == rounds else None
-                if p is not None:
-                    d = json.loads(js.read_text())
-                    d.pop("wall_time_s", None)
-                    same[label] = (re.sub(r"; [0-9.]+ s\n", "\n", p.stdout.replace(str(js), "OUT")),
-                                   json.dumps(d, sort_keys=True))
+        js = lambda label: Path(tmpd) / f"{label}.json"  # noqa: E731
+        cmd = lambda label: [_hdid(), "fit", str(LOG), "--json", str(js(label))]  # noqa: E731
+        env = lambda k, label: {"HDID_CACHE_DIR": str(Path(tmpd) / label)} if k < 0 else {}  # noqa: E731
+        for k, label, wall, cpu, text, l0, l1 in _pinned(trees, range(-1, rounds + 1), cmd, env):
+            row = {"wall_s": wall, "cpu_s": cpu, "load1": (l0["load1"] + l1["load1"]) / 2}
+            print(f"  {label} round {k}: {wall:.2f} s wall, {cpu:.2f} s CPU, load {l0['load1']:.1f}", flush=True)
+            if k < 0:
+                out[label]["empty"] = row
+            elif k > 0:  # (round 0 fills the program store of that tree's source)
+                for f, key in (("wall", "wall_s"), ("cpu", "cpu_s"), ("load", "load1")):
+                    out[label][f].append(row[key])
+            if k == rounds:
+                d = json.loads(js(label).read_text())
+                d.pop("wall_time_s", None)
+                same[label] = (re.sub(r"; [0-9.]+ s\n", "\n", text.replace(str(js(label)), "OUT")),
+                               json.dumps(d, sort_keys=True))
     res = {label: {"cold_cli_s": _stats(o["wall"]), "cold_cli_cpu_s": _stats(o["cpu"]),
                    "load": o["load"], "empty_cache": o["empty"], "src": str(trees[label])} for label, o in out.items()}
     first = next(iter(same.values()))
@@ -469,27 +444,30 @@ def bench_cold(trees: dict, rounds: int) -> dict:
             "same_json": all(v[1] == first[1] for v in same.values()), "rounds": rounds}
 
 
+def _per_tree(names, T):
+    """A table row: ``label``, then ``cell(T[name])`` for each tree."""
+    return lambda label, cell: f"| {label} | " + " | ".join(cell(T[n]) for n in names) + " |"
+
+
 def render_cold(c: dict) -> list[str]:
-    names = list(T := c["trees"])
+    row, yes = _per_tree(names := list(c["trees"]), c["trees"]), lambda k: "yes" if c[k] else "**no**"
+    mm = lambda s: f"{_ms(s['median'])} ({_ms(s['min'])})"  # noqa: E731
     L = [f"## Cold command ({c['date']}: `hdid fit {LOG.name}`, a new process, one core pinned, "
          f"trees alternating, {c['rounds']} runs each with the caches warm)\n",
          "| | " + " | ".join(names) + " |", "|---|" + "---|" * len(names),
-         "| persistent cache warm: wall median (min) | " + " | ".join(
-             f"{_ms(T[n]['cold_cli_s']['median'])} ({_ms(T[n]['cold_cli_s']['min'])})" for n in names) + " |",
-         "| … CPU (user+sys) median (min) | " + " | ".join(
-             f"{_ms(T[n]['cold_cli_cpu_s']['median'])} ({_ms(T[n]['cold_cli_cpu_s']['min'])})" for n in names) + " |",
-         "| … 1-min load | " + " | ".join(", ".join(f"{x:.1f}" for x in T[n]["load"]) for n in names) + " |",
-         "| empty cache (fresh environment): wall; CPU; load | " + " | ".join(
-             f"{_ms(T[n]['empty_cache']['wall_s'])}; {_ms(T[n]['empty_cache']['cpu_s'])}; "
-             f"{T[n]['empty_cache']['load1']:.1f}" for n in names) + " |",
-         f"\nSame report (timing masked): {'yes' if c['same_report'] else '**no**'}; same JSON "
-         f"(wall_time_s left out): {'yes' if c['same_json'] else '**no**'}. On 2 cores shared "
-         "with other jobs, wall ≈ CPU × the load on the pinned core: CPU time is the robust figure.", ""]
+         row("persistent cache warm: wall median (min)", lambda t: mm(t["cold_cli_s"])),
+         row("… CPU (user+sys) median (min)", lambda t: mm(t["cold_cli_cpu_s"])),
+         row("… 1-min load", lambda t: ", ".join(f"{x:.1f}" for x in t["load"])),
+         row("empty cache (fresh environment): wall; CPU; load", lambda t: f"{_ms(t['empty_cache']['wall_s'])}; "
+             f"{_ms(t['empty_cache']['cpu_s'])}; {t['empty_cache']['load1']:.1f}"),
+         f"\nSame report (timing masked): {yes('same_report')}; same JSON (wall_time_s left out): {yes('same_json')}. "
+         "On 2 cores shared with other jobs, wall ≈ CPU × the load on the pinned core: CPU time is the robust figure.",
+         ""]
     return L + [f"- {n}" for n in c.get("notes", [])] + [""]
 
 
 def render_profile(pr: dict) -> list[str]:
-    names = list(trees := pr["trees"])
+    row = _per_tree(names := list(trees := pr["trees"]), trees)
     L = [f"## Where a warm fit's time goes ({pr['date']}, one core pinned, "
          f"{pr['reps']} fits × {len(pr['rounds']) // len(names)} rounds per tree)\n",
          "Each tree in a fresh process (`taskset -c 1`), after two warm-up fits (no tracing "
@@ -499,28 +477,16 @@ def render_profile(pr: dict) -> list[str]:
          + ", ".join(f"{x['tree']} {x['load_before']['load1']:.1f}" for x in pr["rounds"])
          + ". The machine is shared: compare the trees by their ratio, not the absolute times.\n",
          "| phase | " + " | ".join(f"{n}: wall; CPU" for n in names) + " |", "|---|" + "---|" * len(names)]
-
-    def cell(n, ph):
-        c, w = trees[n].get("phases_cpu_s", {}).get(ph), trees[n]["phases_s"].get(ph)
-        return (_ms(w) if w is not None else "–") + (f"; {_ms(c)}" if c is not None else "")
-
-    for ph, text in {**PHASES, "band_bracket": "… of the analysis: the stick-band bracket"}.items():
-        L.append(f"| {text} | " + " | ".join(cell(n, ph) for n in names) + " |")
-    L.append("| **warm `hdid.fit`, total (wall)** | " + " | ".join(
-        f"**{_ms(trees[n]['wall_s']['median'])}** (min {_ms(trees[n]['wall_s']['min'])})" for n in names) + " |")
-    L.append("| CPU (user+sys) | " + " | ".join(_ms(trees[n]["cpu_s"]["median"]) for n in names) + " |")
-    L.append("| `nested=False` | " + " | ".join(_ms(trees[n]["nested_false_s"]) for n in names) + " |")
-    if all("cold_cli_s" in trees[n] for n in names):
-        L.append("| cold `hdid fit … -q` (new process, caches warm): wall; CPU | " + " | ".join(
-            f"{_ms(trees[n]['cold_cli_s']['median'])}; {_ms(trees[n]['cold_cli_cpu_s']['median'])}"
-            for n in names) + " |")
+    L += [row(text, lambda t, ph=ph: f"{_ms(t['phases_s'][ph])}; {_ms(t['phases_cpu_s'][ph])}")
+          for ph, text in {**PHASES, "band_bracket": "… of the analysis: the stick-band bracket"}.items()]
+    L += [row("**warm `hdid.fit`, total (wall)**", lambda t: f"**{_ms(t['wall_s']['median'])}** (min "
+              f"{_ms(t['wall_s']['min'])})"), row("CPU (user+sys)", lambda t: _ms(t["cpu_s"]["median"])),
+          row("`nested=False`", lambda t: _ms(t["nested_false_s"]))]
     if len(names) == 2:
-        a, b = (trees[n]["wall_s"]["median"] for n in names)
-        c, d = (trees[n]["cpu_s"]["median"] for n in names)
+        (a, c), (b, d) = ((trees[n]["wall_s"]["median"], trees[n]["cpu_s"]["median"]) for n in names)
         L.append(f"\nRatio {names[0]} / {names[1]}: **{a / b:.2f}×** in wall time, **{c / d:.2f}×** "
                  "in CPU time (medians; CPU time is the less load-sensitive of the two).")
-    last = [x for x in pr["rounds"] if "forward_ms" in x]
-    if last:
+    if last := [x for x in pr["rounds"] if "forward_ms" in x]:
         x, r = last[-1], last[-1]["rows"][-1]
         L += ["", f"Inside the Levenberg–Marquardt calls ({x['tree']}, one fit): {r['solve_calls']} "
               f"program calls, {r['iterations']} iterations, {_ms(r['solve_s'])} of compute "

@@ -31,6 +31,8 @@ WALKERS = (1, 18, 36, 144, 1024, 8192)
 N_POSITIONS = 36
 POST_STEPS = 2000
 PARAMS = ("k1", "k2", "tau_c", "tau_s", "v_s", "delta", "c_v")
+#: fit_many's logs (batch_speed's design, truths and seeds), and the values kept per log
+DESIGN, SAVED = "paper", ("k1", "tau_c", "tau_s", "c_v")
 
 
 def _per_call(fn, reps=20, min_time=1.0):
@@ -44,8 +46,9 @@ def _per_call(fn, reps=20, min_time=1.0):
 
 
 def measure(args, ref, save) -> dict:
-    """Run the four measurements (checked against the run ``ref``, if any), calling
-    ``save(res)`` after each (a run cut short by a time limit keeps what it measured)."""
+    """Sections 1–3 (checked against the run ``ref``, if any), calling ``save(res)`` after each (a run cut short
+    by a time limit keeps what it measured). Section 4, ``fit_many`` with its default lanes (one start a call), is
+    section 5's ``--modes one``: ``--crossover FILE --modes one --sizes 100 1000`` per backend."""
     import jax
     import jax.numpy as jnp
     import numpy as np
@@ -104,21 +107,6 @@ def measure(args, ref, save) -> dict:
         print("posterior", info, flush=True)
         save(res)
 
-    # 4. fit_many
-    import batch_speed
-
-    paths = batch_speed.make_logs("paper", 2 + max(args.n_logs), Path(args.log_dir))
-    with Clock() as c:
-        hdid.fit_many(paths[:2])
-    res["fit_many"] = {"first_call_s": c.wall, "runs": []}
-    for n in args.n_logs:
-        with Clock() as c:
-            table = hdid.fit_many(paths[2:2 + n])
-        res["fit_many"]["runs"].append({"n_logs": n, "wall_s": c.wall, "cpu_s": c.cpu, "logs_per_s": n / c.wall,
-                                        "errors": int(table["error"].notna().sum()),
-                                        "k1_median": float(np.nanmedian(table["k1"]))})
-        print("fit_many", res["fit_many"]["runs"][-1], flush=True)
-        save(res)
     res["load_end"] = os.getloadavg()[0]
     save(res)
     return res
@@ -126,29 +114,59 @@ def measure(args, ref, save) -> dict:
 
 # ---------------------------------------------------------------- 5. logs as lanes: the crossover
 
-DESIGN = "paper"
-SAVED = ("k1", "tau_c", "tau_s", "c_v")
-
-
 def make_logs(path: str, n: int, procs: int) -> None:
     """``n`` distinct paper-design logs (batch_speed's truths and seeds) as DataFrames,
     pickled to ``path``; made with ``procs`` processes."""
+    import functools
     import multiprocessing
     import pickle
 
+    import batch_speed
+
     # spawn, not fork: this process has imported JAX (threads)
     with multiprocessing.get_context("spawn").Pool(procs) as pool:
-        dfs = pool.map(_one_log, range(n))
+        dfs = pool.map(functools.partial(batch_speed.log_frame, DESIGN), range(n))
     Path(path).write_bytes(pickle.dumps(dfs))
 
 
-def _one_log(i):
-    import batch_speed
-    from hdid.reference import logs
+def _row(rec: dict, n: int, warm, items, kw: dict, t_end: float, save, tag: str, per_log: int = 0) -> None:
+    """Into ``rec``: the first ``fit_many(warm, **kw)`` (if not yet timed), then one timed ``fit_many(items(n),
+    **kw)`` — wall, CPU, logs/s, errors, median k1, load, its timing and (n ≤ ``per_log``) each log's best χ² and
+    :data:`SAVED` values — or fewer logs (``reduced``) or none (``skipped``) where the last row's time per log says
+    ``n`` cannot finish before ``t_end``; ``save()`` after each."""
+    import numpy as np
 
-    amps, fs, duration = batch_speed.DESIGNS[DESIGN]
-    return logs.make_log(batch_speed.truth_of(i), amplitudes=amps, fs=fs, duration=duration, hold=0.04,
-                         offsets_by_setup={"A": 0.012, "B": -0.020}, seed=1000 + i)
+    if "first_call_s" not in rec:
+        if t_end - time.perf_counter() < 30:
+            return
+        with Clock() as c:
+            hdid.fit_many(warm, **kw)
+        rec["first_call_s"] = c.wall
+        print(tag, "first call", round(c.wall, 1), flush=True)
+        save()
+    left = t_end - time.perf_counter()
+    if rec["runs"] and (rate := rec["runs"][-1]["wall_s"] / rec["runs"][-1]["n_logs"]) * n > 0.85 * left:
+        m = int(0.85 * left / rate) // 100 * 100  # the last run's time per log, scaled: skip what cannot finish
+        if m <= rec["runs"][-1]["n_logs"]:
+            rec.setdefault("skipped", []).append({"n_logs": n, "estimate_s": rate * n, "left_s": left})
+            print(tag, n, "skipped", rate * n, left, flush=True)
+            return save()
+        rec.setdefault("reduced", []).append({"n_logs": n, "to": m})
+        n = m
+    load0 = os.getloadavg()[0]
+    with Clock() as c:
+        table = hdid.fit_many(items(n), **kw)
+    run = {"n_logs": n, "wall_s": c.wall, "cpu_s": c.cpu, "logs_per_s": n / c.wall,
+           "errors": int(table["error"].notna().sum()), "k1_median": float(np.nanmedian(table["k1"])),
+           "load_before": load0, "load_after": os.getloadavg()[0],
+           "timing": {k: v for k, v in table.attrs["timing"].items() if isinstance(v, (int, float, str))}}
+    if n <= per_log:  # each log's fit, for the comparison across modes and machines
+        best = [r.starts.costs[r.starts.best] if r is not None else None for r in table["result"]]
+        run["per_log"] = {"cost": [None if b is None else float(b) for b in best],
+                          **{k: [None if v != v else float(v) for v in table[k]] for k in SAVED}}
+    rec["runs"].append(run)
+    print(tag, {k: v for k, v in run.items() if k != "per_log"}, flush=True)
+    save()
 
 
 def crossover(args) -> dict:
@@ -158,62 +176,22 @@ def crossover(args) -> dict:
     import json
     import pickle
 
-    import numpy as np
-
     t_end = time.perf_counter() + args.budget_s
     dfs = pickle.loads(Path(args.logs).read_bytes())
     res = {"generated": time.strftime("%Y-%m-%dT%H:%M:%S"), "machine": _common.machine(),
            "distinct_logs": len(dfs), "budget_s": args.budget_s, "width": args.width, "modes": {}}
 
     def save():
-        tmp = Path(args.out).with_suffix(".tmp")
-        tmp.write_text(json.dumps(res, indent=1))
+        (tmp := Path(args.out).with_suffix(".tmp")).write_text(json.dumps(res, indent=1))
         tmp.replace(args.out)
 
     save()
     kw = {"logs": {"lanes": "logs", **({"lane_width": args.width} if args.width else {})}, "one": {"lanes": 1}}
     for size in args.sizes:
         for mode in args.modes:
-            n = size
-            rec = res["modes"].setdefault(mode, {"runs": []})
-            left = t_end - time.perf_counter()
-            if "first_call_s" not in rec:
-                if left < 30:
-                    continue
-                with Clock() as c:
-                    hdid.fit_many(dfs[:2], **kw[mode])
-                rec["first_call_s"] = c.wall
-                print(mode, "first call", round(c.wall, 1), flush=True)
-                save()
-                left = t_end - time.perf_counter()
-            if rec["runs"]:  # the last run's time per log, scaled: skip what cannot finish
-                last = rec["runs"][-1]
-                rate = last["wall_s"] / last["n_logs"]
-                if rate * n > 0.85 * left:
-                    m = int(0.85 * left / rate) // 100 * 100
-                    if m <= last["n_logs"]:
-                        rec.setdefault("skipped", []).append({"n_logs": n, "estimate_s": rate * n, "left_s": left})
-                        print(mode, n, "skipped", rate * n, left, flush=True)
-                        save()
-                        continue
-                    rec.setdefault("reduced", []).append({"n_logs": n, "to": m})
-                    n = m
-            items = [dfs[i % len(dfs)] for i in range(n)]
-            load0 = os.getloadavg()[0]
-            with Clock() as c:
-                table = hdid.fit_many(items, **kw[mode])
-            tm = table.attrs["timing"]
-            run = {"n_logs": n, "wall_s": c.wall, "cpu_s": c.cpu, "logs_per_s": n / c.wall,
-                   "errors": int(table["error"].notna().sum()), "k1_median": float(np.nanmedian(table["k1"])),
-                   "load_before": load0, "load_after": os.getloadavg()[0],
-                   "timing": {k: v for k, v in tm.items() if isinstance(v, (int, float, str))}}
-            if n <= len(dfs):  # each log's fit, for the comparison across modes and machines
-                best = [r.starts.costs[r.starts.best] if r is not None else None for r in table["result"]]
-                run["per_log"] = {"cost": [None if b is None else float(b) for b in best],
-                                  **{k: [None if v != v else float(v) for v in table[k]] for k in SAVED}}
-            rec["runs"].append(run)
-            print(mode, {k: v for k, v in run.items() if k != "per_log"}, flush=True)
-            save()
+            _row(res["modes"].setdefault(mode, {"runs": []}), size, dfs[:2],
+                 lambda n: [dfs[i % len(dfs)] for i in range(n)], kw[mode], t_end, save, mode,
+                 per_log=len(dfs))
     res["load_end"] = os.getloadavg()[0]
     save()
     return res
@@ -331,8 +309,6 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--tag", choices=("cpu", "gpu"), default="cpu",
                     help="the run it replaces in gpu_path.json (gpu: checked against the cpu run)")
-    ap.add_argument("--log-dir", default=str(_common.ROOT / "benchmarks" / "_cache" / "batch_logs"))
-    ap.add_argument("--n-logs", type=int, nargs="+", default=[100, 1000])
     ap.add_argument("--make-logs", metavar="FILE", help="only make --distinct paper logs, pickled to FILE")
     ap.add_argument("--procs", type=int, default=2, help="with --make-logs: processes")
     ap.add_argument("--distinct", type=int, default=256, help="with --make-logs: distinct logs")

@@ -13,7 +13,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _common import interpretation_section, parse_or_render, run_meta, write_result
+from _common import interpretation_section, last_json, parse_or_render, run_meta, run_timed, write_result
 
 RATE = 10_000.0
 AMPLITUDES = [0.157, -0.157, 0.08, -0.08]
@@ -22,12 +22,11 @@ CHILD = r"""
 import json, resource, sys, time
 import hdid
 t0 = time.perf_counter()
-log = hdid.read_log(sys.argv[1])
-t1 = time.perf_counter()
+log, t1 = hdid.read_log(sys.argv[1]), time.perf_counter()
 r = hdid.fit(log)
-print(json.dumps({"read_s": t1 - t0, "fit_s": time.perf_counter() - t1,
+print(json.dumps({"read_s": t1 - t0, "fit_s": time.perf_counter() - t1, "k1": r.parameters["k1"].value,
                   "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-                  "k1": r.parameters["k1"].value, "rms_counts": r.rms_residual_rad / r.resolution_rad}))
+                  "rms_counts": r.rms_residual_rad / r.resolution_rad}))
 """
 
 
@@ -39,15 +38,14 @@ def one(n: int, timeout: float, tmp: Path) -> dict:
                overwrite=True)
     row = {"samples_per_run": n, "rows": len(AMPLITUDES) * n, "mb": path.stat().st_size / 1e6,
            "simulate_s": time.perf_counter() - t}
-    env, t = {**os.environ, "HDID_NO_CACHE": "1", "JAX_PLATFORMS": "cpu"}, time.perf_counter()
     try:
-        out = subprocess.run([sys.executable, "-c", CHILD, str(path)], capture_output=True,
-                             text=True, timeout=timeout, env=env)
+        wall, _, out = run_timed([sys.executable, "-c", CHILD, path], {**os.environ, "HDID_NO_CACHE": "1",
+                                                                        "JAX_PLATFORMS": "cpu"}, timeout)
     except subprocess.TimeoutExpired:
         return {**row, "status": f"stopped after {timeout:.0f} s"}
-    if out.returncode != 0:
-        return {**row, "status": "failed", "stderr": out.stderr.strip().splitlines()[-1:]}
-    return {**row, "process_s": time.perf_counter() - t, **json.loads(out.stdout.strip().splitlines()[-1]), "status": "ok"}
+    except RuntimeError as e:
+        return {**row, "status": "failed", "stderr": str(e).strip().splitlines()[-1:]}
+    return {**row, "process_s": wall, **last_json(out), "status": "ok"}
 
 
 def render(res: dict) -> str:

@@ -1,6 +1,7 @@
 """The free-motion fit done "the way a user would without hdid": scipy only (``solve_ivp`` LSODA,
 tanh-smoothed friction, ``least_squares``), the baseline that ``fit_speed.py`` and ``batch_speed.py`` import."""
 
+import contextlib
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -46,17 +47,12 @@ def simulate_run_scipy(time_s: np.ndarray, *, theta0: float, t_release: float,
         return [w, (-(k1 * d + k2 * d * d * d) / N - fr) * inv_i]
 
     t = np.asarray(time_s, dtype=float)
-    out = np.full(t.shape, float(theta0))
-    after = t > t_release
-    if not np.any(after):
-        return out
-    try:
-        sol = solve_ivp(rhs, (float(t_release), float(t[-1])), [float(theta0), 0.0],
-                        method="LSODA", rtol=1e-6, atol=1e-9, t_eval=t[after])
-    except _TooStiff:
-        sol = None
-    ok = sol is not None and sol.status >= 0 and sol.y.shape[1] == int(after.sum())
-    out[after] = sol.y[0] if ok else np.nan
+    out, after, sol = np.full(t.shape, float(theta0)), t > t_release, None
+    if np.any(after):
+        with contextlib.suppress(_TooStiff):
+            sol = solve_ivp(rhs, (float(t_release), float(t[-1])), [float(theta0), 0.0],
+                            method="LSODA", rtol=1e-6, atol=1e-9, t_eval=t[after])
+        out[after] = sol.y[0] if sol is not None and sol.status >= 0 and sol.y.shape[1] == after.sum() else np.nan
     return out
 
 
@@ -84,8 +80,8 @@ def guess_offsets(runs: Sequence[Mapping]) -> dict[str, float]:
         for r in (r for r in runs if str(r["setup"]) == setup):
             th = float(np.asarray(r["theta"], float)[-1])
             finals[1 if th > r["theta0_enc"] else -1].append(th)
-        both = finals[1] and finals[-1]
-        out[setup] = 0.5 * (np.mean(finals[1]) + np.mean(finals[-1])) if both else float(np.mean(finals[1] + finals[-1]))
+        out[setup] = (0.5 * (np.mean(finals[1]) + np.mean(finals[-1])) if finals[1] and finals[-1]
+                      else float(np.mean(finals[1] + finals[-1])))
     return out
 
 
@@ -103,10 +99,8 @@ def fit_scipy(runs: list[dict], x0: dict, inertia: float, ratio: float = 100.0, 
     smoothing velocity [rad/s]. Returns ``params``, ``runs`` (``t_release``, ``theta0``, ``theta0_enc``),
     ``offsets``, ``nfev``, ``n_simulations``, ``wall_s``, ``rms`` [rad], ``success``."""
     t_start = time.perf_counter()
-    if missing := [n for n in PARAM_NAMES if n not in x0]:
-        raise ValueError(f"x0 lacks {missing}")
-    if any(float(x0[n]) <= 0 for n in PARAM_NAMES):
-        raise ValueError("starting physical parameters must be > 0 (log-space fit)")
+    if missing := [n for n in PARAM_NAMES if n not in x0] or [n for n in PARAM_NAMES if float(x0[n]) <= 0]:
+        raise ValueError(f"x0 lacks {missing} or they are not > 0 (log-space fit)")
     n_runs, n_p, setups = len(runs), len(PARAM_NAMES), list(dict.fromkeys(str(r["setup"]) for r in runs))
     offsets0 = guess_offsets(runs)
     run_setup = [setups.index(str(r["setup"])) for r in runs]
