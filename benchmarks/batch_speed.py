@@ -113,24 +113,18 @@ def worker(cfg: dict) -> dict:
 def _quality(cfg: dict, timed: list, table) -> dict:
     """Failures, medians, and per log the best χ² and (paper design) z against the truth."""
     out = {"n_failed": int(table["error"].notna().sum()),
-           "errors": [e for e in table["error"] if isinstance(e, str)][:3]}
-    cols = [c for c in ("k1", "tau_c", "rms_residual_counts") if c in table]
-    out["summary"] = {c: float(table[c].median()) for c in cols}
-    per = []  # best χ² (the vectorised fit vs fit() on the same logs); paper design: z against the truth
+           "errors": [e for e in table["error"] if isinstance(e, str)][:3],
+           "summary": {c: float(table[c].median()) for c in ("k1", "tau_c", "rms_residual_counts") if c in table}}
+    out["per_log"] = per = []  # best χ² (vectorised vs fit() on the same logs); paper design: z against the truth
     for path, r in zip(timed, table.itertuples()):
         if (res := r.result) is None:
             per.append(None)
             continue
         i = int(Path(path).stem[3:])
-        row = {"log": i, "chi2": float(res.starts.costs[res.starts.best])}
-        if cfg["design"] == "paper":
-            truth = truth_of(i)
-            for k in ("k1", "tau_c", "tau_s", "c_v"):
-                if k in res.parameters:
-                    p = res.parameters[k]
-                    row[f"z_{k}"] = float((p.value - truth[k]) / p.std)
-        per.append(row)
-    out["per_log"] = per
+        truth = truth_of(i) if cfg["design"] == "paper" else {}
+        per.append({"log": i, "chi2": float(res.starts.costs[res.starts.best]),
+                    **{f"z_{k}": float((p.value - truth[k]) / p.std) for k in ("k1", "tau_c", "tau_s", "c_v")
+                       if truth and (p := res.parameters.get(k)) is not None}})
     return out
 
 
@@ -446,16 +440,14 @@ def main(argv=None):
     ap.add_argument("--skip", nargs="+", metavar="LABEL",
                     help="leave out the configurations whose label starts with one of these "
                          "(to be measured later with --only, e.g. on free cores)")
-    args = _common.parse_or_render(ap, argv, NAME, render)
-    if args is None:
+    if (args := _common.parse_or_render(ap, argv, NAME, render)) is None:
         return
     if args.worker:
         print(json.dumps(worker(json.loads(args.worker))))
         return
     res = measure(args)
     if args.only:  # merge into the previous full run, replacing rows by label
-        prev = json.loads((_common.RESULTS / f"{NAME}.json").read_text())
-        new = {r["config"]["label"]: r for r in res["runs"]}
+        prev, new = _common.stored(NAME), {r["config"]["label"]: r for r in res["runs"]}
         prev["runs"] = [new.pop(r["config"]["label"], r) for r in prev["runs"]] + list(new.values())
         prev.setdefault("reruns", []).append({"only": args.only, **{k: res[k] for k in (
             "load_start", "load_end", "machine", "script_s")}})

@@ -119,8 +119,7 @@ def render(rows: list[dict]) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("designs", nargs="*", default=["paper", "rich"])
-    ap.add_argument("--seeds", default="0:200", help="first:stop (log indices)")
-    ap.add_argument("--only", default="", help="log indices, comma-separated, instead of --seeds (e.g. earlier misses)")
+    ap.add_argument("--seeds", default="0:200", help="first:stop, or log indices comma-separated (e.g. earlier misses)")
     ap.add_argument("--label", default="after")
     ap.add_argument("--append", action="store_true", help="keep the rows already stored")
     ap.add_argument("--report", action="store_true", help="only rewrite the .md")
@@ -133,7 +132,7 @@ def main(argv=None) -> int:
         rows = [r for r in rows if r.get("label") != a.label]
     src = Path(hdid.__file__).parent
     head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=src, capture_output=True, text=True).stdout.strip()
-    seeds = [int(x) for x in a.only.split(",")] if a.only else range(*(int(x) for x in a.seeds.split(":")))
+    seeds = range(*map(int, a.seeds.split(":"))) if ":" in a.seeds else [int(x) for x in a.seeds.split(",")]
     for seed in seeds:
         for design in a.designs:
             if any(r.get("label") == a.label and r["design"] == design and r["seed"] == seed for r in rows):

@@ -38,16 +38,13 @@ def recovery(seeds: int) -> list[dict]:
             t0 = time.perf_counter()
             r = hdid.fit_driven(path)
             wall, coef, pos = time.perf_counter() - t0, r.positional["coefficients"], _pos_truth(p)
-            row = {"log": label, "wall_s": wall, "order": r.positional["order"], "order_true": len(p["pos_a"]),
-                   "rms": r.rms, "params": {}, "positional": {}}
-            for n in PHYSICAL:
-                est = r.parameters[n]
-                row["params"][n] = {"value": est.value, "std": est.std, "truth": p[n], "z": (est.value - p[n]) / est.std}
-            for n, v in ((n, v) for n, v in pos.items() if n in coef):
-                c = coef[n]
-                row["positional"][n] = {"value": c["value"], "std": c["std"], "truth": v, "z": (c["value"] - v) / c["std"]}
-            row["extra_harmonics"] = {n: c for n, c in coef.items() if n not in pos}
-            rows.append(row)
+            est = lambda v, sd, t: {"value": v, "std": sd, "truth": t, "z": (v - t) / sd}  # noqa: E731
+            rows.append(row := {
+                "log": label, "wall_s": wall, "order": r.positional["order"], "order_true": len(p["pos_a"]),
+                "rms": r.rms,
+                "params": {n: est(r.parameters[n].value, r.parameters[n].std, p[n]) for n in PHYSICAL},
+                "positional": {n: est(coef[n]["value"], coef[n]["std"], v) for n, v in pos.items() if n in coef},
+                "extra_harmonics": {n: c for n, c in coef.items() if n not in pos}})
             print(label, f"{wall:.0f} s", "order", row["order"], flush=True)
     return rows
 

@@ -268,22 +268,19 @@ def render(res: dict) -> str:
 
 
 def _notes(res) -> list[str]:
-    cli, warm, notes = res["cli"], res["warm"], []
+    cli, warm, cb, notes = res["cli"], res["warm"], res["cli"]["cold_with_cache_s"], []
     if res["src_fingerprint_start"] != res["src_fingerprint_end"]:
-        notes.append("src/hdid changed while this ran: timings may mix code versions and the "
-                     "persistent cache may have missed after an edit (fingerprint "
-                     f"{res['src_fingerprint_start']} → {res['src_fingerprint_end']}).")
-    cb = cli["cold_with_cache_s"]
+        notes.append("src/hdid changed while this ran: timings may mix code versions and the persistent cache may have "
+                     f"missed after an edit (fingerprint {res['src_fingerprint_start']} → {res['src_fingerprint_end']}).")
     if cli["cache_after_runs"]["files"] > cli["cache_after_cold"]["files"]:
         notes.append("new persistent-cache entries appeared during the populated-cache CLI "
                      "calls (one of them recompiled): their maximum is such a call, the median is not.")
-    notes.append(f"Cold-with-cache CLI wall times ranged {cb['min']:.1f}–{cb['max']:.1f} s over "
-                 f"{cb['n']} calls: most of it is single-threaded Python tracing, which is what "
-                 "the load from other processes slows down most.")
     w, n1 = warm["per_log"][0]["fit_s"]["median"], warm["n_starts_1"][0]["fit_s"]["median"]
-    notes.append(f"n_starts=1 is {w / n1:.1f}× faster than the default n_starts=4 on csf8_paper.csv, but its first "
-                 "call compiles again (the starts are vmapped, so the batch size is part of the compiled shape).")
-    return notes
+    return notes + [f"Cold-with-cache CLI wall times ranged {cb['min']:.1f}–{cb['max']:.1f} s over {cb['n']} calls: "
+                    "most of it is single-threaded Python tracing, which is what the load from other processes slows "
+                    "down most.", f"n_starts=1 is {w / n1:.1f}× faster than the default n_starts=4 on csf8_paper.csv, "
+                    "but its first call compiles again (the starts are vmapped, so the batch size is part of the "
+                    "compiled shape)."]
 
 
 #: Phases of a warm fit, each timed where :func:`hdid.fit` calls it (only the outermost
@@ -510,8 +507,7 @@ def main(argv=None) -> None:
     ap.add_argument("--cold", type=int, metavar="N",
                     help="only the cold command: N warm-cache runs per tree (with --before)")
     ap.add_argument("--child", type=int, help=argparse.SUPPRESS)
-    args = _common.parse_or_render(ap, argv, NAME, render)
-    if args is None:
+    if (args := _common.parse_or_render(ap, argv, NAME, render)) is None:
         return
     if args.child:
         print(json.dumps(child_profile(args.child)))
@@ -519,8 +515,7 @@ def main(argv=None) -> None:
     if args.cold or args.profile:  # one section re-measured, the others kept
         trees = {"before": args.before.resolve() / "src"} if args.before else {}
         trees["now"] = (args.now.resolve() if args.now else ROOT) / "src"
-        res = json.loads((_common.RESULTS / f"{NAME}.json").read_text())
-        key = "cold" if args.cold else "profile"
+        res, key = _common.stored(NAME), "cold" if args.cold else "profile"
         res[key] = (bench_cold(trees, args.cold) if args.cold else
                     bench_profile(trees, reps=5, rounds=2 if args.before else 1)) | {
             "date": time.strftime("%Y-%m-%d %H:%M"), "src_fingerprint": _common.src_fingerprint()}

@@ -16,6 +16,7 @@ size), one process per backend, the results merged into gpu_path.json:
 """
 
 import argparse
+import json
 import os
 import sys
 import time
@@ -169,11 +170,10 @@ def _row(rec: dict, n: int, warm, items, kw: dict, t_end: float, save, tag: str,
     save()
 
 
-def crossover(args) -> dict:
+def crossover(args) -> None:
     """``fit_many`` over ``args.sizes`` logs (log i = distinct log i mod D) for each mode
     (``logs``: logs as lanes, ``one``: one start a call, today's default on a CPU), within
     ``args.budget_s``; the JSON rewritten to ``args.out`` after every row."""
-    import json
     import pickle
 
     t_end = time.perf_counter() + args.budget_s
@@ -194,7 +194,6 @@ def crossover(args) -> dict:
                  per_log=len(dfs))
     res["load_end"] = os.getloadavg()[0]
     save()
-    return res
 
 
 def render(results: dict) -> str:
@@ -257,47 +256,36 @@ def render_crossover(cross: dict) -> list[str]:
                  f"({m['cpu']}), python {m['python']}, jax {m['jax']}, src {m['src_fingerprint']}; "
                  f"{r['distinct_logs']} distinct paper logs (log i of a batch is distinct log i mod "
                  f"{r['distinct_logs']}), lanes per call {r['width'] or 'by backend'}, budget {r['budget_s']:.0f} s.")
+    recs = [(f"{b.upper()} {MODE_NAMES[mode]}", b, mode, rec) for b, r in cross.items() for mode, rec in r["modes"].items()]
     L += ["", "| backend | mode | logs | wall | logs/s | CPU per log | setup | grid | LM | analysis | compile in run "
           "| LM iterations | errors | median k1 | load |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for b, r in cross.items():
-        for mode, rec in r["modes"].items():
-            if "first_call_s" in rec:
-                L.append(f"| {b.upper()} | {MODE_NAMES[mode]} | first call, 2 logs | {rec['first_call_s']:.1f} s "
-                         "| | | | | | | | | | | |")
-            for q in rec["runs"]:
-                t = q["timing"]
-                L.append(f"| {b.upper()} | {MODE_NAMES[mode]} | {q['n_logs']} | {q['wall_s']:.1f} s | "
-                         f"{q['logs_per_s']:.1f} | {q['cpu_s'] / q['n_logs'] * 1e3:.0f} ms | {t['setup_s']:.1f} s | {t['grid_s']:.1f} s | {t['solve_s']:.1f} s | "
-                         f"{t['analyse_s']:.1f} s | {t['compile_s']:.1f} s | {t['lane_steps']} | {q['errors']} | "
-                         f"{q['k1_median']:.1f} | {q['load_before']:.1f}→{q['load_after']:.1f} |")
-            for sk in rec.get("skipped", []):
-                L.append(f"\n{b.upper()} {MODE_NAMES[mode]}, {sk['n_logs']} logs: not run (estimated "
-                         f"{sk['estimate_s']:.0f} s, {sk['left_s']:.0f} s of the budget left).")
-            for rd in rec.get("reduced", []):
-                L.append(f"\n{b.upper()} {MODE_NAMES[mode]}: {rd['n_logs']} logs cut to {rd['to']} to fit the budget.")
-    sizes = sorted({q["n_logs"] for r in cross.values() for rec in r["modes"].values() for q in rec["runs"]})
-    rate = {(b, mode, q["n_logs"]): q["logs_per_s"] for b, r in cross.items() for mode, rec in r["modes"].items()
-            for q in rec["runs"]}
-    cols = [(b, mode) for b, r in cross.items() for mode in r["modes"]]
-    L += ["", "logs/s by batch size (the crossover):", "",
-          "| logs | " + " | ".join(f"{b.upper()} {MODE_NAMES[mo]}" for b, mo in cols) + " |",
-          "|---|" + "---|" * len(cols)]
-    for n in sizes:
-        L.append(f"| {n} | " + " | ".join(f"{rate[(b, mo, n)]:.1f}" if (b, mo, n) in rate else "–"
-                                         for b, mo in cols) + " |")
-    per = [(f"{b.upper()} {MODE_NAMES[mode]}", q["per_log"]) for b, r in cross.items()
-           for mode, rec in r["modes"].items() for q in rec["runs"] if "per_log" in q]
+    for name, b, mode, rec in recs:
+        if "first_call_s" in rec:
+            L.append(f"| {b.upper()} | {MODE_NAMES[mode]} | first call, 2 logs | {rec['first_call_s']:.1f} s "
+                     "| | | | | | | | | | | |")
+        for q in rec["runs"]:
+            t = q["timing"]
+            L.append(f"| {b.upper()} | {MODE_NAMES[mode]} | {q['n_logs']} | {q['wall_s']:.1f} s | {q['logs_per_s']:.1f} "
+                     f"| {q['cpu_s'] / q['n_logs'] * 1e3:.0f} ms | {t['setup_s']:.1f} s | {t['grid_s']:.1f} s | "
+                     f"{t['solve_s']:.1f} s | {t['analyse_s']:.1f} s | {t['compile_s']:.1f} s | {t['lane_steps']} | "
+                     f"{q['errors']} | {q['k1_median']:.1f} | {q['load_before']:.1f}→{q['load_after']:.1f} |")
+        L += [f"\n{name}, {sk['n_logs']} logs: not run (estimated {sk['estimate_s']:.0f} s, {sk['left_s']:.0f} s of "
+              "the budget left)." for sk in rec.get("skipped", [])]
+        L += [f"\n{name}: {rd['n_logs']} logs cut to {rd['to']} to fit the budget." for rd in rec.get("reduced", [])]
+    rate = {(name, q["n_logs"]): q["logs_per_s"] for name, _, _, rec in recs for q in rec["runs"]}
+    L += ["", "logs/s by batch size (the crossover):", "", "| logs | " + " | ".join(x[0] for x in recs) + " |",
+          "|---|" + "---|" * len(recs)]
+    L += [f"| {n} | " + " | ".join(f"{rate[(x[0], n)]:.1f}" if (x[0], n) in rate else "–" for x in recs) + " |"
+          for n in sorted({n for _, n in rate})]
+    per = [(name, q["per_log"]) for name, _, _, rec in recs for q in rec["runs"] if "per_log" in q]
     if len(per) > 1:
         L += ["", "Same fits: each run's per-log results against the first's (the logs both fitted):", "",
               "| run | vs | logs | max rel. diff of χ² | max rel. diff of k1, tau_c, tau_s, c_v | logs > 1e-6 |",
               "|---|---|---|---|---|---|"]
         (n0, p0) = per[0]
         for name, p in per[1:]:
-            k = min(len(p0["cost"]), len(p["cost"]))
-            dc, dp, bad = 0.0, 0.0, 0
-            for i in range(k):
-                if p0["cost"][i] is None or p["cost"][i] is None:
-                    continue
+            k, dc, dp, bad = min(len(p0["cost"]), len(p["cost"])), 0.0, 0.0, 0
+            for i in (i for i in range(k) if p0["cost"][i] is not None and p["cost"][i] is not None):
                 c = abs(p["cost"][i] - p0["cost"][i]) / abs(p0["cost"][i])
                 d = max(abs(p[x][i] - p0[x][i]) / abs(p0[x][i]) for x in SAVED)
                 dc, dp, bad = max(dc, c), max(dp, d), bad + (max(c, d) > 1e-6)
@@ -323,24 +311,18 @@ def main(argv=None):
                     help="store --crossover results (JSON files) in gpu_path.json under 'crossover' and render")
     if (args := parse_or_render(ap, argv, "gpu_path", render, indent=1)) is None:
         return 0
+    results = _common.stored("gpu_path")
     if args.make_logs:
         make_logs(args.make_logs, args.distinct, args.procs)
-        return 0
-    if args.logs:
+    elif args.logs:
         crossover(args)
-        return 0
-    if args.merge:
-        import json
-
-        results = _common.stored("gpu_path")
+    elif args.merge:
         runs = [json.loads(Path(f).read_text()) for f in args.merge]
-        results["crossover"] = {r["machine"]["backend"]: r for r in runs}
-        write_result("gpu_path", results, render, indent=1)
-        return 0
-    results = _common.stored("gpu_path")
-    measure(args, results.get("cpu") if args.tag == "gpu" else None,
-            lambda res: write_result("gpu_path", results | {args.tag: res}, render, indent=1))
-    print(f"wrote {RESULTS / 'gpu_path.json'}")
+        write_result("gpu_path", results | {"crossover": {r["machine"]["backend"]: r for r in runs}}, render, indent=1)
+    else:
+        measure(args, results.get("cpu") if args.tag == "gpu" else None,
+                lambda res: write_result("gpu_path", results | {args.tag: res}, render, indent=1))
+        print(f"wrote {RESULTS / 'gpu_path.json'}")
     return 0
 
 
