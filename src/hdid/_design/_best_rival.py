@@ -72,11 +72,28 @@ def rival_chi2(rival, e: Experiment, theta: np.ndarray, *, nested="auto") -> flo
     """``min χ²(rival | theta's noise-free readings of e)`` by :func:`hdid.fit`
     (module docstring), a position-periodic rival at its best order
     (:func:`best_rival_fit`); NaN where the fit fails (a design with no usable log)."""
+    return rival_fit(rival, e, theta, nested=nested)[0]
+
+
+def rival_fit(rival, e: Experiment, theta: np.ndarray, *, nested="auto", near=None):
+    """``(χ², fit)`` of :func:`rival_chi2` (``(NaN, None)`` where it fails). ``near``: the
+    rival's fit to a neighbouring problem (the same design, other release instants), its
+    optimum the start beside the fit's own grid, at its order, without the limit checks
+    (which as restarts find the basin that start already holds: a fifth of the cost)."""
     if not np.all(np.isfinite(theta)):
-        return math.nan
+        return math.nan, None
     log = noise_free_log(e, theta, f"{e.name} (noise-free)")
-    r = best_rival_fit(log, rival, e, nested=nested)
-    return math.nan if r is None else chi2(r, e.resolution)
+    if near is None:
+        r = best_rival_fit(log, rival, e, nested=nested)
+    else:
+        from .._errors import HdidError
+        from .._fitting._fit import fit as fit_log
+
+        try:
+            r = fit_log(log, start_from_model=True, nested=False, **{**fit_options(rival, e), "model": near.model})
+        except (HdidError, ValueError, FloatingPointError):
+            r = None
+    return (math.nan, None) if r is None else (chi2(r, e.resolution), r)
 
 
 #: A position-periodic rival (an effect with an ``order``: ripple, kinematic error) is

@@ -205,11 +205,12 @@ def _fit_globally(s: Separation, fit_a, fit_b, ab: "_Direction", ba: "_Direction
     """``s.best``: each rival fitted by :func:`hdid.fit` to the other's noise-free
     readings (:func:`._best_rival.rival_chi2`) — at the experiment's own release instants
     the smaller of it and the local refit — averaged over ``draws`` sets of release
-    instants (module docstring; ``s.draws`` each); ``s.trace``: ``tr((P_A − P_B)²)`` from
-    both forms' Jacobians at the design."""
+    instants (module docstring; ``s.draws`` each; the other instants' rival fitted from its
+    optimum at the own instants too, :func:`._best_rival.rival_fit`); ``s.trace``:
+    ``tr((P_A − P_B)²)`` from both forms' Jacobians at the design."""
     e = s.experiment
-    lam_a = _best_rival.rival_chi2(fit_b, e, ab.y)   # A true: B fitted to A's readings
-    lam_b = _best_rival.rival_chi2(fit_a, e, ba.y)
+    lam_a, ra = _best_rival.rival_fit(fit_b, e, ab.y)   # A true: B fitted to A's readings
+    lam_b, rb = _best_rival.rival_fit(fit_a, e, ba.y)
     va = [float(np.nanmin([lam_a, ab.chi2])) if math.isfinite(lam_a) else math.nan]
     vb = [float(np.nanmin([lam_b, ba.chi2])) if math.isfinite(lam_b) else math.nan]
     Ub, Ua = ab._svd(ab.system()[0])[0], ba._svd(ba.system()[0])[0]
@@ -220,9 +221,9 @@ def _fit_globally(s: Separation, fit_a, fit_b, ab: "_Direction", ba: "_Direction
         others = phase_draws(e, draws - 1)
         ya, yb = _trajectories(fit_a, others), _trajectories(fit_b, others)
         spread = 2.0 * (s.trace if s.trace is not None else abs(s.k[0] - s.k[1]))
-        for j, ej in enumerate(others):
-            va.append(_best_rival.rival_chi2(fit_b, ej, ya[j]))
-            vb.append(_best_rival.rival_chi2(fit_a, ej, yb[j]))
+        for j, ej in enumerate(others):  # each started from the own instants' rival optimum too
+            va.append(_best_rival.rival_fit(fit_b, ej, ya[j], near=ra)[0])
+            vb.append(_best_rival.rival_fit(fit_a, ej, yb[j], near=rb)[0])
             if j == 0 and all(_settled(v, spread) for v in (va, vb)):
                 break
     s.draws = (tuple(va), tuple(vb))
