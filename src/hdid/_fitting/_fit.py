@@ -16,7 +16,7 @@ import numpy as np
 from .._errors import FitError
 from .._problems._evaluate import dense as _dense
 from .._problems import _programs
-from ._identifiability import MOVED_COUNTS, analyse
+from ._identifiability import MOVED_COUNTS, analyse, analyse_first_finite
 from .._log import Log, read_log
 from .._models._model import Model
 from . import _cubic_restart, _first_reading, _limits, _polish
@@ -385,13 +385,11 @@ def _finish(setup: _Setup, U, costs, ok, steps, t_start: float, **analyse_option
             f"{prep.source}: every start diverged (non-finite residuals); check units "
             "(rad vs counts) and --inertia, or fix some parameters"
         )
-    order = np.argsort(np.where(finite, costs, np.inf))
-    best = int(order[0])
-    u = U[best]
-    starts = StartSummary.from_solutions(problem, U, costs, ok, steps, best)
-    if analyse_options.get("precomputed") is None:
-        analyse_options["precomputed"] = _stored_analysis(problem, u)
-    result = analyse(problem, prep, u, starts, fixed=set(setup.fixed), **analyse_options)
+    order = np.argsort(np.where(finite, costs, np.inf))[: int(finite.sum())]
+    result, best = analyse_first_finite(
+        problem, prep, U, order, lambda i: StartSummary.from_solutions(
+            problem, U, costs, ok, steps, i), lambda u: _stored_analysis(problem, u),
+        set(setup.fixed), **analyse_options)
     result.wall_time_s = time.perf_counter() - t_start
     if not ok[best]:
         result.warnings.append(

@@ -10,7 +10,6 @@ import numpy as np
 from .._covariance import null_in_u, scaled_covariance, undetermined_scaled
 from .._problems._evaluate import dense as _dense
 from .._problems._evaluate import jacobian as _jacobian
-from .._simulation._aliasing import aliasing_warning, swing_hz
 from .._simulation._prepare import Prepared
 from .._problems._problem import Problem
 from .._results._result import FitResult
@@ -18,7 +17,7 @@ from .._results._summaries import ParameterEstimate, RunSummary, StartSummary
 from .._models._transforms import derivative
 from .._problems._derived import BracketTooCostly, _derived, band_bracket
 from ..effects import StribeckFriction
-from ._floor import RESIDUAL_FLOOR_FACTOR, residual_warnings  # noqa: F401 (re-exported)
+from ._plausibility import RESIDUAL_FLOOR_FACTOR, plausibility_warnings  # noqa: F401
 
 
 #: A direction in the optimiser's space whose data-only standard deviation exceeds this
@@ -119,6 +118,30 @@ def analyse(
         covariance=cov,
         labels=labels,
     )
+
+
+def analyse_first_finite(problem: Problem, prep: Prepared, U, order, summary, stored, fixed,
+                         **options) -> tuple[FitResult, int]:
+    """:func:`analyse` of the first row of ``U`` in ``order`` (best first) with finite
+    residuals and sensitivities, and its index: an optimum at the end of a parameter's range
+    (world log08: v_s 7e-4 rad/s under δ = 3.2 overflows ∂/∂v_s) is passed over, with a
+    warning; none finite: the best one's error. ``summary(i)``, ``stored(u)``: its start
+    summary, its precomputed analysis (the caller's ``precomputed`` for the best)."""
+    from .._errors import FitError
+
+    for k, i in enumerate(int(j) for j in order):
+        pre = options.pop("precomputed", None) if k == 0 else None
+        try:
+            res = analyse(problem, prep, U[i], summary(i), fixed=fixed,
+                          precomputed=pre if pre is not None else stored(U[i]), **options)
+        except FitError as e:
+            first = e if k == 0 else first
+            continue
+        res.warnings += [f"the {k} best optimum(s) have overflowing sensitivities (a "
+                         "parameter at the end of its range): the best with finite ones is "
+                         "reported"] * (k > 0)
+        return res, i
+    raise first
 
 
 def _noise(problem: Problem, prep: Prepared, r, warnings: list[str]):
@@ -431,35 +454,6 @@ def _shape_warnings(problem: Problem, flags: dict[str, str]) -> list[str]:
                 f"({', '.join(shape)}), which this log does not determine, and may be too "
                 "small — sample the posterior (--posterior) for intervals over the shape"
             )
-    return out
-
-
-def plausibility_warnings(prep: Prepared, model, values, rms: float,
-                          fitted_hz: float = math.nan) -> list[str]:
-    """Warn when the log's numbers are implausible for the declared units (time in s,
-    angles in rad) or its sampling (the fitted swing ``fitted_hz`` aliased)."""
-    out = []
-    fs = 1.0 / prep.sample_period
-    if fs < 5.0:
-        out.append(
-            f"the sample rate is {fs:.3g} Hz: implausibly low for this test if time is in "
-            "seconds (a log in milliseconds reads as 1000× slower): convert time to seconds"
-        )
-    amp = float(np.max(np.abs(prep.hold - prep.rest))) if prep.n_runs else 0.0
-    if aliased := aliasing_warning(prep.sample_period, swing_hz(
-            fitted_hz, values, amp / model.ratio), prep.frequency_hz):
-        out.append(aliased)
-    has_gravity = any(e.name == "gravity" for e in model.effects)
-    if (not has_gravity and ("k1" in values and model.ratio > 1 and amp / model.ratio > 0.05
-                             or amp > math.pi)):
-        out.append(
-            f"the logged swing {amp:.3g} rad at the input is {amp / model.ratio:.3g} rad at the "
-            f"output (ratio {model.ratio:g}): a strain-wave gear twists ~1e-3 rad at rated "
-            "torque and a spring test rarely swings over half a turn — is theta in degrees, "
-            "mrad or counts (convert to rad, or --counts-per-rev), or is the ratio wrong "
-            "(--ratio)?"
-        )
-    out += residual_warnings(prep, rms)
     return out
 
 

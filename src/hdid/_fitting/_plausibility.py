@@ -1,12 +1,17 @@
-"""Has a fit reached its floor? The residual against what the sensor alone leaves: the
-rounding of a quantized sensor (RMS = step/√12, exact: a uniform error) or the readings'
-noise σ estimated from their still stretches (a noise model's resolution is σ·√12)."""
+"""Is a fit plausible? The log's numbers for the declared units (time in s, angles in rad),
+its sampling against the fitted swing, and the residual against its floor: what the sensor
+alone leaves, the rounding of a quantized sensor (RMS = step/√12, exact: a uniform error) or
+the readings' noise σ estimated from their still stretches (a noise model's resolution is
+σ·√12)."""
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from .._log._resolution import step_against_readings
+from .._simulation._aliasing import aliasing_warning, swing_hz
 from .._simulation._prepare import Prepared
 from ._limits import FLOOR_TAIL, above_floor
 
@@ -47,4 +52,33 @@ def residual_warnings(prep: Prepared, rms: float) -> list[str]:
             "missing effect (try `hdid diagnose`); the standard errors are scaled up by the "
             "residual but still assume the model"
         )
+    return out
+
+
+def plausibility_warnings(prep: Prepared, model, values, rms: float,
+                          fitted_hz: float = math.nan) -> list[str]:
+    """Warn when the log's numbers are implausible for the declared units (time in s,
+    angles in rad) or its sampling (the fitted swing ``fitted_hz`` aliased)."""
+    out = []
+    fs = 1.0 / prep.sample_period
+    if fs < 5.0:
+        out.append(
+            f"the sample rate is {fs:.3g} Hz: implausibly low for this test if time is in "
+            "seconds (a log in milliseconds reads as 1000× slower): convert time to seconds"
+        )
+    amp = float(np.max(np.abs(prep.hold - prep.rest))) if prep.n_runs else 0.0
+    if aliased := aliasing_warning(prep.sample_period, swing_hz(
+            fitted_hz, values, amp / model.ratio), prep.frequency_hz):
+        out.append(aliased)
+    has_gravity = any(e.name == "gravity" for e in model.effects)
+    if (not has_gravity and ("k1" in values and model.ratio > 1 and amp / model.ratio > 0.05
+                             or amp > math.pi)):
+        out.append(
+            f"the logged swing {amp:.3g} rad at the input is {amp / model.ratio:.3g} rad at the "
+            f"output (ratio {model.ratio:g}): a strain-wave gear twists ~1e-3 rad at rated "
+            "torque and a spring test rarely swings over half a turn — is theta in degrees, "
+            "mrad or counts (convert to rad, or --counts-per-rev), or is the ratio wrong "
+            "(--ratio)?"
+        )
+    out += residual_warnings(prep, rms)
     return out
