@@ -81,11 +81,14 @@ def _run_sse(t, w, r_hp, omega, a_model, periods, fracs):
     return out
 
 
-def scan(frame, *, floor: float | None = None, current=None, periods=None) -> AgeScan | None:
+def scan(frame, *, floor: float | None = None, current=None, periods=None,
+         exclude: tuple[float, float] | None = None) -> AgeScan | None:
     """The clock that best explains ``frame``'s residuals (:func:`hdid.FitResult.residuals`:
     columns ``run``, ``t``, ``residual_rad``, ``omega``, ``phase``, ``weight``), the model's
     own age ``current`` (a :class:`ReadingAge`, or ``None``) taken off; ``periods`` [s]
-    replaces the grid. ``None`` when no run has moving samples."""
+    replaces the grid; ``exclude`` ``(lo, hi)`` [s] leaves those periods out (the runner-up
+    clock: an alias of the best against the host's rate gives the same sawtooth up to its
+    height). ``None`` when no run has moving samples."""
     runs = []
     for name, d in frame.groupby("run", sort=False):
         m = (d["phase"] == "moving").to_numpy() & (d["weight"].to_numpy() > 0)
@@ -102,6 +105,10 @@ def scan(frame, *, floor: float | None = None, current=None, periods=None) -> Ag
         df = max(1.0 / (STEP_FRACTION * span), (f_hi - f_lo) / MAX_PERIODS)
         periods = 1.0 / np.arange(f_lo, f_hi + df, df)
     periods = np.asarray(periods, dtype=float)
+    if exclude is not None:
+        periods = periods[(periods < exclude[0]) | (periods > exclude[1])]
+    if not len(periods):
+        return None
 
     def model_age(i, t):
         if current is None or current.phases is None:
