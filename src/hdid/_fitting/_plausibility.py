@@ -23,13 +23,28 @@ from ._limits import FLOOR_TAIL, above_floor
 RESIDUAL_FLOOR_FACTOR = 3.0
 
 
+#: The simulator's own error relative to the logged swing (RK4 substeps: 1.9e-5 rad on a
+#: 0.157 rad swing, docs/decisions/simulator-scheme.md; :mod:`hdid._simulation._noise`):
+#: the floor a correct model reaches on a fine encoder is the rounding and this together (a
+#: world log, 2^17 counts, 0.31 rad swing at 100 Hz: 1.33x the rounding with every parameter
+#: within 0.5 sd of its truth; this term is 2.3x the rounding there).
+SIMULATOR_ACCURACY = 1e-4
+
+
+def _span(prep: Prepared) -> float:
+    """The largest span of a run's readings [log units]."""
+    return max((float(np.ptp(prep.theta[i, :n])) for i, n in enumerate(prep.lengths) if n),
+               default=0.0)
+
+
 def residual_warnings(prep: Prepared, rms: float) -> list[str]:
     """What the RMS residual ``rms`` [log units] of a fit says: a step that does not match
     the readings, a model that does not describe the log (above
     :data:`RESIDUAL_FLOOR_FACTOR`× the floor) or, on a quantized sensor, a fit that has not
     reached the floor (above the χ² tail test :func:`hdid._fitting._limits.above_floor` for
-    the log's effective readings); none at the floor."""
-    out = []
+    the log's effective readings, the floor being the rounding and the simulator's accuracy
+    together); none at the floor."""
+    out, floor = [], prep.resolution / math.sqrt(12)
     if wrong_step := (step_against_readings(prep.theta, prep.lengths, prep.resolution, rms,
                                             RESIDUAL_FLOOR_FACTOR) if prep.quantized else None):
         out.append(wrong_step)
@@ -42,11 +57,11 @@ def residual_warnings(prep: Prepared, rms: float) -> list[str]:
             "--starts, or a warm --start), a missing effect (try `hdid diagnose`), wrong units, "
             "a wrong resolution or noise beyond the sensor's step"
         )
-    elif prep.quantized and math.isfinite(rms) and rms > (
-            above := above_floor(prep.n_effective)) * prep.resolution / math.sqrt(12):
+    elif prep.quantized and math.isfinite(rms) and rms > (above := above_floor(
+            prep.n_effective) * math.hypot(1.0, SIMULATOR_ACCURACY * _span(prep) / floor)) * floor:
         out.append(
-            f"the RMS residual is {rms / (prep.resolution / math.sqrt(12)):.3g}× the "
-            f"quantization floor, above the {above:.3g}× that rounding alone leaves over "
+            f"the RMS residual is {rms / floor:.3g}× the quantization floor, above the "
+            f"{above:.3g}× that rounding and the simulator's accuracy leave over "
             f"{prep.n_effective:.0f} effective readings (χ² tail {FLOOR_TAIL:g}): the fit has "
             "not reached the floor — a poorer basin (more --starts, or a warm --start) or a "
             "missing effect (try `hdid diagnose`); the standard errors are scaled up by the "
