@@ -89,6 +89,13 @@ class Clock:
         self.cpu = time.process_time() - self.c0
 
 
+def user_env(**extra) -> dict:
+    """This process's environment as a user's ``hdid`` sees it, with ``extra``: the persistent cache on
+    (``HDID_NO_CACHE`` dropped) and Python's compiled modules written and read (``PYTHONDONTWRITEBYTECODE``
+    dropped: ``pip install`` compiles them; without them every process compiles hdid's sources, ≈ 1–2 s)."""
+    return {k: v for k, v in os.environ.items() if k not in ("HDID_NO_CACHE", "PYTHONDONTWRITEBYTECODE")} | extra
+
+
 def stats(xs) -> dict:
     """Median, min, max, count and every value of ``xs``."""
     xs = [float(x) for x in xs]

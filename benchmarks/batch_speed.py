@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import resource
 import shutil
 import subprocess
@@ -163,7 +162,7 @@ def _workers_run(cfg: dict, warm: list, timed: list, t_imp: float) -> dict:
 
 
 def run_worker(cfg: dict, cache_dir: Path, timeout: float = 3600) -> dict:
-    env = {k: v for k, v in os.environ.items() if k != "HDID_NO_CACHE"} | {"HDID_CACHE_DIR": str(cache_dir)}
+    env = _common.user_env(HDID_CACHE_DIR=str(cache_dir))
     if cfg.get("tree"):  # another checkout's hdid (its src first on the path)
         env["PYTHONPATH"] = str(Path(cfg["tree"]) / "src")
     wall, _, out = _common.run_timed([sys.executable, __file__, "--worker", json.dumps(cfg)], env, timeout,

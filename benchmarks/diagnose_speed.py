@@ -7,14 +7,13 @@ each call a fresh pinned process with its own cache folder.
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from _common import DATA, ROOT, interpretation_section, load_text, parse_or_render, run_meta, write_result
+from _common import DATA, ROOT, interpretation_section, load_text, parse_or_render, run_meta, user_env, write_result
 
 NAME = "diagnose_speed"
 LOG = DATA / "hidden_hysteresis_1khz.csv"
@@ -37,8 +36,7 @@ print("@@" + json.dumps({"wall_s": wall, "cpu_s": ru.ru_utime + ru.ru_stime, "ti
 
 
 def measure(src: str, cache: Path, core: int, log: Path) -> dict:
-    env = {k: v for k, v in os.environ.items() if k != "HDID_NO_CACHE"}
-    env |= {"HDID_CACHE_DIR": str(cache), "PYTHONPATH": str(Path(src).resolve())}
+    env = user_env(HDID_CACHE_DIR=str(cache), PYTHONPATH=str(Path(src).resolve()))
     with tempfile.TemporaryDirectory() as tmp:
         load0, t0 = load_text(), time.perf_counter()
         r = subprocess.run(["taskset", "-c", str(core), sys.executable, "-c", CHILD, str(log),

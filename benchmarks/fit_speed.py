@@ -46,7 +46,7 @@ def _cache_stats(path: Path):
 
 def bench_cli(cache: Path, reps: dict) -> dict:
     hdid = _hdid()
-    env = {k: v for k, v in os.environ.items() if k != "HDID_NO_CACHE"} | {"HDID_CACHE_DIR": str(cache)}
+    env = _common.user_env(HDID_CACHE_DIR=str(cache))
     fit_cmd = [hdid, "fit", str(LOG), "-q", "--json", str(cache.parent / "fit_out.json")]
     res = {"command": "hdid fit data/synthetic/csf8_paper.csv -q --json OUT",
            "import_fit_modules": FIT_MODULES, "load_before": load("cli start")}
@@ -383,7 +383,7 @@ def _pinned(trees: dict, rounds, cmd, env=None):
         for label, src in trees.items():
             before = load(f"{label} {k} start")
             wall, cpu, out = run_timed(["taskset", "-c", "1", *cmd(label)],
-                                       os.environ | {"PYTHONPATH": str(src)} | (env(k, label) if env else {}))
+                                       _common.user_env(PYTHONPATH=str(src)) | (env(k, label) if env else {}))
             yield k, label, wall, cpu, out, before, load(f"{label} {k} end")
 
 

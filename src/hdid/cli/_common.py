@@ -333,7 +333,18 @@ class _Command(cloup.Command):
 
 
 class _Group(click.Group):
-    """Usage errors (unknown option, value out of range, …) as one line, exit status 2."""
+    """Usage errors (unknown option, value out of range, …) as one line, exit status 2. As the
+    ``hdid`` process (called with no arguments), it leaves without the interpreter's teardown."""
+
+    def __call__(self, *args, **kwargs):
+        if args or kwargs:  # called by a program (``main([...])``): as click's
+            return super().__call__(*args, **kwargs)
+        try:
+            super().__call__()
+            code = 0
+        except SystemExit as exc:
+            code = exc.code
+        _leave(code)
 
     def make_context(self, info_name, args, parent=None, **extra):
         try:
@@ -346,6 +357,31 @@ class _Group(click.Group):
             return super().invoke(ctx)
         except click.UsageError as exc:
             raise _usage_fail(exc) from None
+
+
+def _leave(code) -> None:
+    """End the ``hdid`` process with ``code`` as the interpreter would — threads' exit hooks and
+    other threads joined, exit handlers run, output flushed — but without freeing every module,
+    JAX's compiled programs and XLA's client one by one (measured on the shipped paper log with a
+    warm cache: 0.5 s of the command's 4.1 s of CPU, ≈ 1 s of wall time on a loaded core). Where
+    the Python has no ``threading._shutdown``: exits normally."""
+    import atexit
+    import os
+    import threading
+
+    if code is not None and not isinstance(code, int):  # as SystemExit("message")
+        print(code, file=sys.stderr)
+        code = 1
+    if not callable(shutdown := getattr(threading, "_shutdown", None)):
+        sys.exit(code)
+    shutdown()  # what the interpreter runs first at exit: executors' hooks, non-daemon threads joined
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe or stream: nothing left to write
+            pass
+    os._exit(code or 0)
 
 
 def _usage_fail(exc: click.UsageError) -> _Fail:
