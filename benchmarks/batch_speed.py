@@ -171,17 +171,13 @@ def run_worker(cfg: dict, cache_dir: Path, timeout: float = 3600) -> dict:
 
 
 def measure(args) -> dict:
-    log_dir = Path(args.log_dir)
-    cache = Path(tempfile.mkdtemp(prefix="hdid_batch_cache_"))
+    log_dir, cache = Path(args.log_dir), Path(tempfile.mkdtemp(prefix="hdid_batch_cache_"))
     res = {"load_start": load("script start"), "machine": _common.machine(), "quick": args.quick, "runs": []}
-    t_script = time.perf_counter()
-    ns = [1, 10, 100] if args.quick else [1, 10, 100, args.n]
-    loop_ns = [1, 10] if args.quick else [1, 10, 100]
-    n_scipy = 1 if args.quick else 3
+    ns, loop_ns, n_scipy = ([1, 10, 100], [1, 10], 1) if args.quick else ([1, 10, 100, args.n], [1, 10, 100], 3)
     print("making logs ...", flush=True)
-    t = time.perf_counter()
+    t_script = time.perf_counter()
     paper = make_logs("paper", WARMUP + max(ns), log_dir)
-    res["log_generation_s"] = time.perf_counter() - t
+    res["log_generation_s"] = time.perf_counter() - t_script
 
     def go(label, mode, n, design="paper", paths=None, **extra):
         if any(map(label.startswith, args.skip or ())) or (args.only and not any(map(label.startswith, args.only))):
@@ -214,9 +210,8 @@ def measure(args) -> dict:
     # several cores: worker processes (threads in one process do not add cores)
     for n in ns[-2:]:
         go(f"workers 2, {n}", "workers", n, paths=paper, workers=2)
-    for design in ("short 0.25 s", "long 1.0 s", "1 kHz", "2 runs", "8 runs"):
-        go(f"design {design}, 20 logs", "vectorized", 20, design=design)
-    go("design paper, 20 logs", "vectorized", 20, paths=paper)
+    for design in (*list(DESIGNS)[1:], "paper"):
+        go(f"design {design}, 20 logs", "vectorized", 20, design=design, paths=paper if design == "paper" else None)
     res |= {"script_s": time.perf_counter() - t_script, "load_end": load("script end")}
     shutil.rmtree(cache, ignore_errors=True)
     return res
