@@ -169,3 +169,20 @@ def test_an_optimum_with_overflowing_sensitivities_is_passed_over_not_a_refusal(
     assert any("overflowing sensitivities" in w for w in res.warnings), res.warnings
     with pytest.raises(hdid.FitError):  # none can be analysed: still the one-line error
         _finish(s, bad[None, :], np.zeros(1), ok, steps, time.perf_counter())
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_run_cut_at_its_first_moving_sample_times_its_turn_to_stop(seed):
+    # HW's station file 24_no_hold: the paper plant (60 Hz at 250 Hz, 4000 counts) whose
+    # logger starts at each run's first moving sample; a run makes one turn, then stops.
+    df = make_log(TRUTH_CSF8, [0.157, -0.157, 0.157, -0.157], 250.0, 0.5, 0.02, {"A": 0.0},
+                  seed)
+    hold = df.groupby("run")["theta"].transform("first")
+    moved = (df["theta"] != hold).groupby(df["run"]).cummax()
+    prep = prepare(hdid.read_log(df[moved].reset_index(drop=True)))
+    # Before: a moving start with one turn was timed by neither rule (two turns; a stop
+    # without a turn): frequency 0.5 Hz (the log's length), every run "ends moving", and
+    # the fit ran to k1 -> 0 at 20.9x the floor. Turn to stop is a half period, late by up
+    # to a sample (4 ms of ~8 ms): the start grid spans 0.25-6.7x the frequency
+    assert 0.5 < prep.frequency_hz / _fn(TRUTH_CSF8) < 2.0, prep.frequency_hz
+    assert not np.any(prep.ends_moving), prep.ends_moving

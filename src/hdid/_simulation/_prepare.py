@@ -338,6 +338,12 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
             half_periods.extend(np.diff(tt))
         elif len(tt) == 1 and not moving[i]:
             half_periods.append(tt[0] - 0.5 * (t[k0] + t[min(k0 + 1, n - 1)]))
+        elif len(tt) == 1 and tail_start < n:
+            # a moving start with one turn, then rest: turn to stop is a half period (a
+            # Coulomb stop is a turning point), timed at the first reading at rest (a bound).
+            # Without it a log cut at its first moving sample (250 Hz, 60 Hz gear: one turn
+            # a run) had no frequency but its length's (0.5 Hz): the fit ran to k1 -> 0
+            stops.append(max(t[min(tail_start, n - 1)] - tt[0], dt))
         elif not tt and tail_start < n:
             # reached rest without a turn: the stop (a Coulomb stop is a turning point);
             # from the first reading where the log starts after the release (a bound: the
