@@ -58,11 +58,32 @@ def test_bam_xl330_every_run_released(bam_fit):
     _released(bam_fit["runs"], bam_fit["warnings"])
 
 
+# What was tried on this log (one `hdid fit` each, the issue's options plus --add ...;
+# |rest_model - rest_logged| per run kp100/kp200/kp400/kp800 in rad):
+# - base (Stribeck + viscous): RMS 9.50e-3 rad (59x the log's own noise 1.6e-4), rests
+#   0.0015/0.0001/0.0096/0.0115, mgl 0.471, band 0.0276.
+# - hdid diagnose (--selection-steps 2): "unexplained"; candidates by dBIC: ripple (order 6)
+#   -1837, gravity_friction -436, load_friction -346, asymmetric_friction -43; back_emf,
+#   hysteresis, reading_age no gain. Ladder: + ripple:6 (42.8x the noise), + hysteresis (34.7x).
+# - + gravity_friction: c_g 0.080 N m, RMS 9.48e-3, rests 0.0063/0.0034/0.0160/0.0100.
+#   (A model-free energy balance per half-swing prefers F0 + c_g|sin| to F0 + c_v, with
+#   c_g 0.098-0.117 N m per run, near BAM's M6 0.26*mgl = 0.12 N m; the trajectory fit
+#   does not follow it: the misfit is dominated by something else.)
+# - + ripple:6: RMS 6.89e-3, rests 0.0070/0.0034/0.0147/0.0073.
+# - + ripple:6 + hysteresis (diagnose's ladder): RMS 5.59e-3, rests 0.0044/0.0021/0.0005/
+#   0.0017, mgl 0.487, but the band reported is 0.0067 rad (outside [0.018, 0.040]; the Dahl
+#   element holds the rest, (tau_s + f_h)/mgl = 0.026) and an output ripple of 6 per rev has
+#   no known source in a spur gear. f_h/sigma_h = 0.011 rad matches the tails' reversals
+#   inside the base band (kp400 turns at -0.016 rad and creeps back 0.013 rad): free play
+#   or presliding compliance in the gear train.
+# - + gravity_friction + hysteresis: rests within 0.0073 but mgl 0.384 (-20 %), f_h/sigma_h
+#   2.4 rad (an extra spring, not friction), band 0.
+# No library model meets all three criteria (rests, mgl, band) on this log.
 @pytest.mark.xfail(strict=True, reason=(
     "kp800 rests 0.0115 rad from its logged rest in the best optimum hdid knows for the "
-    "Stribeck + viscous law (RMS 9.50e-3 rad, band 0.0276 rad); the runs creep into rest "
-    "more slowly than that law can (the XL330's friction is load-dependent in BAM's own "
-    "models); the other runs are within 0.0096 rad"))
+    "Stribeck + viscous law (RMS 9.50e-3 rad, band 0.0276 rad); gravity_friction, "
+    "back_emf, hysteresis, reading_age, ripple and diagnose's ladder (ripple:6 + "
+    "hysteresis) each miss a criterion (see the comment above)"))
 def test_bam_xl330_rests_within_a_hundredth_of_a_radian(bam_fit):
     for run in bam_fit["runs"]:
         # the issue's criterion: the model rests within 0.01 rad of the logged rest
