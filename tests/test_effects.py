@@ -462,3 +462,40 @@ def test_reading_age_is_tried_by_diagnose_only_where_readings_jump(aged_fits):
     assert cand.penalty(400) == pytest.approx(3 * np.log(400))
     # a log whose residual is at the rounding floor (the aged fit's) has nothing for it
     assert cand.variants(plain.model, {}, {"frame": aged.residuals()}) == []
+
+
+def test_reading_age_is_simulated_or_refused_never_ignored(tmp_path):
+    """`hdid simulate --from` a fit with the age reads each run at its device's samples (the
+    numpy oracle above); a driven fit, which does not model it, says so (one line) instead of
+    fitting as if it were absent."""
+    from pathlib import Path
+
+    import pandas as pd
+
+    from hdid._simulation._synthetic import synthesize
+    from hdid.effects import LinearStiffness, ReadingAge, ViscousFriction
+
+    period, phases, rate, hold = 0.007, np.array([0.0031, 0.0007]), 100.0, 0.2
+    base = hdid.Model(effects=(LinearStiffness(k1=AGE_K), ViscousFriction(c_v=AGE_C)),
+                      inertia=AGE_I, ratio=1.0)
+    model = base.with_effect(ReadingAge(sample_period=period, phases=phases))
+    kw = dict(amplitudes=(0.5, -0.4), rate=rate, duration=2.0, hold=hold, counts_per_rev=None,
+              seed=5)
+    synthesize(tmp_path / "aged.csv", model=model, **kw)
+    synthesize(tmp_path / "plain.csv", model=base, **kw)
+    aged, plain = (pd.read_csv(tmp_path / f"{n}.csv") for n in ("aged", "plain"))
+    rng, t_rel = np.random.default_rng(5), []
+    for _ in range(2):  # synthesize's draws: a release instant, then the run's noise
+        t_rel.append(hold + rng.uniform(0.0, 1.0) / rate)
+        rng.normal(0.0, 0.0, size=int(round(2.0 * rate)))
+    for r, (phi, a) in enumerate(zip(phases, (0.5, -0.4))):
+        run = aged[aged["run"] == aged["run"].unique()[r]]
+        held = run["time"].to_numpy() - np.mod(run["time"].to_numpy() - phi, period)
+        oracle = np.where(held < t_rel[r], a, _damped(held - t_rel[r], a))
+        # RK4 against the closed form: ~1e-6 rad over 2 s here; the age itself moves the
+        # readings by ω·a, up to ~70 mrad (so ignoring it fails by 4 orders of magnitude)
+        assert np.max(np.abs(run["theta"].to_numpy() - oracle)) < 1e-4
+    assert np.max(np.abs(aged["theta"].to_numpy() - plain["theta"].to_numpy())) > 1e-2
+    with pytest.raises(hdid.FitError, match="reading_age"):
+        hdid.fit_driven(Path(__file__).resolve().parents[1] / "data" / "synthetic"
+                        / "driven_csf8.csv", model)

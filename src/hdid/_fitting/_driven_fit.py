@@ -325,6 +325,8 @@ def _as_joint(model, order: int, data: DrivenData | None = None) -> DrivenJoint:
     arm hangs is a parameter."""
     if isinstance(model, DrivenJoint):
         return model.with_order(order) if model.positional.order != order else model
+    if model is not None and model.reading is not None:  # not modelled here: say so, not ignore
+        raise FitError("reading_age: driven fits do not model the readings' age; fit without it")
     m = _with_hanging_angle(Model.default() if model is None else model)
     tau_fout = 0.0 if data is not None and not data.has_output else 0.05
     return DrivenJoint(m, tau_fout, PositionalError.zeros(order))

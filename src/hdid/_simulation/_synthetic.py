@@ -43,9 +43,12 @@ def synthesize(
     t = np.arange(n) / rate
     step = 2 * math.pi / counts_per_rev if counts_per_rev else None
     runs = []
+    # a reading component (e.g. reading_age): each run read at the instants its device sampled
+    t_read = (np.asarray(model.reading.sample_times(np.tile(t, (len(amplitudes), 1))))
+              if model.reading is not None else np.tile(t, (len(amplitudes), 1)))
     for i, a in enumerate(amplitudes):
         t_r = hold + rng.uniform(0.0, 1.0) / rate
-        theta = np.asarray(simulate(model, t, a, t_r, max_substep=min(2.5e-4, 0.25 / rate)))
+        theta = np.asarray(simulate(model, t_read[i], a, t_r, max_substep=min(2.5e-4, 0.25 / rate)))
         enc = theta + offset + rng.normal(0.0, noise, size=n) * (noise > 0)
         if step:
             enc = np.round(enc / step) * step
