@@ -152,6 +152,11 @@ def parse_or_render(ap, argv, name, render, indent: int = 2):
     return None
 
 
+def header(*cols: str) -> list[str]:
+    """A markdown table's header row and rule: ``| a | b |``, ``|---|---|``."""
+    return ["| " + " | ".join(cols) + " |", "|---" * len(cols) + "|"]
+
+
 def interpretation_section(res: dict) -> list[str]:
     """Markdown lines of the hand-written interpretation stored in ``res``, if any."""
     return ["## Interpretation", "", res["interpretation"], ""] if res.get("interpretation") else []

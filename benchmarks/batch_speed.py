@@ -5,8 +5,6 @@ cost vs design; compile time. (``hdid.fit`` and the scipy way: fit_speed.py, sci
     python benchmarks/batch_speed.py --render    # results/batch_speed.md from its JSON
 """
 
-from __future__ import annotations
-
 import argparse
 import json
 import resource
@@ -18,7 +16,7 @@ import time
 from pathlib import Path
 
 import _common
-from _common import ROOT, Clock, load
+from _common import ROOT, Clock, header, load
 
 from hdid.reference import logs
 
@@ -211,12 +209,9 @@ def _rate(r):
     return r["n"] / r["total_s"]
 
 
-def _cpu_per_log(r):
-    return r["cpu_s"] / r["n"] if r.get("cpu_s") is not None else None
-
-
 def _cpu_ms(r):
-    return (_cpu_per_log(r) or float("nan")) * 1e3
+    """CPU ms per log (NaN where not measured)."""
+    return r["cpu_s"] / r["n"] * 1e3 if r.get("cpu_s") is not None else float("nan")
 
 
 def _ld(r):
@@ -238,10 +233,9 @@ def render(res: dict) -> str:
          f"{res['load_start']['load1']:.1f}, at end {res['load_end']['load1']:.1f}: the 2 cores are shared with "
          "other engineers' jobs, so every row gives the 1-min load before→after it; a load above 2 means hdid got "
          "less than the 2 cores.\n"]
-    for rr in res.get("reruns", []):
-        L.append(f"Re-measured with `--only {' '.join(repr(o) for o in rr['only'])}` on {rr['machine']['date']} (src "
-                 f"{rr['machine']['src_fingerprint']}, load {rr['load_start']['load1']:.1f} → "
-                 f"{rr['load_end']['load1']:.1f}): those rows replace the first run's.\n")
+    L += [f"Re-measured with `--only {' '.join(repr(o) for o in rr['only'])}` on {rr['machine']['date']} (src "
+          f"{rr['machine']['src_fingerprint']}, load {rr['load_start']['load1']:.1f} → {rr['load_end']['load1']:.1f}): "
+          "those rows replace the first run's.\n" for rr in res.get("reruns", [])]
     L.append("Logs: paper design (4 runs ±0.157 rad, 250 Hz, 0.5 s per run, 125 samples), truths k1, tau_c, tau_s, "
              "c_v drawn log-normal (sd 15 %) around the CSF-8 values, made with `hdid.reference.logs.make_log`. "
              "Every configuration runs in a fresh subprocess: it first fits 2 other logs (compile or "
@@ -255,7 +249,7 @@ def render(res: dict) -> str:
     big = v1000 or max(vec, key=lambda r: r["n"])
     wk = [r for r in res["runs"] if r["config"]["mode"] == "workers"]
     wbig = max(wk, key=lambda r: r["n"]) if wk else None
-    L += ["## Goals\n", "| goal | measured | met? |\n|---|---|---|"]
+    L += ["## Goals\n", *header("goal", "measured", "met?")]
     if wbig:
         tw = wbig["total_s"] * 1000 / wbig["n"]
         how = "measured" if wbig["n"] == 1000 else f"extrapolated from {wbig['n']} logs"
@@ -275,8 +269,8 @@ def render(res: dict) -> str:
         L += ["Several cores (`fit_many(workers=2)` / `hdid fit --workers 2`): logs are split into about 8 chunks per "
               "worker process (as `workers=2` does); the timed call runs on a cluster whose workers have each fitted 2 "
               "logs already (*first call*: cluster start plus every worker's trace/compile or cache read).\n",
-              "| N logs | wall | logs/s | CPU per log (all processes) | speed-up vs one "
-              "process | first call | peak RSS (a worker) | load |\n|---|---|---|---|---|---|---|---|"]
+              *header("N logs", "wall", "logs/s", "CPU per log (all processes)", "speed-up vs one process",
+                      "first call", "peak RSS (a worker)", "load")]
         for r in sorted(wk, key=lambda r: r["n"]):
             one = _find(res, f"vectorized {r['n']}")
             up = f"{_rate(r) / _rate(one):.2f}×" if one else "—"
@@ -285,8 +279,7 @@ def render(res: dict) -> str:
         L.append("")
 
     L += ["## logs/s (4-run paper-design logs)\n", "(`hdid.fit` log by log and the scipy way: `fit_speed.md`.)\n",
-          "| N logs | vectorised `fit_many` | CPU per log | peak RSS | first call (compile) | "
-          "load |\n|---|---|---|---|---|---|"]
+          *header("N logs", "vectorised `fit_many`", "CPU per log", "peak RSS", "first call (compile)", "load")]
     for r in vec:
         L.append(f"| {r['n']} | {_rate(r):.2f} ({r['total_s']:.1f} s) | {_cpu_ms(r):.0f} ms | "
                  f"{r['maxrss_mb']:.0f} MB | {r['first_call_s']:.1f} s | {_ld(r)} |")
@@ -297,14 +290,13 @@ def render(res: dict) -> str:
         L.append(f"- vectorised with `band_bracket=True`, {br['n']} logs: {br['total_s']:.1f} s ({_rate(br):.2f} "
                  f"logs/s) vs {v100['total_s']:.1f} s without (load {_ld(br)}; difference "
                  f"{(br['total_s'] - v100['total_s']) / br['n'] * 1e3:+.0f} ms per log of wall time"
-                 + (f", {(_cpu_per_log(br) - _cpu_per_log(v100)) * 1e3:+.0f} ms of CPU"
-                    if _cpu_per_log(br) and _cpu_per_log(v100) else "")
+                 + (f", {d:+.0f} ms of CPU" if (d := _cpu_ms(br) - _cpu_ms(v100)) == d else "")
                  + ").")
     L += ["", "## Against the truth\n"]
     if big.get("per_log"):
         rows = [x for x in big["per_log"] if x]
         L += [f"- vectorised, {big['n']} logs, error against the truth in standard errors (z = (fit − truth)/std):\n",
-              "| parameter | median abs(z) | share abs(z) < 2 | share abs(z) < 3 |\n|---|---|---|---|"]
+              *header("parameter", "median abs(z)", "share abs(z) < 2", "share abs(z) < 3")]
         for k in ("k1", "tau_c", "tau_s", "c_v"):
             if z := sorted(abs(x[f"z_{k}"]) for x in rows if f"z_{k}" in x):
                 L.append(f"| {k} | {z[len(z) // 2]:.2f} | {sum(v < 2 for v in z) / len(z):.0%} | "
@@ -313,8 +305,8 @@ def render(res: dict) -> str:
     L += _before_after(res, big)
     L += ["", "## Where the vectorised time goes\n",
           "Wall seconds, and CPU seconds (process time, both threads) in brackets.\n",
-          "| N | total | compile | setup (read, prepare) | grid | LM (phases 1+2) | "
-          "analysis | LM lane-steps | CPU µs per lane-step |\n|---|---|---|---|---|---|---|---|---|"]
+          *header("N", "total", "compile", "setup (read, prepare)", "grid", "LM (phases 1+2)", "analysis",
+                  "LM lane-steps", "CPU µs per lane-step")]
     for r in vec:
         t = r["timing"]
         both = lambda k, t=t: f"{t[f'{k}_s']:.2f} s" + (  # noqa: E731
@@ -323,15 +315,15 @@ def render(res: dict) -> str:
                  f"{both('solve')} | {both('analyse')} | {t['lane_steps']} | "
                  f"{1e6 * t.get('solve_cpu_s', t['solve_s']) / max(t['lane_steps'], 1):.0f} |")
     L += ["", "## Compile time (first call in a fresh process, 2 logs)\n",
-          "| persistent cache | first call | of which compile (trace + lower + XLA / cache read) |\n|---|---|---|"]
+          *header("persistent cache", "first call", "of which compile (trace + lower + XLA / cache read)")]
     for label, what in (("vectorized, cold cache, 1 log", "empty"), ("vectorized, warm cache, 1 log", "populated")):
         if r := _find(res, label):
             L.append(f"| {what} | {r['first_call_s']:.1f} s | {r['first_call_timing']['compile_s']:.1f} s |")
     L.append("\nIn a warm process (the timed calls above) `compile_s` is 0: one compiled "
              "program per bucket shape is reused for every log.\n")
     L += ["## Cost vs design (20 logs each, vectorised)\n",
-          "| design | samples per run | runs | logs/s | ms per log (wall) | CPU ms per log | "
-          "first call | peak RSS | load |\n|---|---|---|---|---|---|---|---|---|"]
+          *header("design", "samples per run", "runs", "logs/s", "ms per log (wall)", "CPU ms per log", "first call",
+                  "peak RSS", "load")]
     for design in DESIGNS:
         if not (r := _find(res, f"design {design}, 20 logs")):
             continue
@@ -353,20 +345,19 @@ def _before_after(res: dict, after: dict) -> list[str]:
         return []
     b = res.get("before", {})
     L = ["", f"## Before/after: the same {after['n']} logs, `fit_many` in one process\n",
-         f"Before: `{b.get('commit', '?')}` (a detached worktree, its own `src`); after: this "
-         "tree. Each in a fresh process after its 2-log warm-up, one after the other; CPU "
-         "is the process's (load below: the 1-min load before→after each).\n",
-         "| tree | wall | ms per log (wall) | CPU ms per log | LM iterations | grid CPU | LM "
-         "CPU | analysis CPU | load |\n|---|---|---|---|---|---|---|---|---|"]
+         f"Before: `{b.get('commit', '?')}` (a detached worktree, its own `src`); after: this tree. Each in a fresh "
+         "process after its 2-log warm-up, one after the other; CPU is the process's (load below: the 1-min load "
+         "before→after each).\n", *header("tree", "wall", "ms per log (wall)", "CPU ms per log", "LM iterations",
+                                           "grid CPU", "LM CPU", "analysis CPU", "load")]
     for name, r in (("before", before), ("after", after)):
         t = r["timing"]
         L.append(f"| {name} | {r['total_s']:.1f} s | {1e3 * r['total_s'] / r['n']:.0f} | "
-                 f"{1e3 * _cpu_per_log(r):.0f} | {t['lane_steps']} | {t['grid_cpu_s']:.2f} s | "
+                 f"{_cpu_ms(r):.0f} | {t['lane_steps']} | {t['grid_cpu_s']:.2f} s | "
                  f"{t['solve_cpu_s']:.2f} s | {t['analyse_cpu_s']:.2f} s | {_ld(r)} |")
     if d := _dchi2(after, before):
-        L.append(f"\nBest χ² after vs before, same {len(d)} logs: max |Δχ²| = {max(d):.2g}, "
-                 f"logs with |Δχ²| > 0.1: {sum(v > 0.1 for v in d)} (χ² in units of the "
-                 "quantization variance). (Before, the batch's 'LM' time included its grid.)")
+        L.append(f"\nBest χ² after vs before, same {len(d)} logs: max |Δχ²| = {max(d):.2g}, logs with |Δχ²| > 0.1: "
+                 f"{sum(v > 0.1 for v in d)} (χ² in units of the quantization variance). (Before, the batch's 'LM' "
+                 "time included its grid.)")
     return L
 
 

@@ -11,8 +11,6 @@ separation is computed after the verdict and does not change it) on the logs of 
 ``--pairs`` fits (the same seeds), in parts that may run in parallel processes.
 """
 
-from __future__ import annotations
-
 import argparse
 import json
 import math

@@ -9,8 +9,6 @@ logs the floor-level rule can change, diagnosed again. All three are sections of
     python benchmarks/diagnose_independent.py --render
 """
 
-from __future__ import annotations
-
 import argparse
 import json
 import math

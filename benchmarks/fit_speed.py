@@ -8,8 +8,6 @@ goes, per tree; ``--cold``: the cold command alone, per tree.
     python benchmarks/fit_speed.py --cold N [--before TREE]    # the cold command alone
 """
 
-from __future__ import annotations
-
 import argparse
 import json
 import os
