@@ -48,8 +48,7 @@ def main(argv=None) -> int:
                     help="--pairs: global rival fits of the largest upper bounds (design's)")
     ap.add_argument("--pair", type=int, action="append",
                     help="--pairs/--pair-logs: only these PAIRS (index; repeatable)")
-    args = parse_or_render(ap, argv, "design_check", render)
-    if args is None:
+    if (args := parse_or_render(ap, argv, "design_check", render)) is None:
         return 0
     if args.pair_logs or args.diagnose_logs or args.collect:
         return pair_diagnoses(args)

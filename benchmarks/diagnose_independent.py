@@ -379,8 +379,7 @@ def main(argv=None) -> None:
     ap.add_argument("--seeds", help="with --floor-rule: only these seeds (comma-separated)")
     ap.add_argument("--driver-refits", metavar="JSON",
                     help="store re-diagnosed records ({meta, records}) as that section")
-    args = parse_or_render(ap, argv, NAME, render)
-    if args is None:
+    if (args := parse_or_render(ap, argv, NAME, render)) is None:
         return
     if args.driver_refits:
         return store("driver_refits", json.loads(open(args.driver_refits).read()))

@@ -1,5 +1,5 @@
 """The free-motion fit done "the way a user would without hdid": scipy only (``solve_ivp`` LSODA,
-tanh-smoothed friction, ``least_squares``), the baseline that ``fit_speed.py`` and ``batch_speed.py`` import."""
+tanh-smoothed friction, ``least_squares``), the baseline that ``fit_speed.py`` imports."""
 
 import contextlib
 import math
