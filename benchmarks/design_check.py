@@ -17,7 +17,7 @@ import math
 import sys
 import time
 
-from _common import DATA, RESULTS, cpu_model, load, parse_or_render, src_fingerprint
+from _common import DATA, RESULTS, cpu_model, header, load, parse_or_render, src_fingerprint
 
 QUANTITIES = ("k1", "tau_c", "tau_s", "stick_band_halfwidth_rad")
 TARGETS = "tau_c,tau_s,v_s,band"
@@ -312,8 +312,7 @@ def render(res) -> str:
     if sep:
         L += ["", f"--separate {','.join(sep[0]['separate'])} (fits of this log with each added; the separations as "
                   "diagnose computes them: local refits, then the largest fitted globally until it is a value):", "",
-              "| call | candidates | s | top | its 2 ln LR (A, B true) | kind | load 1/5/15 |",
-              "|---|---|---|---|---|---|---|"]
+              *header("call", "candidates", "s", "top", "its 2 ln LR (A, B true)", "kind", "load 1/5/15")]
         for t in sep:
             L.append(f"| {t['call']} | {t['n_candidates']} | {t['seconds']:.2f} | {t['top']} | "
                      f"{', '.join(_fmt(x) for x in t['top_2lnlr'])} | {t['top_kind']} | "
@@ -330,8 +329,7 @@ def render(res) -> str:
     for c in res.get("checks", []):
         L += [f"## Check: {c['n_fitted']} of {c['n_logs']} simulated logs of '{c['experiment']}' "
               f"fitted ({c['seconds']:.0f} s, load {c['load']['load1']:.2f})", "",
-              "| quantity | truth | mean fit | spread | predicted | predicted/spread | within 25 % |",
-              "|---|---|---|---|---|---|---|"]
+              *header("quantity", "truth", "mean fit", "spread", "predicted", "predicted/spread", "within 25 %")]
         for k, q in c["quantities"].items():
             w = c["within_25pct"].get(k, "")
             L.append(f"| {k} | {_fmt(q['truth'])} | {_fmt(q['mean'])} | {_fmt(q['spread'])} | "
@@ -349,8 +347,7 @@ def render(res) -> str:
               "(locally refitted upper bound in brackets). Realised: χ²(other form) − χ²(true form) of hdid.fit on "
               "logs simulated from each fitted form (median; mean ± sd; how many logs the true form fits better); "
               "ratio = predicted mean / realised median.", "",
-              "| pair (log) | experiment | form true | predicted | realised | ratio | s | load |",
-              "|---|---|---|---|---|---|---|---|"]
+              *header("pair (log)", "experiment", "form true", "predicted", "realised", "ratio", "s", "load")]
         for r in pr["rows"]:
             s_ = r["separating"]
             for name, real in r.get("realised", {}).items():

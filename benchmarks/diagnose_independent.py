@@ -16,7 +16,7 @@ import os
 import sys
 
 import numpy as np
-from _common import RESULTS, Clock, load_text, parse_or_render, run_meta, stored, write_result
+from _common import RESULTS, Clock, header, load_text, parse_or_render, run_meta, stored, write_result
 
 from hdid.reference import logs
 
@@ -236,8 +236,7 @@ def _floor_rule_lines(res: dict) -> list[str]:
          f"{m.get('cpu', '')}; src {m.get('src', '')}; `{m.get('command', '')}`. Before: the drawn suite's stored "
          "verdict (above); after: diagnose with the candidates listed, design=False. Every other log of the suite "
          "cannot change verdict (the notes of benchmarks/README.md).", "", *([m["note"], ""] if m.get("note") else []),
-         "| design | seed | hidden | candidates | before | after | ΔBIC (RMS/floor) after | s | load |",
-         "|---|---|---|---|---|---|---|---|---|"]
+         *header("design", "seed", "hidden", "candidates", "before", "after", "ΔBIC (RMS/floor) after", "s", "load")]
     for r in res["rows"]:
         tab = ", ".join(f"{k} {b:.1f} ({x:.2f})" for k, b, x in r["table"])
         L.append(f"| {r['design']} | {r['seed']} | {r['hidden']} | {', '.join(r['candidates'])} | "

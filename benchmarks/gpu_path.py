@@ -23,7 +23,7 @@ import time
 from pathlib import Path
 
 import _common
-from _common import RESULTS, Clock, parse_or_render, write_result
+from _common import RESULTS, Clock, header, parse_or_render, write_result
 
 import hdid
 
@@ -225,8 +225,7 @@ def render(results: dict) -> str:
                  f"differs from the CPU's by at most {gpu['logp_max_abs_diff_vs_reference']:.1e} "
                  f"(log p ≈ {min(gpu['logp_at_positions']):.1f}…{max(gpu['logp_at_positions']):.1f}).")
     L += ["", f"## 3. `sample_posterior`, {POST_STEPS} steps after the burn-in", "",
-          "| backend | walkers | wall | ms/step | walker-steps/s | τ_max (param) | acceptance |",
-          "|---|---|---|---|---|---|---|"]
+          *header("backend", "walkers", "wall", "ms/step", "walker-steps/s", "τ_max (param)", "acceptance")]
     for t, r in cols:
         for p in r["posterior"]:
             L.append(f"| {t} | {p['n_walkers']} | {p['wall_s']:.1f} s | {p['ms_per_step']:.2f} | "
