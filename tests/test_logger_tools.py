@@ -61,6 +61,13 @@ def _stamps(t):
     return EPOCH_NS + np.round(t * 1e9).astype(np.int64)
 
 
+def _stamped(path, header, t, counts):
+    """``header`` then one 'ns stamp,angle [rad]' line per reading: two tools' shape."""
+    path.write_text(header + "\n" + "".join(
+        f"{s},{v}\n" for s, v in zip(_stamps(t), _rad(counts))))
+    return path
+
+
 def _receipts(t, rng):
     """When the recorder got each message: the stamp plus 0.2-0.6 ms of transport."""
     return _stamps(t) + rng.integers(200_000, 600_000, t.size)
@@ -110,16 +117,19 @@ def test_rosbag2_csv_export(tmp_path, run, ref):
     assert_same_log(read_log(path), ref, time_tol=1e-12)
 
 
-def test_a_float64_topic_has_only_the_receipt_time(tmp_path, run, ref):
-    """``std_msgs/Float64``: no header, so '%time' (the receipt) is the time, and the
-    note says so; the angle is ``field.data``."""
+@pytest.mark.parametrize("header, note, says", [
+    # std_msgs/Float64: no header, so '%time' (the receipt) is the time, and the note says
+    # so; the angle is field.data
+    ("%time,field.data", "ROS log", "receipt"),
+    # a rosbag2 export without header fields: 1.7e18 is ns since 1970, not PX4's µs since
+    # boot (read so, the sample period would be 2 s)
+    ("timestamp,position", "'timestamp'", "ns since 1970"),
+], ids=["float64_topic_receipt_time", "integer_timestamp_unit_by_size"])
+def test_a_bare_ns_stamp_column_is_read_with_a_note(tmp_path, run, ref, header, note, says):
     t, counts = run
-    path = tmp_path / "float64.csv"
-    path.write_text("%time,field.data\n" + "".join(
-        f"{s},{v}\n" for s, v in zip(_stamps(t), _rad(counts))))
-    log = read_log(path)
+    log = read_log(_stamped(tmp_path / "stamped.csv", header, t, counts))
     assert_same_log(log, ref, time_tol=1e-12)
-    assert "receipt" in _note(log, "ROS log")
+    assert says in _note(log, note)
 
 
 def test_a_joint_state_of_several_joints_is_refused_with_the_fix(tmp_path, run):
@@ -267,18 +277,6 @@ def test_px4_ulog_csv(tmp_path, run, ref):
     log = read_log(path, counts_per_rev=CPR)
     assert_same_log(log, ref, time_tol=1e-9)
     _note(log, "PX4 log")
-
-
-def test_an_integer_timestamp_is_read_in_the_unit_its_size_says(tmp_path, run, ref):
-    """``timestamp,position`` (a rosbag2 export without header fields): 1.7e18 is ns since
-    1970, not PX4's µs since boot (read so, the sample period would be 2 s)."""
-    t, counts = run
-    path = tmp_path / "bag_plain.csv"
-    path.write_text("timestamp,position\n" + "".join(
-        f"{s},{v}\n" for s, v in zip(_stamps(t), _rad(counts))))
-    log = read_log(path)
-    assert_same_log(log, ref, time_tol=1e-12)
-    assert "ns since 1970" in _note(log, "'timestamp'")
 
 
 def test_a_millis_timestamp_is_refused_rather_than_read_as_microseconds(tmp_path, run):
