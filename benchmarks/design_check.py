@@ -140,8 +140,8 @@ def _chi2(r, step):
 
 
 def _realised(fits, e, n, seed):
-    """Realised 2 ln LR on ``n`` logs of ``e`` simulated from each fitted form, both forms
-    fitted by hdid.fit as the separation's global refit fits them (same options)."""
+    """Realised 2 ln LR on ``n`` logs of ``e`` simulated from each fitted form, both fitted by hdid.fit as the
+    separation fits them: the truth at its own order, the rival at its best (scanned on the first log, then ±1)."""
     import numpy as np
 
     from hdid._design._best_rival import best_rival_fit
@@ -149,11 +149,10 @@ def _realised(fits, e, n, seed):
 
     out = {}
     for i, truth in enumerate(fits):
-        other = fits[1 - i]
-        vals, wins = [], 0
-        for log in simulate_logs(truth, e, n, seed=seed + i):
-            # both forms at their best orders where position-periodic, as the separation's global refit fits the rival
-            rt, ro = best_rival_fit(log, truth, e), best_rival_fit(log, other, e)
+        other, vals, wins = fits[1 - i], [], 0
+        for k, log in enumerate(simulate_logs(truth, e, n, seed=seed + i)):
+            rt, ro = best_rival_fit(log, truth, e, window=0), best_rival_fit(log, other, e, window=1 + 2 * (k == 0))
+            other = ro if k == 0 and ro is not None else other
             if rt is None or ro is None:  # a failed fit is a result too
                 print("  fit failed", flush=True)
                 continue

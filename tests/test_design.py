@@ -416,6 +416,9 @@ def test_rival_of_another_order_is_fitted_at_its_best_order(case, monkeypatch):
         order = float(next(x for x in best.model.effects if x.key == "ripple").order)
         assert order == m and _best_rival.chi2(best, e.resolution) == pytest.approx(1.0)
         assert len(calls) == len(set(calls)), calls  # each order fitted once
+    calls.clear()  # window 0 (design_check's realised check fits the truth so): its own order only
+    monkeypatch.setattr(fit_module, "fit", lambda log, *, model, m=2.0, calls=calls, **kw: fake(log, model=model, m=m))
+    assert _best_rival.best_rival_fit(None, rival, e, window=0) is not None and calls == [10.0], calls
 
 
 def test_separation_is_averaged_over_the_release_phase(case, monkeypatch):

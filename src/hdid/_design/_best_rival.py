@@ -122,10 +122,11 @@ def _with_order(model, i: int, order: float):
     return eqx.tree_at(lambda m: m.effects[i].order, model, float(order))
 
 
-def best_rival_fit(log, rival, e: Experiment, *, nested="auto"):
+def best_rival_fit(log, rival, e: Experiment, *, nested="auto", window: int = ORDER_WINDOW):
     """:func:`hdid.fit` of ``rival``'s model to ``log`` (a log of ``e``) with
     :func:`fit_options`; a rival with a position-periodic effect at its best order
-    (``ORDER_WINDOW``): the fit of the smallest χ². ``None`` where every fit fails."""
+    (``window`` orders either side of its own, ``ORDER_WINDOW``; 0: its own order only):
+    the fit of the smallest χ². ``None`` where every fit fails."""
     from .._errors import HdidError
     from .._fitting._fit import fit as fit_log
     from ..effects._candidate import MAX_ORDER
@@ -139,11 +140,11 @@ def best_rival_fit(log, rival, e: Experiment, *, nested="auto"):
             return None
 
     i = _order_effect(rival.model)
-    if i is None:
+    if i is None or window <= 0:
         return at(rival.model)
     fitted = float(rival.model.effects[i].order)
     n0 = max(1, int(round(fitted)))
-    top = max(MAX_ORDER, n0 + ORDER_WINDOW)
+    top = max(MAX_ORDER, n0 + window)
     tried: dict[float, object] = {fitted: at(rival.model)}
 
     def cost(n):
@@ -152,7 +153,7 @@ def best_rival_fit(log, rival, e: Experiment, *, nested="auto"):
         r = tried[n]
         return math.inf if r is None else chi2(r, e.resolution)
 
-    for n in range(max(1, n0 - ORDER_WINDOW), n0 + ORDER_WINDOW + 1):
+    for n in range(max(1, n0 - window), n0 + window + 1):
         cost(float(n))
     while True:  # the best at the window's edge: go on in that direction
         best = min(tried, key=cost)
