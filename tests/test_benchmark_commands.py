@@ -30,7 +30,7 @@ SCANNED = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md")),
            *(p for f in (*FOLDERS, "src", "tests") for p in sorted((ROOT / f).rglob("*.py"))
              if p.name not in PLANTED)]
 
-#: A script, with or without its folder (``benchmarks/clean_floor.py``, ``clean_floor.py``).
+#: A script, with or without its folder (``benchmarks/long_log.py``, ``long_log.py``).
 _SCRIPT = re.compile(r"(?<![\w/.-])(?:(benchmarks|calibration)/)?([a-z_][a-z0-9_]*)\.py\b")
 _OPTION = re.compile(r"(?<![\w-])--[a-z][a-z0-9-]*")
 #: Where a shown command ends: a table cell's edge (``\|`` is a pipe inside the cell; the

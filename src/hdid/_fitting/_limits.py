@@ -32,7 +32,7 @@ A fit still above the floor after its limits, or with ``c_v`` gone to 0
 (:func:`stribeck_restarts`; ``restarted_from`` ``"stribeck"`` when one wins): poorer basins
 of clean logs put the damping into the Stribeck shape (``c_v → 0``) or into a creeping law
 (``tau_s ≪ tau_c``), which no limit undoes (clean paper logs 49, 103, 129 of
-``benchmarks/clean_floor.py``: 2.24, 2.28, 1.56× → 0.82, 0.98, 0.88× the floor).
+``docs/decisions/limits-at-the-floor.md``: 2.24, 2.28, 1.56× → 0.82, 0.98, 0.88× the floor).
 
 At the floor a limit nested in another that already fits worse by its own bound is not
 fitted (:func:`implied`: the viscous-only model is the Coulomb limit at ``tau_s → 0``; its
