@@ -119,3 +119,27 @@ def test_solve_fresh_one_lane_is_the_fits_program(paper_setup):
     # a few iterations lower each active row's χ² (LM accepts only decreasing steps)
     _, cost5, _, _ = _one_lane.solve_fresh(s.problem, U, [True, True, True], 5)
     assert np.all(cost5 <= cost)
+
+
+def test_a_verdict_stops_starts_a_clearly_worse_basin_above_its_line():
+    # A limit at the floor only asks whether its optimum lies below a line (the fit's cost
+    # plus the limit's likelihood-ratio bound). At a phase-2 check, starts DROP_DCHI2 (50,
+    # ~7 standard errors) or more above that line stop, as starts that far above the best
+    # do; a start within 50 of it goes on. Costs fed by hand: no fit.
+    def schedule(line, phase2_costs):
+        s = _lm._Schedule(4, 300, verdict_line=line)
+        s.next()
+        s.update(np.array([900.0, 950.0, 980.0, 990.0]), np.zeros(4, bool), np.full(4, 12))
+        # the end of phase 1 keeps the CONTINUED_STARTS best whatever the line (a start 50
+        # above after 12 iterations can still end below it)
+        assert s.active.sum() == _lm.CONTINUED_STARTS
+        s.next()
+        s.update(np.asarray(phase2_costs, float), np.zeros(4, bool), np.full(4, 25))
+        return s.next()
+
+    far = [400.0, 420.0, 440.0, np.inf]  # every continued start > 50 above a line at 20
+    assert schedule(np.inf, far) is not None  # no line: they go on to convergence
+    assert schedule(20.0, far) is None  # the verdict is settled: the limit stops
+    near = [60.0, 420.0, 440.0, np.inf]  # one start within 50 of the line: it alone goes on
+    active, _, _ = schedule(20.0, near)
+    assert active.tolist() == [True, False, False, False]

@@ -200,15 +200,18 @@ def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", f
     # The limits are prior rows on the fit's own problem: they share its programs (the
     # one-lane LM program, one compile per model structure, kept in the program store).
 
-    def local_fits(p, U0, stop=-np.inf):
+    switch = _limits.KEEP_BETTER_AT_FLOOR or not _limits.reached_floor(result)
+    # at the floor a limit is a verdict: its fit stops once an optimum decides it, or once
+    # every start lies a clearly worse basin above its verdict line (_lm._Schedule)
+    stop = -np.inf if switch else _limits.verdict_cost(result, solutions)
+    fit_cost = _limits._cost_of(result, *solutions[:2])
+
+    def local_fits(p, U0, stop=-np.inf, line=np.inf):
         # ``lanes`` rows a schedule (the fit's former ``lanes``-wide program: a short group
         # padded with copies of its first row, computed once), else one schedule for all
-        return _one_lane(p, np.asarray(U0, dtype=float), max_steps, group=lanes or None,
-                         stop_below=stop)[:4]
-
-    switch = _limits.KEEP_BETTER_AT_FLOOR or not _limits.reached_floor(result)
-    # at the floor a limit is a verdict: its fit stops once an optimum decides it
-    stop = -np.inf if switch else _limits.verdict_cost(result, solutions)
+        return _one_lane(p, np.asarray(U0, dtype=float), max_steps,
+                         group=(lanes or None) if switch else None, stop_below=stop,
+                         verdict_line=line)[:4]
 
     model, prep = setup.model, setup.prep
     scales = log_scales(prep, model, np.asarray(problem.offset0))
@@ -222,10 +225,13 @@ def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", f
         U = _limits.with_values_rows(problem, model, np.concatenate([u_fit[None, :], grid_U]),
                                      limit.start, pins)
         cost = grid_costs(p, U[1:])
-        n_grid = max(lanes - 1, 1) if lanes else _limits.LIMIT_GRID_STARTS
+        # at the floor (a verdict only) the batch's few grid starts beside the fit's optimum
+        n_grid = max(lanes - 1, 1) if lanes and switch else _limits.LIMIT_GRID_STARTS
         U0, _ = _choose_starts(U[1:], cost, grid_keys, n_grid, False)
         U0 = np.concatenate([U[:1], np.asarray(U0)])
-        Un, cn, _, _ = local_fits(p, U0, stop)
+        line = np.inf if switch else fit_cost + _limits._chi2_ppf(_limits.LIMIT_LEVEL,
+                                                                   len(limit.removed))
+        Un, cn, _, _ = local_fits(p, U0, stop, line)
         cn = np.where(np.isfinite(cn), cn, np.inf)
         b = int(np.argmin(cn))
         retry = _untrapped(p, prep, Un[b]) if np.isfinite(cn[b]) else None

@@ -70,10 +70,22 @@ class _Schedule:
     for a fit whose only question is whether some optimum lies below it (a limit's
     verdict at the floor, :func:`hdid._fitting._limits.verdict_cost`); further iterations
     could only lower the answer's χ², not change it.
+
+    ``verdict_line``: the cost above which that answer is "no" (a limit at the floor: the
+    fit's cost plus the limit's likelihood-ratio bound). It counts as a lane at every
+    phase-2 check: a lane ``DROP_DCHI2`` or more above it stops, as one that far above the
+    best lane does — so a limit whose every start lies in a clearly worse basin after
+    phase 1 and a chunk stops there, its cost that of its best start so far (an upper
+    bound of its optimum's, far above the line), not its optimum's. Not at the end of
+    phase 1: a start 50 above after its 12 iterations can still end below (measured on
+    60 paper logs, ``benchmarks/results/fit_speed.md``: 2 "fits better"/"fits as well"
+    verdicts lost).
     """
 
-    def __init__(self, n: int, max_steps: int, stop_below: float = -np.inf):
+    def __init__(self, n: int, max_steps: int, stop_below: float = -np.inf,
+                 verdict_line: float = np.inf):
         self.stop_below = float(stop_below)
+        self.verdict_line = float(verdict_line)
         self.max_steps = int(max_steps)
         self.phase = 1
         self.used = 0
@@ -106,7 +118,7 @@ class _Schedule:
             self.active[np.argsort(finite, kind="stable")[:CONTINUED_STARTS]] = True
         else:
             self.ok[a] = done[a]
-            best = finite.min()  # inf when every lane diverged: none goes on
+            best = min(finite.min(), self.verdict_line)  # inf when every lane diverged: none goes on
             self.active = a & ~done & (finite - best < DROP_DCHI2) if np.isfinite(best) else a & False
             if np.any(self.ok & (finite < self.stop_below)):  # the question is answered
                 self.active[:] = False

@@ -55,7 +55,8 @@ def _call_args(U, on, k, state: LMState):
 
 
 def _local_fits(problem: Problem, U0, max_steps: int, lanes: int = LANES, solve=None,
-                group: int | None = None, stop_below: float = -np.inf):
+                group: int | None = None, stop_below: float = -np.inf,
+                verdict_line: float = np.inf):
     """:func:`hdid._fitting._lm._local_fits` (the same schedule, :class:`hdid._fitting._lm._Schedule`,
     and, lanes not interacting, the same iterates for every start up to rounding: a
     vmapped simulator selects where a one-lane one branches) run as calls of one
@@ -70,7 +71,7 @@ def _local_fits(problem: Problem, U0, max_steps: int, lanes: int = LANES, solve=
     unknowns and state are identical (such copies) are computed once: a one-lane program
     gives them identical results.
 
-    ``stop_below``: the schedule's (:class:`hdid._fitting._lm._Schedule`).
+    ``stop_below``, ``verdict_line``: the schedule's (:class:`hdid._fitting._lm._Schedule`).
 
     Returns ``(U, costs, ok, steps, residuals)``, the residuals at each row of ``U`` (NaN
     where none were computed)."""
@@ -82,14 +83,14 @@ def _local_fits(problem: Problem, U0, max_steps: int, lanes: int = LANES, solve=
             pad = np.concatenate([rows, np.repeat(rows[:1], group - len(rows), axis=0)])
             outs.append([np.asarray(x)[:len(rows)]
                          for x in _local_fits(problem, pad, max_steps, lanes, solve,
-                                              stop_below=stop_below)])
+                                              stop_below=stop_below, verdict_line=verdict_line)])
         return tuple(np.concatenate(parts) for parts in zip(*outs))
     solve = _stored_solve if solve is None else solve
     if lanes == 1:
-        return _one_at_a_time(problem, U0, max_steps, solve, stop_below)
+        return _one_at_a_time(problem, U0, max_steps, solve, stop_below, verdict_line)
     U = np.array(U0, dtype=float)
     N, n = U.shape
-    sched = _Schedule(N, max_steps, stop_below)
+    sched = _Schedule(N, max_steps, stop_below, verdict_line)
     m = int(np.prod(problem.times.shape)) + problem.n_physical
     state = [np.asarray(f) for f in LMState.empty(N, m, n)]
     while (task := sched.next()) is not None:
@@ -129,7 +130,8 @@ def _local_fits(problem: Problem, U0, max_steps: int, lanes: int = LANES, solve=
     return U, sched.costs, sched.ok, sched.steps, np.where(state[2][:, None], state[0], np.nan)
 
 
-def _one_at_a_time(problem: Problem, U0, max_steps: int, solve, stop_below: float):
+def _one_at_a_time(problem: Problem, U0, max_steps: int, solve, stop_below: float,
+                   verdict_line: float = np.inf):
     """:func:`_local_fits` with one lane a call: each row's LM state stays as the program
     returned it (device arrays, its Jacobian never copied to the host between calls), and
     rows with the same unknowns and the same state object — a short group's padding
@@ -137,7 +139,7 @@ def _one_at_a_time(problem: Problem, U0, max_steps: int, solve, stop_below: floa
     The same calls on the same numbers as the general path, in the same order."""
     U = np.array(U0, dtype=float)
     N, n = U.shape
-    sched = _Schedule(N, max_steps, stop_below)
+    sched = _Schedule(N, max_steps, stop_below, verdict_line)
     m = int(np.prod(problem.times.shape)) + problem.n_physical
     empty = LMState(*(np.asarray(f) for f in LMState.empty(1, m, n)))
     state = [empty] * N
