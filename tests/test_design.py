@@ -415,10 +415,46 @@ def test_rival_of_another_order_is_fitted_at_its_best_order(case, monkeypatch):
         best = _best_rival.best_rival_fit(None, rival, e)
         order = float(next(x for x in best.model.effects if x.key == "ripple").order)
         assert order == m and _best_rival.chi2(best, e.resolution) == pytest.approx(1.0)
-        assert len(calls) == len(set(calls)), calls  # each order fitted once
+        turns = _best_rival.PHASE_TURNS - 1  # the best order again from its amplitude turned
+        assert len(calls[:-turns]) == len(set(calls[:-turns])) and calls[-turns:] == [m] * turns, calls
     calls.clear()  # window 0 (design_check's realised check fits the truth so): its own order only
     monkeypatch.setattr(fit_module, "fit", lambda log, *, model, m=2.0, calls=calls, **kw: fake(log, model=model, m=m))
     assert _best_rival.best_rival_fit(None, rival, e, window=0) is not None and calls == [10.0], calls
+
+
+def test_rival_at_another_order_is_fitted_from_its_amplitude_turned(case, monkeypatch):
+    """At its best order a position-periodic rival is fitted again from its amplitude pair
+    turned by each quarter period (:data:`hdid._design._best_rival.PHASE_TURNS`): the
+    amplitude it starts from is its own order's, which says nothing of the phase at another
+    (rich log 8805, four amplitudes at 8 kHz: a kinematic error of order 8 fitted to a
+    ripple's noise-free readings ended at χ² 213 from it, 43.0 from a quarter turn; 5
+    simulated logs realised a median 2·ln LR of 35). A stand-in for hdid.fit keeps the
+    start's amplitude and charges 100 unless it is the source's turned by half a period
+    (as a local fit trapped in the basin of its start): the search must end at χ² 1.
+    Fails with the rival fitted from the untouched amplitude only."""
+    from types import SimpleNamespace
+
+    import hdid._fitting._fit as fit_module
+    from hdid._design import _best_rival
+    from hdid._design._candidates import baseline
+    from hdid.effects.ripple import PositionRipple
+
+    _, fit = case
+    e = baseline(fit)
+    sigma = e.resolution / math.sqrt(12.0)
+    rival = SimpleNamespace(model=fit.model.with_effect(PositionRipple(ripple_a=1e-3, ripple_b=2e-4, order=10.0)),
+                            parameters=fit.parameters)
+
+    def fake(log, *, model, **kw):
+        rip = next(x for x in model.effects if x.key == "ripple")
+        flipped = float(rip.ripple_a) == pytest.approx(-1e-3) and float(rip.ripple_b) == pytest.approx(-2e-4)
+        c2 = (float(rip.order) - 8.0) ** 2 + (1.0 if flipped else 100.0)
+        return SimpleNamespace(n_effective=1, rms_residual_rad=sigma * math.sqrt(c2), model=model)
+
+    monkeypatch.setattr(fit_module, "fit", fake)
+    best = _best_rival.best_rival_fit(None, rival, e)
+    rip = next(x for x in best.model.effects if x.key == "ripple")
+    assert _best_rival.chi2(best, e.resolution) == pytest.approx(1.0) and float(rip.order) == 8.0
 
 
 def test_separation_is_averaged_over_the_release_phase(case, monkeypatch):

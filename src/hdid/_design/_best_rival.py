@@ -105,6 +105,12 @@ def rival_fit(rival, e: Experiment, theta: np.ndarray, *, nested="auto", near=No
 #: at order 10 (orders 6-14: 103, 91, 12.1, 60, 347, 993, 1892, 2668, 3068), and diagnose
 #: named that kinematic error on 2 of 10 such ripple logs.
 ORDER_WINDOW = 3
+#: At the best order the fit is repeated from its amplitude pair (``x_a sin nθ + x_b cos nθ``)
+#: turned by each quarter of a period: the amplitude a fit at another order starts from is the
+#: own order's, which says nothing of the phase there. Rich log 8805, four amplitudes at
+#: 8 kHz: a kinematic error of order 8 fitted to a ripple's noise-free readings ended at χ²
+#: 213 from it and at 43.0 from each quarter turn; 5 simulated logs realised a median 2·ln LR 35.
+PHASE_TURNS = 4
 
 
 def _order_effect(model):
@@ -120,6 +126,23 @@ def _with_order(model, i: int, order: float):
     import equinox as eqx
 
     return eqx.tree_at(lambda m: m.effects[i].order, model, float(order))
+
+
+def _turned(model, i: int, quarter: int):
+    """``model`` with effect ``i``'s amplitude pair (fields ``*_a``, ``*_b``) turned by
+    ``quarter`` quarters of a period (``model`` itself where it has no such pair)."""
+    import equinox as eqx
+
+    eff = model.effects[i]
+    fields = [f.name for f in dataclasses.fields(eff)]
+    names = [f for f in fields if f.endswith("_a") and f[:-2] + "_b" in fields]
+    if not names:
+        return model
+    fa, fb = names[0], names[0][:-2] + "_b"
+    a, b = float(getattr(eff, fa)), float(getattr(eff, fb))
+    c, s = round(math.cos(quarter * math.pi / 2)), round(math.sin(quarter * math.pi / 2))
+    return eqx.tree_at(lambda m: (getattr(m.effects[i], fa), getattr(m.effects[i], fb)), model,
+                       (a * c - b * s, a * s + b * c))
 
 
 def best_rival_fit(log, rival, e: Experiment, *, nested="auto", window: int = ORDER_WINDOW):
@@ -166,7 +189,14 @@ def best_rival_fit(log, rival, e: Experiment, *, nested="auto", window: int = OR
         if min(tried, key=cost) == best:
             break
     best = min(tried, key=cost)
-    return tried[best] if math.isfinite(cost(best)) else None
+    if not math.isfinite(cost(best)):
+        return None
+    out = tried[best]
+    for q in range(1, PHASE_TURNS):  # the amplitude's phase at that order (PHASE_TURNS)
+        r = at(_turned(tried[best].model, i, q))
+        if r is not None and chi2(r, e.resolution) < chi2(out, e.resolution):
+            out = r
+    return out
 
 
 def n_physical(fit) -> int:
