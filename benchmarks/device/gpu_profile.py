@@ -8,7 +8,8 @@ about linearly with the logs (27 s for 100, 123 s for 600) although every call i
    — program, lanes ``W``, real lanes ``h``, Levenberg–Marquardt iterations the call ran
    (its while loop's trips: the largest per-lane count), wall and process CPU — so that the
    solve's time splits into calls × iterations × time per iteration, and host time between
-   calls (phase wall minus call wall);
+   calls (phase wall minus call wall), with the per-log one-lane calls made beside them
+   (the stuck-run check, the drop starts' costs) counted and timed;
 2. ``replay``: the largest solve call of the first batch replayed at fixed iteration budgets
    (1 and 4: slope = time per iteration, intercept = a call's fixed cost), with one real
    lane instead of all, and the forward pass (``_lane_costs``) and analysis program alone;
@@ -67,6 +68,24 @@ def _wrap(name, fn):
     return wrapped
 
 
+#: per-log calls made by fit_bucket outside the lane programs (one-lane JAX work on the default
+#: device: the stuck-run check in the solve phase, the drop starts' costs in the grid phase)
+PER_LOG: dict = {}
+
+
+def _count(name, fn):
+    def counted(*a, **k):
+        w0 = time.perf_counter()
+        out = _block(fn(*a, **k))
+        rec = PER_LOG.setdefault(name, {"calls": 0, "wall_s": 0.0})
+        rec["calls"] += 1
+        rec["wall_s"] += time.perf_counter() - w0
+        return out
+    return counted
+
+
+_log_lanes._untrapped = _count("untrapped", _log_lanes._untrapped)
+_log_lanes._costs = _count("drop_start_costs", _log_lanes._costs)
 _log_lanes._lane_solve = _wrap("solve", _log_lanes._lane_solve)
 _log_lanes._lane_costs = _wrap("costs", _log_lanes._lane_costs)
 _log_lanes._lane_analysis = _wrap("analysis", _log_lanes._lane_analysis)
@@ -98,6 +117,7 @@ def _summary(calls: list[dict]) -> dict:
 
 def fit_row(dfs, n: int, res: dict, save, key: str) -> None:
     CALLS.clear()
+    PER_LOG.clear()
     items = [dfs[i % len(dfs)] for i in range(n)]
     load0 = os.getloadavg()[0]
     w0, c0 = time.perf_counter(), time.process_time()
@@ -106,12 +126,12 @@ def fit_row(dfs, n: int, res: dict, save, key: str) -> None:
     timing = {k: v for k, v in table.attrs["timing"].items() if isinstance(v, (int, float, str))}
     row = {"n_logs": n, "wall_s": wall, "cpu_s": cpu, "logs_per_s": n / wall, "load": [load0, os.getloadavg()[0]],
            "errors": int(table["error"].notna().sum()), "timing": timing, "calls": list(CALLS),
-           "summary": _summary(CALLS)}
+           "summary": _summary(CALLS), "per_log_calls": {k: dict(v) for k, v in PER_LOG.items()}}
     s = row["summary"]
     row["host_s"] = {ph: timing.get(f"{ph}_s", 0) - s.get(p, {}).get("wall_s", 0)
                      for ph, p in (("grid", "costs"), ("solve", "solve"), ("analyse", "analysis"))}
     res.setdefault(key, []).append(row)
-    print(key, n, {k: row[k] for k in ("wall_s", "logs_per_s", "host_s")}, s, flush=True)
+    print(key, n, {k: row[k] for k in ("wall_s", "logs_per_s", "host_s", "per_log_calls")}, s, flush=True)
     save()
 
 
