@@ -137,3 +137,87 @@ def test_a_log_with_sensor_noise_at_its_noise_is_not_a_wrong_basin():
     assert same is fit and check.statement is None
     fit0 = hdid.fit(clean, inertia=logs.TRUTH_CSF8["inertia"], nested=False, n_starts=2)
     assert noise_floor(fit0) == fit0.quantization_floor_rad
+
+
+#: A stiff gear on the paper design (4 releases of ±0.157 rad read at 250 Hz): k1 13 600
+#: N m/rad on 7e-7 kg m² through 100:1 swings at 222 Hz, above the log's 125 Hz Nyquist
+#: frequency; light friction rings it down over ~10 periods. (The truth of the SBC's paper
+#: seed 36016, rounded: drawn from the default priors, not tuned.)
+STIFF = dict(k1=13600.0, k2=6.9e8, tau_c=3.8e-3, tau_s=1.13e-2, v_s=0.99, delta=0.49,
+             c_v=2.3e-5, inertia=7e-7)
+
+
+@pytest.fixture(scope="module")
+def stiff_aliased():
+    """The stiff gear's quantized log, its noiseless unrounded twin, and its fit as
+    ``hdid.fit`` makes it (limit checks included: without them it stays at the swing's
+    alias)."""
+    from hdid.reference import logs
+
+    design = dict(logs.PAPER_DESIGN, seed=5)
+    df = logs.make_log(STIFF, **design)
+    clean, info = logs.make_log(STIFF, **design, quantize=False, return_truth=True)
+    return df, clean, info, hdid.fit(df, inertia=STIFF["inertia"])
+
+
+def test_a_substep_picked_from_an_aliased_swing_is_refined_before_any_statement(stiff_aliased):
+    """The fit picks its RK4 substep from the log's turning points; a swing above Nyquist
+    shows its slow alias there (~28 Hz), so the substep is picked for that and RK4's phase
+    error over the ring-down leaves readings several steps off at the truth itself: every
+    optimum stays above the floor, and the statement blamed a basin or a missing effect.
+    The basin check refits at the substep the fitted swing needs (the fit's own rule,
+    h·ω ≲ 0.26) and, there at the floor, says nothing; its problem (the one sampled)
+    carries the finer substep."""
+    from hdid._posterior.basin import substep_wanted
+
+    df, clean, info, fit = stiff_aliased
+    q = 2 * np.pi / 4000
+    # the cause: at the truth, hdid's simulation against the reference's noiseless readings
+    model = hdid.Model.default().replace(**{k: v for k, v in STIFF.items() if k != "inertia"},
+                                         inertia=STIFF["inertia"])
+
+    def worst_gap(h):  # encoder steps
+        return max(float(np.max(np.abs(np.asarray(hdid.simulate(
+            model, g.time.to_numpy(), r["theta0"], r["t_release"], max_substep=h))
+            - (g.theta.to_numpy() - r["offset"])))) / q
+            for r in info["runs"] for g in [clean[clean.run == r["run"]]])
+
+    h = substep_wanted(fit)
+    assert h is not None and h < fit.problem.max_substep
+    # off by more than a step at the fit's substep (no fit reaches the floor), within
+    # rounding (half a step) at the one the fitted swing asks for
+    assert worst_gap(fit.problem.max_substep) > 1.0
+    assert worst_gap(h) < 0.5
+    assert fit.rms_residual_rad > BASIN_FACTOR * fit.quantization_floor_rad
+    new, check = basin_check(fit, df, echo=False)
+    assert check.statement is None, check.statement
+    assert check.rms_over_floor <= BASIN_FACTOR and "substep" in check.checks
+    assert new.problem.max_substep == h
+    assert substep_wanted(new) is None  # the refit is at the substep its own swing asks for
+
+
+def test_at_the_floor_only_a_clearly_under_resolved_swing_is_refined():
+    """At the floor the basin check refits finer only where the fit's substep under-resolves
+    its fitted swing by more than half an octave past ``hdid.fit``'s own rule (h·ω above
+    AT_FLOOR_HW): a 1 ms substep for a 150 Hz swing (h·ω 0.94, an aliased paper log's fit)
+    asks for the rule's 0.25 ms; the same fit at 0.5 ms for a 60 Hz swing (h·ω 0.19, the
+    rule's own centre) is left as it is, as is any fit whose frequency is not known. Above
+    the floor any finer substep of the rule is asked for (60 Hz at 1 ms: h·ω 0.38)."""
+    from hdid._posterior.basin import AT_FLOOR_HW, substep_wanted
+
+    def stand_in(f_hz, h):  # k1 only (no cubic hardening), 4 runs swinging 0.15 rad
+        k1 = (2 * math.pi * f_hz) ** 2 * 7e-7 * 100**2
+        th = np.tile(0.15 * np.cos(np.linspace(0, 20, 50)), (4, 1))
+        prob = SimpleNamespace(theta=th, weight=np.ones_like(th), max_substep=h)
+        return SimpleNamespace(problem=prob,
+                               derived={"natural_frequency_hz": (f_hz, 0.0)},
+                               parameters={"k1": SimpleNamespace(value=k1)},
+                               model=SimpleNamespace(ratio=100.0))
+
+    assert 1e-3 * 2 * math.pi * 150 > AT_FLOOR_HW
+    assert substep_wanted(stand_in(150.0, 1e-3), at_floor=True) == 2.5e-4
+    assert substep_wanted(stand_in(60.0, 5e-4), at_floor=True) is None
+    assert substep_wanted(stand_in(60.0, 5e-4)) is None
+    assert substep_wanted(stand_in(55.0, 1e-3), at_floor=True) is None  # h·ω 0.35: within
+    assert substep_wanted(stand_in(60.0, 1e-3)) == 5e-4
+    assert substep_wanted(stand_in(math.nan, 1e-3), at_floor=True) is None
