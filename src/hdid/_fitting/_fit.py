@@ -179,8 +179,10 @@ def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", f
     gets ``lanes − 1`` grid starts beside the fit's optimum and its rows are scheduled
     ``lanes`` at a time (what the fit's former ``lanes``-wide program did), else
     ``_limits.LIMIT_GRID_STARTS`` grid starts in one schedule (diagnose, the batch, the
-    posterior). Either way every start runs through the one-lane program of the model's
-    structure (:mod:`hdid._fitting._one_lane`), as the fit's own. Options as in :func:`fit`."""
+    posterior, and every fit at the floor, where a limit is a verdict only and its schedule
+    also stops the starts far above its verdict line: :class:`hdid._fitting._lm._Schedule`).
+    Either way every start runs through the one-lane program of the model's structure
+    (:mod:`hdid._fitting._one_lane`), as the fit's own. Options as in :func:`fit`."""
     if nested not in (True, False, "auto"):
         raise ValueError(f"nested = {nested!r}: use True, False or 'auto'")
     del n_starts  # (the limits' own grids are ``_limits.LIMIT_GRID_STARTS`` wide)
