@@ -153,8 +153,14 @@ def replay(res: dict, save, widths, trace_dir, width_solve: bool) -> None:
         save()
     rep["per_iter_s"] = (rep["solve_k4"]["median_s"] - rep["solve_k1"]["median_s"]) / max(
         rep["solve_k4"]["iters"] - rep["solve_k1"]["iters"], 1)
-    one = jnp.asarray(np.arange(W) == 0)
-    rep["solve_k4_one_lane"] = _timed(lambda: run_solve(4, one))
+    # the same call with fewer real lanes (the rest inactive, still computed): does a call's
+    # time follow its live lanes at a fixed width?
+    live = np.flatnonzero(np.asarray(on))
+    for name, m in (("one_lane", 1), ("eighth", max(len(live) // 8, 1))):
+        sub = jnp.asarray(np.isin(np.arange(W), live[:m]))
+        rep[f"solve_k4_{name}"] = _timed(lambda sub=sub: run_solve(4, sub)) | {
+            "h": int(m), "iters": CALLS[-1]["iters"], "lane_iters": CALLS[-1]["lane_iters"]}
+    rep["solve_k4"]["lane_iters"] = next(c["lane_iters"] for c in reversed(CALLS) if c["h"] == h)
     rep["costs"] = _timed(lambda: costs(problems, U))
     rep["analysis"] = _timed(lambda: analysis(problems, U))
     print("replay", rep, flush=True)
