@@ -205,13 +205,16 @@ def test_at_the_floor_only_a_clearly_under_resolved_swing_is_refined():
     the floor any finer substep of the rule is asked for (60 Hz at 1 ms: h·ω 0.38)."""
     from hdid._posterior.basin import AT_FLOOR_HW, substep_wanted
 
-    def stand_in(f_hz, h):  # k1 only (no cubic hardening), 4 runs swinging 0.15 rad
+    def stand_in(f_hz, h, k2=0.0):  # 4 runs released at 0.15 rad, decaying to rest
         k1 = (2 * math.pi * f_hz) ** 2 * 7e-7 * 100**2
-        th = np.tile(0.15 * np.cos(np.linspace(0, 20, 50)), (4, 1))
-        prob = SimpleNamespace(theta=th, weight=np.ones_like(th), max_substep=h)
+        th = np.tile(0.15 * np.cos(np.linspace(0, 20, 50)) * np.exp(-np.linspace(0, 5, 50)), (4, 1))
+        w = np.ones_like(th)
+        w[:, :10] = 0.0  # the first swings unweighted (a paper log's weighted readings span less)
+        prob = SimpleNamespace(theta=th, weight=w, hold=th[:, 0], max_substep=h)
         return SimpleNamespace(problem=prob,
                                derived={"natural_frequency_hz": (f_hz, 0.0)},
-                               parameters={"k1": SimpleNamespace(value=k1)},
+                               parameters={"k1": SimpleNamespace(value=k1),
+                                           "k2": SimpleNamespace(value=k2)},
                                model=SimpleNamespace(ratio=100.0))
 
     assert 1e-3 * 2 * math.pi * 150 > AT_FLOOR_HW
@@ -221,3 +224,9 @@ def test_at_the_floor_only_a_clearly_under_resolved_swing_is_refined():
     assert substep_wanted(stand_in(55.0, 1e-3), at_floor=True) is None  # h·ω 0.35: within
     assert substep_wanted(stand_in(60.0, 1e-3)) == 5e-4
     assert substep_wanted(stand_in(math.nan, 1e-3), at_floor=True) is None
+    # a hardening spring swings the 0.15 rad release at f0·√(1 + ¾·k2·A²/k1), A = 1.5 mrad at
+    # the spring: 45 Hz → 88 Hz at k2 = 2.78·k1/(¾·A²) (SBC seed 36025's fit at 1 ms: h·ω 0.55)
+    k1 = (2 * math.pi * 45.0) ** 2 * 7e-3
+    assert substep_wanted(stand_in(45.0, 1e-3, k2=2.78 * k1 / (0.75 * 1.5e-3**2)),
+                          at_floor=True) == 2.5e-4
+    assert substep_wanted(stand_in(45.0, 1e-3), at_floor=True) is None  # linear: h·ω 0.28

@@ -150,11 +150,15 @@ def substep_wanted(fit, at_floor: bool = False) -> float | None:
     f0 = (getattr(fit, "derived", None) or {}).get("natural_frequency_hz", (math.nan,))[0]
     if prob is None or not (math.isfinite(f0) and f0 > 0):
         return None
+    # the largest release: each run's hold reading against its last weighted one (its rest),
+    # as the fit's own aliasing warning measures it (``prep.hold − prep.rest``)
     theta, weight = np.asarray(prob.theta, dtype=float), np.asarray(prob.weight, dtype=float)
-    half = [0.5 * float(np.ptp(th[w > 0])) for th, w in zip(theta, weight) if np.any(w > 0)]
+    hold = np.asarray(prob.hold, dtype=float)
+    amp = [abs(float(h0 - th[np.flatnonzero(w > 0)[-1]]))
+           for h0, th, w in zip(hold, theta, weight) if np.any(w > 0)]
     values = {n: float(p.value) for n, p in fit.parameters.items()}
     ratio = float(getattr(fit.model, "ratio", 1.0) or 1.0)
-    f = swing_hz(float(f0), values, max(half, default=0.0) / ratio)
+    f = swing_hz(float(f0), values, max(amp, default=0.0) / ratio)
     h, h_fit = substep_for(f), float(prob.max_substep)
     if at_floor and h_fit * 2.0 * math.pi * f <= AT_FLOOR_HW:
         return None
