@@ -227,7 +227,8 @@ def test_the_batch_checks_the_nested_case_like_fit(monkeypatch, nested, symptom,
 def test_the_batch_warns_where_fit_would_check_its_limits():
     # nested=None: the batch does not run hdid.fit's limit checks but says so wherever
     # hdid.fit would run them all — a residual that has not reached the floor
-    # (_limits.reached_floor: the 99.9 % point of √(χ²_ν/ν), 1.38× for this log's ν = 35).
+    # (_limits.reached_floor: the 99.9 % point of √(χ²_ν/n), ν = n − unknowns: the 1.2×
+    # minimum for this log's 35 readings and 17 unknowns).
     # A residual of 1.5× the floor is such a fit (a paper log of batch_speed's sat there,
     # Δχ² = 80 above hdid.fit's optimum, under the former 2× trigger without a word).
     import hdid._fitting._vfit as V
@@ -235,7 +236,7 @@ def test_the_batch_warns_where_fit_would_check_its_limits():
 
     res = hdid.fit_many([EXAMPLE], n_starts=2).result[0]
     setup = V._setup(EXAMPLE)
-    floor, trigger = res.quantization_floor_rad, above_floor(res.n_effective)
+    floor, trigger = res.quantization_floor_rad, above_floor(res.n_effective, res.n_unknowns)
     assert 1.2 <= trigger < 1.5
     for ratio, warned in ((1.0, False), (0.99 * trigger, False), (1.5, True)):
         res.warnings = []

@@ -186,3 +186,138 @@ def test_a_run_cut_at_its_first_moving_sample_times_its_turn_to_stop(seed):
     # to a sample (4 ms of ~8 ms): the start grid spans 0.25-6.7x the frequency
     assert 0.5 < prep.frequency_hz / _fn(TRUTH_CSF8) < 2.0, prep.frequency_hz
     assert not np.any(prep.ends_moving), prep.ends_moving
+
+
+def test_a_residual_below_the_rounding_does_not_shrink_the_errors():
+    # HV's world log18 (86 Hz at 400 Hz, 2^18 counts, one run): 18 effective readings for
+    # 10 unknowns, χ²/ν 0.53 by chance (χ²_8 has that below 0.53·8 = 4.2 one time in six).
+    # The covariance scaled by it shrank every standard error 0.72x: tau_c 3.8 of them from
+    # its truth. Readings on a known grid carry at least the rounding's variance (step²/12:
+    # uniform errors where the readings cross the steps), so the scale stays 1 below it;
+    # above it (noise ahead of the rounding, a model that misses) the errors grow with it.
+    from hdid._fitting._fit import _setup
+    from hdid._fitting._identifiability import _noise
+
+    s = _setup(hdid.read_log(_damped_log()[0]), ratio=DAMPED["ratio"], inertia=DAMPED["inertia"])
+    assert s.prep.resolution_source != "noise"  # the grid (2^16 counts) is known
+    dof = s.prep.n_effective - s.problem.n_unknowns
+    assert dof > 0
+    for scale2 in (0.25, 0.53, 0.99):
+        s2, used, _ = _noise(s.problem, s.prep, np.full(1, math.sqrt(scale2 * dof)), [])
+        assert s2 == pytest.approx(scale2) and used == 1.0, (s2, used)
+    s2, used, _ = _noise(s.problem, s.prep, np.full(1, math.sqrt(2.0 * dof)), [])
+    assert used == pytest.approx(2.0)
+
+
+def test_the_floor_test_counts_the_fit_s_unknowns():
+    # A fit of p unknowns to n readings at the floor leaves χ² ~ χ²_(n−p), RMS² = floor²·χ²/n:
+    # its 0.999 point is lower than χ²_n's. Sweeps of HV's log18 plant (18 readings, 10
+    # unknowns) ended in poorer basins at 1.31-1.52x the floor with tau_c, delta 3-4.7 sd from
+    # their truths, under the 1.53x that n alone allows: counted as at the floor, no limit
+    # restarts, no warning. With the unknowns the bound is the 1.2x minimum.
+    from scipy.stats import chi2
+
+    from hdid._fitting._fit import _setup
+    from hdid._fitting._identifiability import plausibility_warnings
+    from hdid._fitting._limits import FLOOR_MIN, FLOOR_TAIL, above_floor
+
+    assert above_floor(18, 10) == pytest.approx(
+        max(FLOOR_MIN, math.sqrt(chi2.ppf(1 - FLOOR_TAIL, 8) / 18)), rel=1e-6)
+    assert above_floor(18) == pytest.approx(math.sqrt(chi2.ppf(1 - FLOOR_TAIL, 18) / 18),
+                                            rel=1e-6)
+    assert above_floor(18, 10) < 1.25 < 1.5 < above_floor(18)
+    s = _setup(hdid.read_log(_damped_log()[0]), ratio=DAMPED["ratio"], inertia=DAMPED["inertia"])
+    floor = s.prep.resolution / math.sqrt(12.0)
+    p = s.problem.n_unknowns
+    n = s.prep.n_effective
+    assert above_floor(n, p) < above_floor(n)  # this log: 14 readings, 10 unknowns
+    rms = 0.5 * (above_floor(n, p) + above_floor(n)) * floor
+    said = [w for w in plausibility_warnings(s.prep, s.model, s.model.float_values(), rms,
+                                             n_unknowns=p) if "floor" in w]
+    assert len(said) == 1 and "has not reached the floor" in said[0], said
+
+
+#: sweep seed 23 log 19: an 84 Hz gear released 3.3, 2.5 and 1.7 stick bands out, logged at
+#: 250 Hz with noise (0.23 mrad) printed in degrees: each run comes to rest within a reading
+#: or two of its release
+BRIEF = dict(TRUTH_CSF8, k1=940.7, k2=2.126e7, tau_c=1.885e-3, tau_s=4.518e-3, v_s=4.56,
+             delta=1.0, c_v=8.73e-5, inertia=3.36e-7, ratio=100.0)
+
+
+@pytest.fixture(scope="module")
+def brief_fit():
+    df = make_log(BRIEF, [0.157, -0.12, 0.08], 250.0, 0.5, 0.04, {"A": 0.021}, 5,
+                  quantize=False, noise_std=2.3e-4)
+    df = df.assign(theta=[float(f"{v:.7f}") for v in np.degrees(df["theta"])])
+    return hdid.fit(hdid.read_log(df.rename(columns={"theta": "theta [deg]"})),
+                    inertia=BRIEF["inertia"])
+
+
+def test_runs_that_stop_within_a_reading_or_two_say_why_nothing_is_determined(brief_fit):
+    # Before: every standard error ∞ and "the data do not determine them at this optimum
+    # (... log a richer test)": not why, nor what to change. The holds fix the start angles
+    # and the rests the stick band; the swing's 7 parameters and 3 release instants rest on
+    # the few readings in motion.
+    res = brief_fit
+    said = [w for w in res.warnings if "readings in a run's motion" in w]
+    assert len(said) == 1, res.warnings
+    moving = [int(x) for x in said[0].split("move for only ")[1].split(" reading")[0].split(", ")]
+    assert len(moving) == 3 and sum(moving) < res.n_unknowns, said
+    # the rate asked for gives each run's motion 10 readings: ≥ 10/(m+1) samples' time
+    asked = float(said[0].split("at least ")[1].split(" Hz")[0])
+    assert asked >= 10 * 250.0 / (min(moving) + 1) * 0.99, said
+
+
+def test_a_run_with_many_readings_in_motion_does_not_say_so(damped_fit):
+    res, _ = damped_fit  # ~1.7 periods of an 18.5 Hz swing at 100 Hz before it sticks
+    assert not [w for w in res.warnings if "readings in a run's motion" in w], res.warnings
+
+
+def test_a_fold_back_restart_is_the_aliased_swing_slowed_to_the_log_s_own():
+    # HV's world log08: a 53 Hz gear at 200 Hz (3.8 samples a period) fitted on the 254 Hz
+    # alias (k1 22x, 2.96x the floor, warned "aliased"). The restart folds the fitted swing
+    # back to the alias |f − fs| nearest the log's own: its first row is the same model
+    # slowed by r (torques by r², speeds and viscous terms by r), so its trajectory at
+    # t_rel + τ/r is the alias's at t_rel + τ — to the simulator's own accuracy (1e-4 of
+    # the swing, the plausibility module's SIMULATOR_ACCURACY).
+    from hdid._fitting._cubic_restart import fold_back_rows
+    from hdid._fitting._fit import _dense, _setup
+    from hdid._fitting._limits import with_values
+    from hdid._fitting._starts import _grid_starts
+
+    truth = dict(TRUTH_CSF8, k1=532.0, k2=1.0, tau_c=1.09e-3, tau_s=1.22e-3, v_s=8.25,
+                 delta=2.0, c_v=2e-6, inertia=1.82e-6, ratio=51.0)
+    fs, f_true = 200.0, _fn(dict(truth))
+    df = make_log(truth, [0.139, -0.139], fs, 0.5, 0.02, {"A": 0.0}, 3, counts_per_rev=4096)
+    # RK4 substeps short against both swings (ω·h 0.03 at 254 Hz), so that the comparison
+    # below is of the two models, not of the integrator at two step sizes
+    s = _setup(hdid.read_log(df), ratio=truth["ratio"], inertia=truth["inertia"],
+               max_substep=2e-5)
+    assert 0.0 < s.prep.frequency_hz < fs / 2  # the log's own swing is below Nyquist
+    f_alias = fs + f_true  # what the readings cannot tell from f_true: k1·((fs + f)/f)²
+    aliased = {**{k: truth[k] for k in ("k1", "k2", "tau_c", "tau_s", "v_s", "delta", "c_v")}}
+    aliased["k1"] *= (f_alias / f_true) ** 2
+    u0 = _grid_starts(s.problem, s.prep, s.model, 1, False)[0][0]
+    u = with_values(s.problem, s.model, u0, aliased)
+    rows = fold_back_rows(s.problem, s.model, u, 1.0 / fs, f_alias, s.prep.frequency_hz, 0.0)
+    assert rows is not None and len(rows) == 2
+    back = s.problem.values_np(rows[0])
+    r = f_true / f_alias  # the alias nearest the log's own swing is the true one
+    assert back["k1"] == pytest.approx(truth["k1"], rel=1e-9)
+    assert back["tau_c"] == pytest.approx(aliased["tau_c"] * r**2, rel=1e-9)
+    assert back["v_s"] == pytest.approx(aliased["v_s"] * r, rel=1e-9)
+    assert back["c_v"] == pytest.approx(aliased["c_v"] * r, rel=1e-9)
+    assert back["delta"] == pytest.approx(aliased["delta"], rel=1e-12)
+    decay = s.problem.values_np(rows[1])  # the second row keeps the decay per second
+    assert decay["k1"] == pytest.approx(truth["k1"], rel=1e-9)
+    assert decay["tau_c"] == pytest.approx(aliased["tau_c"] * r, rel=1e-9)
+    assert decay["c_v"] == pytest.approx(aliased["c_v"], rel=1e-9)
+    t_rel = np.asarray(s.problem.unpack_np(u)[1])[:, None]
+    tau = np.linspace(0.0, 0.03, 61)[None, :]
+    fast = np.asarray(_dense(s.problem, u, t_rel + tau)[0])
+    slow = np.asarray(_dense(s.problem, rows[0], t_rel + tau / r)[0])
+    swing = float(np.max(np.abs(fast)))
+    assert np.max(np.abs(slow - fast)) < 1e-4 * swing, np.max(np.abs(slow - fast)) / swing
+    # below Nyquist nothing to fold
+    assert fold_back_rows(s.problem, s.model, u, 1.0 / fs, f_true, s.prep.frequency_hz,
+                          0.0) is None

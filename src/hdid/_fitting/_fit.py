@@ -151,7 +151,8 @@ def fit(
     result, (U, costs, ok, steps) = _cubic_restart.restarted(
         result, problem, model, log_scales(prep, model, np.asarray(problem.offset0)),
         (U, costs, ok, steps), lambda U0: _local_fits(problem, U0, max_steps), lambda sol:
-        nested_check(_finish(search, *sol, t_start), log, search, solutions=sol, **checks))
+        nested_check(_finish(search, *sol, t_start), log, search, solutions=sol, **checks),
+        log_hz=prep.frequency_hz, start=np.asarray(U0)[0])
     if search is not setup:
         result = _polish.polished(
             result, setup.problem, (U, costs, ok, steps), lambda U0: _local_fits(
@@ -256,7 +257,8 @@ def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", f
     def finish(U, costs, ok, steps):
         return _finish(setup, U, costs, ok, steps, t_start)
 
-    floor = _limits.above_floor(result.n_effective) * result.quantization_floor_rad
+    floor = (_limits.above_floor(result.n_effective, result.n_unknowns)
+             * result.quantization_floor_rad)
 
     def again(u, cost):  # still above the floor (or c_v → 0): regular Stribeck restarts
         v = {**model.float_values(), **problem.values_np(u)}

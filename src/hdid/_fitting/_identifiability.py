@@ -86,11 +86,13 @@ def analyse(
     corr = _correlations(labels, P, cov, std_u, warnings)
     values, model, params = _parameters(problem, u, std_u, flags)
     derived = _derived(problem, u, cov, null, pre.get("derived"))
-    runs, rms_all, offset = _run_summaries(problem, prep, u, std_u, pre)
+    runs, rms_all, offset, moving = _run_summaries(problem, prep, u, std_u, pre)
     bracket = _run_warnings(prep, runs, values, model, derived, bracket, warnings)
     warnings += _trust_warnings(problem, u, params, std_u, values)
+    warnings += _motion_warning(problem, prep, moving)
     warnings += plausibility_warnings(prep, model, values, rms_all,
-                                      derived.get("natural_frequency_hz", (math.nan,))[0])
+                                      derived.get("natural_frequency_hz", (math.nan,))[0],
+                                      problem.n_unknowns)
 
     return FitResult(
         source=prep.source,
@@ -146,8 +148,9 @@ def analyse_first_finite(problem: Problem, prep: Prepared, U, order, summary, st
 
 def _noise(problem: Problem, prep: Prepared, r, warnings: list[str]):
     """``(s2, s2_used, dof)``: the residual variance in units of the floor's (χ²/dof), and
-    the one the covariance uses — 1 where there are no degrees of freedom, at least 1
-    where the floor is the noise estimated from the log (never more precision than it)."""
+    the one the covariance uses — 1 where there are no degrees of freedom, else at least 1:
+    never more precision than the floor (the noise estimated from the log, or the rounding
+    of a known grid)."""
     n_eff = prep.n_effective
     dof = n_eff - problem.n_unknowns
     rss = float(np.sum(r**2))
@@ -170,7 +173,12 @@ def _noise(problem: Problem, prep: Prepared, r, warnings: list[str]):
                 "lower bounds"
             )
     else:
-        s2_used = max(s2, 1e-12)
+        # readings on a known grid carry at least the rounding's variance (step²/12, exact
+        # for readings spread over the steps); a residual below it is the χ²_ν/ν scatter of
+        # a fit with few degrees of freedom, not more precise readings (a world log, 18
+        # effective readings for 10 unknowns: χ²/ν 0.53 shrank every error 0.72×, tau_c 3.8
+        # of them from its truth)
+        s2_used = max(s2, 1.0)
     return s2, s2_used, dof
 
 
@@ -290,8 +298,9 @@ def _parameters(problem: Problem, u, std_u, flags: dict[str, str]):
 
 
 def _run_summaries(problem: Problem, prep: Prepared, u, std_u, pre: dict):
-    """``(runs, rms, offsets)``: a :class:`RunSummary` per run, the weighted RMS residual of
-    the whole log [log units] and each set-up's offset."""
+    """``(runs, rms, offsets, moving)``: a :class:`RunSummary` per run, the weighted RMS
+    residual of the whole log [log units], each set-up's offset and each run's readings
+    at which the model moves (speed ≠ 0)."""
     _, t_release, theta0_enc, offset = problem.unpack_np(u)
     theta_pred, omega_pred, stuck = map(
         np.asarray, pre["dense"] if "dense" in pre else _dense(problem, u, problem.times)
@@ -321,7 +330,9 @@ def _run_summaries(problem: Problem, prep: Prepared, u, std_u, pre: dict):
             )
         )
     rms_all = math.sqrt(np.sum(w2 * err**2) / np.sum(w2))
-    return runs, rms_all, offset
+    moving = np.array([int(np.count_nonzero(omega_pred[i, :n])) for i, n in
+                       enumerate(prep.lengths)])
+    return runs, rms_all, offset, moving
 
 
 def _run_warnings(prep: Prepared, runs, values, model, derived, bracket: bool,
@@ -433,6 +444,36 @@ def _trust_warnings(problem: Problem, u, params, std_u, values) -> list[str]:
             "rise by fixing tau_s = tau_c)"
         )
     return out
+
+
+#: Readings in motion a run should have for the warning's suggested rate.
+ASK_MOVING_READINGS = 10
+
+
+def _motion_warning(problem: Problem, prep: Prepared, moving) -> list[str]:
+    """Too few readings in motion for the swing's unknowns. A hold fixes its run's start
+    angle and a rest its place in the stick band; the stiffness, the friction law and the
+    release instants rest on the readings taken while the gear moves. Fewer of those than
+    such unknowns determine none of them (sweep log, an 84 Hz gear released inside 3.3
+    stick bands at 250 Hz: each run moves for one reading, every standard error ∞): the
+    warning says so and asks for the rate that gives each run's motion
+    :data:`ASK_MOVING_READINGS` readings."""
+    moving = np.asarray(moving, dtype=int)
+    n_swing = problem.n_physical + (problem.n_runs if problem.release_free else 0)
+    if moving.size == 0 or int(moving.sum()) >= n_swing:
+        return []
+    dt = prep.sample_period
+    shortest = (int(moving.min()) + 1) * dt  # the motion ends before the next reading
+    per_run = ", ".join(str(int(m)) for m in moving)
+    return [
+        f"the runs move for only {per_run} reading(s) (run by run; {int(moving.sum())} in all, "
+        f"against {n_swing} unknowns of the swing: {problem.n_physical} parameters"
+        + (f" and {problem.n_runs} release instants" if problem.release_free else "")
+        + "; the holds and rests fix only the start angles and the stick band): the data "
+        "cannot determine the stiffness and friction — log faster (at least "
+        f"{ASK_MOVING_READINGS / shortest:.3g} Hz, {ASK_MOVING_READINGS} readings in a "
+        f"run's motion of under {shortest * 1e3:.3g} ms) or release from further outside "
+        "the stick band"]
 
 
 def _shape_warnings(problem: Problem, flags: dict[str, str]) -> list[str]:

@@ -135,14 +135,18 @@ def _chi2_ppf(q: float, dof: float) -> float:
     return float(2.0 * gammaincinv(dof / 2.0, q))
 
 
-def above_floor(n_effective: float) -> float:
+def above_floor(n_effective: float, n_unknowns: float = 0) -> float:
     """Multiple of the floor above which a residual has not reached it: at the floor the
-    residuals are rounding errors, RMS² ≈ floor²·χ²_ν/ν for ν effective samples
-    (Gaussian errors: uniform rounding errors scatter less, kurtosis 1.8 against 3, so
-    this is conservative); the ``1 − FLOOR_TAIL`` point of √(χ²_ν/ν) (1.38 for ν = 35,
-    the shipped paper log; 1.14 for ν = 500), at least ``FLOOR_MIN``."""
-    nu = max(float(n_effective), 1.0)
-    return max(FLOOR_MIN, math.sqrt(_chi2_ppf(1.0 - FLOOR_TAIL, nu) / nu))
+    residuals are rounding errors, and a fit of ``n_unknowns`` to ``n`` effective samples
+    leaves RMS² ≈ floor²·χ²_ν/n, ν = n − n_unknowns (Gaussian errors: uniform rounding
+    errors scatter less, kurtosis 1.8 against 3, so this is conservative); the
+    ``1 − FLOOR_TAIL`` point of √(χ²_ν/n) (1.38 for n = 35 and no unknowns, 1.10 with the
+    shipped paper log's 17; 1.14 for n = 500), at least ``FLOOR_MIN``. The unknowns
+    matter where they are many for the samples: a world log, 18 effective readings for 10
+    unknowns, sat at 1.3–1.5× in a poorer basin under the 1.53× that ν = n allows."""
+    n = max(float(n_effective), 1.0)
+    nu = max(n - max(float(n_unknowns), 0.0), 1.0)
+    return max(FLOOR_MIN, math.sqrt(_chi2_ppf(1.0 - FLOOR_TAIL, nu) / n))
 
 
 @dataclass(frozen=True)
@@ -310,7 +314,7 @@ def reached_floor(result) -> bool:
     rms = result.rms_residual_rad
     if not (math.isfinite(rms) and floor > 0):
         return False
-    return rms <= above_floor(result.n_effective) * floor
+    return rms <= above_floor(result.n_effective, result.n_unknowns) * floor
 
 
 def data_chi2(problem, u, cost: float) -> float:

@@ -37,13 +37,13 @@ def _span(prep: Prepared) -> float:
                default=0.0)
 
 
-def residual_warnings(prep: Prepared, rms: float) -> list[str]:
+def residual_warnings(prep: Prepared, rms: float, n_unknowns: int = 0) -> list[str]:
     """What the RMS residual ``rms`` [log units] of a fit says: a step that does not match
     the readings, a model that does not describe the log (above
     :data:`RESIDUAL_FLOOR_FACTOR`× the floor) or, on a quantized sensor, a fit that has not
     reached the floor (above the χ² tail test :func:`hdid._fitting._limits.above_floor` for
-    the log's effective readings, the floor being the rounding and the simulator's accuracy
-    together); none at the floor."""
+    the log's effective readings and the fit's ``n_unknowns``, the floor being the rounding
+    and the simulator's accuracy together); none at the floor."""
     out, floor = [], prep.resolution / math.sqrt(12)
     if wrong_step := (step_against_readings(prep.theta, prep.lengths, prep.resolution, rms,
                                             RESIDUAL_FLOOR_FACTOR) if prep.quantized else None):
@@ -58,11 +58,13 @@ def residual_warnings(prep: Prepared, rms: float) -> list[str]:
             "a wrong resolution or noise beyond the sensor's step"
         )
     elif prep.quantized and math.isfinite(rms) and rms > (above := above_floor(
-            prep.n_effective) * math.hypot(1.0, SIMULATOR_ACCURACY * _span(prep) / floor)) * floor:
+            prep.n_effective, n_unknowns)
+            * math.hypot(1.0, SIMULATOR_ACCURACY * _span(prep) / floor)) * floor:
         out.append(
             f"the RMS residual is {rms / floor:.3g}× the quantization floor, above the "
             f"{above:.3g}× that rounding and the simulator's accuracy leave over "
-            f"{prep.n_effective:.0f} effective readings (χ² tail {FLOOR_TAIL:g}): the fit has "
+            f"{prep.n_effective:.0f} effective readings and {n_unknowns} unknowns (χ² tail "
+            f"{FLOOR_TAIL:g}): the fit has "
             "not reached the floor — a poorer basin (more --starts, or a warm --start) or a "
             "missing effect (try `hdid diagnose`); the standard errors are scaled up by the "
             "residual but still assume the model"
@@ -71,9 +73,10 @@ def residual_warnings(prep: Prepared, rms: float) -> list[str]:
 
 
 def plausibility_warnings(prep: Prepared, model, values, rms: float,
-                          fitted_hz: float = math.nan) -> list[str]:
+                          fitted_hz: float = math.nan, n_unknowns: int = 0) -> list[str]:
     """Warn when the log's numbers are implausible for the declared units (time in s,
-    angles in rad) or its sampling (the fitted swing ``fitted_hz`` aliased)."""
+    angles in rad), its sampling (the fitted swing ``fitted_hz`` aliased) or the residual
+    ``rms`` of a fit of ``n_unknowns`` (:func:`residual_warnings`)."""
     out = []
     fs = 1.0 / prep.sample_period
     if fs < 5.0:
@@ -95,5 +98,5 @@ def plausibility_warnings(prep: Prepared, model, values, rms: float,
             "mrad or counts (convert to rad, or --counts-per-rev), or is the ratio wrong "
             "(--ratio)?"
         )
-    out += residual_warnings(prep, rms)
+    out += residual_warnings(prep, rms, n_unknowns)
     return out

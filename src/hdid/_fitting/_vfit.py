@@ -365,7 +365,8 @@ def _nested(res, item, setup, options: dict, n_starts: int, max_steps: int):
             ratio = res.rms_residual_rad / res.quantization_floor_rad
             res.warnings.append(
                 f"the RMS residual is {ratio:.3g}× the floor, a symptom of a poorer optimum "
-                f"(above {above_floor(res.n_effective):.3g}×, where hdid.fit checks its "
+                f"(above {above_floor(res.n_effective, res.n_unknowns):.3g}×, where hdid.fit "
+                "checks its "
                 "limits); the batch did not check it against its limits (nested Coulomb "
                 "case, no friction, linear spring): refit this log with hdid.fit, or the "
                 "batch with nested='auto'")
