@@ -15,9 +15,15 @@ tolerance), so the log tells the grid when the chance that every level passes fo
 grid, ``Π 2t/q`` over the levels the grid places, times the number of grids tried, is
 below :data:`FALSE_GRID_CHANCE`. The print unit itself explains every printed level
 exactly; it is never the step (it fails that test: ``2t/q ≥ 1``). Nor is a grid less than
-:data:`MIN_STEP_PER_PRINT_UNIT` print units: the readings' rounding to the print unit adds
-``p²/12`` to the quantization variance ``q²/12``, at most 1/16 of it (3 % of the floor
-``q/√12``) at that ratio; coarser printing is noise the fit estimates instead.
+:data:`MIN_STEP_PER_PRINT_UNIT` print units: a grid no wider than a level difference's
+window (two half units) holds every printed level (and the search starts 5 % above it,
+where a wrong grid still fails a level with a chance of ~1/20). A printed level is a
+multiple of its print unit, so the chance a wrong grid passes it is the share of that
+lattice the window holds, not ``2t/q`` (:mod:`._lattice`: at ``q = 3p`` every level
+difference passes). Between 2 and ~7 print units a step the readings' rounding to the
+print unit adds ``p²/12`` to the quantization variance ``q²/12`` (1/4 of it at 2 units,
+12 % on the floor ``q/√12``; 1/15, 3 %, at 3.83): the readings' floor is
+``√(q² + p²)/√12`` with ``Log.resolution`` and ``Log.print_unit``.
 """
 
 from __future__ import annotations
@@ -29,7 +35,8 @@ import numpy as np
 import pandas as pd
 
 from ._grid_outliers import coarser_grid
-from ._step_scan import Budget, offset_chance, steps_in
+from ._lattice import shares
+from ._step_scan import Budget, offset_chance, resolved, steps_in
 
 
 # ------------------------------------------------------------------ print precision
@@ -133,7 +140,9 @@ FALSE_GRID_CHANCE = 1e-6
 #: (._step_scan) may spend on one log before it is said not to tell its grid: ~0.1 s.
 SCAN_BUDGET = 1e7
 #: Smallest encoder step, in print units, reported as found (see the module notes).
-MIN_STEP_PER_PRINT_UNIT = 4.0
+MIN_STEP_PER_PRINT_UNIT = 2.0
+#: The step search starts this factor above the widest window of a level difference.
+_WINDOW_MARGIN = 1.05
 #: Readings closer than this fraction of the largest |reading| are one level (floating
 #: point: values computed as ``offset + k*q`` in float64).
 MERGE_REL = 1e-9
@@ -156,16 +165,16 @@ class StepFinding:
     off_grid_log10_chance: float | None = None
 
 
-def _levels(x: np.ndarray, p: np.ndarray, merge: float) -> tuple[np.ndarray, np.ndarray]:
-    """Distinct levels of one run and the tolerance of each (half its print unit, plus
-    the floating-point merge width)."""
+def _levels(x: np.ndarray, p: np.ndarray, merge: float):
+    """Distinct levels of one run, the tolerance of each (half its print unit, plus the
+    floating-point merge width) and its print unit."""
     order = np.argsort(x, kind="stable")
     xs, ps = x[order], p[order]
     new = np.concatenate(([True], np.diff(xs) > merge))
     idx = np.flatnonzero(new)
     levels = xs[idx]
-    tol = np.maximum.reduceat(ps, idx) / 2.0 + merge
-    return levels, tol
+    unit = np.maximum.reduceat(ps, idx)
+    return levels, unit / 2.0 + merge, unit
 
 
 def _place(d: np.ndarray, t: np.ndarray, qlo: float, qhi: float):
@@ -229,13 +238,13 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
         return StepFinding(None, None, "too few readings to find a grid")
     merge = MERGE_REL * max(float(np.max(np.abs(x[ok]))), np.finfo(float).tiny)
     unit = float(np.max(p[ok])) if print_unit is not None else None
-    d_all, t_all, gaps, run_levels, signed = [], [], [], [], []
+    d_all, t_all, u_all, gaps, run_levels, signed = [], [], [], [], [], []
     n_levels = 0
     for a, b in bounds:
         keep = ok[a:b]
         if keep.sum() == 0:
             continue
-        lv, tl = _levels(x[a:b][keep], p[a:b][keep], merge)
+        lv, tl, pu = _levels(x[a:b][keep], p[a:b][keep], merge)
         n_levels += lv.size
         run_levels.append((int(a), int(b), lv))
         if lv.size < 2:
@@ -246,19 +255,23 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
         others = np.arange(lv.size) != ref
         d_all.append(np.abs(lv[others] - lv[ref]))
         t_all.append(tl[others] + tl[ref])
-        signed.append((lv, tl, others, np.sign(lv[others] - lv[ref])))
+        u_all.append(np.minimum(pu[others], pu[ref]))  # a difference's print lattice
+        signed.append((lv, tl, others, np.sign(lv[others] - lv[ref]), pu))
     if not gaps or (n_levels <= 2 and ok.sum() < 3):
         return StepFinding(None, unit, "fewer than two reading levels: no grid to find")
-    d, t = np.concatenate(d_all), np.concatenate(t_all)
+    d, t, du = np.concatenate(d_all), np.concatenate(t_all), np.concatenate(u_all)
     g = np.concatenate([gg for gg, _ in gaps])
     gt = np.concatenate([tt for _, tt in gaps])
+    t_max = float(np.max(t))
     i0 = int(np.argmin(g))
     g0, t0 = float(g[i0]), float(gt[i0])
     coarse, untold, budget = False, None, Budget(SCAN_BUDGET)
     k_max = MAX_SPARSE_DIVISOR if d.size <= SPARSE_LEVELS else MAX_STEP_DIVISOR
     for k in range(1, k_max + 1):
-        qlo, qhi = max((g0 - t0) / k, 0.0), (g0 + t0) / k
-        if qhi < MIN_STEP_PER_PRINT_UNIT * float(np.median(t)) or qlo <= 0.0:
+        # (a grid no wider than a difference's window, 2t, admits every difference: not
+        # searched, or the bisection below never narrows there)
+        qlo, qhi = max((g0 - t0) / k, _WINDOW_MARGIN * 2.0 * t_max), (g0 + t0) / k
+        if qhi < MIN_STEP_PER_PRINT_UNIT * float(np.median(t)) or qlo >= qhi:
             coarse = True  # finer grids only get closer to the print unit
             break
         # the gaps between neighbouring levels narrow the interval first: a swing's
@@ -280,14 +293,13 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
             break
         # chance that a wrong grid places every level: Π 2t/q over the placed levels,
         # times the grids tried (divisors k, and the interval's width in steps of the
-        # largest multiple's precision)
-        per = np.minimum(2.0 * t[used] / q, 1.0)
-        log_chance = float(np.sum(np.log10(per))) if per.size else 0.0
+        # largest multiple's precision); printed levels are a lattice (._lattice)
         trials = max(k, MAX_STEP_DIVISOR) * max(float(m.max()), 1.0)
-        told = log_chance + math.log10(trials) < math.log10(FALSE_GRID_CHANCE)
+        told = _chance(d[used], t[used], du[used], q) + math.log10(trials) < math.log10(
+            FALSE_GRID_CHANCE)
         if not told:
             # every multiple resolved by bisection, one offset per run (._step_scan)
-            by_offsets = _by_offsets(signed, d, t, qlo, qhi, k, budget)
+            by_offsets = _by_offsets(signed, d, t, (g, gt), qlo, qhi, k, budget)
             untold = untold or _untold(n_levels, q, unit, unit_name)
             if by_offsets == "none":
                 continue  # no grid in this interval after all: try a finer one
@@ -299,6 +311,8 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
             coarse_grid = coarser_grid(q, x, run_levels, merge, MAX_STEP_DIVISOR,
                                        FALSE_GRID_CHANCE)
             if coarse_grid is None:
+                if _mixed_offsets(q, run_levels):
+                    return _untold(n_levels, q, unit, unit_name)
                 return StepFinding(q, unit, None)
             return StepFinding(q * coarse_grid.factor, unit, None,
                                tuple(int(i) for i in coarse_grid.off),
@@ -317,6 +331,39 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
     return StepFinding(None, unit, "the readings lie on no grid")
 
 
+def _mixed_offsets(q: float, run_levels, most: int = 16) -> bool:
+    """Whether some run's levels fill at most half the residues modulo ``n`` steps
+    (``n`` = 2 … ``most``) where a swing over the grid ``q`` fills all: ``r`` of ``n``
+    residues hold ``L`` levels at random with chance ``C(n, r)·(r/n)^L``, taken as
+    impossible below :data:`FALSE_GRID_CHANCE`. Such levels lie on a coarser grid
+    ``n·q`` with several offsets (two releases under one run label): ``q`` only fits
+    their offsets' difference, one coincidence, not every level. (A few readings half
+    a step off a coarse grid fill more than half: the finer grid that explains them,
+    :mod:`._grid_outliers`, is kept.)"""
+    for _, _, lv in run_levels:
+        if lv.size < 8:
+            continue
+        m = np.rint((lv - lv[lv.size // 2]) / q).astype(np.int64)
+        for n in range(2, most + 1):
+            r = int(np.unique(np.mod(m, n)).size)
+            if 2 * r <= n and (math.log10(math.comb(n, r)) + lv.size * math.log10(r / n)
+                          < math.log10(FALSE_GRID_CHANCE)):
+                return True
+    return False
+
+
+def _chance(d: np.ndarray, t: np.ndarray, units: np.ndarray, q: float) -> float:
+    """log10 of the chance that levels on no grid lie at differences ``d`` within ``t`` of
+    multiples of ``q``: ``Π 2t/q``, or the share of the print lattice such a window holds
+    where that is larger (:mod:`._lattice`)."""
+    if d.size == 0:
+        return 0.0
+    per = np.minimum(2.0 * t / q, 1.0)
+    if np.sum(np.log10(per)) >= math.log10(FALSE_GRID_CHANCE) or not np.any(units > 0):
+        return float(np.sum(np.log10(per)))  # not told anyway, or never printed
+    return float(np.sum(np.log10(shares(q, units, 2.0 * t, float(d.max())))))
+
+
 def _untold(n_levels: int, q: float, unit, unit_name: str) -> StepFinding:
     """No step: the levels fit a grid ``q`` but do not tell it from chance."""
     return StepFinding(
@@ -326,7 +373,7 @@ def _untold(n_levels: int, q: float, unit, unit_name: str) -> StepFinding:
     )
 
 
-def _by_offsets(signed, d: np.ndarray, t: np.ndarray, qlo: float, qhi: float, k: int,
+def _by_offsets(signed, d: np.ndarray, t: np.ndarray, gaps, qlo: float, qhi: float, k: int,
                 budget: Budget):
     """The step in ``[qlo, qhi]`` told with every level's multiple resolved
     (:func:`._step_scan.steps_in`) and one offset per run (:func:`._step_scan.offset_chance`),
@@ -336,30 +383,37 @@ def _by_offsets(signed, d: np.ndarray, t: np.ndarray, qlo: float, qhi: float, k:
     # the best a grid here can do: every level placed at the coarsest step, the fewest trials
     best = sum(math.log10(lv.size) + float(np.sum(np.log10(np.minimum(2.0 * tl / qhi, 1.0)))
                                            - np.log10(np.minimum(2.0 * tl / qhi, 1.0)).max())
-               for lv, tl, _, _ in signed)
+               for lv, tl, _, _, _ in signed)
     trials = max(k, MAX_STEP_DIVISOR) * max(float(d.max()) / qhi, 1.0)
     if best + math.log10(trials) >= threshold:
         return None
+    # the neighbouring levels' gaps first: their multiples are small, so they rule out a
+    # log on no grid at a coarse bisection (the differences from the middle level, many
+    # steps, only once it is fine: an analog log printed to a few units a gap spent the
+    # whole budget there); every grid that fits must fit them too
+    if steps_in(gaps[0], gaps[1], qlo, qhi, budget) == []:
+        return "none"
     intervals = steps_in(d, t, qlo, qhi, budget)
     if intervals is None:
         return None
     if not intervals:
         return "none"
+    narrowed = resolved(intervals, d, t, [s[:4] for s in signed], budget)
+    if narrowed is None:
+        return None
     found = None
-    for a, b in intervals:
-        placed = _place(d, t, a, b)
-        if placed is None or np.any(placed[2] < 1):
-            continue
-        m, at = placed[2], 0
-        levels, tols, multiples = [], [], []
-        for lv, tl, others, sign in signed:
+    for qlo_m, qhi_m, m in narrowed:
+        at = 0
+        levels, tols, multiples, units = [], [], [], []
+        for lv, tl, others, sign, pu in signed:
             mult = np.zeros(lv.size)
             mult[others] = sign * m[at:at + sign.size]
             at += sign.size
             levels.append(lv)
             tols.append(tl)
             multiples.append(mult)
-        fit = offset_chance(levels, tols, multiples, placed[0], placed[1])
+            units.append(pu)
+        fit = offset_chance(levels, tols, multiples, qlo_m, qhi_m, units)
         if fit is None:
             continue
         q, log_chance = fit

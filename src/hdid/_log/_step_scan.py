@@ -33,6 +33,8 @@ import math
 
 import numpy as np
 
+from ._lattice import shares
+
 #: The bisection gives up (the log does not tell its grid) beyond this many sub-intervals.
 MAX_ALIVE = 1 << 15
 #: What one test call costs beyond its elements (numpy's overhead), in element tests.
@@ -98,13 +100,15 @@ def steps_in(d: np.ndarray, t: np.ndarray, qlo: float, qhi: float,
 
 
 def offset_chance(levels: list[np.ndarray], tols: list[np.ndarray],
-                  multiples: list[np.ndarray], qlo: float, qhi: float
-                  ) -> tuple[float, float] | None:
+                  multiples: list[np.ndarray], qlo: float, qhi: float,
+                  units: list[np.ndarray] | None = None) -> tuple[float, float] | None:
     """``(step, log10 chance)`` for levels of each run that lie within their tolerances of
     ``offset_r + multiples·q`` for one ``q`` in ``[qlo, qhi]`` and one offset per run, or
     ``None`` where no such ``q`` exists. The step is the one that leaves most room
     (the largest least margin, a Chebyshev fit); the chance is
-    ``Σ_r [log10 n_r + Σ_i log10(2 t_i/q) − max_i log10(2 t_i/q)]`` (module notes)."""
+    ``Σ_r [log10 n_r + Σ_i log10 c_i − max_i log10 c_i]`` with ``c_i = 2 t_i/q`` (module
+    notes), or, for levels printed to ``units``, the share of that print lattice a window
+    of ``2 t_i`` holds where that is larger (:mod:`._lattice`)."""
 
     def spare(q: float) -> float:
         # the least room any run leaves for its offset at step q (< 0: none)
@@ -131,7 +135,64 @@ def offset_chance(levels: list[np.ndarray], tols: list[np.ndarray],
     if room < 0.0:
         return None
     log_chance = 0.0
-    for tl in tols:
-        per = np.log10(np.minimum(2.0 * tl / q, 1.0))
+    for r, tl in enumerate(tols):
+        if units is not None and np.any(units[r] > 0):
+            per = np.log10(shares(q, units[r], 2.0 * tl, float(np.ptp(levels[r]))))
+        else:
+            per = np.log10(np.minimum(2.0 * tl / q, 1.0))
         log_chance += math.log10(tl.size) + float(per.sum() - per.max())
     return q, log_chance
+
+
+
+def resolved(intervals: list[tuple[float, float]], d: np.ndarray, t: np.ndarray, runs,
+             budget: Budget | None = None):
+    """The intervals of :func:`steps_in` narrowed to what their multiples allow, with the
+    multiples, where every two neighbouring levels of a run agree with them too.
+
+    In an interval of :func:`steps_in` every difference ``d`` (from a run's middle level)
+    admits one multiple ``m``; ``q`` then lies in ``[max (d − t)/m, min (d + t)/m]``.
+    Neighbouring levels ``i, j`` of a run (sorted) must also lie within ``t_i + t_j`` of
+    their multiples' difference, ``|Δlevel − Δm·q| ≤ t_i + t_j`` — a necessary condition of
+    :func:`offset_chance`'s fit that most intervals left by the bisection fail. All
+    intervals are tested at once. ``runs``: per run ``(levels, tols, others, sign)``, the
+    differences ``d`` being ``|levels[others] − middle|`` run after run. Yields
+    ``(lo, hi, m)``; ``None`` (instead of a list) when the ``budget`` is spent."""
+    a_all = np.array([a for a, _ in intervals])
+    b_all = np.array([b for _, b in intervals])
+    out = []
+    size = max(1, _CHUNK // max(d.size, 1))
+    for c in range(0, a_all.size, size):
+        a, b = a_all[c:c + size], b_all[c:c + size]
+        if budget is not None:
+            budget.left -= 4 * a.size * d.size + _CALL_COST
+            if budget.left < 0:
+                return None
+        m = np.maximum(np.ceil((d - t)[None, :] / b[:, None] - 1e-12), 0.0)
+        ok = np.all(m >= 1.0, axis=1)
+        safe = np.where(m >= 1.0, m, 1.0)
+        lo = np.maximum(a, np.max((d - t)[None, :] / safe, axis=1))
+        hi = np.minimum(b, np.min((d + t)[None, :] / safe, axis=1))
+        ok &= lo <= hi
+        nlo, nhi, at = lo.copy(), hi.copy(), 0
+        for lv, tl, others, sign in runs:
+            n = sign.size
+            mult = np.zeros((a.size, lv.size))
+            mult[:, others] = sign[None, :] * m[:, at:at + n]
+            at += n
+            if lv.size < 2:
+                continue
+            dl = np.diff(lv)[None, :]  # > 0: the levels are sorted
+            dm = np.diff(mult, axis=1)
+            tt = (tl[1:] + tl[:-1])[None, :]
+            ok &= ~np.any((dm == 0) & (dl > tt), axis=1)
+            pos = np.where(dm > 0, dm, np.nan)
+            neg = np.where(dm < 0, -dm, np.nan)
+            with np.errstate(all="ignore"):
+                nlo = np.fmax(nlo, np.nanmax(np.where(dm > 0, (dl - tt) / pos, -np.inf), axis=1))
+                nhi = np.fmin(nhi, np.nanmin(np.where(dm > 0, (dl + tt) / pos, np.inf), axis=1))
+                nhi = np.fmin(nhi, np.nanmin(np.where(dm < 0, (tt - dl) / neg, np.inf), axis=1))
+        ok &= nlo <= nhi + 1e-12 * b  # (slack for rounding: never stricter than the fit)
+        for i in np.flatnonzero(ok):
+            out.append((float(lo[i]), float(hi[i]), m[i].astype(np.int64)))
+    return out
