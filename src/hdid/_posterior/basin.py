@@ -256,7 +256,8 @@ def _refit_finer(fit, log, h: float):
                        start_from_model=True)
     except (HdidError, ValueError, KeyError, OSError) as exc:
         return fit, f"no refit at the {1e3 * h:.4g} ms substep ({str(exc).splitlines()[0]})"
-    if new.problem.free != fit.problem.free:
+    if (new.problem.free, new.problem.n_unknowns, new.problem.release_free) != (
+            fit.problem.free, fit.problem.n_unknowns, fit.problem.release_free):
         return fit, (f"no refit at the {1e3 * h:.4g} ms substep (the log does not rebuild the "
                      "fit's problem)")
     return new, what
