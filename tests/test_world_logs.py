@@ -321,3 +321,26 @@ def test_a_fold_back_restart_is_the_aliased_swing_slowed_to_the_log_s_own():
     # below Nyquist nothing to fold
     assert fold_back_rows(s.problem, s.model, u, 1.0 / fs, f_true, s.prep.frequency_hz,
                           0.0) is None
+
+
+def test_the_coulomb_limit_starts_at_the_friction_the_swings_slide_at():
+    # HV's world log09 (23 Hz, 2^19 counts, true Coulomb friction): the fit put its friction
+    # in tau_s with v_s 148 rad/s above the 19 rad/s peak and tau_c → 0. The Coulomb limit's
+    # start took tau_s = tau_c ≈ 0 (frictionless) from there and, with the verdict-only
+    # limit fits at the floor, ended at χ² 5.5e8: "Coulomb fits as well" (χ² 124.1 against
+    # 121.7, Δχ² 2.3 < 7.81) was lost. The start is the fitted law at half the peak speed.
+    import numpy as np
+
+    from hdid._fitting._fit import _setup
+    from hdid._fitting._limits import LEVEL_SPEED, limits_of
+    from hdid._fitting._starts import log_scales
+
+    s = _setup(hdid.read_log(_damped_log()[0]), ratio=DAMPED["ratio"], inertia=DAMPED["inertia"])
+    scales = log_scales(s.prep, s.model, np.asarray(s.problem.offset0))
+    coulomb = next(lim for lim in limits_of(s.model, s.fixed) if lim.key == "coulomb")
+    v = {"tau_c": 1e-13, "tau_s": 7.5e-4, "v_s": 8.0 * scales.speed, "delta": 1.1}
+    level = 7.5e-4 * math.exp(-(LEVEL_SPEED / 8.0) ** 1.1)  # 0.95 of tau_s
+    assert coulomb.start(v, scales)["tau_s"] == pytest.approx(level, rel=1e-9)
+    # a law whose v_s lies below the swings' speeds slides at tau_c: the start keeps it
+    v = {"tau_c": 5e-4, "tau_s": 9e-4, "v_s": 0.01 * scales.speed, "delta": 2.0}
+    assert coulomb.start(v, scales)["tau_s"] == pytest.approx(5e-4, rel=1e-6)

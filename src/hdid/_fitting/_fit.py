@@ -226,7 +226,7 @@ def nested_check(result: FitResult, log: Log, setup: _Setup, *, nested="auto", f
         p = _limits.pinned(problem, model, pins)
         # the limit's starts: the fit's optimum and the best of the grid, held at the limit
         U = _limits.with_values_rows(problem, model, np.concatenate([u_fit[None, :], grid_U]),
-                                     limit.start, pins)
+                                     lambda v: limit.start(v, scales), pins)
         cost = grid_costs(p, U[1:])
         # at the floor (a verdict only) the batch's few grid starts beside the fit's optimum
         n_grid = max(lanes - 1, 1) if lanes and switch else _limits.LIMIT_GRID_STARTS

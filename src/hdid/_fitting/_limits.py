@@ -164,8 +164,9 @@ class Limit:
     claim: str
     pins: Callable[[dict, object], dict]
     restarts: Callable[[dict, object], list]
-    #: values a start of the limit's fit takes from its own (e.g. the Coulomb level)
-    start: Callable[[dict], dict] = lambda v: {}
+    #: values a start of the limit's fit takes from its own and the log's scales (e.g. the
+    #: Coulomb level)
+    start: Callable[[dict, object], dict] = lambda v, scales: {}
     #: keys of limits whose model contains this one's (:func:`implied`)
     within: tuple[str, ...] = ()
 
@@ -200,8 +201,10 @@ def limits_of(model, fixed) -> list[Limit]:
                          tuple(n for n in ("tau_s", "v_s", "delta") if n not in fixed),
                          "no Stribeck rise supported: Coulomb friction (tau_s = tau_c) fits "
                          "as well", coulomb_pins, coulomb_restarts,
-                         # the limit's level is tau_s: a start's Coulomb level
-                         lambda v: {"tau_s": v["tau_c"]}))
+                         # the limit's level is tau_s: a start's sliding level on the
+                         # swings (a fit's tau_c → 0 with v_s above the peak speed slides
+                         # at tau_s: HV log09, tau_s = tau_c there started frictionless)
+                         lambda v, scales: {"tau_s": sliding_level(v, scales)}))
     if isinstance(law, AbstractFriction):
         torques = tuple(p.name for p in law.parameters if p.unit == "N m"
                         and p.name not in fixed)
@@ -229,6 +232,14 @@ def limits_of(model, fixed) -> list[Limit]:
                          "no cubic stiffness supported: the linear spring (k2 = 0) fits as "
                          "well", k2_pins, lambda v, scales: [{}]))
     return out
+
+
+def sliding_level(values: dict, scales):
+    """The fitted Stribeck friction at ``LEVEL_SPEED`` of the log's peak speed (arrays of
+    values give arrays)."""
+    shape = np.exp(-(LEVEL_SPEED * scales.speed / np.asarray(values["v_s"], dtype=float))
+                   ** np.asarray(values["delta"], dtype=float))
+    return values["tau_c"] + (values["tau_s"] - values["tau_c"]) * shape
 
 
 def stribeck_restarts(values: dict, scales, fixed) -> list[dict]:
