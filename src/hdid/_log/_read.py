@@ -23,7 +23,7 @@ from ._rollover import unwrap_rollover
 from ._time_order import (
     group_interleaved, repeated_rows, repeated_rows_note, runs_at_restarts, take_rows,
 )
-from ._timer import time_print_unit, unwrap_timer, uniform_stamps
+from ._timer import largest_time_print_unit, time_print_unit, unwrap_timer, uniform_stamps
 from ._timestamps import timestamp_seconds
 from ._tools import tool_columns
 from ._types import Log, Run
@@ -243,7 +243,8 @@ def read_log(
         take_rows(table, order)
     # stamps coarser than a fixed-rate logger's sampling (hdid._log._timer): before the
     # rows written twice, which a held reading stamped twice would look like
-    time = _uniform_stamps(time, run_labels, table, cols, unit_scale, stamped, order_notes)
+    time, rebuilt = _uniform_stamps(time, run_labels, table, cols, unit_scale, stamped,
+                                    order_notes)
     twice = repeated_rows([run_labels, setups, time, theta, inertia, motor, theta_out, load])
     if twice.size:
         order_notes.append(repeated_rows_note(table.lines, twice))
@@ -257,8 +258,9 @@ def read_log(
         run_labels, restart_notes = runs_at_restarts(time, run_labels, table.lines,
                                                      min_samples_per_run)
         order_notes += restart_notes
-        time = _uniform_stamps(time, run_labels, table, cols, unit_scale, stamped,
-                               order_notes)
+        time, again = _uniform_stamps(time, run_labels, table, cols, unit_scale, stamped,
+                                      order_notes)
+        rebuilt = rebuilt or again
 
     # -- counts vs. radians (a count register that rolls over is unwrapped first) ------
     rollover_notes = []
@@ -328,6 +330,10 @@ def read_log(
     run_starts = np.concatenate(([0], np.cumsum(lengths)[:-1]))
     printed = column_print_units(table.columns[cols[_THETA]], unit_scale[_THETA], cpr)
     print_unit = None if printed is None else float(np.max(printed[kept]))
+    # the time column's printing (a stamp is the instant cut to it): none where the
+    # times are date-times or were rebuilt as uniform steps
+    time_unit = None if stamped or rebuilt else largest_time_print_unit(
+        table.columns[cols[_TIME]], unit_scale[_TIME], kept, time)
     resolution_note = None
     if resolution is None:
         found = find_step(theta[kept], None if printed is None else printed[kept], run_starts)
@@ -377,13 +383,15 @@ def read_log(
         notes=tuple(notes),
         print_unit=print_unit,
         resolution_note=resolution_note,
+        time_print_unit=time_unit,
     )
 
 
 def _uniform_stamps(time, run_labels, table, cols, unit_scale, stamped, notes):
-    """:func:`._timer.uniform_stamps` over the runs as labelled so far (notes appended)."""
+    """:func:`._timer.uniform_stamps` over the runs as labelled so far (notes appended),
+    and whether it rebuilt any time."""
     if stamped:
-        return time
+        return time, False
     block_start = np.zeros(time.size, dtype=bool)
     block_start[:1] = True
     if run_labels is not None:
@@ -393,7 +401,7 @@ def _uniform_stamps(time, run_labels, table, cols, unit_scale, stamped, notes):
         time, block_start, lambda: time_print_unit(table.columns[cols[_TIME]], unit_scale[_TIME]),
         table.lines, run_labels)
     notes += stamp_notes
-    return time
+    return time, bool(stamp_notes)
 
 
 def _check_not_mixed(table: _Table, col: int, run_labels: np.ndarray) -> None:

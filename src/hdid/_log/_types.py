@@ -149,6 +149,13 @@ class Log:
     resolution_note : str or None
         Why no encoder step was found in the readings (``resolution`` is ``None``), or
         ``None``.
+    time_print_unit : float or None
+        Printing precision of the time column [s]: the largest rounding unit of its cells as
+        the file prints them (``1e-6`` for whole microseconds or seconds to 6 decimals);
+        ``None`` for numbers never printed, date-times, or times rebuilt as uniform steps
+        (a note says so). A stamp is the sample's instant cut to this unit, an error of up
+        to one unit: ``ω·u/√12`` rad on a reading where the angle moves at ``ω`` rad/s
+        (rounded to the unit; truncated, a bias of ``u/2`` besides).
     first_reading_held : tuple of str
         Runs whose readings move from their second sample on but whose first reading is
         the hold (a logger that starts at the servo-off, the release falling in the first
@@ -174,6 +181,7 @@ class Log:
     print_unit: float | None = None
     resolution_note: str | None = None
     first_reading_held: tuple[str, ...] = ()
+    time_print_unit: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "runs", tuple(self.runs))
