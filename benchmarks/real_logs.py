@@ -93,7 +93,7 @@ def sts_rows(add: tuple[str, ...]):
             fits.append((tuple(a for a in add if a != "reading_age"), res, {},
                          time.perf_counter() - t0, load))
             load, t0 = os.getloadavg()[0], time.perf_counter()
-            res = fit_with_age(real / v["csv"], model, base=res)
+            res = fit_with_age(real / v["csv"], model, base=res, **({"fix": fix} if fix else {}))
             scan = res.reading_age_scans[-1]
             age = dict(sample_period=scan.period, run_periods=list(scan.run_periods),
                        scan_gain=1 - scan.sse / scan.sse_none)
