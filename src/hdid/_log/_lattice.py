@@ -65,3 +65,24 @@ def shares(q: float, units: np.ndarray, widths: np.ndarray, span: float) -> np.n
     pairs, inverse = np.unique(np.stack((units, widths)), axis=1, return_inverse=True)
     each = np.array([lattice_share(q, u, w, span) for u, w in pairs.T])
     return np.maximum(out, each[np.ravel(inverse)])
+
+
+def mixed_offsets(q: float, run_levels, chance: float, most: int = 16) -> bool:
+    """Whether some run's levels fill at most half the residues modulo ``n`` steps
+    (``n`` = 2 … ``most``) where a swing over the grid ``q`` fills all: ``r`` of ``n``
+    residues hold ``L`` levels at random with chance ``C(n, r)·(r/n)^L``, taken as
+    impossible below ``chance`` (the search's false-grid chance). Such levels lie on a coarser grid
+    ``n·q`` with several offsets (two releases under one run label): ``q`` only fits
+    their offsets' difference, one coincidence, not every level. (A few readings half
+    a step off a coarse grid fill more than half: the finer grid that explains them,
+    :mod:`._grid_outliers`, is kept.)"""
+    for _, _, lv in run_levels:
+        if lv.size < 8:
+            continue
+        m = np.rint((lv - lv[lv.size // 2]) / q).astype(np.int64)
+        for n in range(2, most + 1):
+            r = int(np.unique(np.mod(m, n)).size)
+            if 2 * r <= n and (math.log10(math.comb(n, r)) + lv.size * math.log10(r / n)
+                          < math.log10(chance)):
+                return True
+    return False

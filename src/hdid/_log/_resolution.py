@@ -35,7 +35,7 @@ import numpy as np
 import pandas as pd
 
 from ._grid_outliers import coarser_grid
-from ._lattice import shares
+from ._lattice import mixed_offsets, shares
 from ._step_scan import Budget, offset_chance, resolved, steps_in
 
 
@@ -311,7 +311,7 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
             coarse_grid = coarser_grid(q, x, run_levels, merge, MAX_STEP_DIVISOR,
                                        FALSE_GRID_CHANCE)
             if coarse_grid is None:
-                if _mixed_offsets(q, run_levels):
+                if mixed_offsets(q, run_levels, FALSE_GRID_CHANCE):
                     return _untold(n_levels, q, unit, unit_name)
                 return StepFinding(q, unit, None)
             return StepFinding(q * coarse_grid.factor, unit, None,
@@ -329,27 +329,6 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
             "no encoder grid can be told from the printing",
         )
     return StepFinding(None, unit, "the readings lie on no grid")
-
-
-def _mixed_offsets(q: float, run_levels, most: int = 16) -> bool:
-    """Whether some run's levels fill at most half the residues modulo ``n`` steps
-    (``n`` = 2 … ``most``) where a swing over the grid ``q`` fills all: ``r`` of ``n``
-    residues hold ``L`` levels at random with chance ``C(n, r)·(r/n)^L``, taken as
-    impossible below :data:`FALSE_GRID_CHANCE`. Such levels lie on a coarser grid
-    ``n·q`` with several offsets (two releases under one run label): ``q`` only fits
-    their offsets' difference, one coincidence, not every level. (A few readings half
-    a step off a coarse grid fill more than half: the finer grid that explains them,
-    :mod:`._grid_outliers`, is kept.)"""
-    for _, _, lv in run_levels:
-        if lv.size < 8:
-            continue
-        m = np.rint((lv - lv[lv.size // 2]) / q).astype(np.int64)
-        for n in range(2, most + 1):
-            r = int(np.unique(np.mod(m, n)).size)
-            if 2 * r <= n and (math.log10(math.comb(n, r)) + lv.size * math.log10(r / n)
-                          < math.log10(FALSE_GRID_CHANCE)):
-                return True
-    return False
 
 
 def _chance(d: np.ndarray, t: np.ndarray, units: np.ndarray, q: float) -> float:
