@@ -19,12 +19,12 @@ from .._problems import _programs
 from ._identifiability import MOVED_COUNTS, analyse, analyse_first_finite
 from .._log import Log, read_log
 from .._models._model import Model
-from . import _cubic_restart, _first_reading, _limits, _polish
+from . import _cubic_restart, _first_reading, _limits, _polish, _substep
+from ._substep import substep_for  # (the substep rule; hdid._design asks it here too)
 from .._simulation._prepare import Prepared, offset_guess, prepare
 from .._problems._problem import OFFSET_SCALE_REL, Problem, build_problem
 from .._results._result import FitResult
 from .._results._summaries import StartSummary
-from .._simulation._simulate import DEFAULT_MAX_SUBSTEP
 from .._models._transforms import interval_to_u, to_unconstrained
 from ..effects import order_of_magnitude
 from ._lm import PHASE1_STEPS, LMState
@@ -33,12 +33,6 @@ from ._one_lane import _local_fits as _one_lane
 from ._pendulum import pendulum_prepared
 from ._starts import (_choose_starts, _costs, _grid_candidates, _grid_starts, grid_costs,
                       log_scales)
-
-
-#: Natural frequency [Hz] at which the default substep (``DEFAULT_MAX_SUBSTEP``) was
-#: validated against the event-driven reference (error 0.04 of the 250 Hz quantization
-#: floor); other logs scale the substep by powers of two to keep ``h·ω_n`` about the same.
-SUBSTEP_REFERENCE_HZ = 60.0
 
 
 def fit(
@@ -163,6 +157,7 @@ def fit(
     if held:
         result = _first_reading.choose(
             result, fit(dataclasses.replace(log, first_reading_held=held), **given), held)
+    result = _substep.refined(result, log, given, fit)  # a substep the fitted swing wants
     result.wall_time_s = time.perf_counter() - t_start
     return result
 
@@ -463,17 +458,6 @@ def _stored_analysis(problem: Problem, u) -> dict:
     return {"jacobian": _lm_residuals_and_jacobian(problem, u),
             "dense": _stored_dense(problem, u),
             "derived": jax.tree_util.tree_map(np.asarray, derived)}
-
-
-def substep_for(frequency_hz: float) -> float:
-    """Longest RK4 substep [s] for a log whose oscillation frequency is ``frequency_hz``:
-    ``DEFAULT_MAX_SUBSTEP`` at ``SUBSTEP_REFERENCE_HZ``, halved per octave above (so
-    ``h·ω_n`` stays ≲ 0.26), doubled per octave below; powers of two, so logs of similar
-    gears share compiled programs."""
-    if not (math.isfinite(frequency_hz) and frequency_hz > 0):
-        return DEFAULT_MAX_SUBSTEP
-    octaves = math.floor(math.log2(frequency_hz / SUBSTEP_REFERENCE_HZ) + 0.5)
-    return DEFAULT_MAX_SUBSTEP * 2.0 ** (-octaves)
 
 
 def _fixed_values(model: Model, fix) -> dict[str, float]:

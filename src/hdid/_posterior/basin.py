@@ -37,6 +37,11 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+# the substep the fitted swing asks for: the fit's own rule, in one place (``hdid.fit``
+# refits by it where its substep clearly under-resolves the swing, ``at_floor``; above the
+# floor this check asks it plainly)
+from .._fitting._substep import AT_FLOOR_HW, substep_wanted  # noqa: F401
+
 #: Residual, as a multiple of the quantization floor, above which the fit has not reached
 #: its best basin: exact models on clean logs leave 0.4–1.0× the floor (less where the gear
 #: sticks); the fit's own floor test (``_limits.above_floor``) is 1.2–1.4× for 35–500
@@ -116,53 +121,6 @@ def rms_over_floor(fit) -> float:
 
 def _fixed(fit) -> set[str]:
     return {n for n, p in fit.parameters.items() if p.fixed}
-
-
-#: ``h·ω`` (substep × the fitted swing's angular frequency) beyond which a fit at its floor
-#: is refitted finer before sampling: twice the centre of ``hdid.fit``'s own rule
-#: (``_fit.substep_for``: 2π·60 Hz·0.5 ms = 0.19, its octaves spanning 0.13–0.27), half an
-#: octave past the rule's edge, where RK4's error per unit time (∝ (h·ω)⁴) is 4× the
-#: rule's worst; a log near an octave's edge is not refitted for nothing.
-AT_FLOOR_HW = 0.377
-
-
-def substep_wanted(fit, at_floor: bool = False) -> float | None:
-    """The longest RK4 substep [s] that ``hdid.fit``'s own rule (``_fit.substep_for``:
-    ``h·ω ≲ 0.26``) gives for the fit's fitted swing — its natural frequency, hardened at
-    the log's largest swing (``_aliasing.swing_hz``) — when that is finer than the substep
-    the fit ran at (``at_floor``: and that substep's ``h·ω`` above :data:`AT_FLOOR_HW`);
-    ``None`` otherwise (or when the frequency is not known).
-
-    Why: the fit picks its substep from the log's own turning-point frequency. A log
-    sampled below twice its swing shows a slower false swing (its alias), so the substep
-    is picked for that: a paper-design log (250 Hz) of a 222 Hz swing read as 29 Hz ran at
-    1 ms, ``h·ω`` = 1.4, where RK4's phase error over the ring-down puts the simulation at
-    the truth 4.8 encoder steps off the reference simulator (SBC seed 36016). No optimum
-    of that discretised model describes the log (3.3× the floor; the truth, its nuisances
-    refitted, 34×), so the limit checks cannot help and the statement would blame the
-    basin or a missing effect for what is the integrator's error."""
-    import numpy as np
-
-    from .._fitting._fit import substep_for
-    from .._simulation._aliasing import swing_hz
-
-    prob = getattr(fit, "problem", None)
-    f0 = (getattr(fit, "derived", None) or {}).get("natural_frequency_hz", (math.nan,))[0]
-    if prob is None or not (math.isfinite(f0) and f0 > 0):
-        return None
-    # the largest release: each run's hold reading against its last weighted one (its rest),
-    # as the fit's own aliasing warning measures it (``prep.hold − prep.rest``)
-    theta, weight = np.asarray(prob.theta, dtype=float), np.asarray(prob.weight, dtype=float)
-    hold = np.asarray(prob.hold, dtype=float)
-    amp = [abs(float(h0 - th[np.flatnonzero(w > 0)[-1]]))
-           for h0, th, w in zip(hold, theta, weight) if np.any(w > 0)]
-    values = {n: float(p.value) for n, p in fit.parameters.items()}
-    ratio = float(getattr(fit.model, "ratio", 1.0) or 1.0)
-    f = swing_hz(float(f0), values, max(amp, default=0.0) / ratio)
-    h, h_fit = substep_for(f), float(prob.max_substep)
-    if at_floor and h_fit * 2.0 * math.pi * f <= AT_FLOOR_HW:
-        return None
-    return h if h < h_fit * (1.0 - 1e-9) else None
 
 
 def basin_check(fit, log=None, *, echo: bool = True):
