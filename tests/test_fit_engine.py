@@ -82,9 +82,11 @@ def test_limit_starts_are_set_on_whole_columns_as_row_by_row(paper_setup):
     values = s.problem.values_np(U[0])
     for limit in _limits.limits_of(s.model, s.fixed):
         pins = limit.pins(values, scales)
-        rows = _limits.with_values_rows(s.problem, s.model, U, limit.start, pins)
+        rows = _limits.with_values_rows(s.problem, s.model, U,
+                                        lambda v: limit.start(v, scales), pins)
         one = np.stack([_limits.with_values(s.problem, s.model, u,
-                                            {**limit.start(s.problem.values_np(u)), **pins})
+                                            {**limit.start(s.problem.values_np(u), scales),
+                                             **pins})
                         for u in U])
         # the same transforms on the same numbers: equal to the last bit
         np.testing.assert_array_equal(rows, one)

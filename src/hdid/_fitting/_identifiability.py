@@ -17,7 +17,7 @@ from .._results._summaries import ParameterEstimate, RunSummary, StartSummary
 from .._models._transforms import derivative
 from .._problems._derived import BracketTooCostly, _derived, band_bracket
 from ..effects import StribeckFriction
-from ._plausibility import RESIDUAL_FLOOR_FACTOR, plausibility_warnings  # noqa: F401
+from ._plausibility import RESIDUAL_FLOOR_FACTOR, motion_warning, plausibility_warnings  # noqa: F401
 
 
 #: A direction in the optimiser's space whose data-only standard deviation exceeds this
@@ -89,7 +89,7 @@ def analyse(
     runs, rms_all, offset, moving = _run_summaries(problem, prep, u, std_u, pre)
     bracket = _run_warnings(prep, runs, values, model, derived, bracket, warnings)
     warnings += _trust_warnings(problem, u, params, std_u, values)
-    warnings += _motion_warning(problem, prep, moving)
+    warnings += motion_warning(problem, prep, moving)
     warnings += plausibility_warnings(prep, model, values, rms_all,
                                       derived.get("natural_frequency_hz", (math.nan,))[0],
                                       problem.n_unknowns)
@@ -444,36 +444,6 @@ def _trust_warnings(problem: Problem, u, params, std_u, values) -> list[str]:
             "rise by fixing tau_s = tau_c)"
         )
     return out
-
-
-#: Readings in motion a run should have for the warning's suggested rate.
-ASK_MOVING_READINGS = 10
-
-
-def _motion_warning(problem: Problem, prep: Prepared, moving) -> list[str]:
-    """Too few readings in motion for the swing's unknowns. A hold fixes its run's start
-    angle and a rest its place in the stick band; the stiffness, the friction law and the
-    release instants rest on the readings taken while the gear moves. Fewer of those than
-    such unknowns determine none of them (sweep log, an 84 Hz gear released inside 3.3
-    stick bands at 250 Hz: each run moves for one reading, every standard error ∞): the
-    warning says so and asks for the rate that gives each run's motion
-    :data:`ASK_MOVING_READINGS` readings."""
-    moving = np.asarray(moving, dtype=int)
-    n_swing = problem.n_physical + (problem.n_runs if problem.release_free else 0)
-    if moving.size == 0 or int(moving.sum()) >= n_swing:
-        return []
-    dt = prep.sample_period
-    shortest = (int(moving.min()) + 1) * dt  # the motion ends before the next reading
-    per_run = ", ".join(str(int(m)) for m in moving)
-    return [
-        f"the runs move for only {per_run} reading(s) (run by run; {int(moving.sum())} in all, "
-        f"against {n_swing} unknowns of the swing: {problem.n_physical} parameters"
-        + (f" and {problem.n_runs} release instants" if problem.release_free else "")
-        + "; the holds and rests fix only the start angles and the stick band): the data "
-        "cannot determine the stiffness and friction — log faster (at least "
-        f"{ASK_MOVING_READINGS / shortest:.3g} Hz, {ASK_MOVING_READINGS} readings in a "
-        f"run's motion of under {shortest * 1e3:.3g} ms) or release from further outside "
-        "the stick band"]
 
 
 def _shape_warnings(problem: Problem, flags: dict[str, str]) -> list[str]:

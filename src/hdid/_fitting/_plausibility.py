@@ -100,3 +100,33 @@ def plausibility_warnings(prep: Prepared, model, values, rms: float,
         )
     out += residual_warnings(prep, rms, n_unknowns)
     return out
+
+
+#: Readings in motion a run should have for the warning's suggested rate.
+ASK_MOVING_READINGS = 10
+
+
+def motion_warning(problem, prep: Prepared, moving) -> list[str]:
+    """Too few readings in motion for the swing's unknowns. A hold fixes its run's start
+    angle and a rest its place in the stick band; the stiffness, the friction law and the
+    release instants rest on the readings taken while the gear moves. Fewer of those than
+    such unknowns determine none of them (sweep log, an 84 Hz gear released inside 3.3
+    stick bands at 250 Hz: each run moves for one reading, every standard error ∞): the
+    warning says so and asks for the rate that gives each run's motion
+    :data:`ASK_MOVING_READINGS` readings."""
+    moving = np.asarray(moving, dtype=int)
+    n_swing = problem.n_physical + (problem.n_runs if problem.release_free else 0)
+    if moving.size == 0 or int(moving.sum()) >= n_swing:
+        return []
+    dt = prep.sample_period
+    shortest = (int(moving.min()) + 1) * dt  # the motion ends before the next reading
+    per_run = ", ".join(str(int(m)) for m in moving)
+    return [
+        f"the runs move for only {per_run} reading(s) (run by run; {int(moving.sum())} in all, "
+        f"against {n_swing} unknowns of the swing: {problem.n_physical} parameters"
+        + (f" and {problem.n_runs} release instants" if problem.release_free else "")
+        + "; the holds and rests fix only the start angles and the stick band): the data "
+        "cannot determine the stiffness and friction — log faster (at least "
+        f"{ASK_MOVING_READINGS / shortest:.3g} Hz, {ASK_MOVING_READINGS} readings in a "
+        f"run's motion of under {shortest * 1e3:.3g} ms) or release from further outside "
+        "the stick band"]
