@@ -85,7 +85,7 @@ def worker(cfg: dict) -> dict:
     if cfg["mode"] == "workers":
         out.update(_workers_run(cfg, warm, timed, t_imp))
     else:
-        opts = dict(vectorize=True, band_bracket=cfg.get("bracket"))
+        opts = dict(vectorize=True)
         out["import_s"] = time.perf_counter() - t_imp
         with Clock() as first:
             timing = hdid.fit_many(warm, **opts).attrs["timing"]
@@ -190,7 +190,6 @@ def measure(args) -> dict:
         go(f"vectorized {n}", "vectorized", n, paths=paper)
     if args.before:  # the same logs through the older tree, right after
         go(f"before: vectorized {max(ns)}", "vectorized", max(ns), paths=paper, tree=str(Path(args.before).resolve()))
-    go("vectorized 100, band bracket on", "vectorized", min(100, max(ns)), paths=paper, bracket=True)
     # several cores: worker processes (threads in one process do not add cores)
     for n in ns[-2:]:
         go(f"workers 2, {n}", "workers", n, paths=paper, workers=2)
@@ -284,24 +283,7 @@ def render(res: dict) -> str:
         L.append(f"| {r['n']} | {_rate(r):.2f} ({r['total_s']:.1f} s) | {_cpu_ms(r):.0f} ms | "
                  f"{r['maxrss_mb']:.0f} MB | {r['first_call_s']:.1f} s | {_ld(r)} |")
     L.append("")
-    br = _find(res, "vectorized 100, band bracket on") or None
-    v100 = _find(res, f"vectorized {br['n']}") if br else None
-    if br and v100:
-        L.append(f"- vectorised with `band_bracket=True`, {br['n']} logs: {br['total_s']:.1f} s ({_rate(br):.2f} "
-                 f"logs/s) vs {v100['total_s']:.1f} s without (load {_ld(br)}; difference "
-                 f"{(br['total_s'] - v100['total_s']) / br['n'] * 1e3:+.0f} ms per log of wall time"
-                 + (f", {d:+.0f} ms of CPU" if (d := _cpu_ms(br) - _cpu_ms(v100)) == d else "")
-                 + ").")
-    L += ["", "## Against the truth\n"]
-    if big.get("per_log"):
-        rows = [x for x in big["per_log"] if x]
-        L += [f"- vectorised, {big['n']} logs, error against the truth in standard errors (z = (fit − truth)/std):\n",
-              *header("parameter", "median abs(z)", "share abs(z) < 2", "share abs(z) < 3")]
-        for k in ("k1", "tau_c", "tau_s", "c_v"):
-            if z := sorted(abs(x[f"z_{k}"]) for x in rows if f"z_{k}" in x):
-                L.append(f"| {k} | {z[len(z) // 2]:.2f} | {sum(v < 2 for v in z) / len(z):.0%} | "
-                         f"{sum(v < 3 for v in z) / len(z):.0%} |")
-    L += [""] + _common.interpretation_section(res)
+    L += _common.interpretation_section(res)
     L += _before_after(res, big)
     L += ["", "## Where the vectorised time goes\n",
           "Wall seconds, and CPU seconds (process time, both threads) in brackets.\n",
