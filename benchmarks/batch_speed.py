@@ -92,25 +92,18 @@ def worker(cfg: dict) -> dict:
         out.update(first_call_s=first.wall, first_call_timing=timing)
         with Clock() as c:
             table = hdid.fit_many(timed, **opts)
-        out.update(total_s=c.wall, cpu_s=c.cpu, timing=table.attrs["timing"], **_quality(cfg, timed, table))
+        out.update(total_s=c.wall, cpu_s=c.cpu, timing=table.attrs["timing"], **_quality(timed, table))
     return out | {"n": len(timed), "maxrss_mb": max(out.get("maxrss_mb", 0.0), _usage()[1]), "load_after": load("end")}
 
 
-def _quality(cfg: dict, timed: list, table) -> dict:
-    """Failures, medians, and per log the best χ² and (paper design) z against the truth."""
+def _quality(timed: list, table) -> dict:
+    """Failures, medians, and per log the best χ² (the before/after table compares them)."""
     out = {"n_failed": int(table["error"].notna().sum()),
            "errors": [e for e in table["error"] if isinstance(e, str)][:3],
            "summary": {c: float(table[c].median()) for c in ("k1", "tau_c", "rms_residual_counts") if c in table}}
-    out["per_log"] = per = []  # best χ² (before vs after on the same logs); paper design: z against the truth
-    for path, r in zip(timed, table.itertuples()):
-        if (res := r.result) is None:
-            per.append(None)
-            continue
-        i = int(Path(path).stem[3:])
-        truth = truth_of(i) if cfg["design"] == "paper" else {}
-        per.append({"log": i, "chi2": float(res.starts.costs[res.starts.best]),
-                    **{f"z_{k}": float((p.value - truth[k]) / p.std) for k in ("k1", "tau_c", "tau_s", "c_v")
-                       if truth and (p := res.parameters.get(k)) is not None}})
+    out["per_log"] = [None if (res := r.result) is None else
+                      {"log": int(Path(path).stem[3:]), "chi2": float(res.starts.costs[res.starts.best])}
+                      for path, r in zip(timed, table.itertuples())]
     return out
 
 
@@ -141,7 +134,7 @@ def _workers_run(cfg: dict, warm: list, timed: list, t_imp: float) -> dict:
         after = client.run(_usage)
         out.update(cpu_s=(_usage()[0] - c0) + sum(after[k][0] - before[k][0] for k in after),
                    maxrss_mb=max(v[1] for v in after.values()), timing=table.attrs["timing"],
-                   **_quality(cfg, timed, table))
+                   **_quality(timed, table))
     finally:
         client.close()
         cluster.close()
