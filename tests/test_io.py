@@ -331,10 +331,10 @@ def test_binary_file(tmp_path):
 
 def test_missing_column_lists_found_columns(tmp_path):
     lines = log_lines()
-    lines[0] = lines[0].replace("theta", "angle")
+    lines[0] = lines[0].replace("theta", "winkel")
     path = write_lines(tmp_path / "cols.csv", lines)
     msg = str(error_of(path))
-    assert path.name in msg and "'theta'" in msg and "'angle'" in msg and "'run'" in msg
+    assert path.name in msg and "'theta'" in msg and "'winkel'" in msg and "'run'" in msg
 
 
 def test_semicolon_file_is_read_like_the_comma_file(tmp_path):

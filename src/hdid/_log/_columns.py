@@ -86,6 +86,14 @@ def _find_columns(
         if key in index and by_alias(name) != by_alias(table.names[index[key]]):
             if by_alias(name):  # ``theta`` and ``position``: the canonical name wins
                 continue
+        elif key in index and by_alias(name) and key in (_THETA, _THETA_OUT):
+            raise LogError(  # ``Angle`` and ``Encoder``: which one the fit reads is unclear
+                f"two angle columns ({_show(table.names[index[key]], 30)}, column "
+                f"{index[key] + 1}, and column {i + 1}) — rename the one to fit 'theta' "
+                "(or prefix them 'motor' and 'load')",
+                path=path,
+                column=name,
+            )
         elif key in index:
             raise LogError(
                 f"column appears twice (columns {index[key] + 1} and {i + 1}) — rename or "

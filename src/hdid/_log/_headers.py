@@ -19,10 +19,13 @@ from ._names import _KNOWN_COLUMNS, _THETA, _THETA_OUT, _TIME
 #: Angle columns, which may be given in encoder counts (``theta_cts``).
 _ANGLES = (_THETA, _THETA_OUT)
 #: Other names loggers give a known column: a bare ``t``, LabVIEW's ``X_Value`` (the
-#: time of an ``.lvm`` file), a drive's ``Position`` or ``pos``, the two encoders of a
-#: motor-and-output set-up (``motor_pos``, ``load_pos``). A column named by its canonical
-#: name wins over one named by an alias.
+#: time of an ``.lvm`` file), a drive's ``Position`` or ``pos``, a rig's ``Angle`` or
+#: ``Encoder`` (raw counts when integers: the count rules of :mod:`._columns` apply), the
+#: two encoders of a motor-and-output set-up (``motor_pos``, ``load_pos``). A column named
+#: by its canonical name wins over one named by an alias; two angle columns named by
+#: aliases (``Angle`` and ``Encoder``) are ambiguous and refused.
 _ALIASES = {"t": _TIME, "x_value": _TIME, "pos": _THETA, "position": _THETA,
+            "angle": _THETA, "encoder": _THETA,
             # a motor-and-output layout's two encoders
             **dict.fromkeys(("motor_pos", "motor_position", "motor_angle", "theta_motor"),
                             _THETA),

@@ -93,8 +93,10 @@ def find_header(lines: list[str]) -> tuple[int, str]:
     a time and an angle column; the lines above it are a preamble. Failing that, it is the
     first comment line that names them (``# time,theta`` from ``numpy.savetxt``), its
     comment mark dropped. When no line among the first :data:`_HEADER_SEARCH_LINES` does,
-    it is the first line that is not blank or a comment (so that a header lacking a
-    required column is named in the error as it is).
+    it is the line (not blank, a comment or a ``key: value`` preamble line) followed by the
+    longest run of numeric rows with its cell count, else the first line that is not blank
+    or a comment (so that a header lacking a required column is named in the error as it
+    is, not a preamble's ``Operator: HV``).
     """
     first = None
     for i, line in enumerate(lines[:_HEADER_SEARCH_LINES]):
@@ -119,7 +121,48 @@ def find_header(lines: list[str]) -> tuple[int, str]:
             return i, sep
     if first is None:  # only blank or comment lines: the caller says so
         first = next((i for i, line in enumerate(lines) if line.strip()), 0)
-    return first, _line_sep(lines[first]) if lines else ","
+        return first, _line_sep(lines[first]) if lines else ","
+    # no line names the columns: the header is the line above the longest run of numeric
+    # rows with its cell count, so that a preamble (``Operator: HV``) is not taken for it
+    # and the error names the file's real columns
+    best, most = first, 0
+    for i in range(first, min(len(lines), _HEADER_SEARCH_LINES)):
+        line = lines[i]
+        if not line.strip() or _is_comment(line) or _KEY_VALUE.match(line):
+            continue
+        run = _numeric_run(lines, i)
+        if run > most:
+            best, most = i, run
+    return best, _line_sep(lines[best])
+
+
+#: A preamble line ``Operator: HV``, ``Date: 2026-11-27`` (a name, a colon, a value).
+_KEY_VALUE = re.compile(r"^\s*[A-Za-z][\w .()/-]*:\s+\S[^,;\t]*$")
+#: Rows looked at below a header candidate (enough to tell a header from a preamble).
+_RUN_PROBE = 20
+
+
+def _numeric_run(lines: list[str], i: int) -> int:
+    """How many rows below line ``i`` (one units row under it allowed; blank and comment
+    lines skipped) have its cell count and only numbers (or missing-value marks)."""
+    sep = _line_sep(lines[i])
+    n = len(_cells(lines[i], sep))
+    run, j, units = 0, i + 1, True
+    while j < len(lines) and run < _RUN_PROBE:
+        line = lines[j]
+        j += 1
+        if not line.strip() or _is_comment(line):
+            continue
+        cells = _cells(line, sep)
+        numbers = [c for c in cells if c and c.lower() not in _NA_TOKENS]
+        numeric = bool(numbers) and all(_NUMBER.match(c) for c in numbers)
+        if len(cells) != n or not numeric:
+            if units and run == 0 and len(cells) == n:  # a units row: ``[us],counts``
+                units = False
+                continue
+            break
+        run += 1
+    return run
 
 
 def blank_non_rows(lines: list[str], header_at: int) -> int:
