@@ -44,10 +44,8 @@ def main(argv=None) -> int:
     ap.add_argument("--part", default="0/1", help="--diagnose-logs: every K-th log from the I-th")
     ap.add_argument("--collect", metavar="DIR", help="the diagnosed logs' records into the result")
     ap.add_argument("--label", default="", help="--collect: the run's name (its code, machine)")
-    ap.add_argument("--certify", type=int, default=0,
-                    help="--pairs: global rival fits of the largest upper bounds (design's)")
-    ap.add_argument("--pair", type=int, action="append",
-                    help="--pairs/--pair-logs: only these PAIRS (index; repeatable)")
+    ap.add_argument("--certify", type=int, default=0, help="--pairs: global rival fits of the N largest upper bounds")
+    ap.add_argument("--pair", type=int, action="append", help="--pairs/--pair-logs: only these PAIRS (index; repeat)")
     if (args := parse_or_render(ap, argv, "design_check", render)) is None:
         return 0
     if args.pair_logs or args.diagnose_logs or args.collect:
@@ -135,6 +133,16 @@ def _case_log(design: str, seed: int):
     return name, di.make_log(truth, des, hp, seed, name)
 
 
+def _pair_fits(design, seed, keys):
+    """The hidden effect's name, the two forms' diagnose candidates on the suite's log ``seed``, diagnose's seconds."""
+    import hdid
+
+    hidden, df = _case_log(design, seed)
+    t = time.perf_counter()
+    by = {c.key: c for c in hdid.diagnose(df, candidates=list(keys), design=False).candidates if c.error is None}
+    return hidden, [by[k] for k in keys], time.perf_counter() - t
+
+
 def _chi2(r, step):
     return r.n_effective * (r.rms_residual_rad / (step / math.sqrt(12.0))) ** 2
 
@@ -170,18 +178,12 @@ def _realised(fits, e, n, seed):
 def pairs(n: int, n_this: int, only=None, certify: int = 0) -> int:
     """``--pairs``: diagnose's separating experiments, checked by simulation (``only``:
     those of PAIRS, the other rows kept)."""
-    import hdid
     from hdid._config import float64
     from hdid._diagnosis._separating import experiments_for, separating
 
     chosen_pairs = [p for i, p in enumerate(PAIRS) if not only or i in only]
     for title, design, seed, keys in chosen_pairs:
-        hidden, df = _case_log(design, seed)
-        t = time.perf_counter()
-        d = hdid.diagnose(df, candidates=list(keys), design=False)
-        dt = time.perf_counter() - t
-        by = {c.key: c for c in d.candidates if c.error is None}
-        a, b = by[keys[0]], by[keys[1]]
+        hidden, (a, b), dt = _pair_fits(design, seed, keys)
         row = {"title": title, "design": design, "seed": seed, "hidden": hidden,
                "forms": [a.label, b.label], "delta_bic": [a.delta_bic, b.delta_bic],
                "src": src_fingerprint(), "n": n, "n_this": n_this,
@@ -236,10 +238,7 @@ def pair_diagnoses(args) -> int:
         for p, (title, design, seed, keys) in enumerate(PAIRS):
             if args.pair and p not in args.pair:
                 continue
-            _, df = _case_log(design, seed)
-            d = hdid.diagnose(df, candidates=list(keys), design=False)
-            by = {c.key: c for c in d.candidates if c.error is None}
-            fits = [by[k].fit.result() for k in keys]
+            fits = [c.fit.result() for c in _pair_fits(design, seed, keys)[1]]
             name = next(r for r in stored if r["title"] == title)["separating"]["experiment"]
             e = next(x for x in experiments_for(*fits) if x.name == name)
             for i, f in enumerate(fits):  # the seeds of --pairs' realised 2 ln LR
@@ -252,6 +251,7 @@ def pair_diagnoses(args) -> int:
         import platform
 
         import jax
+        from diagnose_independent import _named
 
         i, k = map(int, args.part.split("/"))
         # log 0 of every form first, then log 1, ...: the first logs done cover every form
@@ -265,9 +265,7 @@ def pair_diagnoses(args) -> int:
             t, c = time.perf_counter(), time.process_time()
             d = hdid.diagnose(log, design=False)
             cands = [x for x in d.candidates if x.error is None]
-            named = (cands[0].key if d.verdict == "missing_effect" else d.verdict if d.verdict != "ambiguous" else
-                     "|".join(s.strip() for s in d.summary.split("ambiguous between ", 1)[-1]
-                              .split(" (")[0].split(",")))
+            named = _named(d)
             rec.update(verdict=d.verdict, named=named, summary=d.summary,
                        table=[(x.key, x.label, x.delta_bic, x.rms_after_rad / d.floor_rad) for x in cands[:6]],
                        rms_before_floor=d.base.rms_residual_rad / d.floor_rad,
@@ -294,9 +292,7 @@ def _write(res):
 
 
 def _fmt(x):
-    if x is None or (isinstance(x, float) and not math.isfinite(x)):
-        return "n/a"
-    return f"{x:.3g}"
+    return "n/a" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{x:.3g}"
 
 
 def render(res) -> str:
@@ -330,10 +326,9 @@ def render(res) -> str:
               f"fitted ({c['seconds']:.0f} s, load {c['load']['load1']:.2f})", "",
               *header("quantity", "truth", "mean fit", "spread", "predicted", "predicted/spread", "within 25 %")]
         for k, q in c["quantities"].items():
-            w = c["within_25pct"].get(k, "")
-            L.append(f"| {k} | {_fmt(q['truth'])} | {_fmt(q['mean'])} | {_fmt(q['spread'])} | "
-                     f"{_fmt(q['predicted'])} | {_fmt(q['predicted_over_spread'])} | "
-                     f"{'' if w == '' else ('yes' if w else ('no' if w is False else 'n/a'))} |")
+            w = {"": "", True: "yes", False: "no"}.get(c["within_25pct"].get(k, ""), "n/a")
+            cells = (_fmt(q[x]) for x in ("truth", "mean", "spread", "predicted", "predicted_over_spread"))
+            L.append(f"| {k} | {' | '.join(cells)} | {w} |")
         L += ["", f"fits above 3x the floor: {c['fits_above_floor']}; failures: {len(c['failures'])}",
               "linearisation flags: " + ("; ".join(c["linearisation"]) or "none"), ""]
     pr = res.get("pairs")
