@@ -24,6 +24,7 @@ from pathlib import Path
 import _common
 import numpy as np
 from _common import DATA, ROOT
+from scipy.stats import binomtest
 
 CHECKED = ("k1", "k2", "tau_c", "tau_s", "c_v", "stick_band_halfwidth_rad")
 REPORTED = CHECKED + ("v_s", "delta")
@@ -32,10 +33,6 @@ BINS = 10
 #: amplitude (a release inside the band never moves: the log would have a run without motion, which hdid rejects).
 BAND_MARGIN = 0.9
 DEFAULT_PRIOR_NAMES = ("k1", "k2", "tau_c", "tau_s", "c_v", "v_s", "delta")
-
-
-def _design(gen, design_name):
-    return gen.RICH_DESIGN if design_name == "rich" else gen.PAPER_DESIGN
 
 
 @functools.cache
@@ -48,7 +45,8 @@ def nominal_default_prior(design_name):
     from hdid.reference import logs as gen
 
     cat = dict(gen.TRUTH_CSF8)
-    prob = _setup(gen.make_log(cat, **dict(_design(gen, design_name), seed=0)), inertia=cat["inertia"]).problem
+    design = getattr(gen, design_name.upper() + "_DESIGN")  # PAPER_DESIGN / RICH_DESIGN
+    prob = _setup(gen.make_log(cat, **dict(design, seed=0)), inertia=cat["inertia"]).problem
     specs, pri = prob.base.parameter_specs(), default_priors(prob)
     return {n: (float(from_unconstrained(specs[n], pri[n].mean, np)), float(pri[n].sd)) for n in DEFAULT_PRIOR_NAMES}
 
@@ -108,7 +106,7 @@ def draw_log(gen, design_name, seed, noise="prior"):
     the truth drawn by :func:`draw_default` from ``rng(seed)``, the noise by :func:`draw_noise`. ``noise="analog"``:
     the readings are not rounded (every reading at full weight, Gaussian noise: the sampler's likelihood is then the
     generator's exactly, a check that rounding is not what miscalibrates)."""
-    design = _design(gen, design_name)
+    design = getattr(gen, design_name.upper() + "_DESIGN")
     truth, band_rejects, order_rejects = draw_default(gen, np.random.default_rng(seed), design_name, design)
     sigma = draw_noise(gen, seed, noise)
     df, info = gen.make_log(truth, **dict(design, seed=seed), noise_std=sigma, return_truth=True,
@@ -127,7 +125,7 @@ def run_one(gen, design_name, seed, max_steps, method="emcee,smc", noise="prior"
     from hdid._posterior.modes import sampled_modes
 
     truth, df, info, notes = draw_log(gen, design_name, seed, noise)
-    design, prior = _design(gen, design_name), nominal_default_prior(design_name)
+    design, prior = getattr(gen, design_name.upper() + "_DESIGN"), nominal_default_prior(design_name)
     base = {"design": design_name, "seed": seed, "truth_params": truth, "load_start": _common.loads(),
             "prior": "default", "band_rejects": notes["band_rejects"], "truth_notes": notes}
     t0, c0 = time.perf_counter(), time.process_time()  # CPU s beside wall s: a starved core shows
@@ -169,13 +167,9 @@ def run_one(gen, design_name, seed, max_steps, method="emcee,smc", noise="prior"
     return outs
 
 
-def _wilson(k, n, z=1.959963984540054):
-    """Wilson score 95 % interval of a binomial proportion ``k/n``."""
-    if n == 0:
-        return 0.0, 1.0
-    p, h = k / n, z * z / n
-    mid, half = (p + h / 2) / (1 + h), z * math.sqrt(p * (1 - p) / n + h / (4 * n)) / (1 + h)
-    return max(0.0, mid - half), min(1.0, mid + half)
+def _wilson(k, n):
+    """Wilson score 95 % interval of a binomial proportion ``k/n`` (``n`` > 0)."""
+    return binomtest(int(k), n).proportion_ci(method="wilson")
 
 
 def _steps(r):
@@ -359,9 +353,8 @@ def main(argv=None):
     ap.add_argument("--seed0", type=int, default=34000)
     ap.add_argument("--max-steps", type=int, default=20000, help="emcee's chain length cap")
     ap.add_argument("--budget-min", type=float, default=600.0, help="start no log after this")
-    ap.add_argument("--end-by", type=float, default=None, metavar="S",
-                    help="start no log that would end after S seconds from the start, judged by the latest log of its "
-                         "design in this process (before any: --expect-s)")
+    ap.add_argument("--end-by", type=float, metavar="S", help="start no log that would end after S seconds from the "
+                    "start, judged by the latest log of its design in this process (before any: --expect-s)")
     ap.add_argument("--expect-s", default="", metavar="DESIGN:S,...",
                     help="--end-by: a log's expected seconds before this process has timed one of its design")
     ap.add_argument("--paper-first", action="store_true",
