@@ -15,6 +15,7 @@ import math
 import os
 import sys
 
+import jax
 import numpy as np
 from _common import RESULTS, Clock, header, load_text, parse_or_render, run_meta, stored, write_result
 
@@ -252,10 +253,8 @@ def _suite_lines(records: list, title: str) -> list[str]:
         if not rows:
             continue
         ok = [r for r in rows if "error" not in r]
-        lines += [f"## {title}{design} design", "",
-                  "| hidden | seed | g | rate Hz | v_s | δ | verdict | named | first (ΔBIC) | "
-                  "RMS before → after | ✓ | s | load | code |",
-                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+        lines += [f"## {title}{design} design", "", *header("hidden", "seed", "g", "rate Hz", "v_s", "δ", "verdict",
+                  "named", "first (ΔBIC)", "RMS before → after", "✓", "s", "load", "code")]
         for r in rows:
             dp, tr = r["design_params"], r["truth"]
             if "error" in r:
@@ -293,7 +292,7 @@ def _suite_lines(records: list, title: str) -> list[str]:
         named = [r["named"] if r["verdict"] == "missing_effect" else r["verdict"] for r in ok]
         cols = list(dict.fromkeys([*HIDDEN[1:-1], *sorted(set(named) - set(HIDDEN) - {
             "ambiguous", "unexplained", "adequate"}), "ambiguous", "unexplained", "adequate"]))
-        lines += ["| hidden | " + " | ".join(cols) + " |", "|---" * (len(cols) + 1) + "|"]
+        lines += header("hidden", *cols)
         for h in dict.fromkeys([*HIDDEN, *(r["hidden"] for r in ok)]):
             if not any(r["hidden"] == h for r in ok):
                 continue
@@ -343,14 +342,13 @@ def _driver_lines(res: dict) -> list[str]:
     L = ["# Rates with the driver refits (`--driver-refits`)", "",
          f"{m.get('cpu', '')}; src {m.get('src', '')}; load {m.get('load', '')} → "
          f"{m.get('load_end', '?')}. " + m.get("note", ""), "",
-         "| design | seed | hidden | before | after | grade before → after | s |", "|---|---|---|---|---|---|---|"]
+         *header("design", "seed", "hidden", "before", "after", "grade before → after", "s")]
     old = {(r["design"], r["seed"]): r for r in res["records"]}
     for key, r in after.items():
         b = old[key]
         L.append(f"| {key[0]} | {key[1]} | {r['hidden']} | {b['named']} | {r.get('named', 'FAILED')} | {_grade(b)} → "
                  f"{_grade(r) if 'error' not in r else 'failed'} | {r.get('wall_s', math.nan):.0f} |")
-    L += ["", "| design | logs | right before → after | honest | wrong | false alarms (none) |",
-          "|---|---|---|---|---|---|"]
+    L += ["", *header("design", "logs", "right before → after", "honest", "wrong", "false alarms (none)")]
     for design in ("rich", "paper"):
         rows = [r for r in res["records"] if r["design"] == design and "error" not in r]
         new = [x for r in rows if "error" not in (x := after.get((r["design"], r["seed"]), r))]
@@ -412,8 +410,6 @@ def main(argv=None) -> None:
     save = lambda: store("fixed_plant" if args.fixed_plant else None,  # noqa: E731
                          {"meta": meta, "records": records})
     for design in designs:
-        import jax
-
         # Programs of the previous design are not needed again; a long process that kept
         # them all ran out of memory mappings (LLVM "Cannot allocate memory").
         jax.clear_caches()
