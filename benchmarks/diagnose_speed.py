@@ -46,15 +46,6 @@ def measure(src: str, cache: Path, core: int, log: Path) -> dict:
     return {"error": (r.stderr or r.stdout)[-3000:], **times} if line is None else {**json.loads(line[2:]), **times}
 
 
-def summarize_programs(progs: list[dict]) -> dict:
-    """Per ``how`` (stored / traced / jit): how many programs, and their prepare and compile seconds summed."""
-    out: dict[str, dict] = {}
-    for p in progs:
-        o = out.setdefault(p["how"], {"n": 0, "prepare_s": 0.0, "compile_s": 0.0})
-        o.update(n=o["n"] + 1, prepare_s=o["prepare_s"] + p["prepare_s"], compile_s=o["compile_s"] + p["compile_s"])
-    return out
-
-
 def render(res: dict) -> str:
     m = res["meta"]
     lines = [f"# `hdid diagnose {Path(res['log']).name}`: time per code, cold and warm", "",
@@ -72,8 +63,11 @@ def render(res: dict) -> str:
                          f"{r['load_start']} → {r['load_end']} | error: {r['error'].strip().splitlines()[-1][:120]} |")
             continue
         t = r["timing"]
-        prog = "; ".join(f"{k} {v['n']}: {v['prepare_s']:.1f} + {v['compile_s']:.1f} s"
-                         for k, v in sorted(summarize_programs(r.get("programs", [])).items())) or "—"
+        by_how: dict[str, list] = {}  # stored / traced / jit: how many programs, their seconds summed
+        for p in r.get("programs", []):
+            by_how.setdefault(p["how"], []).append(p)
+        prog = "; ".join(f"{k} {len(v)}: {sum(p['prepare_s'] for p in v):.1f} + {sum(p['compile_s'] for p in v):.1f} s"
+                         for k, v in sorted(by_how.items())) or "—"
         cands = ", ".join(f"{lb} {d:.1f}" for lb, d in r["candidates"][:3])
         lines.append(f"| {r['code']} | {r['cache']} | {r['process_wall_s']:.1f} | {r['cpu_s']:.1f} | "
                      f"{t.get('compile_s', float('nan')):.1f} | {t.get('run_s', float('nan')):.1f} | {prog} | "
