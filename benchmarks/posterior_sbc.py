@@ -255,10 +255,9 @@ def _render(res, all_logs, method=None):
               "| parameter | median | min | max |", "|---|---|---|---|"]
         for n, v in wr.items():
             L.append(f"| {n} | {statistics.median(v):.2f} | {min(v):.2f} | {max(v):.2f} |")
-    L += ["\n## Convergence and time per log\n",
-          "| design | seed | converged | steps | R-hat max | ESS bulk min | ESS tail min | "
-          "fit s | posterior s (compile, mode search) | load start → end | misses (95 %) |",
-          "|---|---|---|---|---|---|---|---|---|---|---|"]
+    L += ["\n## Convergence and time per log\n", *_common.header(
+        "design", "seed", "converged", "steps", "R-hat max", "ESS bulk min", "ESS tail min", "fit s",
+        "posterior s (compile, mode search)", "load start → end", "misses (95 %)")]
     for r in logs:
         miss = [n for n in REPORTED if not r["quantities"][n]["cover95"]]
         conv_ = f"yes ({r['met_by']})" if r["converged"] else "NO"
