@@ -24,8 +24,6 @@ from hdid.reference import logs
 NAME = "diagnose_independent"
 HIDDEN = ("none", "backlash", "hysteresis", "asymmetric_friction", "load_friction", "ripple",
           "soft_windup", "kinematic_error", "quadratic_drag")
-N = 100.0
-SAMPLES = 300  # per run, rich design (hold 40 samples): the calibration's rich shape
 SEED0 = {"rich": 8800, "paper": 9800}
 #: ``--fixed-plant``: the shipped plant (``logs.TRUTH_CSF8``) with each effect at its ``logs.HIDDEN`` size; seeds
 #: 7100+ (7500+ with ``--removed``). The rich design's smallest release is 0.07 rad, not the shipped rich log's 0.05:
@@ -36,67 +34,7 @@ RICH = dict(amplitudes=[0.157, -0.157, 0.13, -0.13, 0.10, -0.10, 0.07, -0.07], f
 REMOVED = ("viscous", "stribeck", "stiffness")  # nothing hidden, the model lacks the piece
 
 
-def draw(design: str, seed: int) -> tuple[dict, dict]:
-    """A plant (``generate.make_log``'s truth) and a design for one log."""
-    rng = np.random.default_rng(seed)
-    g = math.exp(rng.uniform(math.log(0.3), math.log(3.0)))
-    if design == "rich":
-        a_min, a_max = rng.uniform(0.05, 0.08), rng.uniform(0.2, 0.3)
-        mid = np.sort(rng.uniform(a_min + 0.02, a_max - 0.02, 2))[::-1]
-        mags = [a_max, *mid, a_min]
-        fs = float(rng.choice([500.0, 1000.0, 2000.0]))
-        des = dict(amplitudes=[s * a for a in mags for s in (1, -1)], fs=fs, duration=SAMPLES / fs, hold=40 / fs,
-                   offsets_by_setup={"A": float(rng.uniform(-0.02, 0.02))})
-    else:
-        a_min = 0.157
-        des = dict(amplitudes=[0.157, -0.157, 0.157, -0.157], fs=250.0, duration=0.5,
-                   hold=0.04, offsets_by_setup={"A": float(rng.uniform(-0.03, 0.03)),
-                                                "B": float(rng.uniform(-0.03, 0.03))})
-    k1 = 940.0 * g * rng.uniform(0.8, 1.25)
-    k_wg = k1 / N**2
-    r = rng.uniform(1.3, 2.0)
-    tau_c = min(2.5e-3 * g * rng.uniform(0.6, 1.4), 0.4 * k_wg * a_min / r)
-    truth = {"k1": k1, "k2": 6.5e7 * g * rng.uniform(0.5, 1.5), "tau_c": tau_c,
-             "tau_s": r * tau_c, "v_s": rng.uniform(2.0, 10.0), "delta": rng.uniform(0.5, 2.5),
-             "c_v": 1.8e-5 * g * rng.uniform(0.5, 2.0), "inertia": 7e-7 * g * rng.uniform(0.6, 1.6)}
-    return truth, {**des, "gear_factor": g}
-
-
-def hidden_params(name: str, truth: dict, design: dict, rng) -> dict:
-    """Magnitudes of the hidden effect, relative to the drawn plant and design."""
-    k1, k_wg, tc = truth["k1"], truth["k1"] / N**2, truth["tau_c"]
-    amps = [abs(a) for a in design["amplitudes"]]
-    a_max = max(amps)
-    if name == "backlash":
-        return {"backlash": rng.uniform(0.01, 0.025)}
-    if name == "hysteresis":
-        return {"f_h": rng.uniform(0.3, 0.6) * tc, "sigma_h": rng.uniform(0.7, 1.5) * k_wg}
-    if name == "asymmetric_friction":
-        return {"asym": rng.choice([-1, 1]) * rng.uniform(0.2, 0.4)}
-    if name == "load_friction":
-        return {"c_load": rng.uniform(0.05, 0.15) * k_wg}
-    if name == "ripple":
-        amp, ph = rng.uniform(0.15, 0.35) * tc, rng.uniform(0, 2 * math.pi)
-        return {"ripple_a": amp * math.cos(ph), "ripple_b": amp * math.sin(ph),
-                "order": float(rng.choice([8.0, 12.0, 16.0, 24.0, 36.0]))}
-    if name == "soft_windup":
-        d = a_max / N
-        t_max = k1 * d + truth["k2"] * d**3
-        return {"K1": rng.uniform(0.55, 0.7) * k1, "K2": rng.uniform(1.0, 1.1) * k1,
-                "K3": 1.25 * k1, "T1": rng.uniform(0.08, 0.15) * t_max, "dT12": rng.uniform(0.3, 0.4) * t_max}
-    if name == "kinematic_error":
-        return {"ke_a": rng.choice([-1, 1]) * rng.uniform(1.5e-4, 2.5e-4),
-                "ke_b": rng.choice([-1, 1]) * rng.uniform(1.5e-4, 2.5e-4), "order": 2.0}
-    if name == "quadratic_drag":
-        return {"c_2": rng.uniform(0.7, 1.5) * 1e-6 * truth["inertia"] / 7e-7}
-    raise KeyError(name)
-
-
-def suite_log(design: str, seed: int, name: str) -> tuple[dict, dict, dict]:
-    """The suite's draw for one log: truth, design and the hidden effect's parameters."""
-    truth, des = draw(design, seed)
-    hp = hidden_params(name, truth, des, np.random.default_rng(seed + 10_000)) if name != "none" else {}
-    return truth, des, hp
+draw, hidden_params, suite_log = logs.draw_plant, logs.hidden_params, logs.suite_log
 
 
 def make_log(truth: dict, des: dict, hp: dict, seed: int, name: str):

@@ -11,6 +11,8 @@ checks every module of :mod:`hdid.reference`).  A user makes logs with ``hdid si
 * Free motion: :func:`make_log` (any truth and design, optionally with a hidden effect),
   the CSF-8-100-like :data:`TRUTH_CSF8`, the shipped designs :data:`PAPER_DESIGN`,
   :data:`RICH_DESIGN` and :data:`HIDDEN_DESIGN`, :func:`rest_gap` and :func:`encoder_step`.
+* Broad plants (the diagnose suite's): :func:`draw_plant`, :func:`hidden_params`,
+  :func:`suite_log`.
 * Hidden effects: :data:`HIDDEN` (each library effect, and one outside the library, written
   in numpy for the reference simulator) and :func:`reference_kwargs`.
 * Driven joint: the reference simulator :func:`simulate_driven` with its physics pieces
@@ -27,6 +29,7 @@ from __future__ import annotations
 from ._driven import capacity, inverse_stiffness, positional_error, simulate_driven, sliding_friction
 from ._driven_log import DRIVEN_DESIGN, OUTPUT_COUNTS_PER_REV, TRUTH_DRIVEN_CSF8, make_driven_log
 from ._hidden import HIDDEN, reference_kwargs
+from ._suite import draw_plant, hidden_params, suite_log
 from ._logs import (
     COUNTS_PER_REV,
     HIDDEN_DESIGN,
@@ -51,7 +54,9 @@ __all__ = [
     "TRUTH_CSF8",
     "TRUTH_DRIVEN_CSF8",
     "capacity",
+    "draw_plant",
     "encoder_step",
+    "hidden_params",
     "inverse_stiffness",
     "make_driven_log",
     "make_log",
@@ -60,4 +65,5 @@ __all__ = [
     "rest_gap",
     "simulate_driven",
     "sliding_friction",
+    "suite_log",
 ]
