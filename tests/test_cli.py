@@ -87,7 +87,7 @@ def _run_cli(*args: str) -> subprocess.CompletedProcess:
     "make, args, fragment",
     [
         (None, ["fit", "does/not/exist.csv"], "exist.csv"),
-        ("time,angle\n0,0\n", ["fit", "{path}"], "theta"),
+        ("time,winkel\n0,0\n", ["fit", "{path}"], "theta"),  # no angle-column name
         ("".join(f"{i*0.004},{i % 7 * 100}\n" for i in range(50)), ["fit", "{path}"], "--counts-per-rev"),
         ("time,theta\n0,0.1\n0.004,abc\n", ["fit", "{path}"], "row 3"),
         (None, ["fit", str(EXAMPLE), "--json", str(EXAMPLE)], "overwrite"),
