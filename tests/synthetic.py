@@ -7,6 +7,21 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 SYNTH = ROOT / "data" / "synthetic"
+REAL = ROOT.parent / "shared" / "data" / "real"
+
+
+def real_reference(folder: str) -> dict:
+    """``../shared/data/real/<folder>/reference.json`` parsed, or the test skipped naming the
+    folder (real logs stay outside the repository)."""
+    import json
+
+    import pytest
+
+    ref_path = REAL / folder / "reference.json"
+    if not ref_path.exists():
+        pytest.skip(f"{ref_path.name} not in {REAL / folder} (real logs stay outside the "
+                    "repository: ../shared/data/real/README.md says where they come from)")
+    return json.loads(ref_path.read_text())
 
 
 def cli_fit_json(log, out, *options: str):

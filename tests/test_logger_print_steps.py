@@ -104,18 +104,20 @@ def test_guard_analog_swings_printed_the_same_way_get_no_grid(tmp_path, unit, de
         assert read_log(path).resolution is None, seed
 
 
-def test_guard_analog_levels_a_few_print_units_apart_get_no_grid():
-    """Guard: 300 analog sets (two runs, 8-300 readings) whose closest levels lie 1-13
-    print units apart, where a grid of 2-4 print units is now searched: no grid. A
+@pytest.mark.parametrize("seed, lo, hi", [(12, 0.6, 3.0), (11, 2.0, 40.0)])
+def test_guard_analog_levels_get_no_grid(seed, lo, hi):
+    """Guard: 300 analog sets (two runs, 8-300 readings) whose closest levels lie a few
+    print units apart (1-13 units for ``lo, hi`` = 0.6, 3: where a grid of 2-4 print units
+    is now searched; 4-40 units for 2, 40: the regime the bisection opens): no grid. A
     printed level is a multiple of its print unit, so at q = 3p the difference of two
     levels lies within 2·p/2 of a multiple of q whatever the levels are; counting the
     chance as 2t/q per level (not the lattice's share) gives such sets grids. The bar is
     a chance of 1e-6 per log: one false grid in 300 would be a 3e-4 event."""
-    rng = np.random.default_rng(12)
+    rng = np.random.default_rng(seed)
     false = 0
     for _ in range(300):
         n, unit = int(rng.integers(8, 300)), 10.0 ** -int(rng.integers(3, 7))
-        spread = n**2 * unit * rng.uniform(0.6, 3.0) / 3
+        spread = n**2 * unit * rng.uniform(lo, hi) / 3
         y = np.round(rng.normal(0.0, spread, n) / unit) * unit
         false += find_step(y, unit, [0, n // 2]).step is not None
     assert false == 0

@@ -18,7 +18,7 @@ import pytest
 import hdid
 from hdid.effects import library
 
-from synthetic import ROOT
+from synthetic import ROOT, real_reference
 
 STS = ROOT.parent / "shared" / "data" / "real" / "sts3215_drop"
 SETUP = "m0.741_l0.10"   # the quickest of the eight to fit
@@ -39,10 +39,8 @@ def _fast_part(result) -> float:
 
 @pytest.fixture(scope="module")
 def fits():
+    real_reference(STS.name)  # skips, naming the folder, where the real logs are absent
     ref_path = STS / "reference.json"
-    if not ref_path.exists():
-        pytest.skip(f"{ref_path.name} not in {STS} (real logs stay outside the repository: "
-                    "../shared/data/real/README.md says where they come from)")
     from hdid._fitting._reading_age import fit_with_age
 
     ref = json.loads(ref_path.read_text())["setups"][SETUP]

@@ -14,14 +14,12 @@ does (tau_c 0.16 under tau_s 0.35; ``--sts back_emf@clamp``).
 
 from __future__ import annotations
 
-import json
-
 import pytest
 
 import hdid
 from hdid.effects import library
 
-from synthetic import ROOT
+from synthetic import ROOT, real_reference
 
 STS = ROOT.parent / "shared" / "data" / "real" / "sts3215_drop"
 SETUP = "m0.741_l0.15"   # swings to 6.7 rad/s, well past the clamp speed; ~30 s to fit
@@ -29,11 +27,7 @@ SETUP = "m0.741_l0.15"   # swings to 6.7 rad/s, well past the clamp speed; ~30 s
 
 @pytest.fixture(scope="module")
 def braked():
-    ref_path = STS / "reference.json"
-    if not ref_path.exists():
-        pytest.skip(f"{ref_path.name} not in {STS} (real logs stay outside the repository: "
-                    "../shared/data/real/README.md says where they come from)")
-    ref = json.loads(ref_path.read_text())
+    ref = real_reference(STS.name)
     w_e = (12.0 + 2 * 0.7) / ref["bam_fits_published"]["m1"]["kt"]  # the clamp speed [rad/s]
     v = ref["setups"][SETUP]
     model = (hdid.Model.default(inertia=v["bam_m6_total_inertia_kgm2"], ratio=1.0).without("stiffness")
