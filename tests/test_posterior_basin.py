@@ -195,6 +195,7 @@ def test_a_substep_picked_from_an_aliased_swing_is_refined_before_any_statement(
     assert check.statement is None, check.statement
     assert check.rms_over_floor <= BASIN_FACTOR and "substep" in check.checks
     assert new.problem.max_substep == h
+    assert check.unchecked is None  # the log was at hand: the refit ran
     assert substep_wanted(new) is None  # the refit is at the substep its own swing asks for
 
 
@@ -232,3 +233,62 @@ def test_at_the_floor_only_a_clearly_under_resolved_swing_is_refined():
     assert substep_wanted(stand_in(45.0, 1e-3, k2=2.78 * k1 / (0.75 * 1.5e-3**2)),
                           at_floor=True) == 2.5e-4
     assert substep_wanted(stand_in(45.0, 1e-3), at_floor=True) is None  # linear: h·ω 0.28
+
+
+def _no_log_stand_in(rms_over_floor, **kw):
+    """A fit of a DataFrame (``source`` None: no file to reread) that did not run its limit
+    checks (``limits`` empty), of the default model; its residual ``rms_over_floor`` × the
+    quantization floor of a 4000-count encoder."""
+    q = 2 * math.pi / 4000
+    fields = dict(rms_residual_rad=rms_over_floor * q / math.sqrt(12),
+                  quantization_floor_rad=q / math.sqrt(12), restarted_from=None, problem=None,
+                  model=hdid.Model.default(), parameters={}, source=None, limits=[],
+                  derived={})
+    fields.update(kw)
+    return SimpleNamespace(**fields)
+
+
+def test_a_needed_check_without_the_log_says_so_in_the_warnings():
+    """A fit of a DataFrame has no file for the basin check to refit from: above the floor
+    (the limit checks needed, not run) or at it with a substep that does not resolve its
+    fitted swing (150 Hz at 1 ms, h·ω 0.94), the check cannot run without ``log=``, and
+    the result's warnings must say so and name the fix, not the JSON's ``basin.checks``
+    alone. A fit at the floor whose substep resolves its swing needs nothing: no line."""
+    fit = _no_log_stand_in(3.0)  # 3× the floor: above BASIN_FACTOR, the limit checks needed
+    same, check = basin_check(fit, echo=False)
+    assert same is fit and check.statement.startswith("WRONG BASIN")
+    assert check.unchecked.startswith("BASIN NOT CHECKED")
+    assert "pass log= (the DataFrame) to sample_posterior" in check.unchecked
+    assert "no limit checks" in check.unchecked and "\n" not in check.unchecked
+
+    # at the floor, a 150 Hz swing at a 1 ms substep: the refit it asks for cannot run
+    th = np.tile(0.15 * np.cos(np.linspace(0, 20, 50)) * np.exp(-np.linspace(0, 5, 50)), (4, 1))
+    prob = SimpleNamespace(theta=th, weight=np.ones_like(th), hold=th[:, 0], max_substep=1e-3)
+    k1 = (2 * math.pi * 150.0) ** 2 * 7e-7 * 100**2
+    fine = _no_log_stand_in(1.0, problem=prob, derived={"natural_frequency_hz": (150.0, 0.0)},
+                            parameters={"k1": SimpleNamespace(value=k1, fixed=False),
+                                        "k2": SimpleNamespace(value=0.0, fixed=False)},
+                            model=SimpleNamespace(ratio=100.0))
+    same, check = basin_check(fine, echo=False)
+    assert same is fine and check.statement is None
+    assert check.unchecked.startswith("BASIN NOT CHECKED")
+    assert "1 ms RK4 substep does not resolve its fitted swing" in check.unchecked
+    assert "pass log= (the DataFrame) to sample_posterior" in check.unchecked
+    # the same fit at a substep that resolves its swing (h·ω 0.24): nothing needed, no line
+    prob.max_substep = 2.5e-4
+    _, check = basin_check(fine, echo=False)
+    assert check.unchecked is None and check.statement is None
+
+
+def test_sample_posterior_without_the_log_warns_and_with_it_does_not(stiff_aliased):
+    """Through ``sample_posterior`` (a few steps: the warnings, not the draws, are tested):
+    the stiff gear's fit of a DataFrame, whose substep its fitted swing does not resolve,
+    sampled without ``log=`` carries the BASIN NOT CHECKED line naming the fix; with
+    ``log=`` the refit runs (test above: ``check.unchecked`` None)."""
+    _, _, _, fit = stiff_aliased
+    assert fit.source is None or not Path(str(fit.source)).is_file()  # no file to reread
+    post = hdid.sample_posterior(fit, n_steps=5, burn_in=0, seed=0, modes="fit")
+    lines = [w for w in post.warnings if w.startswith("BASIN NOT CHECKED")]
+    assert len(lines) == 1, post.warnings
+    assert "pass log= (the DataFrame) to sample_posterior" in lines[0]
+    assert post.warnings[0].startswith("WRONG BASIN")  # the statement stays first

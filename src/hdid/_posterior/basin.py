@@ -23,6 +23,12 @@ at its best known optimum and is reused as it is. If the residual is still above
 intervals would describe the wrong basin; the sampler then prints it before sampling and
 carries it first in the result's warnings and at the top of its report.
 
+A check that was needed (above the floor, or a substep the fitted swing does not resolve)
+but could not refit for want of the log (a fit of a DataFrame has no file to reread, and
+no ``log=`` was given) leaves the result untrustworthy: :func:`basin_check` then also
+returns a ``BASIN NOT CHECKED`` line naming the fix, which the result carries in its
+warnings (after the statement, if any).
+
 Why sample anyway rather than refuse: above the floor for lack of an effect the
 posterior is still the model's (conditional on it), and a step that does not describe the
 readings (a wrong ``--resolution``) puts every fit above the floor; a refusal would leave
@@ -56,14 +62,16 @@ STEP_SUSPECT = 5.0 * math.sqrt(12.0)
 @dataclass
 class BasinCheck:
     """What :func:`basin_check` found: ``rms_over_floor`` before and after the checks,
-    which checks ran (``checks``), the limit the fit was restarted from, and the statement
-    (``None``: the fit is at the floor)."""
+    which checks ran (``checks``), the limit the fit was restarted from, the statement
+    (``None``: the fit is at the floor) and ``unchecked``: the warning when a check was
+    needed but could not refit for want of the log (``None``: every needed check ran)."""
 
     rms_over_floor_before: float
     rms_over_floor: float
     checks: str
     restarted_from: str | None
     statement: str | None
+    unchecked: str | None = None
 
     def to_dict(self) -> dict:
         return {"rms_over_floor_before": _num(self.rms_over_floor_before),
@@ -134,6 +142,7 @@ def basin_check(fit, log=None, *, echo: bool = True):
     from .._fitting import _limits
 
     before = rms_over_floor(fit)
+    h0 = float(getattr(getattr(fit, "problem", None), "max_substep", math.nan))
     ran: list[str] = []
     if before <= BASIN_FACTOR:  # at the floor: refined only where the swing is under-resolved
         # (twice at most: on an aliased log the refit may settle on a faster alias, whose
@@ -145,7 +154,8 @@ def basin_check(fit, log=None, *, echo: bool = True):
                 break
         if (after := rms_over_floor(fit)) <= BASIN_FACTOR:
             return fit, BasinCheck(before, after, "; ".join(ran) or "none needed (at the floor)",
-                                   getattr(fit, "restarted_from", None), None)
+                                   getattr(fit, "restarted_from", None), None,
+                                   _unchecked(ran, after, h0))
     for _ in range(2):  # the limit checks may find the true swing: its substep is asked again
         if (h := substep_wanted(fit)) is not None:
             fit, what = _refit_finer(fit, log, h)
@@ -182,7 +192,28 @@ def basin_check(fit, log=None, *, echo: bool = True):
         if echo:
             print(f"hdid: {statement}", file=sys.stderr, flush=True)
     return fit, BasinCheck(before, after, checks, getattr(fit, "restarted_from", None),
-                           statement)
+                           statement, _unchecked(ran, after, h0))
+
+
+#: What :func:`_refit_finer` and :func:`_rerun_limits` say when they had no log to refit.
+NO_LOG = "the log is not at hand: pass log= to sample_posterior"
+
+
+def _unchecked(ran: list[str], after: float, h: float) -> str | None:
+    """The warning line when a needed check (``ran``: what the basin check did) could not
+    refit for want of the log; ``after``: the residual over the floor it left, ``h`` [s]:
+    the fit's substep. ``None`` when every needed check ran."""
+    missing = [what.split(" (", 1)[0] for what in ran if NO_LOG in what]
+    if not missing:
+        return None
+    why = (f"its residual is {after:.2f}× the noise floor (above {BASIN_FACTOR:g}×)"
+           if after > BASIN_FACTOR else
+           f"its {1e3 * h:.4g} ms RK4 substep does not resolve its fitted swing")
+    return (f"BASIN NOT CHECKED: {why}, but the basin check could not refit ("
+            f"{'; '.join(dict.fromkeys(missing))}) for want of the log (no log= given and no file "
+            "the fit read: a fit of a DataFrame), so the intervals may describe a poorer basin or a "
+            "simulation off the dynamics it models — pass log= (the DataFrame) to "
+            "sample_posterior")
 
 
 def _log_at_hand(fit, log):
@@ -206,8 +237,8 @@ def _refit_finer(fit, log, h: float):
     what = (f"a refit at the RK4 substep its fitted swing needs ({1e3 * h:.4g} ms; the fit "
             f"ran at {1e3 * old:.4g} ms) with its own limit and restart checks")
     if (log := _log_at_hand(fit, log)) is None:
-        return fit, (f"no refit at the {1e3 * h:.4g} ms substep its fitted swing needs (the log "
-                     "is not at hand: pass log= to sample_posterior)")
+        return fit, (f"no refit at the {1e3 * h:.4g} ms substep its fitted swing needs "
+                     f"({NO_LOG})")
     try:
         new = _fit.fit(log, fit.model, fix=sorted(_fixed(fit)) or None,
                        free_inertia="inertia" in fit.problem.free, max_substep=h,
@@ -229,9 +260,10 @@ def _rerun_limits(fit, log):
 
     prob = fit.problem
     log = _log_at_hand(fit, log)
-    if log is None or not prob.release_free:
-        return fit, ("no limit checks (the log is not at hand: pass log= to "
-                     "sample_posterior, or fit with nested=True)")
+    if log is None:
+        return fit, f"no limit checks ({NO_LOG}, or fit with nested=True)"
+    if not prob.release_free:
+        return fit, "no limit checks (the fit's release instants are fixed)"
     try:
         if getattr(fit, "first_reading_held", ()):  # the fit's story of its first readings
             from .._log import Log, read_log

@@ -129,7 +129,9 @@ def sample_posterior(
         only the mixing changes.
     log:
         The fit's log (a path or :class:`~hdid.Log`), for the basin check below when the
-        fit did not run its limit checks (default: ``fit.source`` when it is a file).
+        fit did not run its limit checks (default: ``fit.source`` when it is a file). A fit
+        of a DataFrame has no file: without ``log=`` a check it needs cannot refit, and
+        the result's warnings say so (``BASIN NOT CHECKED``).
 
     Notes
     -----

@@ -202,7 +202,8 @@ def prior_table(problem, priors: dict[str, PriorSpec], u_fit, half_width: float
 def finish(result, basin, prior, default_prior, half_width: float):
     """``result`` with the table of the priors it was sampled under (:func:`prior_table`,
     with each parameter's posterior/prior width; flat ones in the box of ±``half_width``)
-    and the basin check's record (its statement first in the warnings)."""
+    and the basin check's record (its statement first in the warnings, then the line saying
+    a needed check could not refit for want of the log)."""
     prob = result.fit.problem
     specs = with_user(default_priors(prob, default_prior), prob, prior)
     table = prior_table(prob, specs, np.asarray(result.fit.u, dtype=float), half_width)
@@ -213,6 +214,8 @@ def finish(result, basin, prior, default_prior, half_width: float):
     result.priors = table
     result.default_prior = default_prior
     result.basin = basin.to_dict()
+    if basin.unchecked:  # a needed check could not refit: after the statement, if any
+        result.warnings.insert(0, basin.unchecked)
     if basin.statement:
         result.warnings.insert(0, basin.statement)
     return result
