@@ -507,3 +507,42 @@ def test_separation_is_averaged_over_the_release_phase(case, monkeypatch):
     flat = _separate.separations(fit, rival, [e], include=(0,))[0]
     assert [len(d) for d in flat.draws] == [2, 2] and flat.draws[0] == pytest.approx((1e-3, 1e-3)), flat.draws
 
+
+
+def test_an_unverified_upper_bound_never_ranks_above_a_fitted_value():
+    """``criterion="separate"`` (:func:`hdid._design._rank.rank`): a locally refitted
+    separation is only an upper bound (3–25× the realised 2·ln LR on confusable pairs), so
+    with the global fits' budget spent before a large bound was fitted, it must not rank
+    first: the values rank first (largest first), then the bounds, then the linearised
+    ones, and the warnings name the bounds above the top value. Stand-in predictions (no
+    fit): the case ``design --separate`` met on a real pair, a bound 1676 left unfitted
+    above the best fitted value 19.7. Fails with the ranking by the number alone."""
+    from hdid._design._candidates import Experiment
+    from hdid._design._fisher import Prediction
+    from hdid._design._rank import rank, separation_warnings
+
+    def pred(name, lam, kind, error=None):
+        e = Experiment(name=name, amplitudes=(0.1,), rate=1000.0, duration=1.0, hold=0.1,
+                       resolution=1e-4)
+        return Prediction(experiment=e, separation=lam, separation_kind=kind, error=error)
+
+    fitted, bound, linear = "rival fitted globally", "upper bound", "linearised"
+    preds = [pred("this log", (3.0, 4.0), fitted),
+             pred("bound above", (1676.0, 2000.0), bound),
+             pred("four amplitudes", (19.7, 25.0), fitted),
+             pred("bound below", (10.0, 12.0), bound),
+             pred("linearised", (5e4, 6e4), linear),
+             pred("failed", None, None, error="no usable log")]
+    order = [preds[i].experiment.name for i, _ in rank(preds, "separate", ())]
+    assert order == ["four amplitudes", "this log", "bound above", "bound below",
+                     "linearised", "failed"], order
+    (w,) = separation_warnings(preds, rival_fits=3)
+    assert "'bound above'" in w and "'linearised'" in w and "'bound below'" not in w, w
+    assert "19.7" in w and "rival_fits=3" in w, w
+    # no value at all: the largest bound ranks first, and the warnings say it is a bound
+    only = [pred("a", (5.0, 9.0), bound), pred("b", (50.0, 60.0), bound), pred("c", (1.0, 2.0), linear)]
+    assert [i for i, _ in rank(only, "separate", ())] == [1, 0, 2]
+    (w,) = separation_warnings(only, rival_fits=0)
+    assert "no candidate's rival was fitted globally" in w, w
+    # every bound at or below the top value (the budget reached them all): no warning
+    assert separation_warnings([preds[0], preds[2], preds[3]], rival_fits=3) == []

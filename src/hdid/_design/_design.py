@@ -69,6 +69,8 @@ def design(
         With ``separate``: at most this many experiments' rivals fitted globally, the
         largest separation first, until the largest is a value (each costs two
         :func:`hdid.fit` calls on a log of that design); 0 keeps the local upper bounds.
+        The values rank above every upper bound (a bound is only an "at most"); where
+        the fits run out with a bound above the top value, ``warnings`` says so.
 
     The prediction is the linearised Fisher information of the exact simulator with the
     nuisances (release instants, start angles, set-up offsets) estimated alongside and the
@@ -112,6 +114,8 @@ def design(
         source=str(result.source), criterion=criterion, targets=targets, values=values,
         derived=derived, predictions=preds, ranking=ranking,
         noise_rad=_fisher.extra_noise(result), warnings=_warnings(result, preds))
+    if criterion == "separate":
+        out.warnings += _rank.separation_warnings(preds, rival_fits)
     if check:
         out.check = _check_one(result, out, check, check_candidate, seed)
     out.wall_time_s = time.perf_counter() - t0

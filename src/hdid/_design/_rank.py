@@ -7,7 +7,13 @@ better), so they do not depend on the parameters' units:
   (parameters, or derived quantities: ``band`` is the stick band's half-width,
   ``frequency`` the natural frequency): the geometric mean of their std ratios;
 * ``"separate"`` — minus the smaller expected ``2·ln LR`` between two fitted models
-  (:mod:`hdid._design._separate`): the design that tells them apart best first;
+  (:mod:`hdid._design._separate`): the design that tells them apart best first. A value
+  whose rival was fitted only locally is an upper bound — the design separates the pair
+  *at most* that well (3–25× the realised 2·ln LR on confusable pairs) — so the values
+  (the rival fitted globally) rank first, then the upper bounds, then the linearised
+  values, each tier largest first, as :func:`hdid.diagnose` ranks its separating
+  experiments; :func:`separation_warnings` says where a bound above the top value was
+  left unverified;
 * ``"d"`` (D-optimality) — ``ln det`` of the fit's free parameters' covariance (in the
   optimiser's space, nuisances marginalised) less this log's, over ``2·p``: the ratio of
   the volumes of the confidence ellipsoids as a geometric-mean std ratio.
@@ -32,6 +38,10 @@ ALIASES = {
 }
 
 CRITERIA = ("targets", "d", "separate")
+
+#: How a separation was computed (``Prediction.separation_kind``), most trusted first:
+#: the rank tier of ``criterion="separate"`` (module docstring).
+SEPARATION_KINDS = ("rival fitted globally", "upper bound", "linearised")
 
 
 def resolve_targets(targets, parameters, derived) -> tuple[str, ...]:
@@ -96,4 +106,43 @@ def rank(preds: list[Prediction], criterion: str, targets) -> list[tuple[int, fl
         raise HdidError("criterion 'targets' needs targets (e.g. --target tau_c,band)")
     ref = preds[0]
     scored = [(i, score(p, ref, criterion, targets)) for i, p in enumerate(preds)]
-    return sorted(scored, key=lambda x: (math.isnan(x[1]), x[1] if not math.isnan(x[1]) else 0.0))
+
+    def tier(i: int) -> int:  # "separate": values, then upper bounds, then the rest
+        if criterion != "separate":
+            return 0
+        kind = preds[i].separation_kind
+        return SEPARATION_KINDS.index(kind) if kind in SEPARATION_KINDS else len(SEPARATION_KINDS)
+
+    return sorted(scored, key=lambda x: (math.isnan(x[1]), math.isinf(x[1]) and x[1] > 0,
+                                         tier(x[0]), x[1] if not math.isnan(x[1]) else 0.0))
+
+
+def separation_warnings(preds: list[Prediction], rival_fits: int) -> list[str]:
+    """What the ``"separate"`` ranking cannot vouch for: no value at all (every candidate
+    ranked by an upper bound or a linearisation), or candidates whose upper bound exceeds
+    the top value but whose rival was not fitted globally within ``rival_fits`` (ranked
+    below every value: a bound says only "at most")."""
+    def lam(p):
+        ok = p.error is None and p.separation is not None and all(math.isfinite(x) for x in p.separation)
+        return min(p.separation) if ok else math.nan
+
+    values = [lam(p) for p in preds if p.separation_kind == SEPARATION_KINDS[0]]
+    values = [v for v in values if math.isfinite(v)]
+    bounds = [(lam(p), p.experiment.name) for p in preds if p.separation_kind != SEPARATION_KINDS[0]]
+    bounds = sorted(((v, n) for v, n in bounds if math.isfinite(v)), reverse=True)
+    if not bounds:
+        return []
+    if not values:
+        return [f"no candidate's rival was fitted globally (rival_fits={rival_fits}): the ranking "
+                "is by local upper bounds ('<=') or linearised values, each only an 'at most'; "
+                "the top candidate may separate the pair far less (rival_fits > 0 fits the "
+                "largest, or confirm by simulation: check=)"]
+    top = max(values)
+    above = [(v, n) for v, n in bounds if v > top]
+    if not above:
+        return []
+    names = ", ".join(repr(n) for _, n in above[:5]) + (", ..." if len(above) > 5 else "")
+    return [f"{len(above)} candidate(s) ({names}) have upper bounds up to {above[0][0]:.3g} above "
+            f"the top globally fitted value {top:.3g}, but their rival was not fitted globally "
+            f"within rival_fits={rival_fits}: a bound is only an 'at most', so they rank below "
+            "every fitted value (raise rival_fits to fit them)"]

@@ -71,8 +71,8 @@ class DesignResult:
                 "d": "D-optimality (confidence-volume ratio as a geometric-mean std ratio)",
                 "separate": "the expected 2 ln LR between the two rival fits (the smaller "
                             "direction; score column: the rival fitted globally by hdid.fit "
-                            "where marked '=', else refitted locally, an upper bound '<='), "
-                            "std ratios"
+                            "where marked '=', else refitted locally, an upper bound '<=': "
+                            "the values first), std ratios"
                 }[self.criterion]
         lines = [f"hdid design: {self.source}", "",
                  f"ranking by {crit}, relative to this log (1 = as now, < 1 better):"]
