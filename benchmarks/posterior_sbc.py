@@ -363,6 +363,8 @@ def main(argv=None):
     ap.add_argument("--noise", choices=("prior", "moving", "none", "analog"), default="prior",
                     help="noise before rounding: the sampler's σ_n prior, that after each release only, or none; "
                          "analog: step/√12 on unrounded readings (the likelihood exact)")
+    ap.add_argument("--seeds", default="", metavar="DESIGN:SEED,...",
+                    help="run exactly these logs, in this order (instead of --paper-logs/--rich-logs from --seed0)")
     ap.add_argument("--shard", default="0/1", help="K/N: run every N-th log from the K-th")
     ap.add_argument("--merge", nargs="+", metavar="JSON", help="join shards' results into NAME")
     ap.add_argument("--cli", action="store_true", help="time the CLI process instead: --logs, --repeats, --timeout")
@@ -395,6 +397,8 @@ def main(argv=None):
     res.update({k: v for k, v in _common.stored(args.name).items() if k in ("cli", "checks", "skew_checks")})
     sched = [(d, args.seed0 + off + i) for i in range(max(args.paper_logs, args.rich_logs))
              for d, off, n in (("paper", 0, args.paper_logs), ("rich", 1000, args.rich_logs)) if i < n]
+    if args.seeds:
+        sched = [(d, int(x)) for d, x in (item.split(":") for item in args.seeds.split(","))]
     if args.paper_first:
         sched.sort(key=lambda s: s[0] != "paper")  # stable: seeds stay in order within a design
     (k, n), t_start = (int(x) for x in args.shard.split("/")), time.perf_counter()
