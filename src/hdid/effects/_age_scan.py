@@ -56,6 +56,10 @@ class AgeScan:
     sse: float
     sse_none: float
     significant: bool
+    #: ``j`` [s]: the request jitter chosen with ``jitters`` (0 without), shared by the runs
+    jitter: float = 0.0
+    #: ``sse`` at ``j = 0`` with each run's phase re-chosen on the same grid (``nan`` without)
+    sse_no_jitter: float = float("nan")
 
 
 def _highpass(x: np.ndarray) -> np.ndarray:
@@ -69,26 +73,35 @@ def _highpass(x: np.ndarray) -> np.ndarray:
     return x - (c[..., hi] - c[..., lo]) / (hi - lo)
 
 
-def _run_sse(t, w, r_hp, omega, a_model, periods, fracs):
-    """Weighted SSE ``(len(periods), len(fracs))`` of ``hp(r) − hp(−ω·(a − a_m))``."""
+def _run_sse(t, w, r_hp, omega, a_model, periods, fracs, jitter=0.0):
+    """Weighted SSE ``(len(periods), len(fracs))`` of ``hp(r) − hp(−ω·(a − a_m))``, the
+    age ``a = t − s̄`` of :class:`ReadingAge` with request jitter ``jitter`` [s]."""
+    from .reading_age import expected_floor
+
     out = np.empty((len(periods), len(fracs)))
     for i in range(0, len(periods), BLOCK):
         p = periods[i:i + BLOCK, None, None]
         phi = fracs[None, :, None] * p
-        age = np.mod(t[None, None, :] - phi, p)
+        if jitter:
+            u = (t[None, None, :] - phi) / p
+            age = p * (u - expected_floor(u, jitter / p))
+        else:
+            age = np.mod(t[None, None, :] - phi, p)
         x = _highpass(-omega * (age - a_model))
         out[i:i + BLOCK] = np.sum(w * (r_hp - x) ** 2, axis=-1)
     return out
 
 
 def scan(frame, *, floor: float | None = None, current=None, periods=None,
-         exclude: tuple[float, float] | None = None) -> AgeScan | None:
+         exclude: tuple[float, float] | None = None, jitters=None) -> AgeScan | None:
     """The clock that best explains ``frame``'s residuals (:func:`hdid.FitResult.residuals`:
     columns ``run``, ``t``, ``residual_rad``, ``omega``, ``phase``, ``weight``), the model's
     own age ``current`` (a :class:`ReadingAge`, or ``None``) taken off; ``periods`` [s]
     replaces the grid; ``exclude`` ``(lo, hi)`` [s] leaves those periods out (the runner-up
     clock: an alias of the best against the host's rate gives the same sawtooth up to its
-    height). ``None`` when no run has moving samples."""
+    height); ``jitters`` [fractions of ``P``]: request jitters tried at the chosen period, each
+    run's phase chosen again with each (the best is kept where it beats ``j = 0`` by more than
+    ``ln n``, the BIC's charge for one more setting). ``None`` when no run has moving samples."""
     runs = []
     for name, d in frame.groupby("run", sort=False):
         m = (d["phase"] == "moving").to_numpy() & (d["weight"].to_numpy() > 0)
@@ -149,9 +162,27 @@ def scan(frame, *, floor: float | None = None, current=None, periods=None,
         sse_none += float(np.sum(w * _highpass(r) ** 2))
     sse = float(total[k])
     n = sum(len(r[1]) for r in live)
+    jitter, sse_j0 = 0.0, float("nan")
+    if jitters is not None:  # the request jitter, at the chosen period, the phases re-chosen
+        one = np.array([period])
+        costs = []
+        for frac in (0.0, *(float(x) for x in jitters if x > 0)):
+            per = [_run_sse(t, w, _highpass(r), om, model_age(index[name], t), one, fracs,
+                            jitter=frac * period)[0] for name, t, w, r, om in live]
+            costs.append((float(sum(c.min() for c in per)), frac * period,
+                          [int(np.argmin(c)) for c in per]))
+        sse_j0 = costs[0][0]
+        best = min(costs, key=lambda c: c[0])
+        s2 = (floor if floor and math.isfinite(floor) else math.sqrt(sse_none / n)) ** 2
+        if (sse_j0 - best[0]) / s2 > math.log(max(n, 2)):
+            sse, jitter = best[0], best[1]
+            for j, (name, t, w, r, om) in enumerate(live):
+                centre = float(np.sum(w * om**2 * t) / max(np.sum(w * om**2), 1e-300))
+                phases[index[name]] = centre - np.mod(centre - fracs[best[2][j]] * period, period)
     sigma2 = (floor if floor and math.isfinite(floor) else math.sqrt(sse_none / n)) ** 2
     # the scan chooses a period and one phase per run: charge ln n per choice (BIC)
     significant = (sse_none - sse) / sigma2 > (1 + len(live)) * math.log(max(n, 2))
     return AgeScan(period=period, phases=np.where(np.isnan(phases), period / 2, phases),
                    run_periods=run_periods, runs=[r[0] for r in runs], sse=sse,
-                   sse_none=sse_none, significant=bool(significant))
+                   sse_none=sse_none, significant=bool(significant), jitter=jitter,
+                   sse_no_jitter=sse_j0)

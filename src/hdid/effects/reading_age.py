@@ -96,6 +96,16 @@ class ReadingAge(AbstractReading):
     ``P``, or its alias against the host's rate, with a spread of ``P/√12``; it lives in the
     sample-to-sample part of the residual, which no torque (a smooth trajectory) can follow,
     and grows with the speed: a residual of ``ω·P/√12`` rad at speed ω.
+
+    *Request jitter* ``j`` [s] (default 0: the sawtooth above). The host's request reaches
+    the device at ``t_k + d_k``, ``d_k`` uniform over a window of width ``j`` (centred: a
+    mean delay is a shift of ``φ_r``), so a reading polled within ``j/2`` of a device
+    sample shows the newer or the older sample by chance. The model predicts the mean
+    instant ``s̄_k = φ_r + P·E⌊(t_k + d_k − φ_r)/P⌋`` in closed form (:func:`expected_floor`):
+    the staircase with ramps of width ``j`` at its steps (never after ``t_k`` on average,
+    non-decreasing). Residual mark when ``j`` is missing: readings whose age is within
+    ``j/2`` of ``0`` or ``P`` jump by ``±ω·P`` (residual/ω off the sawtooth by one period,
+    towards the other side), uncorrelated with the host's own interval jitter.
     """
 
     #: ``P`` [s]: the device's sampling period (each reading is its last sample).
@@ -103,6 +113,10 @@ class ReadingAge(AbstractReading):
     #: ``φ_r`` per run [s, the log's time axis], in the log's run order; ``None``: not yet
     #: found (:meth:`from_fit`).
     phases: Float[ArrayLike, " R"] | None = None
+    #: ``j`` [s]: width of the uniform spread of the request's arrival about the timestamp
+    #: (0: each reading is exactly the last sample before ``t_k``); chosen by the scan
+    #: (:func:`hdid.effects._age_scan.scan` with ``jitters``) and held, as ``P`` is.
+    jitter: Float[ArrayLike, ""] = 0.0
 
     #: No least-squares unknowns: a change of ``P`` or ``φ`` re-sorts which device sample
     #: each reading shows (a jump of ``ω·P`` in that reading), which a local linearisation
@@ -145,7 +159,8 @@ class ReadingAge(AbstractReading):
     @classmethod
     def of_scan(cls, found) -> ReadingAge:
         """The component holding a scan's clock (:class:`~hdid.effects._age_scan.AgeScan`)."""
-        return cls(sample_period=float(found.period), phases=np.asarray(found.phases, dtype=float))
+        return cls(sample_period=float(found.period), phases=np.asarray(found.phases, dtype=float),
+                   jitter=float(getattr(found, "jitter", 0.0)))
 
     def sample_times(self, times: Float[Array, "R T"]) -> Float[Array, "R T"]:
         """``t − a = φ + P·⌊(t − φ)/P⌋``, the device's last sample before ``t``."""
@@ -167,5 +182,20 @@ class ReadingAge(AbstractReading):
         # a per-run copy of the model (one row per run) holds every run's phases in each row
         phases = phases[rows, rows % runs] if phases.ndim == 2 else phases[rows % runs]
         period = jnp.broadcast_to(period, (n,)) if period.ndim < 2 else period[:, 0]
+        jitter = jnp.asarray(self.jitter, dtype=float)
+        jitter = jnp.broadcast_to(jitter, (n,)) if jitter.ndim < 2 else jitter[:, 0]
         p, phi = period[:, None], phases[:, None]
-        return phi + p * jnp.floor((times - phi) / p)
+        return phi + p * expected_floor((times - phi) / p, jitter[:, None] / p)
+
+
+def expected_floor(u, w):
+    """``E⌊u + D⌋`` for ``D`` uniform on ``[−w/2, w/2]`` (``0 ≤ w ≤ 1``, in periods): ``⌊u⌋``
+    plus the chance of passing the next step minus that of falling below the last, with
+    ``f = u − ⌊u⌋``: ``clip((f + w/2 − 1)/w, 0, 1) − clip((w/2 − f)/w, 0, 1)``; exactly
+    ``⌊u⌋`` where ``w = 0``. numpy in, numpy out; JAX in, JAX out."""
+    xp = jnp if isinstance(u, jnp.ndarray) or isinstance(w, jnp.ndarray) else np
+    n = xp.floor(u)
+    f, w = u - n, xp.clip(w, 0.0, 1.0)
+    safe = xp.where(w > 0, w, 1.0)
+    ramp = xp.clip((f + w / 2 - 1) / safe, 0.0, 1.0) - xp.clip((w / 2 - f) / safe, 0.0, 1.0)
+    return n + xp.where(w > 0, ramp, 0.0)
