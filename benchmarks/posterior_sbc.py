@@ -167,6 +167,36 @@ def run_one(gen, design_name, seed, max_steps, method="emcee,smc", noise="prior"
     return outs
 
 
+def samples_per_period(r):
+    """Readings a period of the log's true swing: the linear frequency ``√(k1/(J·N²))/2π``
+    hardened at the design's largest release (``_aliasing.swing_hz``); below
+    ``MIN_SAMPLES_PER_PERIOD`` (2.5) the log is aliased (its turning points timed by the model alone)."""
+    from hdid._simulation._aliasing import swing_hz
+    from hdid.reference import logs as gen
+
+    t, design = r["truth_params"], getattr(gen, r["design"].upper() + "_DESIGN")
+    n = t.get("ratio", 100.0)
+    f0 = math.sqrt(t["k1"] / (t["inertia"] * n**2)) / (2 * math.pi)
+    return design["fs"] / swing_hz(f0, t, max(abs(a) for a in design["amplitudes"]) / n)
+
+
+def _aliased_lines(logs):
+    """Pooled 95 % coverage of the aliased and the resolved logs apart (all, then converged only)."""
+    from hdid._simulation._aliasing import MIN_SAMPLES_PER_PERIOD as M
+
+    L = []
+    for what, keep in ((f"aliased (< {M:g} readings a period of the true swing)", lambda x: x < M),
+                       ("resolved", lambda x: x >= M)):
+        for conv in (False, True):
+            rs = [r for r in logs if keep(samples_per_period(r)) and (r["converged"] or not conv)]
+            k, m = sum(r["quantities"][n]["cover95"] for r in rs for n in CHECKED), len(rs) * len(CHECKED)
+            if m:
+                lo, hi = _wilson(k, m)
+                L.append(f"{what.capitalize()} logs{', converged only' if conv else ''} ({len(rs)}): "
+                         f"{k}/{m} = {k / m:.1%} [{lo:.1%}, {hi:.1%}].")
+    return L
+
+
 def _wilson(k, n):
     """Wilson score 95 % interval of a binomial proportion ``k/n`` (``n`` > 0)."""
     return binomtest(int(k), n).proportion_ci(method="wilson")
@@ -238,6 +268,7 @@ def _render(res, all_logs, method=None):
         if rs:
             lo, hi = _wilson(k, m)
             L.append(f"Converged logs only, {des or 'both designs'}: {k}/{m} = {k / m:.1%} [{lo:.1%}, {hi:.1%}].")
+    L += ["", *_aliased_lines(logs)]
     basin = sum(any(w.startswith("WRONG BASIN") for w in r.get("warnings", [])) for r in logs)
     L.append(f"\nLogs with the WRONG BASIN statement: {basin} of {len(logs)}.\n")
     L += [f"## Rank of the truth among the draws ({BINS} bins, counts; uniform if calibrated)\n",
@@ -256,12 +287,13 @@ def _render(res, all_logs, method=None):
         for n, v in wr.items():
             L.append(f"| {n} | {statistics.median(v):.2f} | {min(v):.2f} | {max(v):.2f} |")
     L += ["\n## Convergence and time per log\n", *_common.header(
-        "design", "seed", "converged", "steps", "R-hat max", "ESS bulk min", "ESS tail min", "fit s",
+        "design", "seed", "readings a period", "converged", "steps", "R-hat max", "ESS bulk min", "ESS tail min", "fit s",
         "posterior s (compile, mode search)", "load start → end", "misses (95 %)")]
     for r in logs:
         miss = [n for n in REPORTED if not r["quantities"][n]["cover95"]]
+        spp = samples_per_period(r)
         conv_ = f"yes ({r['met_by']})" if r["converged"] else "NO"
-        L.append(f"| {r['design']} | {r['seed']} | {conv_} | {_steps(r)} | {r['rhat_max']:.3f} | "
+        L.append(f"| {r['design']} | {r['seed']} | {spp:.2f} | {conv_} | {_steps(r)} | {r['rhat_max']:.3f} | "
                  f"{r['ess_bulk_min']:.0f} | {r['ess_tail_min']:.0f} | {r['fit_s']:.0f} | {r['posterior_s']:.0f} "
                  f"({r['compile_s']:.1f}, {r['mode_search_s']:.0f}) | {r['load_start'][0]} → {r['load_end'][0]} | "
                  f"{', '.join(miss) or '–'} |")
@@ -367,6 +399,8 @@ def main(argv=None):
                     help="run exactly these logs, in this order (instead of --paper-logs/--rich-logs from --seed0)")
     ap.add_argument("--shard", default="0/1", help="K/N: run every N-th log from the K-th")
     ap.add_argument("--merge", nargs="+", metavar="JSON", help="join shards' results into NAME")
+    ap.add_argument("--check", metavar="KEY", help="--merge: keep the joined run beside NAME's own logs, as its check KEY")
+    ap.add_argument("--about", default="", help="--check: what the check is (its conditions), shown above its tables")
     ap.add_argument("--cli", action="store_true", help="time the CLI process instead: --logs, --repeats, --timeout")
     ap.add_argument("--logs", type=int, default=1, help="--cli: the shipped log and N-1 drawn ones")
     ap.add_argument("--repeats", type=int, default=3, help="--cli: runs per log and sampler")
@@ -388,6 +422,11 @@ def main(argv=None):
                    shards=[{k: q.get(k) for k in ("generated", "options", "load_start", "machine", "skipped")}
                            for q in parts])
         res.pop("cli", None)
+        if args.check:  # a run beside the stored one (other conditions): kept whole, its own tables
+            full = _common.stored(args.name)
+            full.setdefault("checks", {})[args.check] = {k: v for k, v in res.items() if k not in ("cli", "checks")
+                                                         } | {"about": args.about}
+            return _common.write_result(args.name, full, render, indent=1)
         res.update({k: v for k, v in _common.stored(args.name).items() if k in ("cli", "checks", "skew_checks")})
         return _common.write_result(args.name, res, render, indent=1)
 
