@@ -168,33 +168,20 @@ def run_one(gen, design_name, seed, max_steps, method="emcee,smc", noise="prior"
 
 
 def samples_per_period(r):
-    """Readings a period of the log's true swing: the linear frequency ``√(k1/(J·N²))/2π``
-    hardened at the design's largest release (``_aliasing.swing_hz``); below
-    ``MIN_SAMPLES_PER_PERIOD`` (2.5) the log is aliased (its turning points timed by the model alone)."""
+    """Readings a period of the log's true swing, ``√(k1/(J·N²))/2π`` hardened at the largest release
+    (``_aliasing.swing_hz``); below its ``MIN_SAMPLES_PER_PERIOD`` (2.5) the log is aliased."""
     from hdid._simulation._aliasing import swing_hz
     from hdid.reference import logs as gen
 
-    t, design = r["truth_params"], getattr(gen, r["design"].upper() + "_DESIGN")
-    n = t.get("ratio", 100.0)
-    f0 = math.sqrt(t["k1"] / (t["inertia"] * n**2)) / (2 * math.pi)
-    return design["fs"] / swing_hz(f0, t, max(abs(a) for a in design["amplitudes"]) / n)
+    t, d = r["truth_params"], getattr(gen, r["design"].upper() + "_DESIGN")
+    n, amp = t.get("ratio", 100.0), max(abs(a) for a in d["amplitudes"])
+    return d["fs"] / swing_hz(math.sqrt(t["k1"] / (t["inertia"] * n**2)) / (2 * math.pi), t, amp / n)
 
 
-def _aliased_lines(logs):
-    """Pooled 95 % coverage of the aliased and the resolved logs apart (all, then converged only)."""
-    from hdid._simulation._aliasing import MIN_SAMPLES_PER_PERIOD as M
-
-    L = []
-    for what, keep in ((f"aliased (< {M:g} readings a period of the true swing)", lambda x: x < M),
-                       ("resolved", lambda x: x >= M)):
-        for conv in (False, True):
-            rs = [r for r in logs if keep(samples_per_period(r)) and (r["converged"] or not conv)]
-            k, m = sum(r["quantities"][n]["cover95"] for r in rs for n in CHECKED), len(rs) * len(CHECKED)
-            if m:
-                lo, hi = _wilson(k, m)
-                L.append(f"{what.capitalize()} logs{', converged only' if conv else ''} ({len(rs)}): "
-                         f"{k}/{m} = {k / m:.1%} [{lo:.1%}, {hi:.1%}].")
-    return L
+def _pooled(rs, what):
+    """``what (n logs): k/m = x % [Wilson 95 %].``: pooled 95 % coverage of logs ``rs`` over ``CHECKED``."""
+    k, m = sum(r["quantities"][n]["cover95"] for r in rs for n in CHECKED), len(rs) * len(CHECKED)
+    return [f"{what} ({len(rs)}): {k}/{m} = {k / m:.1%} [{'{:.1%}, {:.1%}'.format(*_wilson(k, m))}]."] if m else []
 
 
 def _wilson(k, n):
@@ -263,12 +250,11 @@ def _render(res, all_logs, method=None):
     L.append(f"\nPooled 95 % coverage over k1, k2, tau_c, tau_s, c_v and the band: {tot_k}/{tot_n} = "
              f"{tot_k / tot_n:.1%} [{lo:.1%}, {hi:.1%}].\n")
     for des in ("paper", "rich", None):
-        rs = [r for r in conv if des in (None, r["design"])]
-        k, m = sum(r["quantities"][n]["cover95"] for r in rs for n in CHECKED), len(rs) * len(CHECKED)
-        if rs:
-            lo, hi = _wilson(k, m)
-            L.append(f"Converged logs only, {des or 'both designs'}: {k}/{m} = {k / m:.1%} [{lo:.1%}, {hi:.1%}].")
-    L += ["", *_aliased_lines(logs)]
+        L += _pooled([r for r in conv if des in (None, r["design"])], f"Converged logs only, {des or 'both designs'}")
+    spp = {id(r): samples_per_period(r) for r in logs}  # aliased: < 2.5 readings a period of the true swing
+    for what, rs in (("\nAliased (< 2.5 readings a period of the true swing)", [r for r in logs if spp[id(r)] < 2.5]),
+                     ("Resolved", [r for r in logs if spp[id(r)] >= 2.5])):
+        L += _pooled(rs, f"{what} logs") + _pooled([r for r in rs if r["converged"]], f"{what.strip()} logs, converged only")
     basin = sum(any(w.startswith("WRONG BASIN") for w in r.get("warnings", [])) for r in logs)
     L.append(f"\nLogs with the WRONG BASIN statement: {basin} of {len(logs)}.\n")
     L += [f"## Rank of the truth among the draws ({BINS} bins, counts; uniform if calibrated)\n",
@@ -399,8 +385,8 @@ def main(argv=None):
                     help="run exactly these logs, in this order (instead of --paper-logs/--rich-logs from --seed0)")
     ap.add_argument("--shard", default="0/1", help="K/N: run every N-th log from the K-th")
     ap.add_argument("--merge", nargs="+", metavar="JSON", help="join shards' results into NAME")
-    ap.add_argument("--check", metavar="KEY", help="--merge: keep the joined run beside NAME's own logs, as its check KEY")
-    ap.add_argument("--about", default="", help="--check: what the check is (its conditions), shown above its tables")
+    ap.add_argument("--check", metavar="KEY", help="--merge: keep the joined run beside NAME's logs, as check KEY")
+    ap.add_argument("--about", default="", help="--check: what the check is (its conditions), above its tables")
     ap.add_argument("--cli", action="store_true", help="time the CLI process instead: --logs, --repeats, --timeout")
     ap.add_argument("--logs", type=int, default=1, help="--cli: the shipped log and N-1 drawn ones")
     ap.add_argument("--repeats", type=int, default=3, help="--cli: runs per log and sampler")
@@ -423,9 +409,7 @@ def main(argv=None):
                            for q in parts])
         res.pop("cli", None)
         if args.check:  # a run beside the stored one (other conditions): kept whole, its own tables
-            full = _common.stored(args.name)
-            full.setdefault("checks", {})[args.check] = {k: v for k, v in res.items() if k not in ("cli", "checks")
-                                                         } | {"about": args.about}
+            (full := _common.stored(args.name)).setdefault("checks", {})[args.check] = dict(res, about=args.about)
             return _common.write_result(args.name, full, render, indent=1)
         res.update({k: v for k, v in _common.stored(args.name).items() if k in ("cli", "checks", "skew_checks")})
         return _common.write_result(args.name, res, render, indent=1)
@@ -436,8 +420,7 @@ def main(argv=None):
     res.update({k: v for k, v in _common.stored(args.name).items() if k in ("cli", "checks", "skew_checks")})
     sched = [(d, args.seed0 + off + i) for i in range(max(args.paper_logs, args.rich_logs))
              for d, off, n in (("paper", 0, args.paper_logs), ("rich", 1000, args.rich_logs)) if i < n]
-    if args.seeds:
-        sched = [(d, int(x)) for d, x in (item.split(":") for item in args.seeds.split(","))]
+    sched = [(d, int(x)) for d, x in (item.split(":") for item in args.seeds.split(","))] if args.seeds else sched
     if args.paper_first:
         sched.sort(key=lambda s: s[0] != "paper")  # stable: seeds stay in order within a design
     (k, n), t_start = (int(x) for x in args.shard.split("/")), time.perf_counter()
