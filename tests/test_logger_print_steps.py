@@ -24,7 +24,7 @@ import pytest
 from hdid import read_log
 from hdid._log._resolution import find_step
 
-_TO_RAD = {"rad": 1.0, "deg": math.pi / 180.0, "rev": 2.0 * math.pi}
+_TO_RAD = {"rad": 1.0, "mrad": 1e-3, "deg": math.pi / 180.0, "rev": 2.0 * math.pi}
 
 
 def swings(rng, *, fs: float, f_n: float, amp: float, runs: int = 3, dur: float = 0.8):
@@ -121,3 +121,50 @@ def test_guard_analog_levels_get_no_grid(seed, lo, hi):
         y = np.round(rng.normal(0.0, spread, n) / unit) * unit
         false += find_step(y, unit, [0, n // 2]).step is not None
     assert false == 0
+
+
+# (counts a revolution, unit, decimals): one to two print units a step
+FINE_CASES = [
+    (2**15, "mrad", 1),  # 1.92 (the world test's log 06: 0.1 mrad)
+    (2**18, "deg", 3),  # 1.37
+]
+
+
+@pytest.mark.parametrize("cpr, unit, decimals", FINE_CASES)
+def test_an_encoder_step_under_two_print_units_is_found(tmp_path, cpr, unit, decimals):
+    """Below two print units every level difference lies within one unit of some multiple
+    of any step, and the search stopped there ("fewer than 2 print units: no grid"): the
+    fit then took the print unit's floor (2.2x too small at 1.92 units: HV log 06's 2.21x,
+    silently). A common offset per run still tells the grid: a share 1 - 1/Q of the print
+    lattice stays empty in a fixed pattern (hdid._log._fine_grid). Three logs per encoder
+    at 500-2000 Hz; the step found must keep every level on its own multiple."""
+    q = 2.0 * math.pi / cpr
+    p = 10.0**-decimals * _TO_RAD[unit]
+    assert 1.0 < q / p < 2.0
+    for seed in range(3):
+        rng = np.random.default_rng(300 + seed)
+        runs = swings(rng, fs=float(rng.choice([500.0, 1000.0, 2000.0])),
+                      f_n=rng.uniform(12.0, 40.0), amp=rng.uniform(0.04, 0.15))
+        path = tmp_path / f"fine{cpr}_{unit}_{seed}.csv"
+        write(path, runs, cpr=cpr, unit=unit, decimals=decimals, offset=rng.uniform(-3, 3))
+        log = read_log(path)
+        assert log.resolution is not None, (seed, log.resolution_note)
+        # a level printed within p/2 of its grid point: a step off by more than p/M (M the
+        # widest run's span in steps) moves some level to another multiple
+        span = max(float(np.ptp(r.theta)) for r in log.runs) / q
+        assert abs(log.resolution - q) * span <= p, seed
+
+
+@pytest.mark.parametrize("unit, decimals, noise", [("mrad", 1, 0.0), ("deg", 3, 0.3)])
+def test_guard_analog_swings_under_two_print_units_get_no_grid(tmp_path, unit, decimals, noise):
+    """Guard (passes before too): the same swings without an encoder (noise 0 or 0.3 print
+    units), printed alike: no step (the lattice fills at random, not in a pattern)."""
+    p = 10.0**-decimals * _TO_RAD[unit]
+    for seed in range(3):
+        rng = np.random.default_rng(400 + seed)
+        runs = swings(rng, fs=float(rng.choice([500.0, 1000.0, 2000.0])),
+                      f_n=rng.uniform(12.0, 40.0), amp=rng.uniform(0.04, 0.15))
+        runs = [(t, x + rng.normal(0.0, noise * p, x.size)) for t, x in runs]
+        path = tmp_path / f"analog_fine_{unit}_{seed}.csv"
+        write(path, runs, cpr=2**48, unit=unit, decimals=decimals, offset=rng.uniform(-3, 3))
+        assert read_log(path).resolution is None, seed

@@ -339,6 +339,8 @@ def read_log(
         found = find_step(theta[kept], None if printed is None else printed[kept], run_starts)
         resolution, resolution_note = found.step, found.note
         resolution_source = "estimated" if resolution is not None else None
+        if resolution is not None and found.note:  # a step another one rivals
+            notes.append(f"column '{name(_THETA)}': {found.note}")
         if found.off_grid:
             notes.append(_off_grid_note(found, kept, time, theta, table.lines, names,
                                         run_starts))

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from ._fine_grid import fine_step
 from ._grid_outliers import coarser_grid
 from ._lattice import mixed_offsets, shares
 from ._step_scan import Budget, offset_chance, resolved, steps_in
@@ -237,7 +238,29 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
     if ok.sum() < 2:
         return StepFinding(None, None, "too few readings to find a grid")
     merge = MERGE_REL * max(float(np.max(np.abs(x[ok]))), np.finfo(float).tiny)
-    unit = float(np.max(p[ok])) if print_unit is not None else None
+    found = _by_differences(x, p, bounds, ok, merge, print_unit is not None, unit_name)
+    if found.step is not None or not found.print_unit or np.ptp(p[ok]) > 0.0:
+        return found
+    # one print unit throughout: a grid of one to a few units by its empty lattice points
+    fine = fine_step(x, found.print_unit, bounds, merge, FALSE_GRID_CHANCE)
+    if fine is None:
+        return found
+    q, _, rival = fine
+    if mixed_offsets(q, [(a, b, np.unique(x[a:b][ok[a:b]])) for a, b in bounds],
+                     FALSE_GRID_CHANCE):
+        return found
+    note = None if rival is None else (
+        f"the readings fit an encoder step of {q:.4g} {unit_name} and one of {rival:.4g} "
+        f"{unit_name} ({q / found.print_unit:.3g} and {rival / found.print_unit:.3g} print "
+        f"units) about equally: {q:.4g} is taken; the quantization floor may be off by "
+        f"{abs(rival / q - 1.0):.1%}")
+    return StepFinding(q, found.print_unit, note)
+
+
+def _by_differences(x, p, bounds, ok, merge: float, printed: bool,
+                    unit_name: str) -> StepFinding:
+    """:func:`find_step` by the differences of each run's levels (module notes)."""
+    unit = float(np.max(p[ok])) if printed else None
     d_all, t_all, u_all, gaps, run_levels, signed = [], [], [], [], [], []
     n_levels = 0
     for a, b in bounds:
