@@ -45,3 +45,20 @@ def test_shards_put_paper_logs_first_and_start_no_log_past_their_end(tmp_path, m
     assert res["logs"] == []
     assert [(s["design"], s["seed"]) for s in res["skipped"]] == [
         ("paper", 100), ("paper", 101), ("rich", 1100), ("rich", 1101)]
+
+
+def test_aliased_logs_are_told_from_their_truth_swing():
+    """The calibration reports aliased logs apart: readings a period of the truth's swing,
+    ``fs / f``, with ``f = √(k1/(J·N²))/2π`` (the spring at the output, the inertia at the
+    motor) hardened by the Duffing backbone ``√(1 + ¾·k2·A²/k1)`` at the largest release's
+    twist ``A = 0.157 rad / N``."""
+    J, N, fs = 7e-7, 100.0, gen.PAPER_DESIGN["fs"]
+    k1 = J * N**2 * (2 * math.pi * 100.0) ** 2  # a 100 Hz linear swing: 2.5 readings a period at 250 Hz
+    linear = {"design": "paper", "truth_params": {"k1": k1, "k2": 0.0, "inertia": J, "ratio": N}}
+    assert S.samples_per_period(linear) == pytest.approx(fs / 100.0, rel=1e-12)
+    # k2 with ¾·k2·A²/k1 = 3 doubles the swing's frequency: half the readings a period
+    A = max(abs(a) for a in gen.PAPER_DESIGN["amplitudes"]) / N
+    hard = {"design": "paper", "truth_params": dict(linear["truth_params"], k2=4 * k1 / A**2)}
+    assert S.samples_per_period(hard) == pytest.approx(fs / 200.0, rel=1e-12)
+    # the rich design reads the same plant at 1 kHz: 10 readings a period
+    assert S.samples_per_period(dict(linear, design="rich")) == pytest.approx(10.0, rel=1e-12)
