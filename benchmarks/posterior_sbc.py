@@ -119,8 +119,9 @@ def draw_log(gen, design_name, seed, noise="prior"):
 
 
 def run_one(gen, design_name, seed, max_steps, method="emcee,smc", noise="prior"):
-    """One log: fit once, seek its optima once, then each sampler of ``method`` from them."""
+    """One log: fit once and basin-check it (the fit the samplers sample), its optima once, then each sampler."""
     import hdid
+    from hdid._posterior.basin import basin_check
     from hdid._posterior.density import posterior_density
     from hdid._posterior.modes import sampled_modes
 
@@ -129,7 +130,7 @@ def run_one(gen, design_name, seed, max_steps, method="emcee,smc", noise="prior"
     base = {"design": design_name, "seed": seed, "truth_params": truth, "load_start": _common.loads(),
             "prior": "default", "band_rejects": notes["band_rejects"], "truth_notes": notes}
     t0, c0 = time.perf_counter(), time.process_time()  # CPU s beside wall s: a starved core shows
-    fit = hdid.fit(df, inertia=truth["inertia"])
+    fit = basin_check(hdid.fit(df, inertia=truth["inertia"]), df, echo=False)[0]
     base["fit_s"], t1 = time.perf_counter() - t0, time.perf_counter()
     dens = posterior_density(fit, prior=prior)
     modes = sampled_modes(fit, "auto", seed % 1000, dens.u_fit, dens.lin, dens.lp.gauss_prior)
@@ -168,11 +169,9 @@ def run_one(gen, design_name, seed, max_steps, method="emcee,smc", noise="prior"
 
 
 def samples_per_period(r):
-    """Readings a period of the log's true swing, ``√(k1/(J·N²))/2π`` hardened at the largest release
-    (``_aliasing.swing_hz``); below its ``MIN_SAMPLES_PER_PERIOD`` (2.5) the log is aliased."""
+    """Readings a period of the true swing ``√(k1/(J·N²))/2π``, hardened at the largest release (``swing_hz``)."""
     from hdid._simulation._aliasing import swing_hz
     from hdid.reference import logs as gen
-
     t, d = r["truth_params"], getattr(gen, r["design"].upper() + "_DESIGN")
     n, amp = t.get("ratio", 100.0), max(abs(a) for a in d["amplitudes"])
     return d["fs"] / swing_hz(math.sqrt(t["k1"] / (t["inertia"] * n**2)) / (2 * math.pi), t, amp / n)
@@ -381,12 +380,11 @@ def main(argv=None):
     ap.add_argument("--noise", choices=("prior", "moving", "none", "analog"), default="prior",
                     help="noise before rounding: the sampler's σ_n prior, that after each release only, or none; "
                          "analog: step/√12 on unrounded readings (the likelihood exact)")
-    ap.add_argument("--seeds", default="", metavar="DESIGN:SEED,...",
-                    help="run exactly these logs, in this order (instead of --paper-logs/--rich-logs from --seed0)")
+    ap.add_argument("--seeds", default="", metavar="DESIGN:SEED,...", help="run exactly these logs, in this order")
     ap.add_argument("--shard", default="0/1", help="K/N: run every N-th log from the K-th")
     ap.add_argument("--merge", nargs="+", metavar="JSON", help="join shards' results into NAME")
     ap.add_argument("--check", metavar="KEY", help="--merge: keep the joined run beside NAME's logs, as check KEY")
-    ap.add_argument("--about", default="", help="--check: what the check is (its conditions), above its tables")
+    ap.add_argument("--about", default="", help="--check: what the check is, above its tables")
     ap.add_argument("--cli", action="store_true", help="time the CLI process instead: --logs, --repeats, --timeout")
     ap.add_argument("--logs", type=int, default=1, help="--cli: the shipped log and N-1 drawn ones")
     ap.add_argument("--repeats", type=int, default=3, help="--cli: runs per log and sampler")
