@@ -17,7 +17,8 @@ from .._results._summaries import ParameterEstimate, RunSummary, StartSummary
 from .._models._transforms import derivative
 from .._problems._derived import BracketTooCostly, _derived, band_bracket
 from ..effects import StribeckFriction
-from ._plausibility import RESIDUAL_FLOOR_FACTOR, motion_warning, plausibility_warnings  # noqa: F401
+from ._plausibility import (RESIDUAL_FLOOR_FACTOR, integrator_warning,  # noqa: F401
+                            motion_warning, plausibility_warnings)
 
 
 #: A direction in the optimiser's space whose data-only standard deviation exceeds this
@@ -90,6 +91,8 @@ def analyse(
     bracket = _run_warnings(prep, runs, values, model, derived, bracket, warnings)
     warnings += _trust_warnings(problem, u, params, std_u, values)
     warnings += motion_warning(problem, prep, moving)
+    warnings += integrator_warning(problem, prep, values,
+                                   derived.get("natural_frequency_hz", (math.nan, math.nan)))
     warnings += plausibility_warnings(prep, model, values, rms_all,
                                       derived.get("natural_frequency_hz", (math.nan,))[0],
                                       problem.n_unknowns)
@@ -107,6 +110,8 @@ def analyse(
         resolution_source=prep.resolution_source,
         print_unit=getattr(prep, "print_unit", None),
         resolution_note=getattr(prep, "resolution_note", None),
+        time_print_unit=getattr(prep, "time_print_unit", None),
+        timing_floor_rad=prep.floor if getattr(prep, "time_scale", None) is not None else None,
         sample_period=prep.sample_period,
         n_effective=prep.n_effective,
         n_unknowns=problem.n_unknowns,

@@ -12,7 +12,9 @@ import numpy as np
 
 from .._log._resolution import step_against_readings
 from .._simulation._aliasing import aliasing_warning, swing_hz
+from .._simulation._phase_error import BIAS_SHARE, frequency_bias, substep_for_error
 from .._simulation._prepare import Prepared
+from .._simulation._simulate import substeps_for
 from ._limits import FLOOR_TAIL, above_floor
 
 #: An adequate model leaves the rounding of a quantized sensor: RMS ≈ step/√12 (uniform
@@ -44,14 +46,17 @@ def residual_warnings(prep: Prepared, rms: float, n_unknowns: int = 0) -> list[s
     reached the floor (above the χ² tail test :func:`hdid._fitting._limits.above_floor` for
     the log's effective readings and the fit's ``n_unknowns``, the floor being the rounding
     and the simulator's accuracy together); none at the floor."""
-    out, floor = [], prep.resolution / math.sqrt(12)
+    # (the floor: the step's rounding, and the time stamps' where they are rounded instants)
+    out, floor = [], float(getattr(prep, "floor", prep.resolution / math.sqrt(12)))
+    timed = getattr(prep, "time_scale", None) is not None
     if wrong_step := (step_against_readings(prep.theta, prep.lengths, prep.resolution, rms,
                                             RESIDUAL_FLOOR_FACTOR) if prep.quantized else None):
         out.append(wrong_step)
-    elif math.isfinite(rms) and rms > RESIDUAL_FLOOR_FACTOR * prep.resolution / math.sqrt(12):
+    elif math.isfinite(rms) and rms > RESIDUAL_FLOOR_FACTOR * floor:
         out.append(  # (a noise model's resolution is σ·√12, σ from the still readings)
-            f"the RMS residual is {rms / (prep.resolution / math.sqrt(12)):.3g}× the "
-            + ("quantization floor" if prep.quantized else "readings' noise")
+            f"the RMS residual is {rms / floor:.3g}× the "
+            + (("floor of the encoder's and the time stamps' rounding" if timed else
+                "quantization floor") if prep.quantized else "readings' noise")
             + ": the model does not describe this log, and the standard "
             "errors (which assume it does) are not trustworthy — a poorer basin (more "
             "--starts, or a warm --start), a missing effect (try `hdid diagnose`), wrong units, "
@@ -61,7 +66,8 @@ def residual_warnings(prep: Prepared, rms: float, n_unknowns: int = 0) -> list[s
             prep.n_effective, n_unknowns)
             * math.hypot(1.0, SIMULATOR_ACCURACY * _span(prep) / floor)) * floor:
         out.append(
-            f"the RMS residual is {rms / floor:.3g}× the quantization floor, above the "
+            f"the RMS residual is {rms / floor:.3g}× the "
+            f"{'rounding (step and time stamps)' if timed else 'quantization'} floor, above the "
             f"{above:.3g}× that rounding and the simulator's accuracy leave over "
             f"{prep.n_effective:.0f} effective readings and {n_unknowns} unknowns (χ² tail "
             f"{FLOOR_TAIL:g}): the fit has "
@@ -130,3 +136,31 @@ def motion_warning(problem, prep: Prepared, moving) -> list[str]:
         f"{ASK_MOVING_READINGS / shortest:.3g} Hz, {ASK_MOVING_READINGS} readings in a "
         f"run's motion of under {shortest * 1e3:.3g} ms) or release from further outside "
         "the stick band"]
+
+
+def integrator_warning(problem, prep: Prepared, values: dict, frequency: tuple[float, float]
+                       ) -> list[str]:
+    """The RK4 substep's phase error (:mod:`hdid._simulation._phase_error`) where it is more
+    than :data:`~hdid._simulation._phase_error.BIAS_SHARE` of the fitted frequency's
+    standard error (``frequency``: natural frequency [Hz] and its std): the fitted
+    frequency and ``k1`` are then biased high by more than the errors say. The swing is
+    the natural frequency hardened at the log's largest release (:func:`swing_hz`); the
+    substep the one run, the sample period split into whole substeps of at most
+    ``max_substep`` (:func:`~hdid._simulation._simulate.substeps_for`)."""
+    f0, sd = frequency
+    h = float(getattr(problem, "max_substep", math.nan) or math.nan)
+    if not (math.isfinite(f0) and f0 > 0 and math.isfinite(sd) and sd > 0 and h > 0):
+        return []
+    h = prep.sample_period / substeps_for(prep.sample_period, h)  # the substep run
+    amp = float(np.max(np.abs(prep.hold - prep.rest))) if prep.n_runs else 0.0
+    ratio = float(getattr(problem.base, "ratio", 1.0) or 1.0)
+    f = swing_hz(f0, values, amp / ratio)
+    bias, rel = frequency_bias(h, f), sd / f0
+    if not bias > BIAS_SHARE * rel:
+        return []
+    return [f"the fitted frequency and k1 rest on the RK4 substep: at {1e3 * h:.4g} ms "
+            f"(h·ω {2 * math.pi * f * h:.2g} at the {f:.4g} Hz swing) the simulated swing "
+            f"runs slow by (h·ω)⁴/120 = {bias:.2g}, which the fit takes up: the frequency high "
+            f"by up to {bias / rel:.2g} of its standard error, k1 (with k2) by up to "
+            f"{2e6 * bias:.3g} ppm — "
+            f"refit with max_substep={substep_for_error(h, f, rel):.4g} (s)"]

@@ -63,6 +63,10 @@ class FitResult:
     #: runs whose first reading was taken as the hold, the release in the first interval
     #: (:attr:`hdid.Log.first_reading_held`, :mod:`hdid._fitting._first_reading`)
     first_reading_held: tuple[str, ...] = ()
+    #: the time column's print unit [s] where the stamps are instants rounded to it, and
+    #: the floor with that rounding in it [rad] (:mod:`hdid._simulation._timing`)
+    time_print_unit: float | None = None
+    timing_floor_rad: float | None = None
 
     # -- accessors --------------------------------------------------------------------
     @property
@@ -93,7 +97,11 @@ class FitResult:
 
     @property
     def quantization_floor_rad(self) -> float:
-        """RMS error of rounding to the encoder step, ``step/√12``."""
+        """RMS error of rounding to the encoder step, ``step/√12`` — with the rounding of
+        the time stamps where they are rounded instants (the weighted RMS a correct model
+        reaches then: :attr:`hdid._simulation._prepare.Prepared.floor`)."""
+        if self.timing_floor_rad:
+            return self.timing_floor_rad
         return self.resolution_rad / math.sqrt(12)
 
     def predict(self, times=None) -> np.ndarray:
@@ -157,6 +165,9 @@ class FitResult:
             "print_unit": self.print_unit,
             "resolution_note": self.resolution_note,
             "first_reading_held": list(self.first_reading_held),
+            # (only where the stamps' rounding is in the floor: hdid._simulation._timing)
+            **({"time_print_unit": self.time_print_unit,
+                "timing_floor_rad": self.timing_floor_rad} if self.timing_floor_rad else {}),
             "quantization_floor_rad": self.quantization_floor_rad,
             "stick_band_halfwidth_rad": self.stick_band_halfwidth_rad,
             "stick_band_halfwidth_std_rad": self.derived["stick_band_halfwidth_rad"][1],
@@ -221,7 +232,10 @@ class FitResult:
             lines.append(
                 f"RMS residual {self.rms_residual_rad:.3e} rad = "
                 f"{self.rms_residual_rad / self.resolution_rad:.3f} counts "
-                f"(quantization floor {floor:.3e} rad = 0.289 counts)"
+                + (f"(floor {floor:.3e} rad = {floor / self.resolution_rad:.3g} counts: the "
+                   f"step's rounding and the time stamps' to {self.time_print_unit:.3g} s)"
+                   if self.timing_floor_rad else
+                   f"(quantization floor {floor:.3e} rad = 0.289 counts)")
             )
         lo = self.derived["stick_band_lower_rad"][0]
         hi = self.derived["stick_band_upper_rad"][0]

@@ -15,6 +15,7 @@ from .._errors import LogError
 from .._log import Log
 from ._noise import grid_noise, noise_sigma
 from ._tails import oscillates
+from ._timing import time_scales
 
 #: Shortest bracket [s] allowed before the last sample at the hold reading for the
 #: release instant (a release just outside the stick band starts slowly); the bracket is
@@ -118,6 +119,10 @@ class Prepared:
     log_notes: tuple[str, ...] = ()
     #: index of the first sample of each run's final still stretch (its length where none)
     tail_start: np.ndarray = None
+    #: ``(R, T)`` each reading's error over ``step/√12`` where the stamps are instants cut
+    #: to ``time_print_unit`` [s] (:mod:`._timing`; ``weight`` divides by it), else None
+    time_scale: np.ndarray = None
+    time_print_unit: float | None = None
 
     @property
     def n_runs(self) -> int:
@@ -129,8 +134,19 @@ class Prepared:
 
     @property
     def n_effective(self) -> float:
-        """Effective number of observations, ``Σ w²``."""
-        return float(np.sum(self.weight**2))
+        """Effective number of observations, ``Σ w²`` (``w`` before :attr:`time_scale`)."""
+        if self.time_scale is None:
+            return float(np.sum(self.weight**2))
+        return float(np.sum((self.weight * self.time_scale) ** 2))
+
+    @property
+    def floor(self) -> float:
+        """The residuals' floor [log units]: ``step/√12``, with rounded stamps (:mod:`._timing`)
+        the weighted RMS reached there, ``step/√12·√(n_effective/Σw²)``."""
+        sigma = self.resolution / math.sqrt(12.0)
+        if self.time_scale is None:
+            return sigma
+        return sigma * math.sqrt(self.n_effective / float(np.sum(self.weight**2)))
 
     @property
     def quantized(self) -> bool:
@@ -385,6 +401,9 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
             hi[i] = t[min(k0 + 1, n - 1)]
             guess[i] = 0.5 * (t[k0] + t[min(k0 + 1, n - 1)])
     speeds = [np.max(np.abs(np.diff(r.theta)) / np.diff(r.time)) for r in runs if len(r.theta) > 1]
+    unit = getattr(log, "time_print_unit", None)
+    if (scale := time_scales(runs, unit, step, (R, T)) if quantized else None) is not None:
+        weight = weight / scale  # the stamps' rounding (:mod:`._timing`)
     return Prepared(
         source=log.source,
         run_names=tuple(r.name for r in runs),
@@ -415,6 +434,8 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
         still=still_run,
         log_notes=tuple(getattr(log, "notes", ())),
         tail_start=tail_starts,
+        time_scale=scale,
+        time_print_unit=unit if scale is not None else None,
     )
 
 
