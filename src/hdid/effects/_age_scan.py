@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import jax.numpy as jnp
 import numpy as np
 
 #: Residual and prediction minus their running mean over this many samples: what is left is
@@ -62,6 +63,20 @@ class AgeScan:
     sse_no_jitter: float = float("nan")
 
 
+
+def expected_floor(u, w):
+    """``E⌊u + D⌋`` for ``D`` uniform on ``[−w/2, w/2]`` (``0 ≤ w ≤ 1``, in periods): ``⌊u⌋``
+    plus the chance of passing the next step minus that of falling below the last, with
+    ``f = u − ⌊u⌋``: ``clip((f + w/2 − 1)/w, 0, 1) − clip((w/2 − f)/w, 0, 1)``; exactly
+    ``⌊u⌋`` where ``w = 0``. numpy in, numpy out; JAX in, JAX out."""
+    xp = jnp if isinstance(u, jnp.ndarray) or isinstance(w, jnp.ndarray) else np
+    n = xp.floor(u)
+    f, w = u - n, xp.clip(w, 0.0, 1.0)
+    safe = xp.where(w > 0, w, 1.0)
+    ramp = xp.clip((f + w / 2 - 1) / safe, 0.0, 1.0) - xp.clip((w / 2 - f) / safe, 0.0, 1.0)
+    return n + xp.where(w > 0, ramp, 0.0)
+
+
 def _highpass(x: np.ndarray) -> np.ndarray:
     """``x`` minus its centred running mean over ``SMOOTH`` samples along the last axis
     (the window shrinks at the ends)."""
@@ -76,8 +91,6 @@ def _highpass(x: np.ndarray) -> np.ndarray:
 def _run_sse(t, w, r_hp, omega, a_model, periods, fracs, jitter=0.0):
     """Weighted SSE ``(len(periods), len(fracs))`` of ``hp(r) − hp(−ω·(a − a_m))``, the
     age ``a = t − s̄`` of :class:`ReadingAge` with request jitter ``jitter`` [s]."""
-    from .reading_age import expected_floor
-
     out = np.empty((len(periods), len(fracs)))
     for i in range(0, len(periods), BLOCK):
         p = periods[i:i + BLOCK, None, None]

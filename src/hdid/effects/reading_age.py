@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ._age_scan import expected_floor
 from ._candidate import Candidate
 from ._reading import AbstractReading
 
@@ -101,7 +102,7 @@ class ReadingAge(AbstractReading):
     the device at ``t_k + d_k``, ``d_k`` uniform over a window of width ``j`` (centred: a
     mean delay is a shift of ``φ_r``), so a reading polled within ``j/2`` of a device
     sample shows the newer or the older sample by chance. The model predicts the mean
-    instant ``s̄_k = φ_r + P·E⌊(t_k + d_k − φ_r)/P⌋`` in closed form (:func:`expected_floor`):
+    instant ``s̄_k = φ_r + P·E⌊(t_k + d_k − φ_r)/P⌋`` in closed form (:func:`hdid.effects._age_scan.expected_floor`):
     the staircase with ramps of width ``j`` at its steps (never after ``t_k`` on average,
     non-decreasing). Residual mark when ``j`` is missing: readings whose age is within
     ``j/2`` of ``0`` or ``P`` jump by ``±ω·P`` (residual/ω off the sawtooth by one period,
@@ -187,15 +188,3 @@ class ReadingAge(AbstractReading):
         p, phi = period[:, None], phases[:, None]
         return phi + p * expected_floor((times - phi) / p, jitter[:, None] / p)
 
-
-def expected_floor(u, w):
-    """``E⌊u + D⌋`` for ``D`` uniform on ``[−w/2, w/2]`` (``0 ≤ w ≤ 1``, in periods): ``⌊u⌋``
-    plus the chance of passing the next step minus that of falling below the last, with
-    ``f = u − ⌊u⌋``: ``clip((f + w/2 − 1)/w, 0, 1) − clip((w/2 − f)/w, 0, 1)``; exactly
-    ``⌊u⌋`` where ``w = 0``. numpy in, numpy out; JAX in, JAX out."""
-    xp = jnp if isinstance(u, jnp.ndarray) or isinstance(w, jnp.ndarray) else np
-    n = xp.floor(u)
-    f, w = u - n, xp.clip(w, 0.0, 1.0)
-    safe = xp.where(w > 0, w, 1.0)
-    ramp = xp.clip((f + w / 2 - 1) / safe, 0.0, 1.0) - xp.clip((w / 2 - f) / safe, 0.0, 1.0)
-    return n + xp.where(w > 0, ramp, 0.0)
