@@ -98,7 +98,9 @@ def fit_many(
     -----
     In the batch every log runs :func:`hdid.fit`'s own driver (grid, all starts a few
     iterations, the best ones to convergence, the restart of an optimum that holds moving
-    runs), so its numbers are :func:`hdid.fit`'s up to rounding (the padding reorders sums);
+    runs, the restarts of a cubic gone to 0, a stuck release or an aliased swing, the refit
+    at the RK4 substep a swing above the log's Nyquist frequency wants), so its numbers are
+    :func:`hdid.fit`'s up to rounding (the padding reorders sums) and the limit checks;
     logs whose problems have the same structure and padded shape share one compiled
     program per step. A log whose fit diverges gets an error in its row. A log with runs
     that move from their first samples is fitted by :func:`hdid.fit` itself, which weighs

@@ -154,7 +154,9 @@ def restarted(result, problem, model, scales, solutions, local_fits, finish,
     ends lower than the optimum by more than the limits' same-optimum margin: then
     ``finish(solutions)`` assembles the result again from all local fits (its limits checked
     anew). Returns the
-    result and the local fits ``solutions`` ``(U, costs, ok, steps)``, extended if kept."""
+    result and the local fits ``solutions`` ``(U, costs, ok, steps)``, extended if kept; a
+    result kept from a fold-back row carries the optimum it was folded from as
+    ``unfolded``."""
     fitted_hz = result.derived.get("natural_frequency_hz", (math.nan,))[0]
     more = [r for r in (restart_rows(problem, model, scales, result.u),
                         release_row(problem, result.u)) if r is not None]
@@ -170,9 +172,14 @@ def restarted(result, problem, model, scales, solutions, local_fits, finish,
         folded = np.concatenate([folded, again])
     if folded is not None:  # a basin of its own: not dropped beside the optimum's lane
         new = tuple(np.concatenate([a, b]) for a, b in zip(new, local_fits(folded)))
-    costs = np.asarray(new[1])
-    if not np.min(np.where(np.isfinite(costs[1:]), costs[1:], np.inf)) < costs[0] * (
-            1.0 - SAME_MARGIN):
+    costs = np.where(np.isfinite(new[1]), np.asarray(new[1]), np.inf)
+    if not np.min(costs[1:]) < costs[0] * (1.0 - SAME_MARGIN):
         return result, solutions
     solutions = tuple(np.concatenate([a, b]) for a, b in zip(solutions, new))
-    return finish(solutions), solutions
+    out = finish(solutions)
+    if folded is not None and int(np.argmin(costs)) >= len(costs) - len(folded):
+        # a folded swing won at a substep picked for the slow one: the fast optimum may
+        # have lost by the integrator's error alone (:func:`hdid._fitting._substep.refined`
+        # refits it at the substep it wants)
+        out.unfolded = result
+    return out, solutions

@@ -117,30 +117,52 @@ def refined(result, log, given: dict, fit):
     refit is ``fit`` with the fitted model as a warm start (``start_from_model``: its
     optimum's parameters; its own grid, limit checks and restarts, the fold-back restart
     of an aliased optimum among them) at that substep; the lower χ² is kept and its
-    warnings say which substep ran and why. At most :data:`MAX_REFITS` times."""
+    warnings say which substep ran and why. At most :data:`MAX_REFITS` times. A result
+    still above the floor whose fold-back restart replaced a fast optimum (:func:`_unfolded`)
+    has that optimum refitted the same way, warm from its model."""
     if given.get("max_substep") is not None:
         return result
     notes: list[str] = []
     for _ in range(MAX_REFITS):
-        if (h := substep_wanted(result, at_floor=True)) is None:
+        src, h = result, substep_wanted(result, at_floor=True)
+        if h is None and (u := _unfolded(result)) is not None:
+            src, h = u, substep_wanted(u, at_floor=True)
+        if h is None:
             break
-        f, old = fitted_swing_hz(result), float(result.problem.max_substep)
+        f, old = fitted_swing_hz(src), float(src.problem.max_substep)
         held = tuple(getattr(result, "first_reading_held", ()) or ())
         on = dataclasses.replace(log, first_reading_held=held) if held else log
-        new = fit(on, **{**given, "model": result.model, "max_substep": h,
+        new = fit(on, **{**given, "model": src.model, "max_substep": h,
                          "start_from_model": True})
         a, b = _chi2(result), _chi2(new)
         floor2 = float(new.quantization_floor_rad) ** 2 or 1.0
+        why = _why(src, h, f) + (" (the optimum its fold-back restart replaced)"
+                                 if src is not result else "")
         if b < a:
-            notes.append(f"refitted at the {1e3 * h:.4g} ms RK4 substep: {_why(result, h, f)}; "
+            notes.append(f"refitted at the {1e3 * h:.4g} ms RK4 substep: {why}; "
                          f"χ² {a / floor2:.4g} → {b / floor2:.4g} (quantization-floor units)")
             result = new
             continue
         notes.append(f"a refit at the {1e3 * h:.4g} ms RK4 substep ended higher (χ² "
                      f"{b / floor2:.4g} against {a / floor2:.4g} in quantization-floor units) "
-                     f"and the fit at {1e3 * old:.4g} ms is kept, though {_why(result, h, f)}: "
+                     f"and the fit at {1e3 * old:.4g} ms is kept, though {why}: "
                      "its simulation may be off the dynamics it models (log faster than "
                      "twice the swing)")
         break
+    result.__dict__.pop("unfolded", None)
     result.warnings += [n for n in notes if n not in result.warnings]
     return result
+
+
+def _unfolded(result):
+    """The optimum a fold-back restart replaced in ``result``
+    (:func:`hdid._fitting._cubic_restart.restarted`: a swing above the log's Nyquist
+    frequency folded to the alias nearest the log's own), where ``result`` has not reached
+    the quantization floor: that optimum was judged at the substep of the slow swing,
+    which may have cost it the integrator's error alone (a 222 Hz gear read at 250 Hz,
+    fitted at 1 ms: its folded 31 Hz restart won at 91× the floor, the 222 Hz swing refitted
+    at 0.125 ms reaches it). At the floor the folded swing describes the log and stays."""
+    from ._limits import reached_floor
+
+    u = getattr(result, "unfolded", None)
+    return None if u is None or reached_floor(result) else u

@@ -4,8 +4,11 @@ Every log runs :func:`hdid.fit`'s steps — the grid of starts
 (:func:`hdid._fitting._starts._grid_starts`), Levenberg–Marquardt from every start one at a
 time through the one-lane program of its model structure (:mod:`hdid._fitting._one_lane`,
 the schedule :class:`hdid._fitting._lm._Schedule`), the restart of an optimum that holds
-runs the log shows moving, then the analysis at the best start — so a log gets the fit it
-gets alone, up to rounding (below). There is no driver of the batch's own. Logs that
+runs the log shows moving, the analysis at the best start, then :func:`hdid.fit`'s
+restarts and substep refit by the same functions (:func:`_settled`: a cubic gone to 0, a
+release stuck on its bracket's end, a swing on an alias above the log's Nyquist frequency
+folded back, the RK4 substep its fitted swing wants) — so a log gets the fit it gets
+alone, up to rounding and the limit checks (below). There is no driver of the batch's own. Logs that
 :func:`hdid.fit` fits in more than one pass — runs that move from their first samples (both
 stories of the first reading), logs on no grid (the search's weights, then the polish in
 the likelihood's, :mod:`hdid._fitting._polish`) — go through :func:`hdid.fit` itself.
@@ -48,12 +51,12 @@ from .._log import Log, read_log
 from .._problems import _programs
 from .._problems._problem import Problem
 from .._simulation._prepare import search_weight
-from . import _first_reading, _log_lanes
+from . import _cubic_restart, _first_reading, _log_lanes, _substep
 from ._fit import _finish, _setup, _stored_analysis, _untrapped, fit, nested_check
 from ._limits import above_floor, needs_check, reached_floor
 from ._one_lane import LANES
 from ._one_lane import _local_fits as _one_lane
-from ._starts import _grid_starts
+from ._starts import _grid_starts, log_scales
 
 
 #: Starts per call of the Levenberg–Marquardt program
@@ -297,24 +300,67 @@ def _fit_log(item, setup, padded: Problem, options: dict, lanes: int, bracket: b
                 ok, steps = np.concatenate([ok, ok1]), np.concatenate([steps, s1])
             timing.lane_steps += int(np.sum(steps))
         with _Phase(timing, "analyse"):
-            finite = np.isfinite(costs)
-            pre = (_unpad(_stored_analysis(padded, U[int(np.argmin(np.where(
-                finite, costs, np.inf)))]), setup.problem) if finite.any() else None)
-            res = _finish(setup, U, costs, ok, steps, t_start, bracket=bracket,
-                          precomputed=pre)
-            res = _nested(res, item, setup, options, n_starts, max_steps)
-            _check_finite(res)
+            res = _analysed(item, setup, padded, (U, costs, ok, steps), options, bracket,
+                            t_start)
+        res = _settled(res, item, setup, padded, (U, costs, ok, steps), U0[0], options,
+                       bracket, timing, t_start, lanes)
+        _check_finite(res)
     except LOG_ERRORS as exc:
         return exc
     return res
+
+
+def _analysed(item, setup, padded: Problem, solutions, options: dict, bracket: bool,
+              t_start: float, pre=None):
+    """The :class:`~hdid.FitResult` of the local fits ``solutions`` ``(U, costs, ok,
+    steps)``: the analysis' JAX parts at the best row on the padded problem (``pre``
+    where already computed), the rest on the log's own (:func:`_finish`), then the
+    batch's limit check (:func:`_nested`)."""
+    U, costs, ok, steps = solutions
+    finite = np.isfinite(costs)
+    if pre is None and finite.any():
+        pre = _unpad(_stored_analysis(padded, U[int(np.argmin(np.where(
+            finite, costs, np.inf)))]), setup.problem)
+    res = _finish(setup, U, costs, ok, steps, t_start, bracket=bracket, precomputed=pre)
+    return _nested(res, item, setup, options, int(options.get("n_starts", 6)),
+                   int(options.get("max_steps", 300)))
+
+
+def _settled(res, item, setup, padded: Problem, solutions, start, options: dict,
+             bracket: bool, timing: BatchTiming, t_start: float, lanes: int = LANES):
+    """:func:`hdid.fit`'s steps after its local fits, by the same functions: the restarts
+    of an optimum whose cubic went to 0, whose release stuck on its bracket's end or whose
+    swing sits on an alias above the log's Nyquist frequency
+    (:func:`hdid._fitting._cubic_restart.restarted`, one start at a time on the padded
+    problem, the lower kept), then the refit at the RK4 substep the fitted swing wants
+    where the log's substep clearly under-resolves it
+    (:func:`hdid._fitting._substep.refined`: this batch's own steps again, warm from the
+    fitted model, at that substep). A log that needs none of them costs a few NumPy
+    checks. ``start``: the first start (the data's release guesses); ``lanes``: starts per
+    call of the restarts' Levenberg–Marquardt program."""
+    max_steps = int(options.get("max_steps", 300))
+    prob, prep, model = setup.problem, setup.prep, setup.model
+    with _Phase(timing, "solve"):
+        res, _ = _cubic_restart.restarted(
+            res, prob, model, log_scales(prep, model, np.asarray(prob.offset0)), solutions,
+            lambda U0: _local_fits(padded, U0, max_steps, lanes),
+            lambda sol: _analysed(item, setup, padded, sol, options, bracket, t_start),
+            log_hz=prep.frequency_hz, start=np.asarray(start))
+
+    def again(log, **opts):  # this log through the batch's own steps at another substep
+        s = _setup(log, **{k: opts[k] for k in _SETUP_OPTIONS if k in opts})
+        out = _fit_log(log, s, pad_to_bucket(s.problem), opts, lanes, bracket, timing)
+        if isinstance(out, BaseException):
+            raise out
+        return out
+
+    return _substep.refined(res, item, options, again)
 
 
 def _fit_lanes(items, setups: dict, padded: dict, buckets: set, timing, bracket, done,
                options, lane_width=None):
     """``lanes="logs"``: each bucket's logs fitted together (:mod:`._log_lanes`), then
     each log's analysis and the batch's limit check (:func:`_nested`) on the host."""
-    n_starts = int(options.get("n_starts", 6))
-    max_steps = int(options.get("max_steps", 300))
     groups: dict = {}
     for i in setups:
         key = _bucket_key(padded[i])
@@ -325,22 +371,24 @@ def _fit_lanes(items, setups: dict, padded: dict, buckets: set, timing, bracket,
         width = int(lane_width or _log_lanes.default_width(padded[idx[0]]))
         fitted = _log_lanes.fit_bucket([setups[i] for i in idx], [padded[i] for i in idx],
                                        options, width, timing, lambda n: _Phase(timing, n))
-        with _Phase(timing, "analyse"):
-            for i, f in zip(idx, fitted):
-                if isinstance(f, BaseException):
-                    if not isinstance(f, LOG_ERRORS):
-                        raise f
-                    done(i, f)
-                    continue
-                try:
-                    U, costs, ok, steps, pre = f
-                    res = _finish(setups[i], U, costs, ok, steps, t_start, bracket=bracket,
-                                  precomputed=None if pre is None else _unpad(pre, setups[i].problem))
-                    res = _nested(res, items[i], setups[i], options, n_starts, max_steps)
-                    _check_finite(res)
-                except LOG_ERRORS as exc:
-                    res = exc
-                done(i, res)
+        for i, f in zip(idx, fitted):
+            if isinstance(f, BaseException):
+                if not isinstance(f, LOG_ERRORS):
+                    raise f
+                done(i, f)
+                continue
+            try:
+                U, costs, ok, steps, pre, start = f
+                sol = (U, costs, ok, steps)
+                with _Phase(timing, "analyse"):
+                    res = _analysed(items[i], setups[i], padded[i], sol, options, bracket,
+                                    t_start, None if pre is None else _unpad(pre, setups[i].problem))
+                res = _settled(res, items[i], setups[i], padded[i], sol, start, options,
+                               bracket, timing, t_start)
+                _check_finite(res)
+            except LOG_ERRORS as exc:
+                res = exc
+            done(i, res)
 
 
 def _local_fits(problem: Problem, U0, max_steps: int, lanes: int):
