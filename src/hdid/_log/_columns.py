@@ -84,6 +84,12 @@ def _find_columns(
         if key not in _KNOWN_COLUMNS:
             continue
         if key in index and by_alias(name) != by_alias(table.names[index[key]]):
+            if key == _TIME:  # ``time`` and ``timestamp [ms]``: say which one is read
+                other = table.names[index[key]]
+                used, unused = (other, name) if by_alias(name) else (name, other)
+                table.notes = list(table.notes) + [
+                    f"two time columns: the time is read from {_show(used, 30)}, not from "
+                    f"{_show(unused, 30)}"]
             if by_alias(name):  # ``theta`` and ``position``: the canonical name wins
                 continue
         elif key in index and by_alias(name) and key in (_THETA, _THETA_OUT):
@@ -132,7 +138,7 @@ def _find_columns(
         elif any(sep in n for n in table.names for sep in (";", "\t", "|")):
             hint = " — the file seems not to be comma-separated; save it as CSV with ',' between cells"
         elif table.names and all(_looks_numeric(n) for n in table.names if n):
-            hint = " — the first line looks like data; add a header line such as 'time,theta'"
+            hint = f" — the first line looks like data; add a header line {_header_for(table)}"
         else:
             hint = " — rename the columns (names are case-insensitive)"
         raise LogError(
@@ -259,6 +265,53 @@ def _missing_cells(column) -> np.ndarray:
     text = [_cell_text(u).lower() for u in uniques]
     flags = np.array([t == "" or t in _NA_TOKENS for t in text], dtype=bool)
     return flags[codes] if flags.size else np.zeros(raw.shape, dtype=bool)
+
+
+#: Slowest sampling [Hz] the time's unit may imply: the fit warns below 5 Hz (a log in ms
+#: read as s); a header-less log's time unit is the largest that samples at least this fast.
+_MIN_RATE_HZ = 5.0
+#: Time units for a header-less log's suggested header, largest first, in seconds.
+_TIME_UNITS = (("s", 1.0), ("ms", 1e-3), ("us", 1e-6), ("ns", 1e-9))
+
+
+def _header_for(table: _Table) -> str:
+    """The header line a header-less log needs, with the units its first row and columns
+    suggest: time in the largest unit that samples at >= 5 Hz, the angle in rad (or raw
+    counts when whole numbers beyond radians), e.g. ``'time [ms],theta [rad]'``."""
+    if len(table.names) < 2:
+        return "such as 'time,theta'"
+
+    def numbers(i: int) -> np.ndarray:
+        cells = [table.names[i], *np.asarray(table.columns[i], dtype=object)[:2000]]
+        values = pd.to_numeric(pd.Series([_cell_text(c) for c in cells]), errors="coerce")
+        values = values.to_numpy(dtype=np.float64)
+        return values[np.isfinite(values)]
+
+    steps = np.diff(numbers(0))
+    steps = steps[steps > 0]
+    time, why = "time", ""
+    if steps.size:
+        step = float(np.median(steps))
+        unit, per = next(((u, f) for u, f in _TIME_UNITS if step * f <= 1.0 / _MIN_RATE_HZ),
+                         _TIME_UNITS[-1])
+        time, why = f"time [{unit}]", (f"steps of {step:.4g} in the first column: "
+                                       f"{1.0 / (step * per):.4g} Hz in {unit}; ")
+    a = numbers(1)
+    top = float(np.max(np.abs(a))) if a.size else 0.0
+    whole = np.all(np.abs(a - np.rint(a)) <= _INTEGER_TOL * np.maximum(1.0, np.abs(a)))
+    if top <= _COUNTS_LOOKING_MAX:
+        line, angle = f"'{time},theta [rad]'", "radians"
+    elif whole:
+        line, angle = f"'{time},counts'", f"whole numbers up to {top:.6g}: counts; {_COUNTS_HINT}"
+    else:
+        line, angle = (f"'{time},theta [UNIT]'",
+                       f"up to {top:.6g}, beyond radians: UNIT is its unit (deg, mrad, …)")
+    more = len(table.names) - 2
+    if more:
+        line = f"{line[:-1]},…' (… a name for each of the other {more} columns, e.g. 'run'; "
+    else:
+        line += " ("
+    return f"{line}{why}second column {angle})"
 
 
 def _looks_numeric(text: str) -> bool:

@@ -6,7 +6,8 @@ read as a known column name (case-insensitive; spaces and hyphens count as ``_``
 bare ``t`` is ``time``) followed by an optional unit: in brackets or parentheses
 (``theta [deg]``, ``t(s)``), after a slash (``t/s``, ``Theta / deg``) or, when the name alone is not a known column, as a
 ``_unit`` suffix (``time_ms``, ``theta_deg``) where the suffix is a unit the column knows
-(:mod:`hdid._units`). Anything else is not one of hdid's columns and is ignored.
+(:mod:`hdid._units`). A ``timestamp`` with its unit (``timestamp [ms]``, ``Timestamp (s)``,
+``timestamp_us``) is the time. Anything else is not one of hdid's columns and is ignored.
 """
 
 from __future__ import annotations
@@ -36,6 +37,11 @@ _ALIASES = {"t": _TIME, "x_value": _TIME, "pos": _THETA, "position": _THETA,
 
 #: Names that carry their unit: an Arduino sketch's ``millis()`` and ``micros()``.
 _WITH_UNIT = {"millis": (_TIME, "ms"), "micros": (_TIME, "us")}
+#: Names that are a known column only with their unit written (``timestamp [ms]``,
+#: ``timestamp (s)``, ``timestamp_us``): a bare ``timestamp`` is a tool's convention
+#: (PX4's µs since boot, ROS's ns since 1970: :mod:`._tools`, which also takes a bare one
+#: of date-times).
+_WITH_UNIT_ONLY = {"timestamp": _TIME, "time_stamp": _TIME}
 
 
 def _canonical(base: str) -> str:
@@ -56,11 +62,13 @@ def header_key(name: str) -> tuple[str, str | None]:
     key = _canonical(base)
     if unit is None and key in _WITH_UNIT:
         return _WITH_UNIT[key]
+    if unit is not None and key in _WITH_UNIT_ONLY:
+        return _WITH_UNIT_ONLY[key], unit
     if key in _KNOWN_COLUMNS or unit is not None:
         return key, unit
     head, sep, tail = key.rpartition("_")
     if sep and head:
-        head = _ALIASES.get(head, head)
+        head = _ALIASES.get(head, _WITH_UNIT_ONLY.get(head, head))
         counts = head in _ANGLES and tail.isalpha() and _units.scale("counts", tail) is not None
         if head in _KNOWN_COLUMNS and (_units.scale(head, tail) is not None or counts):
             return head, tail
@@ -78,4 +86,5 @@ def by_alias(name: str) -> bool:
     base, unit = _units.split(name)
     key = re.sub(r"[\s\-]+", "_", base.strip().lower())
     head = key.rpartition("_")[0]
-    return key in _ALIASES or (unit is None and head in _ALIASES)
+    return (key in _ALIASES or (unit is None and head in _ALIASES)
+            or key in _WITH_UNIT_ONLY or (unit is None and head in _WITH_UNIT_ONLY))

@@ -12,6 +12,11 @@ runs) larger than half that range which, undone, is nearer the steps around it (
 gear's speed) than as read. Each wrap is undone by adding ±2**bits to every
 reading after it, the readings are moved by whole register turns to lie nearest zero,
 and the log's notes say so.
+
+The unwrapping is sure only while the counter moves well under half the register between
+readings. Beyond a quarter of it, the step's change from one reading to the next (the
+swing's acceleration) can reach half the register, where a wrap and a fast step read
+alike: the note then says the unwrapping is ambiguous (log faster, or a wider counter).
 """
 
 from __future__ import annotations
@@ -71,6 +76,17 @@ def unwrap_rollover(counts: np.ndarray, rows: np.ndarray, column: str
     out = out - span * np.rint(np.median(out) / span)
     shown = ", ".join(str(int(rows[i + 1])) for i in wraps[:5])
     more = f" and {wraps.size - 5} more" if wraps.size > 5 else ""
+    # the motion at the wraps: the steps across them, undone, and those on either side
+    near = np.clip(np.concatenate([wraps - 1, wraps, wraps + 1]), 0, steps.size - 1)
+    fastest = float(np.max(np.abs(np.diff(out)[near])))
+    if fastest > span / 4:
+        return out, (
+            f"column {column!r}: the {bits}-bit count register rolls over at row(s) "
+            f"{shown}{more}, but the counter moves up to {fastest:.0f} counts between readings "
+            f"(more than a quarter of its {int(span)}): a wrap and a fast step are not told "
+            f"apart, so the unwrapping by ±{int(span)} counts is ambiguous — log faster or "
+            "log a wider counter (32 bits)"
+        )
     return out, (
         f"column {column!r}: the {bits}-bit count register rolls over at row(s) {shown}{more} "
         f"(a step of more than {int(span // 2)} counts between two samples that the steps "

@@ -26,6 +26,12 @@ _ISO = re.compile(r"^\d{4}-\d{2}-\d{2}[T ]\d{1,2}:\d{2}")
 _CLOCK = re.compile(r"^\d{1,2}:\d{2}:\d{2}(\.\d+)?$")
 
 
+def holds_datetimes(column) -> bool:
+    """Whether a column's first filled cell is a date and time of day (or a time of day)."""
+    first = next((t for t in map(_cell_text, np.asarray(column, dtype=object)) if t), "")
+    return bool(_ISO.match(first) or _CLOCK.match(first))
+
+
 def timestamp_seconds(column, fail) -> np.ndarray | None:
     """Seconds after the first row of a column of ISO 8601 date-times, or None when the
     column does not hold date-times (it is read as numbers). ``fail(message, pos)`` builds

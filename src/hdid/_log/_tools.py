@@ -17,6 +17,9 @@ PlotJuggler's CSV export: ``__time`` [s since 1970], each series named by its to
 
 PX4 (``ulog2csv``): every topic's first column is ``timestamp``, integer microseconds
 since boot; a wheel encoder's angle is ``encoder_position[0]``, in counts.
+
+Data loggers and LabVIEW: a bare ``Timestamp`` (or ``DateTime``) of date-times
+(``2026-11-27 10:00:00.004``) is the time, read as seconds by :mod:`._timestamps`.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import numpy as np
 from .._errors import LogError
 from ._headers import header_key
 from ._names import _COUNTS, _THETA, _TIME
+from ._timestamps import holds_datetimes
 
 #: ROS time columns, the sample's stamp first: (seconds, nanoseconds) pairs, then one
 #: integer in nanoseconds.
@@ -38,6 +42,9 @@ _ROS_ANGLES = ("field.position0", "field.position", "position0", "position", "fi
                "data")
 #: PX4's encoder angle (counts).
 _PX4_ANGLE = "encoder_position[0]"
+#: Bare names of a time column of date-times (``2026-11-27 10:00:00.004``); with a unit
+#: (``timestamp [ms]``) the name is a time column of numbers (:mod:`._headers`).
+_DATETIME_NAMES = ("timestamp", "time stamp", "time_stamp", "datetime", "date_time", "date time")
 
 
 def _integers(column) -> list[int] | None:
@@ -61,8 +68,16 @@ def tool_columns(table) -> list[str]:
     """Rename (and, for time, recompute) a ROS or PX4 log's columns to hdid's, in place;
     the notes that say what was taken. A table with hdid's own time column is left alone."""
     lower = [name.strip().lower() for name in table.names]
+    stamps = [i for i, n in enumerate(lower) if n in _DATETIME_NAMES
+              and holds_datetimes(table.columns[i][:50])]
     if any(header_key(n)[0] == _TIME for n in table.names):
-        return []
+        return [f"two time columns: the time is read from "
+                f"{next(repr(n) for n in table.names if header_key(n)[0] == _TIME)}, not from "
+                f"the date-times of '{table.names[i]}'" for i in stamps[:1]]
+    if stamps:  # a logger's date-times (LabVIEW, data loggers): seconds (._timestamps)
+        notes = [f"time from the date-times of '{table.names[stamps[0]]}'"]
+        table.names[stamps[0]] = _TIME
+        return notes
     if any(n.startswith(("field.", "%time", "header.stamp")) for n in lower):
         return _ros(table, lower)
     if lower and lower[0] == "__time":
