@@ -98,7 +98,7 @@ def _speed(fit, loads, separate=()):
     ``separate``: two effects, each added to the fit's model and fitted, the pair given
     as ``separate=`` (the separations as diagnose computes them)."""
     import hdid
-    from hdid._design import _candidates
+    from hdid._design import _best_rival, _candidates
     from hdid.effects._registry import registry
 
     vals = fit.model.float_values()
@@ -110,13 +110,15 @@ def _speed(fit, loads, separate=()):
              dict(name="amplitude x1.25", amplitudes=[1.25 * a for a in base.amplitudes]),
              dict(name="repeats x3", repeats=3)]
     cands = _candidates.default_candidates(base, fit.model)[1:] + _candidates.load_candidates(extra, base)
-    timings = []
-    for label in ("first with separate" if pair else "cold", "warm", "warm"):
+    timings = []  # (and, with a pair, the rivals fitted with hdid.fit's own limit checks, as before)
+    for label in ("first with separate", "warm", "warm, limit checks in every rival fit", "warm") if pair else (
+            "cold", "warm", "warm"):
+        _best_rival.rival_fit.__kwdefaults__["nested"] = "auto" if "limit" in label else _best_rival.RIVAL
         loads.append(load(f"before {label}"))
-        t = time.perf_counter()
+        t, cpu = time.perf_counter(), time.process_time()
         d20 = hdid.design(fit, cands, targets=None if pair else TARGETS, separate=pair)
-        timings.append({"call": label, "n_candidates": len(d20.predictions),
-                        "seconds": time.perf_counter() - t, **load(label)})
+        timings.append({"call": label, "n_candidates": len(d20.predictions), "seconds": time.perf_counter() - t,
+                        "cpu_s": time.process_time() - cpu, **load(label)})
         if pair:
             timings[-1].update(separate=list(separate), top=(top := d20.best).experiment.name,
                                top_2lnlr=list(top.separation), top_kind=top.separation_kind)
@@ -307,9 +309,9 @@ def render(res) -> str:
     if sep:
         L += ["", f"--separate {','.join(sep[0]['separate'])} (fits of this log with each added; the separations as "
                   "diagnose computes them: local refits, then the largest fitted globally until it is a value):", "",
-              *header("call", "candidates", "s", "top", "its 2 ln LR (A, B true)", "kind", "load 1/5/15")]
+              *header("call", "candidates", "s", "CPU s", "top", "its 2 ln LR (A, B true)", "kind", "load 1/5/15")]
         for t in sep:
-            L.append(f"| {t['call']} | {t['n_candidates']} | {t['seconds']:.2f} | {t['top']} | "
+            L.append(f"| {t['call']} | {t['n_candidates']} | {t['seconds']:.2f} | {_fmt(t.get('cpu_s'))} | {t['top']} | "
                      f"{', '.join(_fmt(x) for x in t['top_2lnlr'])} | {t['top_kind']} | "
                      f"{t['load1']:.2f} / {t['load5']:.2f} / {t['load15']:.2f} |")
     L += ["", f"## Ranking by {TARGETS} (geometric-mean std ratio to this log)", "", "```",
