@@ -293,3 +293,53 @@ def test_the_box_filters_only_optima_beyond_a_flat_prior(fit):
         dens = posterior_density(fit, default_prior=default)
         found = sampled_modes(fit, [near, far], 0, dens.u_fit, dens.lin, dens.lp.gauss_prior)
         assert len(found) == kept, default
+
+
+class _Inverted:
+    """``fit`` with its unknowns ``u`` replaced (a fit that ended outside the prior's order)."""
+
+    def __init__(self, fit, u):
+        self._fit, self.u = fit, u
+
+    def __getattr__(self, name):
+        return getattr(self._fit, name)
+
+
+def test_an_optimum_outside_the_order_is_refitted_inside_and_said(fit):
+    """A fit that ends on an inverted Stribeck law (tau_s < tau_c: zero posterior density;
+    SBC paper log 36009 did, tau_s 1.11 < tau_c 3.67 mN m) — here the shipped paper fit with
+    its two friction levels swapped. The walkers must start from an optimum inside the order,
+    not from that point merely moved inside (which stranded every walker 8770 in log p
+    away), and the result must say so in one line. The shipped fit itself is an optimum
+    inside the order on this very log, so the refit must reach its cost within 9.21 (the 99 %
+    point of χ²₂: the tolerance the mode search keeps its ridge starts by), and the start's
+    log density must be finite."""
+    from hdid._posterior.density import ordered_pairs
+    from hdid._posterior.ensemble import _Ensemble
+    from hdid._posterior.modes import _laplace, sampled_modes
+
+    prob = fit.problem
+    free = list(prob.free)
+    jc, js = free.index("tau_c"), free.index("tau_s")
+    u = np.array(fit.u, dtype=float)
+    assert u[js] > u[jc]  # the shipped fit keeps the order
+    u[jc], u[js] = u[js], u[jc]
+    bad = _Inverted(fit, u)
+    dens = posterior_density(bad)
+    found = sampled_modes(bad, "fit", 0, dens.u_fit, dens.lin, dens.lp.gauss_prior)
+    pairs = ordered_pairs(prob)
+    best = min(found, key=lambda m: m.cost)
+    assert np.all(best.u[pairs[:, 1]] >= best.u[pairs[:, 0]])
+    from hdid._posterior.modes import with_user_prior
+
+    view = with_user_prior(fit, dens.lp.gauss_prior)[0]
+    ref = _laplace(view.problem, np.asarray(fit.u, dtype=float))[0]
+    assert best.cost <= ref + 9.21  # 99 % point of χ²₂
+    x = np.concatenate([best.u, [np.log(0.3 * fit.resolution_rad)]])
+    assert np.isfinite(float(dens.lp.log_prob(jnp.asarray(dens.lp.to_sampled_np(x)))))
+    notes = [m.note for m in found if m.note]
+    assert len(notes) == 1 and "\n" not in notes[0]
+    assert notes[0].startswith("CONSTRAINED OPTIMUM") and "tau_s ≥ tau_c" in notes[0]
+    run = _Ensemble.start(bad, None, 0, None, None, None, None, "weak", "fit", None)
+    assert notes[0] in run.warnings
+    assert np.all(np.isfinite(run.state.log_prob))

@@ -111,6 +111,7 @@ class _Ensemble:
         self.found = found = sampled_modes(fit, modes, seed, self.u_fit, self.lin, lp.gauss_prior,
                                                  ridges="emcee" in RIDGE_SAMPLERS)
         self.limits = found_limits(fit, found, modes, self.lin, lp.gauss_prior, seed)
+        self.warnings += [m.note for m in found if m.note]
         self.t_modes = time.perf_counter() - t_modes
         self.log_lo = log_lo = math.log(bounds[0] * q)
         self.log_rms = log_rms = math.log(max(fit.rms_residual_rad, bounds[0] * q))

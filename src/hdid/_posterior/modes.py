@@ -37,6 +37,8 @@ class Mode:
     #: "optimum", or "limit:NAME": a limit fit (NAME held near zero, :mod:`.limits`)
     kind: str = "optimum"
     limit: Any = None        # its :class:`~hdid._posterior.limits.LimitFit`
+    #: one warning line the sampler carries (:mod:`.inside`: the fit's optimum broke an order)
+    note: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"cost": self.cost, "weight": self.weight, "log_evidence": self.log_evidence,
@@ -397,12 +399,28 @@ def sampled_modes(fit, modes, seed: int, u_fit: np.ndarray, lin: np.ndarray,
             best = min(m.cost for m in found)
             found += seek_limits(view, lin, best) + (seek_ridges(view, lin, best) if ridges else [])
     else:
+        view = with_user_prior(fit, gauss_prior, seed)[0]
         found = [replace(m) for m in modes if ridges or not m.kind.startswith("ridge:")]
         found = found or [replace(m) for m in modes]
     from .density import ordered_pairs
+    from .inside import in_support, inside_optimum
 
     P = fit.problem.n_physical
     pairs = ordered_pairs(fit.problem)
+    # the fit's optimum outside the prior's support (tau_s < tau_c): refitted inside it
+    inside = inside_optimum(fit, view, gauss_prior)
+    note = None
+    if inside is not None:
+        u_in, _, note = inside
+        if u_in is None:
+            import sys
+
+            print(f"hdid: {note}", file=sys.stderr, flush=True)
+        elif not any(_same_optimum(view.problem, m, u_in) for m in found
+                     if in_support(pairs, m.u)):
+            cost, cov, logz = _laplace(view.problem, u_in)
+            found.append(Mode(u=u_in, cost=cost, cov=cov, log_evidence=logz,
+                              values=view.problem.values_np(u_in), note=note))
 
     def in_order(u):
         return pairs is None or bool(np.all(u[pairs[:, 1]] >= u[pairs[:, 0]]))
@@ -421,6 +439,8 @@ def sampled_modes(fit, modes, seed: int, u_fit: np.ndarray, lin: np.ndarray,
             for i, j in pairs:
                 m.u[j] = max(m.u[j], m.u[i] + 0.02)
         found = [m]
+    if note is not None and not any(m.note for m in found):
+        found[0].note = note  # the statement travels with the sampled optimum
     lz = np.array([m.log_evidence + float(lin @ (m.u[:P] - u_fit[:P])) for m in found])
     wz = np.exp(lz - lz.max())
     wz /= wz.sum()
@@ -431,6 +451,17 @@ def sampled_modes(fit, modes, seed: int, u_fit: np.ndarray, lin: np.ndarray,
     for m, wi in zip(found, wz):
         m.weight = float(wi)
     return found
+
+
+def _same_optimum(problem: Problem, m: Mode, u) -> bool:
+    """Whether ``u`` is ``m``'s optimum (:func:`find_modes`' merge rule: a straight path
+    that rises less than ``MODE_BARRIER`` above the worse end), for an optimum of ``m``'s
+    kind only."""
+    if m.kind != "optimum":
+        return False
+    path = m.u + np.linspace(0.0, 1.0, 9)[:, None] * (np.asarray(u) - m.u)
+    pc = np.asarray(_path_costs(problem, path))
+    return bool(np.all(np.isfinite(pc)) and np.max(pc) - max(pc[0], pc[-1]) < MODE_BARRIER)
 
 
 def mode_shares(found, mix, X, what: str, tail: str):

@@ -277,6 +277,7 @@ def _setup(fit, seed, sigma_floor=None, modes="auto", prior=None, default_prior=
     t = time.perf_counter()
     found = sampled_modes(fit, modes, seed, u_fit, lin, lp.gauss_prior)
     limits = found_limits(fit, found, modes, lin, lp.gauss_prior, seed)
+    warnings += [m.note for m in found if m.note]
     t_modes = time.perf_counter() - t
     q = float(prob.step)
     log_lo = math.log(bounds[0] * q)
