@@ -26,7 +26,8 @@ import math
 import numpy as np
 
 from .._simulation._aliasing import swing_hz
-from .._simulation._simulate import DEFAULT_MAX_SUBSTEP
+from .._simulation._phase_error import BIAS_SHARE, frequency_bias, substep_for_error
+from .._simulation._simulate import DEFAULT_MAX_SUBSTEP, substeps_for
 
 #: Natural frequency [Hz] at which the default substep (``DEFAULT_MAX_SUBSTEP``) was
 #: validated against the event-driven reference (error 0.04 of the 250 Hz quantization
@@ -45,6 +46,10 @@ AT_FLOOR_HW = 0.377
 #: alias, whose swing asks for a finer substep again (SBC seed 36008: 0.5 → 0.25 ms ended
 #: at k1 11.9× the truth, asking for 0.0625 ms).
 MAX_REFITS = 2
+#: Δχ² [floor units] above which a refit for the RK4 phase error alone is taken for
+#: another basin and not kept (a 3 sd shift of one parameter): HV log21's refit at 0.209 ms
+#: ended 4.7 above the 1 ms fit, which carries k1 +24 ppm at 25 sd of bias.
+PRECISION_CHI2 = 9.0
 
 
 def substep_for(frequency_hz: float) -> float:
@@ -86,8 +91,26 @@ def substep_wanted(fit, at_floor: bool = False) -> float | None:
         return None
     h, h_fit = substep_for(f), float(fit.problem.max_substep)
     if at_floor and h_fit * 2.0 * math.pi * f <= AT_FLOOR_HW:
-        return None
+        return for_precision(fit, f)
     return h if h < h_fit * (1.0 - 1e-9) else None
+
+
+def for_precision(fit, f: float) -> float | None:
+    """A finer substep where the fit's own leaves an RK4 phase error of more than
+    :data:`~hdid._simulation._phase_error.BIAS_SHARE` of its fitted frequency's standard
+    error (a fine encoder measures the frequency to ppm: world logs 04/05/11/14, k1 +9 …
+    +48 ppm at 4–10 sd, the (h·ω)⁴/60 of each fit's substep): the longest power-of-two
+    division that brings it to :data:`~hdid._simulation._phase_error.TARGET_SHARE`
+    (:mod:`hdid._simulation._phase_error`); ``None`` where the bias is within it. ``f``:
+    the fitted swing [Hz]."""
+    f0, sd = (getattr(fit, "derived", None) or {}).get("natural_frequency_hz", (math.nan,) * 2)
+    dt = float(getattr(fit, "sample_period", math.nan))
+    if not (math.isfinite(sd) and sd > 0 and f0 > 0 and dt > 0):
+        return None
+    run = dt / substeps_for(dt, float(fit.problem.max_substep))  # the substep run
+    if frequency_bias(run, f) <= BIAS_SHARE * sd / f0:
+        return None
+    return substep_for_error(run, f, sd / f0)
 
 
 def _chi2(result) -> float:
@@ -101,6 +124,10 @@ def _why(fit, h: float, f: float) -> str:
     """What made the substep ``h`` [s] needed for the fit's swing ``f`` [Hz]."""
     old = float(fit.problem.max_substep)
     nyquist = 0.5 / float(fit.sample_period)
+    if old * 2.0 * math.pi * f <= AT_FLOOR_HW:  # resolved: its phase error against the std
+        return (f"the RK4 phase error at {1e3 * old:.4g} ms (h·ω {old * 2 * math.pi * f:.2g} "
+                f"at the fitted {f:.4g} Hz swing) biased its frequency by more than "
+                f"{BIAS_SHARE:g} of its standard error; at {1e3 * h:.4g} ms it is within it")
     where = (f"above the log's Nyquist frequency ({nyquist:.4g} Hz), so its turning points "
              "show a slower alias, for which the substep was picked" if f > nyquist else
              "faster than the log's turning points, from which the substep was picked")
@@ -138,7 +165,10 @@ def refined(result, log, given: dict, fit):
         floor2 = float(new.quantization_floor_rad) ** 2 or 1.0
         why = _why(src, h, f) + (" (the optimum its fold-back restart replaced)"
                                  if src is not result else "")
-        if b < a:
+        # a refit for the phase error alone (:func:`for_precision`) is the same model
+        # simulated more closely: kept unless it ends PRECISION_CHI2 higher (another basin)
+        precise = old * 2.0 * math.pi * f <= AT_FLOOR_HW
+        if b < a or (precise and (b - a) / floor2 < PRECISION_CHI2):
             notes.append(f"refitted at the {1e3 * h:.4g} ms RK4 substep: {why}; "
                          f"χ² {a / floor2:.4g} → {b / floor2:.4g} (quantization-floor units)")
             result = new
