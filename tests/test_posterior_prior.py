@@ -343,3 +343,23 @@ def test_an_optimum_outside_the_order_is_refitted_inside_and_said(fit):
     run = _Ensemble.start(bad, None, 0, None, None, None, None, "weak", "fit", None)
     assert notes[0] in run.warnings
     assert np.all(np.isfinite(run.state.log_prob))
+
+
+def test_no_optimum_inside_the_order_is_said_before_sampling(fit, monkeypatch, capsys):
+    """When no refit inside the order reaches a finite density (forced here: every cost
+    infinite), one line says so on standard error at once — before any sampling — and the
+    sampled start carries it for the result's warnings."""
+    from hdid._posterior import inside
+    from hdid._posterior.modes import sampled_modes
+
+    free = list(fit.problem.free)
+    jc, js = free.index("tau_c"), free.index("tau_s")
+    u = np.array(fit.u, dtype=float)
+    u[jc], u[js] = u[js], u[jc]
+    bad = _Inverted(fit, u)
+    dens = posterior_density(bad)
+    monkeypatch.setattr(inside, "_costs", lambda problem, U: np.full(len(np.atleast_2d(U)), np.inf))
+    found = sampled_modes(bad, "fit", 0, dens.u_fit, dens.lin, dens.lp.gauss_prior)
+    err = capsys.readouterr().err
+    assert err.count("NO OPTIMUM INSIDE THE PRIOR") == 1 and "tau_s ≥ tau_c" in err
+    assert found[0].note is not None and found[0].note.startswith("NO OPTIMUM INSIDE")
