@@ -483,9 +483,9 @@ def test_separation_is_averaged_over_the_release_phase(case, monkeypatch):
         d = np.abs(r.theta - r.theta[0])
         return float(d[np.argmax(d > 0)] / np.max(d))
 
-    def fake(log, *, model, chi2_of, **kw):  # (at the floor: no limit restarts, _best_rival.RIVAL)
+    def fake(log, *, model, chi2_of, **kw):
         return SimpleNamespace(n_effective=1, rms_residual_rad=sigma * math.sqrt(chi2_of(log)), model=model,
-                               parameters=fit.parameters, quantization_floor_rad=math.inf, n_unknowns=0)
+                               parameters=fit.parameters)
 
     rival = _tau_c_moved(fit, 0.3, True)
     # χ² 20·(run 1's first moving reading / its swing): it moves with the phase by more than
@@ -546,34 +546,3 @@ def test_an_unverified_upper_bound_never_ranks_above_a_fitted_value():
     assert "no candidate's rival was fitted globally" in w, w
     # every bound at or below the top value (the budget reached them all): no warning
     assert separation_warnings([preds[0], preds[2], preds[3]], rival_fits=3) == []
-
-
-def test_rival_fit_checks_its_limits_only_as_restarts_above_the_floor(case, monkeypatch):
-    """A rival fitted to noise-free readings gives the separation its χ² alone: hdid.fit
-    runs without its limit checks (at the floor a limit is a verdict that never moves the
-    optimum: most of the cost of ``design --separate``), and only a fit left above the
-    floor is restarted from its limits (:func:`hdid._design._best_rival.limit_restarts`,
-    on the fit's own problem rebuilt: hysteresis fitted to backlash's readings, four
-    amplitudes at 1 kHz, χ² 2.6e4 from the grid, 14.1 from its Coulomb limit). hdid.fit
-    and the limit check are stand-ins (the case's fit, or it 10x above the floor). Fails
-    with the rival fitted with ``nested="auto"`` (the old call: the checks inside every fit)."""
-    import dataclasses
-
-    import hdid._fitting._fit as fit_module
-    from hdid._design import _best_rival, _separate
-    from hdid._design._candidates import baseline
-
-    _, fit = case
-    e = baseline(fit)
-    theta = _separate._trajectories(fit, [e])[0]
-    above = dataclasses.replace(fit, rms_residual_rad=10.0 * fit.quantization_floor_rad)
-    for result, restarted in ((fit, False), (above, True)):
-        fits, checks = [], []
-        monkeypatch.setattr(fit_module, "fit", lambda log, *, nested, r=result, **kw: (
-            fits.append(nested), r)[1])
-        monkeypatch.setattr(fit_module, "nested_check", lambda r, log, setup, *, nested: (
-            checks.append((setup.problem.n_unknowns, nested)), r)[1])
-        lam, r = _best_rival.rival_fit(fit, e, theta)
-        assert fits == [False], fits
-        assert checks == ([(len(fit.u), "auto")] if restarted else []), checks
-        assert lam == pytest.approx(_best_rival.chi2(result, e.resolution))

@@ -24,8 +24,7 @@ cross: local refits overstated the realised 2·ln LR 3–25×). :func:`rival_chi
 fits ``μ``'s readings (unrounded, the design's encoder step given, so χ² is in units of
 its quantization variance) with :func:`hdid.fit` — the fit's own driver: its data-driven
 grid of starts (``B``'s own start rules), the multi-start one-lane Levenberg–Marquardt
-(:func:`hdid._fitting._one_lane._local_fits`), its limits as restarts above the floor
-(:data:`RIVAL`) — with
+(:func:`hdid._fitting._one_lane._local_fits`), its limit checks above the floor — with
 ``B``'s fit to the log as one more start (``start_from_model``), the same model structure,
 fixed values and inertia handling as :func:`hdid._design._check.run` fits a simulated log.
 A position-periodic rival (ripple, kinematic error) is fitted at its best order near its
@@ -69,27 +68,15 @@ def chi2(result, step: float) -> float:
     return float(result.n_effective * (result.rms_residual_rad / (step / math.sqrt(12.0))) ** 2)
 
 
-#: ``nested`` of a rival's fit to noise-free readings (:func:`rival_fit`): :func:`hdid.fit`
-#: without its limit checks, then, only where that fit has not reached the floor, the
-#: limits as restarts (:func:`limit_restarts`). The limits matter to a separation only as
-#: restarts: the rival's χ² is all it gives, and at the floor a limit is a verdict that
-#: never moves the optimum (``_limits.KEEP_BETTER_AT_FLOOR``). Above it they find basins
-#: the fit's grid misses: paper log, four amplitudes at 1 kHz, hysteresis fitted to
-#: backlash's readings ends at χ² 2.6e4 from the grid and at 14.1 restarted from its
-#: Coulomb limit.
-RIVAL = "rival"
-
-
-def rival_chi2(rival, e: Experiment, theta: np.ndarray, *, nested=RIVAL) -> float:
+def rival_chi2(rival, e: Experiment, theta: np.ndarray, *, nested="auto") -> float:
     """``min χ²(rival | theta's noise-free readings of e)`` by :func:`hdid.fit`
     (module docstring), a position-periodic rival at its best order
     (:func:`best_rival_fit`); NaN where the fit fails (a design with no usable log)."""
     return rival_fit(rival, e, theta, nested=nested)[0]
 
 
-def rival_fit(rival, e: Experiment, theta: np.ndarray, *, nested=RIVAL, near=None):
-    """``(χ², fit)`` of :func:`rival_chi2` (``(NaN, None)`` where it fails); ``nested``
-    :data:`RIVAL` by default (the limits only as restarts above the floor). ``near``: the
+def rival_fit(rival, e: Experiment, theta: np.ndarray, *, nested="auto", near=None):
+    """``(χ², fit)`` of :func:`rival_chi2` (``(NaN, None)`` where it fails). ``near``: the
     rival's fit to a neighbouring problem (the same design, other release instants), its
     optimum the start beside the fit's own grid, at its order, without the limit checks
     (which as restarts find the basin that start already holds: a fifth of the cost)."""
@@ -160,8 +147,7 @@ def _turned(model, i: int, quarter: int):
 
 def best_rival_fit(log, rival, e: Experiment, *, nested="auto", window: int = ORDER_WINDOW):
     """:func:`hdid.fit` of ``rival``'s model to ``log`` (a log of ``e``) with
-    :func:`fit_options` (``nested`` as :func:`hdid.fit`'s, or :data:`RIVAL`); a rival
-    with a position-periodic effect at its best order
+    :func:`fit_options`; a rival with a position-periodic effect at its best order
     (``window`` orders either side of its own, ``ORDER_WINDOW``; 0: its own order only):
     the fit of the smallest χ². ``None`` where every fit fails."""
     from .._errors import HdidError
@@ -172,9 +158,6 @@ def best_rival_fit(log, rival, e: Experiment, *, nested="auto", window: int = OR
 
     def at(model):
         try:
-            if nested == RIVAL:
-                return limit_restarts(fit_log(log, start_from_model=True, nested=False,
-                                              **{**opts, "model": model}), log)
             return fit_log(log, start_from_model=True, nested=nested, **{**opts, "model": model})
         except (HdidError, ValueError, FloatingPointError):
             return None
@@ -214,30 +197,6 @@ def best_rival_fit(log, rival, e: Experiment, *, nested="auto", window: int = OR
         if r is not None and chi2(r, e.resolution) < chi2(out, e.resolution):
             out = r
     return out
-
-
-def limit_restarts(result, log):
-    """``result`` (:func:`hdid.fit` of ``log`` without its limit checks) restarted from its
-    model's limits where it has not reached the floor (:data:`RIVAL`), as
-    :func:`hdid.diagnose`, the batch and the posterior's basin check run them
-    (:func:`hdid._fitting._fit.nested_check` on the fit's own problem rebuilt, each limit
-    from the optimum and ``_limits.LIMIT_GRID_STARTS`` grid starts in one schedule); at the
-    floor ``result`` itself."""
-    import dataclasses as dc
-
-    from .._fitting import _fit, _limits
-
-    if _limits.reached_floor(result):
-        return result
-    prob = result.problem
-    fixed = sorted(n for n, p in result.parameters.items() if p.fixed)
-    held = tuple(getattr(result, "first_reading_held", ()) or ())
-    log = dc.replace(log, first_reading_held=held) if held else log
-    setup = _fit._setup(log, result.model, fix=fixed, free_inertia="inertia" in prob.free,
-                        max_substep=float(prob.max_substep))
-    if setup.problem.n_unknowns != len(result.u) or setup.problem.free != prob.free:
-        return result  # (the log does not rebuild the fit's problem: kept as fitted)
-    return _fit.nested_check(result, log, setup, nested="auto")
 
 
 def n_physical(fit) -> int:
