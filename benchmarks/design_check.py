@@ -98,7 +98,7 @@ def _speed(fit, loads, separate=()):
     ``separate``: two effects, each added to the fit's model and fitted, the pair given
     as ``separate=`` (the separations as diagnose computes them)."""
     import hdid
-    from hdid._design import _best_rival, _candidates
+    from hdid._design import _candidates
     from hdid.effects._registry import registry
 
     vals = fit.model.float_values()
@@ -110,10 +110,8 @@ def _speed(fit, loads, separate=()):
              dict(name="amplitude x1.25", amplitudes=[1.25 * a for a in base.amplitudes]),
              dict(name="repeats x3", repeats=3)]
     cands = _candidates.default_candidates(base, fit.model)[1:] + _candidates.load_candidates(extra, base)
-    timings = []  # (and, with a pair, the rivals fitted with hdid.fit's own limit checks, as before)
-    for label in ("first with separate", "warm", "warm, limit checks in every rival fit", "warm") if pair else (
-            "cold", "warm", "warm"):
-        _best_rival.rival_fit.__kwdefaults__["nested"] = "auto" if "limit" in label else _best_rival.RIVAL
+    timings = []
+    for label in ("first with separate" if pair else "cold", "warm", "warm"):
         loads.append(load(f"before {label}"))
         t, cpu = time.perf_counter(), time.process_time()
         d20 = hdid.design(fit, cands, targets=None if pair else TARGETS, separate=pair)
