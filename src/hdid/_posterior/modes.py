@@ -133,11 +133,9 @@ def _restart_candidates(fit, rng, n_random: int) -> np.ndarray:
     return np.array(cands)
 
 
-#: Restarts drawn from the widened Laplace approximation in :func:`find_modes`. 30 instead
-#: of 6 found more optima (paper log 1007 with seed 0: the one nearest the truth, which 6
-#: missed; with seed 7 not) but did not change the coverage on 14 paper logs (95 %
-#: intervals 86 % vs 84 %, band 12/14 both; docs/decisions/mode-search-starts.md)
-#: and costs ≈ 8 s more per call.
+#: Restarts drawn from the widened Laplace approximation in :func:`find_modes`: 30 found
+#: more optima but not more coverage (14 paper logs: 86 % vs 84 %), ≈ 8 s more a call
+#: (docs/decisions/mode-search-starts.md).
 N_RANDOM_RESTARTS = 6
 
 
@@ -299,15 +297,12 @@ def ridge_names(problem, lin, covariance=None) -> list[str]:
     return limit_names(problem, mask, covariance) if mask.any() else []
 
 
-#: Ridge points kept as starts: within this of the best optimum in −2 log p (the 99 % point
-#: of χ²₂; mass e⁻⁴·⁶ of the best's per unit volume). The shipped paper log's 15 points
-#: within MODE_DCHI2_MAX took half the walkers at their Laplace weights, and its SMC, which
-#: had converged, no longer did.
+#: Ridge points kept as starts: within this of the best optimum in −2 log p (χ²₂'s 99 %
+#: point). All 15 within MODE_DCHI2_MAX took half the walkers on the shipped paper log,
+#: and its SMC no longer converged.
 RIDGE_DCHI2 = 9.21
-#: The samplers given the ridge starts: SMC's particles are reweighted at every temperature
-#: and a start of little mass dies out; emcee's walkers keep their starts, and the 10 %
-#: started down the Coulomb ridge stall there — on the shipped paper log its R-hat after
-#: 20 000 steps rose from 1.058 to 1.116 with them (benchmarks/results/posterior_sbc.md).
+#: The samplers given the ridge starts: SMC reweights them away if of little mass; emcee's
+#: walkers started down the Coulomb ridge stall there (shipped paper log: R-hat 1.058 → 1.116).
 RIDGE_SAMPLERS = ("smc",)
 #: Share of the walkers, of SMC's reference and of the independence proposal that the
 #: ridge points hold together at most: their Laplace weights (at points that are not
