@@ -68,27 +68,32 @@ CASES = [
 ]
 
 
-@pytest.mark.parametrize("cpr, unit, decimals", CASES)
-def test_an_encoder_step_of_two_to_seven_print_units_is_found(tmp_path, cpr, unit, decimals):
-    """Three logs per encoder (150-500 Hz, 12-40 Hz, swings of 0.04-0.15 rad): the step
-    is found and puts every level on its own multiple."""
+def _steps_found(tmp_path, cpr, unit, decimals, rates, seed0):
+    """Three logs of one encoder (logged at one of ``rates`` [Hz], 12-40 Hz, swings of
+    0.04-0.15 rad), each read: the step found must keep every level on its own multiple.
+    Each printed level lies within p/2 of its grid point, so a found step may be off by
+    p/M at most (M the widest run's span in steps) without moving a level to another
+    multiple; anything further off is a wrong grid."""
     q = 2.0 * math.pi / cpr
     p = 10.0**-decimals * _TO_RAD[unit]
-    assert 2.0 < q / p < 7.0
     for seed in range(3):
-        rng = np.random.default_rng(100 + seed)
-        runs = swings(rng, fs=float(rng.choice([150.0, 250.0, 500.0])),
+        rng = np.random.default_rng(seed0 + seed)
+        runs = swings(rng, fs=float(rng.choice(rates)),
                       f_n=rng.uniform(12.0, 40.0), amp=rng.uniform(0.04, 0.15))
         path = tmp_path / f"enc{cpr}_{unit}_{seed}.csv"
         write(path, runs, cpr=cpr, unit=unit, decimals=decimals, offset=rng.uniform(-3, 3))
         log = read_log(path)
         assert log.resolution is not None, (seed, log.resolution_note)
-        # each printed level lies within p/2 of its grid point, so a found step may be off
-        # by p/M at most (M the widest run's span in steps) without moving a level to
-        # another multiple; anything further off is a wrong grid
         span = max(float(np.ptp(r.theta)) for r in log.runs) / q
         assert abs(log.resolution - q) * span <= p, seed
         assert log.print_unit == pytest.approx(p, rel=1e-12)
+    return q / p
+
+
+@pytest.mark.parametrize("cpr, unit, decimals", CASES)
+def test_an_encoder_step_of_two_to_seven_print_units_is_found(tmp_path, cpr, unit, decimals):
+    """Three logs per encoder at 150-500 Hz: the step is found."""
+    assert 2.0 < _steps_found(tmp_path, cpr, unit, decimals, [150.0, 250.0, 500.0], 100) < 7.0
 
 
 @pytest.mark.parametrize("unit, decimals", [("rad", 4), ("deg", 2), ("rev", 5)])
@@ -137,22 +142,8 @@ def test_an_encoder_step_under_two_print_units_is_found(tmp_path, cpr, unit, dec
     fit then took the print unit's floor (2.2x too small at 1.92 units: HV log 06's 2.21x,
     silently). A common offset per run still tells the grid: a share 1 - 1/Q of the print
     lattice stays empty in a fixed pattern (hdid._log._fine_grid). Three logs per encoder
-    at 500-2000 Hz; the step found must keep every level on its own multiple."""
-    q = 2.0 * math.pi / cpr
-    p = 10.0**-decimals * _TO_RAD[unit]
-    assert 1.0 < q / p < 2.0
-    for seed in range(3):
-        rng = np.random.default_rng(300 + seed)
-        runs = swings(rng, fs=float(rng.choice([500.0, 1000.0, 2000.0])),
-                      f_n=rng.uniform(12.0, 40.0), amp=rng.uniform(0.04, 0.15))
-        path = tmp_path / f"fine{cpr}_{unit}_{seed}.csv"
-        write(path, runs, cpr=cpr, unit=unit, decimals=decimals, offset=rng.uniform(-3, 3))
-        log = read_log(path)
-        assert log.resolution is not None, (seed, log.resolution_note)
-        # a level printed within p/2 of its grid point: a step off by more than p/M (M the
-        # widest run's span in steps) moves some level to another multiple
-        span = max(float(np.ptp(r.theta)) for r in log.runs) / q
-        assert abs(log.resolution - q) * span <= p, seed
+    at 500-2000 Hz."""
+    assert 1.0 < _steps_found(tmp_path, cpr, unit, decimals, [500.0, 1000.0, 2000.0], 300) < 2.0
 
 
 @pytest.mark.parametrize("unit, decimals, noise", [("mrad", 1, 0.0), ("deg", 3, 0.3)])
