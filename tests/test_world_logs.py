@@ -279,7 +279,7 @@ def test_a_fold_back_restart_is_the_aliased_swing_slowed_to_the_log_s_own():
     # back to the alias |f − fs| nearest the log's own: its first row is the same model
     # slowed by r (torques by r², speeds and viscous terms by r), so its trajectory at
     # t_rel + τ/r is the alias's at t_rel + τ — to the simulator's own accuracy (1e-4 of
-    # the swing, the plausibility module's SIMULATOR_ACCURACY).
+    # the swing: RK4 substeps, docs/decisions/simulator-scheme.md).
     from hdid._fitting._cubic_restart import fold_back_rows
     from hdid._fitting._fit import _dense, _setup
     from hdid._fitting._limits import with_values

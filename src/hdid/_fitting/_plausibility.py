@@ -9,13 +9,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.special import chdtrc
 
 from .._log._resolution import step_against_readings
 from .._simulation._aliasing import aliasing_warning, swing_hz
 from .._simulation._phase_error import BIAS_SHARE, frequency_bias, substep_for_error
 from .._simulation._prepare import Prepared
 from .._simulation._simulate import substeps_for
-from ._limits import FLOOR_TAIL, above_floor
+from ._limits import FLOOR_TAIL, _chi2_ppf
 
 #: An adequate model leaves the rounding of a quantized sensor: RMS ≈ step/√12 (uniform
 #: error; less with stuck stretches — 0.6–0.9× measured at the truth of 4-run paper logs).
@@ -25,27 +26,31 @@ from ._limits import FLOOR_TAIL, above_floor
 RESIDUAL_FLOOR_FACTOR = 3.0
 
 
-#: The simulator's own error relative to the logged swing (RK4 substeps: 1.9e-5 rad on a
-#: 0.157 rad swing, docs/decisions/simulator-scheme.md; :mod:`hdid._simulation._noise`):
-#: the floor a correct model reaches on a fine encoder is the rounding and this together (a
-#: world log, 2^17 counts, 0.31 rad swing at 100 Hz: 1.33x the rounding with every parameter
-#: within 0.5 sd of its truth; this term is 2.3x the rounding there).
-SIMULATOR_ACCURACY = 1e-4
-
-
-def _span(prep: Prepared) -> float:
-    """The largest span of a run's readings [log units]."""
-    return max((float(np.ptp(prep.theta[i, :n])) for i, n in enumerate(prep.lengths) if n),
-               default=0.0)
+def floor_test(n_effective: float, rms_over_floor: float, n_unknowns: float = 0
+               ) -> tuple[float, float, float, float]:
+    """``(chi2, nu, p, bound)``: the χ² test of a residual against an exactly known floor.
+    At the floor the residuals are the rounding alone, so ``chi2 = n·(RMS/floor)²`` over the
+    ``n`` effective readings is χ²-distributed with ``nu = n − n_unknowns`` degrees of
+    freedom (Gaussian errors; uniform rounding scatters less, kurtosis 1.8 against 3, so a
+    small ``p`` is conservative); ``p`` its upper tail and ``bound`` the RMS multiple of the
+    floor at ``p = FLOOR_TAIL``: √(χ²_ν(1 − FLOOR_TAIL)/n). No allowance for the simulator:
+    its integrator error is refitted at a finer substep where it matters
+    (:func:`hdid._fitting._substep.for_precision`) and named by :func:`integrator_warning`
+    (HV7 world log07, 2^17 counts: 1.36× the floor, χ² 1260 on ν 660, z +16.5, silent under
+    the 3.06× that an allowance of 1e-4 of the swing gave, which the 3× warning overtook)."""
+    n = max(float(n_effective), 1.0)
+    nu = max(n - max(float(n_unknowns), 0.0), 1.0)
+    chi2 = n * float(rms_over_floor) ** 2
+    return chi2, nu, float(chdtrc(nu, chi2)), math.sqrt(_chi2_ppf(1.0 - FLOOR_TAIL, nu) / n)
 
 
 def residual_warnings(prep: Prepared, rms: float, n_unknowns: int = 0) -> list[str]:
     """What the RMS residual ``rms`` [log units] of a fit says: a step that does not match
     the readings, a model that does not describe the log (above
     :data:`RESIDUAL_FLOOR_FACTOR`× the floor) or, on a quantized sensor, a fit that has not
-    reached the floor (above the χ² tail test :func:`hdid._fitting._limits.above_floor` for
-    the log's effective readings and the fit's ``n_unknowns``, the floor being the rounding
-    and the simulator's accuracy together); none at the floor."""
+    reached the floor (:func:`floor_test`: χ² of the log's effective readings on their
+    degrees of freedom after the fit's ``n_unknowns``, upper tail below
+    :data:`~hdid._fitting._limits.FLOOR_TAIL`); none at the floor."""
     # (the floor: the step's rounding, and the time stamps' where they are rounded instants)
     out, floor = [], float(getattr(prep, "floor", prep.resolution / math.sqrt(12)))
     timed = getattr(prep, "time_scale", None) is not None
@@ -62,19 +67,22 @@ def residual_warnings(prep: Prepared, rms: float, n_unknowns: int = 0) -> list[s
             "--starts, or a warm --start), a missing effect (try `hdid diagnose`), wrong units, "
             "a wrong resolution or noise beyond the sensor's step"
         )
-    elif prep.quantized and math.isfinite(rms) and rms > (above := above_floor(
-            prep.n_effective, n_unknowns)
-            * math.hypot(1.0, SIMULATOR_ACCURACY * _span(prep) / floor)) * floor:
+    elif prep.quantized and math.isfinite(rms) and (
+            test := floor_test(prep.n_effective, rms / floor, n_unknowns))[2] < FLOOR_TAIL:
+        chi2, nu, p, above = test
         out.append(
             f"the RMS residual is {rms / floor:.3g}× the "
             f"{'rounding (step and time stamps)' if timed else 'quantization'} floor, above the "
-            f"{above:.3g}× that rounding and the simulator's accuracy leave over "
-            f"{prep.n_effective:.0f} effective readings and {n_unknowns} unknowns (χ² tail "
-            f"{FLOOR_TAIL:g}): the fit has "
-            "not reached the floor — a poorer basin (more --starts, or a warm --start) or a "
-            "missing effect (try `hdid diagnose`); the standard errors are scaled up by the "
+            f"{above:.3g}× that rounding alone leaves: χ² {chi2:.4g} on ν {nu:.0f} "
+            f"({prep.n_effective:.0f} effective readings, {n_unknowns} unknowns), p {p:.2g} "
+            f"(tail {FLOOR_TAIL:g}): the fit has not reached the floor — a poorer basin (more "
+            "--starts, or a warm --start), a missing effect (try `hdid diagnose`), the RK4 "
+            "substep (refit with a smaller max_substep) or the time stamps (jitter or a "
+            "drifting clock beyond their rounding); the standard errors are scaled up by the "
             "residual but still assume the model"
         )
+    # (readings on no grid: their floor σ is itself estimated from the still stretches, so
+    # a χ² against it is no exact test; they keep the 3× "does not describe" rule alone)
     return out
 
 
