@@ -108,8 +108,10 @@ def read_log(
     steps, or 1e-9 rad when the resolution is unknown: a run that never moves is
     kept, a rest point inside the stick band, and named in ``Log.notes``). The
     sample period is the median time step; the steps may vary (jitter, dropped
-    samples) and a run is split at a break (a step over 5 of its median steps),
-    named in ``Log.notes``. A one-sample read dropout (a reading ten times farther from
+    samples) and a run is split at a break (a step over 5 of its median steps, the
+    gear moving on both sides), named in ``Log.notes``; without a ``run`` column, a
+    timer restarted near its register's end (a forward jump of over half the register)
+    or a pause of over 1000 median steps starts a new run, moving or not. A one-sample read dropout (a reading ten times farther from
     both neighbours than any change the run shows, while they agree) is dropped before
     the step is sought and named in ``Log.notes`` (more than 1 % of a run's rows is an
     error); a few readings off the encoder grid that all others lie on are kept and
@@ -218,7 +220,9 @@ def read_log(
         _check_not_mixed(table, cols[_MOTOR], run_labels)
     cells.raise_first()
     # a logger's timer register that rolls over (hdid._log._timer), in its own ticks
-    time, timer_note = unwrap_timer(time, table.lines, name(_TIME))
+    time, timer_note, timer_restarts = unwrap_timer(time, table.lines, name(_TIME))
+    jumps = np.zeros(n, dtype=bool)  # rows at which the timer was restarted near its end
+    jumps[timer_restarts] = True
     time, theta = time * unit_scale[_TIME], theta * unit_scale[_THETA]
     if inertia is not None:
         inertia = inertia * unit_scale[_INERTIA]
@@ -241,6 +245,7 @@ def read_log(
             None if v is None else v[order]
             for v in (run_labels, setups, time, theta, inertia, motor, theta_out, load))
         take_rows(table, order)
+        jumps = jumps[order]
     # stamps coarser than a fixed-rate logger's sampling (hdid._log._timer): before the
     # rows written twice, which a held reading stamped twice would look like
     time, rebuilt = _uniform_stamps(time, run_labels, table, cols, unit_scale, stamped,
@@ -253,10 +258,12 @@ def read_log(
             None if v is None else v[keep]
             for v in (run_labels, setups, time, theta, inertia, motor, theta_out, load))
         take_rows(table, keep)
+        jumps = jumps[keep]
         n = int(keep.size)
     if _RUN not in cols:
         run_labels, restart_notes = runs_at_restarts(time, run_labels, table.lines,
-                                                     min_samples_per_run)
+                                                     min_samples_per_run,
+                                                     np.flatnonzero(jumps))
         order_notes += restart_notes
         time, again = _uniform_stamps(time, run_labels, table, cols, unit_scale, stamped,
                                       order_notes)

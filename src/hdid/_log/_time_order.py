@@ -18,6 +18,13 @@
   restart, and only when every stretch is long enough to be a run: two rows out of order
   (time drops by a sample or two) stay the error that asks to sort the rows. With a
   ``run`` column, time that drops inside one run stays an error.
+- **A timer restarted near its end, a long pause.** A timer restarted just before its
+  register ends jumps *forward* by nearly a register length (:mod:`._timer`), and a
+  logger stopped and started again leaves a step of many sample periods. Without a
+  ``run`` column, a forward step of more than :data:`RESTART_PERIODS` of the log's median
+  step, or one the timer reader names a restart, starts a run too, whether the gear
+  moves there or not: nothing links the samples across it, and simulating the pause
+  would cost millions of substeps.
 """
 
 from __future__ import annotations
@@ -26,6 +33,11 @@ import numpy as np
 import pandas as pd
 
 from ._table import _Table
+
+#: A forward time step longer than this many of the log's median steps is a new start
+#: (a logger stopped and started again), not a sample the logger dropped: loggers drop
+#: one to a few samples at a time (:data:`hdid._log._validate.BREAK_PERIODS`).
+RESTART_PERIODS = 1000.0
 
 
 def repeated_rows(values: list[np.ndarray | None]) -> np.ndarray:
@@ -59,10 +71,13 @@ def take_rows(table: _Table, keep: np.ndarray) -> None:
 
 
 def runs_at_restarts(time: np.ndarray, run_labels: np.ndarray | None, lines: np.ndarray,
-                     min_samples: int) -> tuple[np.ndarray | None, list[str]]:
+                     min_samples: int, jumps: np.ndarray | None = None
+                     ) -> tuple[np.ndarray | None, list[str]]:
     """Run labels for a log without a ``run`` column whose time restarts, and a note
     (``run_labels`` unchanged and no note when it does not, or when a stretch would be
-    too short to be a run: the time check then names the row)."""
+    too short to be a run: the time check then names the row). ``jumps``: positions of
+    rows at which the timer reader found a restart (a forward jump); forward steps over
+    :data:`RESTART_PERIODS` median steps are restarts too."""
     n = time.size
     if n < 2:
         return run_labels, []
@@ -70,7 +85,15 @@ def runs_at_restarts(time: np.ndarray, run_labels: np.ndarray | None, lines: np.
     block_start[0] = True
     if run_labels is not None:
         block_start[1:] = run_labels[1:] != run_labels[:-1]
-    drops = np.flatnonzero((np.diff(time) < 0) & ~block_start[1:]) + 1
+    steps = np.diff(time)
+    ahead = steps[(steps > 0) & ~block_start[1:]]
+    forward = np.zeros(n, dtype=bool)
+    if ahead.size:
+        forward[1:] = steps > RESTART_PERIODS * float(np.median(ahead))
+    if jumps is not None:
+        forward[np.asarray(jumps, dtype=np.int64)] = True
+    forward &= ~block_start
+    drops = np.flatnonzero(((steps < 0) & ~block_start[1:]) | forward[1:]) + 1
     if drops.size == 0:
         return run_labels, []
     starts = np.flatnonzero(block_start)
@@ -79,7 +102,8 @@ def runs_at_restarts(time: np.ndarray, run_labels: np.ndarray | None, lines: np.
     for i in drops:  # in file order: each stretch starts at its block's start or a drop
         piece_start = max(piece_start, int(starts[np.searchsorted(starts, i, side="right") - 1]))
         # a restart drops back into the first half of the stretch so far
-        if time[i] > time[piece_start] + 0.5 * (time[i - 1] - time[piece_start]):
+        if not forward[i] and time[i] > time[piece_start] + 0.5 * (time[i - 1]
+                                                                     - time[piece_start]):
             return run_labels, []
         cut[i] = True
         piece_start = int(i)
@@ -97,8 +121,8 @@ def runs_at_restarts(time: np.ndarray, run_labels: np.ndarray | None, lines: np.
             name = block if k == 0 else f"{block}.{k + 1}"
         labels[e:f] = name
         names.append(name)
-    shown = ", ".join(f"{int(lines[i])} ({time[i - 1]:.6g} s → {time[i]:.6g} s)"
-                      for i in drops[:5])
+    shown = ", ".join(f"{int(lines[i])} ({time[i - 1]:.6g} s → {time[i]:.6g} s"
+                      f"{', a forward jump' if forward[i] else ''})" for i in drops[:5])
     more = f" and {drops.size - 5} more" if drops.size > 5 else ""
     return labels, [f"time restarts at row(s) {shown}{more} and the log has no 'run' column: "
                     f"each stretch is a run ({', '.join(repr(m) for m in names[:6])}"

@@ -12,6 +12,13 @@ sampling.
   a time column of whole ticks (whole numbers, or a counter printed in another unit:
   a millisecond timer in seconds, ``65.532``, ticks by 0.001) whose values fit the
   register is read so.
+- **A timer restarted near its end.** A logger that restarts its timer at each run may
+  start it anywhere, also just before its end: the time then jumps *forward* by nearly a
+  register length (a 32-bit µs timer started 1.3 s before its end jumps by
+  ``2**32 µs − 1.3 s``, 71.6 min) and the timer's wrap follows a little later. No pause of
+  a sampling logger is read so: a forward step of more than half the register is a
+  restart, and :func:`unwrap_timer` names its rows (a new run starts there,
+  :mod:`._time_order`).
 - **Stamps coarser than the sampling.** A fixed-rate logger sampling faster than its
   timestamps resolve (4 kHz stamped to 1 ms) writes each time several times, each with a
   different reading. Where every stamp of a run is its sample's instant cut to the print
@@ -35,20 +42,29 @@ BREAK_STEPS = 5.0
 
 
 def unwrap_timer(time: np.ndarray, rows: np.ndarray, column: str
-                 ) -> tuple[np.ndarray, str | None]:
-    """Time with every timer wrap undone (in the column's own units, file order) and a note
-    naming the wraps (None when there are none)."""
+                 ) -> tuple[np.ndarray, str | None, np.ndarray]:
+    """Time with every timer wrap undone (in the column's own units, file order), a note
+    naming the wraps (None when there are none), and the positions of the rows at which
+    the timer was restarted near its end (a forward step of more than half the register
+    that holds every value; each such row starts a run)."""
+    none = np.zeros(0, dtype=np.int64)
     if time.size < 3 or not np.all(np.isfinite(time)):
-        return time, None
+        return time, None, none
     tick = _tick(time)
     if tick is None:
-        return time, None  # not a counter's ticks
+        return time, None, none  # not a counter's ticks
     steps = np.diff(time)
     ahead = steps[steps > 0]
     if ahead.size == 0:
-        return time, None
+        return time, None, none
     typical = float(np.median(ahead))
     lo, hi = float(np.min(time)), float(np.max(time))
+    restarts = none
+    for bits in TIMER_BITS:  # the narrowest register that holds every value
+        span = 2.0 ** bits * tick
+        if (lo >= 0 and hi < span) or (lo >= -span / 2 and hi < span / 2):
+            restarts = np.flatnonzero(steps > span / 2) + 1
+            break
     turns = np.zeros(time.size)
     wrapped = []
     for i in np.flatnonzero(steps < 0):
@@ -62,14 +78,14 @@ def unwrap_timer(time: np.ndarray, rows: np.ndarray, column: str
                 wrapped.append((int(rows[i + 1]), bits))
                 break
     if not wrapped:
-        return time, None
+        return time, None, restarts
     shown = ", ".join(str(r) for r, _ in wrapped[:5])
     more = f" and {len(wrapped) - 5} more" if len(wrapped) > 5 else ""
     bits = "/".join(sorted({str(b) for _, b in wrapped}))
     return time + np.cumsum(turns), (
         f"column {column!r}: the logger's {bits}-bit timer rolls over at row(s) {shown}{more} "
         "(time drops back by the register's length and goes on at the same rate): unwrapped"
-    )
+    ), restarts
 
 
 def _tick(time: np.ndarray) -> float | None:
