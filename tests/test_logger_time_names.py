@@ -79,6 +79,22 @@ def test_a_bare_integer_timestamp_is_still_px4_microseconds(tmp_path):
     _period_ok(read_log(path))
 
 
+@pytest.mark.parametrize("decimals", [6, 3])
+def test_a_bare_timestamp_of_decimal_epoch_seconds_is_the_time(tmp_path, decimals):
+    """A Python logger's ``time.time()`` printed as ``%.6f`` (or whole ms) under a bare
+    'timestamp': seconds since 1970, relative to the first row (refused as missing 'time'
+    before). The stamps are printed to 1 µs/1 ms on a 2 ms period, so the median step is
+    exact to far better than 1e-3 of it."""
+    t, theta = _swing()
+    path = tmp_path / "log.csv"
+    path.write_text("timestamp,theta\n" + _lines(
+        [f"{1764331200.25 + a:.{decimals}f}" for a in t], theta))
+    log = read_log(path)
+    _period_ok(log)
+    assert log.runs[0].time[0] == 0.0
+    assert any("since 1970" in n for n in log.notes), log.notes
+
+
 @pytest.mark.parametrize("unit, scale, h", [("ms", 1e3, 1 / 300), ("us", 1e6, H), ("s", 1.0, H)])
 def test_the_header_a_headerless_log_is_told_to_add_reads_it(tmp_path, unit, scale, h):
     """A header-less log is refused with the header line to add, its time unit from the

@@ -24,6 +24,8 @@ Data loggers and LabVIEW: a bare ``Timestamp`` (or ``DateTime``) of date-times
 
 from __future__ import annotations
 
+from decimal import Decimal, InvalidOperation
+
 import numpy as np
 
 from .._errors import LogError
@@ -84,7 +86,28 @@ def tool_columns(table) -> list[str]:
         return _plotjuggler(table, lower)
     if lower and lower[0] == "timestamp" and _integers(table.columns[0][:50]) is not None:
         return _px4(table, lower)
+    at = lower.index("timestamp") if "timestamp" in lower else None
+    if at is not None and (rel := _epoch_seconds(table.columns[at])) is not None:
+        # a Python logger's time.time(): decimal seconds since 1970
+        table.columns[at], table.names[at] = rel, f"{_TIME} [s]"
+        return ["time from 'timestamp' in s since 1970 (its size), relative to the first row"]
     return []
+
+
+def _epoch_seconds(column) -> np.ndarray | None:
+    """Text cells of decimal seconds since 1970 (``time.time()`` printed: 1.5e9-2.5e9, with
+    a decimal point) as text seconds after the first, exact (decimal arithmetic: float64
+    keeps only ~0.2 µs at 1.7e9 s); ``None`` for anything else."""
+    cells = [str(c).strip() for c in column]
+    if not cells or not all("." in c for c in cells[:50]):
+        return None
+    try:
+        values = [Decimal(c) for c in cells]
+        if not all(Decimal("1.5e9") <= v <= Decimal("2.5e9") for v in values):
+            return None
+    except InvalidOperation:  # an empty cell, NaN, words
+        return None
+    return np.array([str(v - values[0]) for v in values], dtype=object)
 
 
 def _has_angle(table) -> bool:
