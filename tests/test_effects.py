@@ -553,3 +553,71 @@ def test_reading_age_scan_finds_the_request_jitter():
     assert (found.sse_no_jitter - found.sse) / floor**2 > 10 * np.log(len(frame))
     plain = scan(frame, floor=floor, periods=[period])
     assert plain.jitter == 0.0
+
+
+# -- the rotor behind the gear's free play (a second body: its own simulator) ----------------
+def test_rotor_free_play_crosses_the_gap_and_shares_momentum_at_the_impact():
+    import math
+
+    import jax.numpy as jnp
+
+    from hdid.effects._rotor_free_play import DropLaw, RotorFreePlay, simulate_drops
+
+    # Arm and rotor coast at 3 rad/s, the rotor on the arm's rear flank; a constant torque T
+    # brakes the arm, tau_r the rotor. The arm alone decelerates at a_a = T/J_a, the rotor at
+    # a_r = tau_r/J_r < a_a, so the rotor leaves the flank at once and crosses the gap b:
+    # z = −b/2 + (a_a − a_r)·t²/2 reaches +b/2 at t* = sqrt(2b/(a_a − a_r)); until then the
+    # arm is θ0 + ω0·t − a_a·t²/2 exactly. After the impact both ride together, whatever the
+    # contact's restitution: the total momentum J_a·ω + J_r·ψ = I·ω0 − (T + tau_r)·t (the
+    # contact is internal), so the arm's speed is ω0 − (T + tau_r)·t/I and its deceleration
+    # (T + tau_r)/I.
+    inertia, j_r, b, torque, tau_r, w0, th0 = 0.05, 0.02, 0.03, 0.5, 0.01, 3.0, -0.1
+    j_a = inertia - j_r
+    law = DropLaw(mgl=0.0, tau_c=torque, tau_s=torque, v_s=1.0, delta=2.0, c_v=0.0)
+    rotor = RotorFreePlay(j_r=j_r, backlash=b, tau_r=tau_r)
+    t = np.arange(0.0, 0.25, 1e-3)
+    theta = np.asarray(simulate_drops(law, rotor, inertia, t[None], jnp.array([th0]), jnp.array([0.0]),
+                                      duration=0.26, omega0=w0))[0]
+    a_a, a_r = torque / j_a, tau_r / j_r
+    t_star = math.sqrt(2 * b / (a_a - a_r))
+    free = t < t_star - 2e-3
+    # RK4 is exact on a quadratic: 1e-5 rad is a hundredth of a 12-bit count
+    np.testing.assert_allclose(theta[free], th0 + w0 * t[free] - 0.5 * a_a * t[free] ** 2, atol=1e-5)
+    # 30 ms after the impact the 150 Hz critically damped contact (a 1 ms time constant) has
+    # settled: a quadratic through the next 120 ms has the momentum's speed and deceleration
+    ride = (t > t_star + 0.03) & (t < t_star + 0.15)
+    c = np.polyfit(t[ride], theta[ride], 2)
+    tm = t[ride].mean()
+    assert 2 * c[0] == pytest.approx(-(torque + tau_r) / inertia, rel=1e-3)
+    assert 2 * c[0] * tm + c[1] == pytest.approx(w0 - (torque + tau_r) * tm / inertia, rel=1e-3)
+    # ... and one rigid inertia would be 0.012 rad (8 counts) elsewhere at t*
+    rigid = th0 + w0 * t_star - 0.5 * (torque + tau_r) / inertia * t_star**2
+    assert abs(np.interp(t_star, t, theta) - rigid) > 0.005
+
+
+def test_rotor_free_play_without_play_is_one_inertia_in_hdid():
+    import math
+
+    import jax.numpy as jnp
+
+    from hdid.effects import Gravity, ViscousFriction
+    from hdid.effects._rotor_free_play import CONTACT_HZ, DropLaw, RotorFreePlay, simulate_drops
+
+    # With no gap and no rotor friction the two bodies are one inertia I on a stiff contact:
+    # hdid's own simulator of the same pendulum is the reference.
+    inertia, j_r, mgl, c_v, th0 = 0.05, 0.02, 1.8, 0.02, -1.0
+    t = np.arange(0.0, 3.0, 0.01)
+    ref = np.asarray(hdid.simulate(hdid.Model(effects=(Gravity(mgl=mgl), ViscousFriction(c_v=c_v)),
+                                              inertia=inertia, ratio=1.0), t, th0, 0.0))
+    law = DropLaw(mgl=mgl, tau_c=0.0, tau_s=0.0, v_s=1.0, delta=2.0, c_v=c_v)
+    got = np.asarray(simulate_drops(law, RotorFreePlay(j_r=j_r, backlash=0.0, tau_r=0.0), inertia,
+                                    t[None], jnp.array([th0]), jnp.array([0.0]), duration=3.0))[0]
+    # The contact's compliance lowers the swing's frequency by (ω_n/ω_c)²·I/(2·J_a) (the
+    # two-mass system's low root), a phase error of at most |θ0|·ω_n·t·that after t seconds
+    wn, wc = math.sqrt(mgl / inertia), 2 * math.pi * CONTACT_HZ
+    bound = abs(th0) * wn * t[-1] * 0.5 * (wn / wc) ** 2 * inertia / (inertia - j_r)
+    assert np.max(np.abs(got - ref)) < bound
+    # with a gap and rotor friction the same drop is far from it
+    gap = np.asarray(simulate_drops(law, RotorFreePlay(j_r=j_r, backlash=0.05, tau_r=0.03), inertia,
+                                    t[None], jnp.array([th0]), jnp.array([0.0]), duration=3.0))[0]
+    assert np.max(np.abs(gap - ref)) > 100 * bound
