@@ -76,3 +76,41 @@ def test_the_same_columns_named_time_read(tmp_path, header, times):
     """Guard: the same readings under 'time' read (so the xfails above fail on the name alone)."""
     t, _ = _swing()
     _check(read_log(_write(tmp_path / "t.csv", header, times(t))))
+
+
+# ------------------------------------------------ seed 9091 world test (new logger habits)
+# Each log below is drawn here (the damped swing of _swing above), never read from a file.
+
+_LVM_HEAD = ("LabVIEW Measurement\t\nWriter_Version\t2\nReader_Version\t2\nSeparator\tTab\n"
+             "Decimal_Separator\t.\nMulti_Headings\tNo\nX_Columns\tOne\nTime_Pref\tRelative\n"
+             "***End_of_Header***\t\n\t\n")
+
+
+def _lvm(path, channel, unit_label):
+    """A LabVIEW *Write To Measurement File* log: one segment whose channel header names the
+    channel's unit in ``Y_Unit_Label`` (LabVIEW's own place for it; the channel name is the
+    DAQ task's, without a unit), the angle written in degrees with LabVIEW's 6 decimals."""
+    t, theta = _swing()
+    seg = ("Channels\t1\t\nSamples\t%d\t\nDate\t2026/11/28\t\nTime\t14:40:12.8340451\t\n"
+           "Y_Unit_Label\t%s\t\nX_Dimension\tTime\t\nX0\t0.0000000000000000E+0\t\n"
+           "Delta_X\t%.6f\t\n***End_of_Header***\t\nX_Value\t%s\tComment\n" % (N, unit_label, H, channel))
+    path.write_text(_LVM_HEAD + seg + "".join(f"{a:.6f}\t{np.degrees(b):.6f}\n" for a, b in zip(t, theta)))
+    return path
+
+
+@pytest.mark.xfail(strict=True, reason="reader (HW, src/hdid/_log/_lvm.py): an .lvm channel header's "
+                   "Y_Unit_Label (Deg) is ignored, the degrees are read as radians (HV9 log00: the fit "
+                   "then says UNITS and asks for a header 'theta [deg]' the file has no place for)")
+def test_an_lvm_channel_in_degrees_by_its_y_unit_label(tmp_path):
+    log = read_log(_lvm(tmp_path / "deg.lvm", "Position", "Deg"))
+    _, theta = _swing()
+    # LabVIEW prints 6 decimals of a degree: 1e-6 deg = 1.75e-8 rad, the tolerance
+    np.testing.assert_allclose(log.runs[0].theta, theta, rtol=0, atol=np.radians(1e-6))
+
+
+def test_an_lvm_channel_with_its_unit_in_its_name_reads_in_radians(tmp_path):
+    """Guard: the same file with the unit in the channel's name reads in rad (so the xfail
+    above fails on the Y_Unit_Label alone)."""
+    log = read_log(_lvm(tmp_path / "deg.lvm", "Position (deg)", "Deg"))
+    _, theta = _swing()
+    np.testing.assert_allclose(log.runs[0].theta, theta, rtol=0, atol=np.radians(1e-6))
