@@ -103,6 +103,47 @@ def test_arviz_check_is_put_off_only_while_the_chain_is_under_50_tau():
     assert _short_of_tau(_Fake(x), 6000) == 0
 
 
+def test_tau_that_grows_with_the_chain_says_a_longer_chain_will_not_converge():
+    """``tau_outlasts_chain``: τ ∝ steps^g over a doubling of the chain. 36 AR(1) walkers of
+    τ ≈ 200 (ρ = 0.99) checked at 1500, 2100 and 3000 steps (7.5–15 τ, under ``OUTLAST_TAU``:
+    only g decides): stationary, g ≈ 0 (sd ≈ 0.25 at this length over 20 seeds, largest
+    0.73 < ``OUTLAST_GROWTH``) — not flagged. 36 random walks (walkers that never settle,
+    like walkers on a ridge they do not cross): τ grows like the chain, g ≈ 1 (0.91–1.16
+    over 20 seeds) — flagged, over the ×2 in steps. ``_short_of_tau`` records the history
+    the sampler's warning reads."""
+    import emcee
+
+    from hdid._posterior.diagnostics import OUTLAST_GROWTH, tau_outlasts_chain
+    from hdid._posterior.driver import _short_of_tau
+
+    rng = np.random.default_rng(3)
+    stationary = _ar1(rng, 3000, 36, 0.99)[:, :, None]
+    walks = np.cumsum(rng.standard_normal((3000, 36)), axis=0)[:, :, None]
+    checks = (1500, 2100, 3000)
+
+    class _Fake:
+        def __init__(self, chain):
+            self.chain = chain
+
+        def get_chain(self, thin=1):
+            return self.chain[::thin]
+
+        def get_autocorr_time(self, tol=0, thin=1):
+            return thin * emcee.autocorr.integrated_time(self.chain[::thin], c=5, tol=tol)
+
+    for chain, flagged in ((stationary, False), (walks, True)):
+        history = []
+        for n in checks:
+            _short_of_tau(_Fake(chain[:n]), n, history)
+        assert [n for n, _ in history] == list(checks)
+        grew = tau_outlasts_chain(history)
+        assert (grew is not None) == flagged, (history, grew)
+        if flagged:
+            assert OUTLAST_GROWTH <= grew[0] < 1.5 and grew[1] == 2.0
+    # too short a history to say: no earlier check at half the length
+    assert tau_outlasts_chain([(2100, 500.0), (3000, 900.0)]) is None
+
+
 def test_public_api():
     # hdid's entry points run in float64 (hdid._config.float64): the same function inside
     assert hdid.sample_posterior.__wrapped__ is sample_posterior

@@ -138,6 +138,36 @@ class Convergence:
         }
 
 
+#: τ that grows at least this fast with the chain, as the exponent ``g`` of τ ∝ steps^g
+#: over a doubling (a stationary chain: g → 0 once it is tens of τ long; walkers that
+#: never cross between optima or along a ridge: g ≈ 1, the correlations outlast the chain),
+#: on a chain still under ``OUTLAST_TAU`` τ, means a longer chain will not converge.
+#: Measured on the calibration's paper logs (benchmarks/results/posterior_convergence.md):
+#: seed 36008 g = 0.98 at 1.6 τ (not converged at 40 000 steps; τ of tau_c, c_v ≈ 25 000), 36027 g = 0.10 (converged at 15 262 steps); 36 AR(1) walkers of τ ≈ 200 at
+#: 7.5 → 15 τ: g sd ≈ 0.25, largest of 20 seeds 0.73; 36 random walks: g 0.91–1.16.
+OUTLAST_GROWTH = 0.8
+#: ... on a chain shorter than this many τ (a stationary chain this long has τ to ±~20 %
+#: with 36 walkers, so ``g`` over a doubling stays well under ``OUTLAST_GROWTH``).
+OUTLAST_TAU = 20.0
+
+
+def tau_outlasts_chain(history) -> tuple[float, float] | None:
+    """``(g, steps ratio)`` when the largest τ grew like the chain itself — ``history`` is
+    ``[(steps, τ_max), ...]`` at the chain's checks; ``g`` is the exponent of τ ∝ steps^g
+    from the last check back to the latest one at most half its length — and the chain is
+    still under ``OUTLAST_TAU`` τ; ``None`` otherwise (too short a history to say)."""
+    h = [(float(n), float(t)) for n, t in history if n > 0 and math.isfinite(t) and t > 0]
+    if len(h) < 2:
+        return None
+    n2, t2 = h[-1]
+    earlier = [(n, t) for n, t in h[:-1] if n <= 0.5 * n2]
+    if not earlier or n2 / t2 >= OUTLAST_TAU:
+        return None
+    n1, t1 = earlier[-1]
+    g = math.log(t2 / t1) / math.log(n2 / n1)
+    return (g, n2 / n1) if g >= OUTLAST_GROWTH else None
+
+
 def diagnostic_stride(steps: int) -> int:
     """Thinning that keeps at most ``DIAG_MAX_STEPS`` steps per walker."""
     return max(1, math.ceil(steps / DIAG_MAX_STEPS))

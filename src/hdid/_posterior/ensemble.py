@@ -21,6 +21,7 @@ from .diagnostics import (
     RHAT_MAX,
     TAU_MULTIPLE,
     convergence,
+    tau_outlasts_chain,
     diagnostic_stride,
     tau_pooled,
     width_ratios,
@@ -189,6 +190,7 @@ class _Ensemble:
         sampler = self.sampler
         total = n_steps or max_steps
         done, conv = 0, None
+        self.tau_history = []  # (steps, largest τ) at each check: does τ outgrow the chain?
         t_kept = time.perf_counter()
         t_diag = 0.0
         next_check = chunk
@@ -201,13 +203,15 @@ class _Ensemble:
             next_check = max(done + chunk, int(CHECK_GROWTH * done))
             if n_steps is None or done >= total:
                 td = time.perf_counter()
-                short = done < total and _short_of_tau(sampler, done)
+                short = done < total and _short_of_tau(sampler, done, self.tau_history)
                 if short:
                     # a chain under 50 τ of its sampled coordinates: arviz (≈ 1–2 s a check)
                     # only once it may pass; check again where 50 τ is (≤ ×CHECK_GROWTH on)
                     next_check = max(done + chunk, min(next_check, int(1.05 * short)))
                 else:
                     conv = _converge(sampler, self.lp, self.prob, self.labels)
+                    if conv.tau is not None and np.all(np.isfinite(conv.tau)):
+                        self.tau_history.append((done, float(np.max(conv.tau))))
                 t_diag += time.perf_counter() - td
                 if n_steps is None and not short and conv.converged:
                     break
@@ -216,7 +220,19 @@ class _Ensemble:
     def _chain_warnings(self, done, conv, burn_in, n_reset):
         """NOT CONVERGED, stranded and STUCK walkers."""
         out = []
-        if not conv.converged:
+        if not conv.converged and (grew := tau_outlasts_chain(getattr(self, "tau_history", []))):
+            name, what = conv.worst
+            out.append(
+                f"NOT CONVERGED: after {done} steps ({burn_in} burn-in before) the worst quantity "
+                f"is {name} ({what}), the chain {conv.chain_in_tau:.1f} τ long, and τ grew with "
+                f"the chain (τ ∝ steps^{grew[0]:.2f} over the last ×{grew[1]:.1f} in steps): the "
+                "walkers do not cross between optima or along a ridge, so a longer chain will not "
+                f"converge either; the criterion is bulk/tail ESS ≥ {ESS_MIN} and R-hat ≤ "
+                f"{RHAT_MAX} or a chain ≥ {TAU_MULTIPLE} τ. Check the modes and the trace plot; "
+                "fix a parameter the log does not determine (--fix / fix=), give it a prior "
+                "(--prior / prior=) or log releases that separate it (hdid design)"
+            )
+        elif not conv.converged:
             name, what = conv.worst
             out.append(
                 f"NOT CONVERGED: after {done} steps ({burn_in} burn-in before) the worst quantity "
@@ -337,7 +353,7 @@ def _taus(sampler):
     return tau_e, np.fmax(tau_e, thin * tau_pooled(chain[::thin]))
 
 
-def _short_of_tau(sampler, done: int) -> int:
+def _short_of_tau(sampler, done: int, history: list | None = None) -> int:
     """``TAU_MULTIPLE`` × the largest τ of the sampled coordinates when the chain is shorter
     than that (0 otherwise): the ensemble rule cannot pass yet, and R-hat ≤ 1.01 with walkers
     as chains came only at ≈ 85–125 τ on the paper design (diagnostics module), so the
@@ -345,6 +361,8 @@ def _short_of_tau(sampler, done: int) -> int:
     t = _taus(sampler)[1]
     if not np.all(np.isfinite(t)):
         return 0
+    if history is not None:  # (steps, largest τ): the grown chain's record
+        history.append((done, float(np.max(t))))
     need = TAU_MULTIPLE * float(np.max(t))
     return int(math.ceil(need)) if done < need else 0
 
