@@ -50,15 +50,16 @@ def load(real, setup: str):
 
 class Problem:
     """One set-up's least-squares problem; ``rotor``: None (one inertia), ``"free"`` or a
-    held ``(j_r, b, tau_r)``."""
+    held ``(j_r, b, tau_r)``; ``data``: readings to fit in place of the log's (same instants)."""
 
-    def __init__(self, real, setup, rotor=None):
+    def __init__(self, real, setup, rotor=None, data=None):
         import jax
         import jax.numpy as jnp
 
         from hdid.effects._rotor_free_play import DropLaw, RotorFreePlay, simulate_drops
 
         self.ref, self.runs, self.times, self.data, self.w = load(real, setup)
+        self.data = self.data if data is None else np.asarray(data, dtype=float)
         self.inertia, self.R, self.rotor = self.ref["bam_m6_total_inertia_kgm2"], len(self.runs), rotor
         self.nr = 3 if rotor == "free" else 0
         dur = float(np.max(self.times - np.array([r["tr"] for r in self.runs])[:, None])) + 0.1
@@ -74,9 +75,13 @@ class Problem:
             law, rot, th0, tr = unpack(x)
             return simulate_drops(law, rot, self.inertia, self.times, th0, tr, duration=dur)
 
+        def resid(x):  # a step into an unstable corner (a near-zero arm inertia) is refused, not NaN
+            r = ((model(x) - self.data) * self.w).ravel()
+            return jnp.where(jnp.isfinite(r), r, 10.0)
+
         self.model = jax.jit(model)
-        self.f = jax.jit(lambda x: ((model(x) - self.data) * self.w).ravel())
-        self.jac = jax.jit(jax.jacfwd(lambda x: ((model(x) - self.data) * self.w).ravel()))
+        self.f = jax.jit(resid)
+        self.jac = jax.jit(lambda x: jnp.nan_to_num(jax.jacfwd(resid)(x), nan=0.0, posinf=0.0, neginf=0.0))
 
     def bounds(self):
         rot_lo, rot_hi = [1e-4, 0.0, 0.0][:self.nr], [0.9 * self.inertia, 0.5, 2.0][:self.nr]
@@ -168,4 +173,21 @@ def median_quarters(q: list[list[float]], n: int = 5) -> list[float | None]:
     for j in range(n):
         v = [r[j] for r in q if len(r) > j]
         out.append(float(np.median(v)) if v else None)
+    return out
+
+
+def signature(real, setup: str, law: dict, rotors) -> list[dict]:
+    """What the rotor leaves in a one-inertia fit: noiseless drops of ``setup`` (its runs'
+    instants, release angles and times; arm law ``law``) made with each held rotor of
+    ``rotors``, fitted with one inertia; the quarters' data − model as for a log."""
+    import jax.numpy as jnp
+
+    out = []
+    for rotor in rotors:
+        gen = Problem(real, setup, tuple(rotor))
+        x = np.r_[[law[n] for n in LAW], [r["th0"] for r in gen.runs], [r["tr"] for r in gen.runs]]
+        one = Problem(real, setup, data=np.asarray(gen.model(jnp.asarray(x))))
+        y = one.fit(x)
+        out.append(dict(setup=setup, rotor=dict(zip(ROTOR, map(float, rotor))), rms=one.rms(y),
+                        mgl=float(y[0]), mgl_true=float(x[0]), quarters=median_quarters(one.quarters(y))))
     return out

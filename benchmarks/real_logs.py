@@ -185,12 +185,23 @@ def main(argv=None):
                     help="fit the STS3215 drops with the base model plus these effects (none: the base)")
     ap.add_argument("--rotor", action="store_true", help="STS3215: one inertia against the motor's "
                     "rotor behind the gear's free play, one fitting machinery (minutes)")
+    ap.add_argument("--rotor-signature", action="store_true", help="STS3215: noiseless drops made with "
+                    "a rotor behind free play, fitted with one inertia (what the rotor leaves in the quarters)")
     ap.add_argument("--energy", action="store_true", help="STS3215: friction laws judged by the "
                     "energy lost per half-swing (model-free, seconds)")
     if (args := parse_or_render(ap, argv, "real_logs", render, indent=1)) is None:
         return
     if args.rotor:
         return write_result("real_logs", {**stored("real_logs"), "sts_rotor": sts_rotor()}, render, indent=1)
+    if args.rotor_signature:
+        from _sts_rotor import signature
+
+        res = stored("real_logs")
+        law = next(r["law"] for r in res["sts_rotor"] if r["setup"] == "m1.168_l0.15" and r["model"] == "one inertia")
+        held = next(r["rotor"] for r in res["sts_rotor"] if r["model"] == "rotor, held")
+        rotors = [(held["j_r"], held["backlash"], held["tau_r"]), (0.024, 0.02, 0.01), (0.024, 0.05, 0.03)]
+        return write_result("real_logs", {**res, "sts_rotor_signature": signature(
+            ROOT.parent / "shared" / "data" / "real" / "sts3215_drop", "m1.168_l0.15", law, rotors)}, render, indent=1)
     if args.energy:
         res = stored("real_logs")
         fits = [r for r in res.get("sts", []) if not r["add"]]
@@ -266,6 +277,16 @@ def render(res: dict) -> str:
         lines += energy_section(res["sts_energy"])
     if res.get("sts_rotor"):
         lines += rotor_section(res["sts_rotor"])
+    if res.get("sts_rotor_signature"):
+        lines += ["", "What a rotor behind free play leaves in a one-inertia fit (`--rotor-signature`: noiseless drops "
+                  "at m1.168_l0.15's instants, releases and arm law, fitted with one inertia; the log's own signs are "
+                  "in the table above):", "", "| rotor: J_r, b, τ_r | RMS/floor | mgl fit / true | R→B | B→T | T→B "
+                  "| B→T | T→B |", "|---|---|---|---|---|---|---|---|"]
+        for r in res["sts_rotor_signature"]:
+            rot = r["rotor"]
+            lines.append(f"| {rot['j_r']:.3g}, {rot['backlash']:.3g}, {rot['tau_r']:.3g} | {r['rms']:.2f} | "
+                         f"{r['mgl']:.4g} / {r['mgl_true']:.4g} | " + " | ".join(
+                             "—" if q is None else f"{q:+.1f}" for q in r["quarters"]) + " |")
     return "\n".join(lines + [""] + interpretation_section(res)).rstrip("\n") + "\n"
 
 
