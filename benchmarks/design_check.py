@@ -159,7 +159,8 @@ def _realised(fits, e, n, seed):
     for i, truth in enumerate(fits):
         other, vals, wins = fits[1 - i], [], 0
         for k, log in enumerate(simulate_logs(truth, e, n, seed=seed + i)):
-            rt, ro = best_rival_fit(log, truth, e, window=0), best_rival_fit(log, other, e, window=1 + 2 * (k == 0))
+            rt = best_rival_fit(log, truth, e, window=0)
+            ro = best_rival_fit(log, other, e, window=1 + 2 * (k == 0), truth=truth)
             other = ro if k == 0 and ro is not None else other
             if rt is None or ro is None:  # a failed fit is a result too
                 print("  fit failed", flush=True)

@@ -546,3 +546,53 @@ def test_an_unverified_upper_bound_never_ranks_above_a_fitted_value():
     assert "no candidate's rival was fitted globally" in w, w
     # every bound at or below the top value (the budget reached them all): no warning
     assert separation_warnings([preds[0], preds[2], preds[3]], rival_fits=3) == []
+
+
+def test_a_rival_that_nests_the_truth_is_also_started_at_that_corner(case, monkeypatch):
+    """Soft wind-up with K1 → 0, T1/K1 = b/2N, K2 = K3 = k1 is a free play b then a linear
+    spring: on backlash readings its best fit can sit at that corner, which its own starts
+    (K1 0.97 and 0.6 × k1) never reach (log 9902, rate ×4 + encoder ×16: λ 84 predicted
+    from the soft-centre basin, −1.7 ± 2.9 realised on 5 logs). The rival is therefore
+    also started at the corner built from the true form's fit
+    (:func:`hdid._design._best_rival.corner_model`). hdid.fit is replaced by a stand-in
+    whose basin is the start's (χ² 1 from a start with K1 < 5 % of k1, else 80), so the
+    test sees which starts run. Fails without the corner start (80)."""
+    from types import SimpleNamespace
+
+    import hdid._fitting._fit as fit_module
+    from hdid._design import _best_rival
+    from hdid._design._candidates import baseline
+    from hdid.effects import FreePlayStiffness, ThreeSegmentStiffness
+
+    _, fit = case
+    e = baseline(fit)
+    sigma = e.resolution / math.sqrt(12.0)
+    k1, b, N = 940.0, 0.02, float(fit.model.ratio)
+    truth = SimpleNamespace(model=fit.model.with_effect(FreePlayStiffness(k1=k1, k2=6.5e7, backlash=b)),
+                            parameters={})
+    rival = SimpleNamespace(model=fit.model.with_effect(ThreeSegmentStiffness.start_from(
+        {**fit.model.float_values(), "k1": k1})), parameters={})
+    started = []
+
+    def fake(log, *, model, **kw):
+        sw = next(x for x in model.effects if isinstance(x, ThreeSegmentStiffness))
+        started.append(sw)
+        chi2 = 1.0 if float(sw.K1) < 0.05 * k1 else 80.0
+        return SimpleNamespace(n_effective=1, rms_residual_rad=sigma * math.sqrt(chi2), model=model,
+                               parameters={})
+
+    monkeypatch.setattr(fit_module, "fit", fake)
+    assert _best_rival.chi2(_best_rival.best_rival_fit(None, rival, e), e.resolution) == pytest.approx(80.0)
+    best = _best_rival.best_rival_fit(None, rival, e, truth=truth)
+    assert _best_rival.chi2(best, e.resolution) == pytest.approx(1.0)
+    sw = started[-1]
+    d1 = 0.5 * b / N  # the zone's half-width at the output
+    assert float(sw.T1) / float(sw.K1) == pytest.approx(d1) and float(sw.K2) == float(sw.K3) == k1
+    # the corner is the free play then the linear spring up to the centre segment's
+    # torque, K1·d1 = CORNER_K1·k1·d1 (1 % of the spring torque at twice the half-width)
+    from hdid.effects.soft_windup import CORNER_K1
+
+    d = np.linspace(-4 * d1, 4 * d1, 81)
+    free = k1 * np.sign(d) * np.maximum(np.abs(d) - d1, 0.0)
+    corner = np.array([float(sw.spring_torque(x)) for x in d])
+    assert np.max(np.abs(corner - free)) <= CORNER_K1 * k1 * d1 * (1 + 1e-9)

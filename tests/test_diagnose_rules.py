@@ -121,6 +121,61 @@ def test_a_floor_level_form_the_likelihood_clearly_favours_is_still_named():
     assert verdict == "ambiguous"
 
 
+def _soft_windup_fit(K1, K1_sd, play, ratio=100.0):
+    """An analysed soft wind-up refit as the nesting rule reads it: ``K1`` [N m/rad] with
+    its std, ``T1`` putting the zone's total play at ``play`` [rad, WG]."""
+    P = SimpleNamespace
+    return P(parameters={"K1": P(value=K1, std=K1_sd), "T1": P(value=K1 * play / (2 * ratio), std=math.nan)},
+             model=P(ratio=ratio))
+
+
+def _backlash_and_soft_windup(first, K1, K1_sd):
+    """Both forms at the floor, χ² 150 and 152 at n = 200 (likelihood gap 2.7 < 10):
+    ambiguous by the floor rule; ``first``: which one the BIC ranks first."""
+    from hdid._diagnosis import _nesting
+
+    bl, sw = _cand("backlash", -60.0, rms=0.9), _cand("soft_windup", -60.0, rms=0.88)
+    bl.delta_bic, sw.delta_bic = (-60.0, -55.0) if first == "backlash" else (-55.0, -60.0)
+    bl.fit, sw.fit = _fit(152.0), _fit(150.0)
+    bl.values = {"k1": 1096.0, "k2": 4e7, "backlash": 0.0229}
+    sw.result = _soft_windup_fit(K1, K1_sd, 0.0228)
+    ranked = sorted([bl, sw], key=lambda c: c.delta_bic)
+    rounds = _round(ranked)
+    rounds[0]["nested"] = _nesting.corners(ranked, lambda c: c.result)
+    return rounds
+
+
+@pytest.mark.parametrize("first", ["backlash", "soft_windup"])
+def test_a_richer_form_at_its_corner_that_is_the_simpler_one_names_the_simpler(first):
+    """Soft wind-up with K1 → 0 (T1/K1 = b/2N, K2 = K3) is a dead zone then a stiffening
+    spring: a free play. On simulated backlash logs it reached the floor at that corner
+    (K1 11.7 against k1 1096) and the verdict was ``ambiguous backlash | soft_windup`` on
+    10/10; no experiment separates them when backlash is true. K1 = 11.7 ± 40: zero is
+    within 2 std (a two-sided 95 % interval), so the soft wind-up adds nothing the free play
+    lacks and the form with fewer parameters is named, whichever the BIC put first; the
+    summary and ``Diagnosis.nested`` say why. (Before: ambiguous.)"""
+    from hdid._diagnosis._verdict import nested_named, pairs_to_separate
+
+    rounds = _backlash_and_soft_windup(first, 11.7, 40.0)
+    verdict, summary, _ = D._verdict(rounds, CANDS)
+    assert verdict == "missing_effect", summary
+    assert summary.startswith("add backlash") and "corner that is backlash" in summary
+    assert "0.0228 rad at the WG against backlash's 0.0229" in summary
+    rec = nested_named(rounds, CANDS)
+    assert [(r["named"], r["richer"], r["parameter"]) for r in rec] == [
+        ("backlash", "soft_windup", "K1")]
+    assert pairs_to_separate(verdict, rounds, CANDS) == []  # no pair left to separate
+
+
+def test_a_richer_form_away_from_its_corner_stays_a_rival():
+    """A real soft centre (K1 270 ± 30: zero 9 std away) is not the free play: the pair
+    stays ambiguous, with the experiment to separate them."""
+    rounds = _backlash_and_soft_windup("backlash", 270.0, 30.0)
+    assert rounds[0]["nested"] == []
+    verdict, summary, _ = D._verdict(rounds, CANDS)
+    assert verdict == "ambiguous" and "backlash, soft_windup" in summary
+
+
 def test_clear_winner_at_the_floor_is_named():
     rounds = _round([_cand("hysteresis", -60), _cand("backlash", -25)])
     verdict, summary, _ = D._verdict(rounds, CANDS)

@@ -75,16 +75,18 @@ def rival_chi2(rival, e: Experiment, theta: np.ndarray, *, nested="auto") -> flo
     return rival_fit(rival, e, theta, nested=nested)[0]
 
 
-def rival_fit(rival, e: Experiment, theta: np.ndarray, *, nested="auto", near=None):
+def rival_fit(rival, e: Experiment, theta: np.ndarray, *, nested="auto", near=None,
+              truth=None):
     """``(χ², fit)`` of :func:`rival_chi2` (``(NaN, None)`` where it fails). ``near``: the
     rival's fit to a neighbouring problem (the same design, other release instants), its
     optimum the start beside the fit's own grid, at its order, without the limit checks
-    (which as restarts find the basin that start already holds: a fifth of the cost)."""
+    (which as restarts find the basin that start already holds: a fifth of the cost).
+    ``truth``: the form whose readings ``theta`` are (:func:`best_rival_fit`'s corner start)."""
     if not np.all(np.isfinite(theta)):
         return math.nan, None
     log = noise_free_log(e, theta, f"{e.name} (noise-free)")
     if near is None:
-        r = best_rival_fit(log, rival, e, nested=nested)
+        r = best_rival_fit(log, rival, e, nested=nested, truth=truth)
     else:
         from .._errors import HdidError
         from .._fitting._fit import fit as fit_log
@@ -145,11 +147,35 @@ def _turned(model, i: int, quarter: int):
                        (a * c - b * s, a * s + b * c))
 
 
-def best_rival_fit(log, rival, e: Experiment, *, nested="auto", window: int = ORDER_WINDOW):
+def corner_model(truth_model, rival_model, twist: float):
+    """The rival's start at the corner of its parameters that *is* the true form, or
+    ``None`` where it contains no such corner. The soft wind-up with its centre segment
+    gone is a free play then a stiffening spring (``K1 → 0``, ``T1/K1 = b/2N``, ``K2 = K3 =
+    k1``: :meth:`~hdid.effects.ThreeSegmentStiffness.free_play_corner`): fitted to a
+    backlash's readings from its own fit to the log (a soft centre) and from its grid
+    it stayed in the soft-centre basin (rate ×4 + encoder ×16 on log 9902: λ 84 predicted,
+    −1.7 ± 2.9 realised on 5 logs), so it also starts from the backlash fit's play, the
+    shared parameters (friction, inertia) at the true form's values. ``twist``: the output
+    twist the design swings to [rad] (where the start puts the stiffening bend)."""
+    from ..effects import FreePlayStiffness, ThreeSegmentStiffness
+
+    spring = next((x for x in truth_model.effects if isinstance(x, FreePlayStiffness)), None)
+    rich = next((x for x in rival_model.effects if isinstance(x, ThreeSegmentStiffness)), None)
+    if spring is None or rich is None or not (math.isfinite(twist) and twist > 0):
+        return None
+    values = ThreeSegmentStiffness.free_play_corner(
+        float(spring.k1), float(spring.backlash), float(truth_model.ratio), twist)
+    return truth_model.with_effect(ThreeSegmentStiffness(**values))
+
+
+def best_rival_fit(log, rival, e: Experiment, *, nested="auto", window: int = ORDER_WINDOW,
+                   truth=None):
     """:func:`hdid.fit` of ``rival``'s model to ``log`` (a log of ``e``) with
     :func:`fit_options`; a rival with a position-periodic effect at its best order
-    (``window`` orders either side of its own, ``ORDER_WINDOW``; 0: its own order only):
-    the fit of the smallest χ². ``None`` where every fit fails."""
+    (``window`` orders either side of its own, ``ORDER_WINDOW``; 0: its own order only);
+    with ``truth`` (the true form's fit) also from the rival's corner that is the true
+    form (:func:`corner_model`), where it has one: the fit of the smallest χ². ``None``
+    where every fit fails."""
     from .._errors import HdidError
     from .._fitting._fit import fit as fit_log
     from ..effects._candidate import MAX_ORDER
@@ -164,7 +190,14 @@ def best_rival_fit(log, rival, e: Experiment, *, nested="auto", window: int = OR
 
     i = _order_effect(rival.model)
     if i is None or window <= 0:
-        return at(rival.model)
+        out = at(rival.model)
+        twist = max((abs(a) for a in e.amplitudes), default=math.nan) / float(rival.model.ratio)
+        corner = None if truth is None else corner_model(truth.model, rival.model, twist)
+        if corner is not None:
+            r = at(corner)
+            if r is not None and (out is None or chi2(r, e.resolution) < chi2(out, e.resolution)):
+                out = r
+        return out
     fitted = float(rival.model.effects[i].order)
     n0 = max(1, int(round(fitted)))
     top = max(MAX_ORDER, n0 + window)

@@ -209,8 +209,8 @@ def _fit_globally(s: Separation, fit_a, fit_b, ab: "_Direction", ba: "_Direction
     optimum at the own instants too, :func:`._best_rival.rival_fit`); ``s.trace``:
     ``tr((P_A − P_B)²)`` from both forms' Jacobians at the design."""
     e = s.experiment
-    lam_a, ra = _best_rival.rival_fit(fit_b, e, ab.y)   # A true: B fitted to A's readings
-    lam_b, rb = _best_rival.rival_fit(fit_a, e, ba.y)
+    lam_a, ra = _best_rival.rival_fit(fit_b, e, ab.y, truth=fit_a)  # A true: B fitted to A's
+    lam_b, rb = _best_rival.rival_fit(fit_a, e, ba.y, truth=fit_b)
     va = [float(np.nanmin([lam_a, ab.chi2])) if math.isfinite(lam_a) else math.nan]
     vb = [float(np.nanmin([lam_b, ba.chi2])) if math.isfinite(lam_b) else math.nan]
     Ub, Ua = ab._svd(ab.system()[0])[0], ba._svd(ba.system()[0])[0]

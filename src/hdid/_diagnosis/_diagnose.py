@@ -74,7 +74,11 @@ Verdicts (the only four; :func:`_verdict`)
         ``AMBIGUOUS_DBIC`` (:func:`hdid._diagnosis._verdict._likelihood_gap`: penalties
         never choose between forms that both reach the floor): "ambiguous between A, B" —
         never a single confident name (a warning says when none of them brings the
-        residual to the floor).
+        residual to the floor). A richer form that reaches the floor only at the corner
+        of its parameters that *is* a simpler contender (soft wind-up with no centre
+        stiffness: a free play) is no rival of it: the simpler form, with fewer
+        parameters, is named and the summary and ``Diagnosis.nested`` say so
+        (:mod:`hdid._diagnosis._nesting`).
     ``unexplained``
         the residual is above the floor and either no candidate has strong evidence or
         the best leaves it above the floor (and ``steps`` > 1 did not reach it).
@@ -138,6 +142,7 @@ from ._verdict import (  # noqa: F401
     _rivals,
     _verdict,
     _warnings,
+    nested_named,
 )
 from ._ladder import _chi2, _ladder_step, bic, bic_value, model_ladder  # noqa: F401
 from ._excess import floor_check
@@ -146,7 +151,7 @@ from ._wrong_step import readings_step
 from ._refits import (  # noqa: F401 (re-exported)
     _base_starts, _cand_bic, _candidate_fits, _own_optimum, _record, sf_key)
 from ._separating import MAX_SEPARATED_PAIRS, for_verdict as _separating_experiments  # noqa: F401
-from . import _detecting
+from . import _detecting, _nesting
 from ._search import (  # noqa: F401 (re-exported: tests, calibration)
     BASE_IMPROVED_DBIC,
     BASIN_PASSES,
@@ -154,8 +159,10 @@ from ._search import (  # noqa: F401 (re-exported: tests, calibration)
     FULL_GRID_STARTS,
     MAX_ANALYSED,
     Search,
+    analyse,
     analyse_strong,
     candidate_table,
+    corner_restarts,
     current_from_candidates,
     driver_refits,
     grid_points,
@@ -321,12 +328,18 @@ def _ladder_of_candidates(s: Search, current, wanted, steps, n_starts):
             fcheck = floor_check(current, 1.0 / float(prep.sample_period), len(prep.lengths))
         results = candidate_table(s, by_key, current, fcheck)
         results = driver_refits(s, by_key, results, current, fcheck, floor, STRONG_DBIC)
+        results = corner_restarts(s, by_key, results, current, fcheck, STRONG_DBIC)
         s.notes += rank_within_families(results, s.all_cands, STRONG_DBIC, AMBIGUOUS_DBIC)
         strong = analyse_strong(results, STRONG_DBIC)
+        # a richer form at the corner that is a simpler strong one (the nesting rule):
+        # the richer one's std, and the simpler one analysed as the best would be
+        nested = _nesting.corners(strong, analyse)
+        for rec in nested:
+            analyse(next(c for c in strong if c.key == rec["named"]))
         for c in results:
             c.reason = _reason(c, s.all_cands[c.key], look.features, floor)
         rounds.append({"current": current, "results": results, "white": look.white,
-                       "floor": floor, "result": look.result})
+                       "floor": floor, "result": look.result, "nested": nested})
         best = strong[0] if strong else None
         if best is None:
             break
@@ -407,4 +420,5 @@ def _assemble(s: Search, rounds, ladder, fcheck, verdict, summary, separating,
         false_alarm=fa.to_dict() if fa is not None else None,
         rounding_floor=fcheck.to_dict() if fcheck is not None else None,
         separating_experiments=separating,
+        nested=nested_named(rounds, s.all_cands),
     )

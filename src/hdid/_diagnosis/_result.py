@@ -123,6 +123,9 @@ class Diagnosis:
     #: the experiment that separates the two forms, computed by :mod:`hdid._design` with
     #: its expected ``2·ln LR`` (:func:`hdid._diagnosis._separating.separating`)
     separating_experiments: list[dict[str, Any]] = field(default_factory=list)
+    #: the nesting rule applied (:mod:`hdid._diagnosis._nesting`): a richer form that
+    #: reached the floor only at its corner that is the named, simpler form
+    nested: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def best(self) -> CandidateResult | None:
@@ -180,6 +183,7 @@ class Diagnosis:
             "false_alarm": self.false_alarm,
             "rounding_floor": self.rounding_floor,
             "separating_experiments": self.separating_experiments,
+            **({"nested": self.nested} if self.nested else {}),
             "timing": self.timing,
         })
 
@@ -349,4 +353,5 @@ def _load(path, effects, cls) -> Diagnosis:
         warnings=list(d.get("warnings") or []), false_alarm=d.get("false_alarm"),
         rounding_floor=d.get("rounding_floor"),
         separating_experiments=list(d.get("separating_experiments") or []),
+        nested=list(d.get("nested") or []),
     )

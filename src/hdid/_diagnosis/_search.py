@@ -262,17 +262,61 @@ def driver_refits(s: Search, by_key, results: list[CandidateResult], current, fc
     return candidate_table(s, by_key, current, fcheck) if changed else results
 
 
+def corner_restarts(s: Search, by_key, results: list[CandidateResult], current, fcheck,
+                    strong_dbic: float) -> list[CandidateResult]:
+    """A strong richer form whose optimum sits at its corner that is a strong simpler one
+    (:mod:`hdid._diagnosis._nesting`: soft wind-up with ``K1`` at zero, a free play) while
+    the simpler one's refits ended higher: the simpler one refitted from that corner
+    mapped back (:func:`hdid._diagnosis._nesting.simple_values`, the shared parameters and
+    the runs' nuisances at the richer fit's). Its refits start near the current optimum and
+    may miss the basin the richer one found through its extra freedom (a backlash log
+    with four amplitudes at 1 kHz: soft wind-up at K1 66 ± 162, χ² 169; backlash 262, so
+    the richer form was named alone). An optimum found joins the simpler one's refits and
+    the table is made again."""
+    from .._fitting import _refit
+    from ._nesting import NESTINGS, at_corner, simple_values
+
+    strong = {c.key: c for c in results if c.error is None and c.delta_bic < strong_dbic
+              and c.fit is not None and c.fit.finite}
+    changed = False
+    for n in NESTINGS:
+        rich, simple = strong.get(n.rich), strong.get(n.simple)
+        if rich is None or simple is None or simple.fit.cost <= rich.fit.cost:
+            continue
+        if at_corner(rich.fit.result(), simple.values, n) is None:
+            continue
+        rf, sf = rich.fit, simple.fit
+        values = {**rf.values(), **simple_values(n, rf.values(), float(rf.model.ratio))}
+        s.say(f"  {simple.label}: refitted from {rich.label}'s corner that is it")
+        u = _refit.warm(sf.setup, values, _refit.tail_of(rf.setup.problem, rf.u))
+        again = _refit.run(sf.label, sf.setup, [("corner", u)])
+        if again.finite and again.cost < sf.cost:
+            by_key[simple.key] = [*by_key[simple.key], again]
+            changed = True
+    return candidate_table(s, by_key, current, fcheck) if changed else results
+
+
 def analyse_strong(results: list[CandidateResult], strong_dbic: float) -> list[CandidateResult]:
     """The strong candidates (ΔBIC below ``strong_dbic``), best first; the first
     ``MAX_ANALYSED`` analysed: whether their refit leaves a white residual at the floor
     (the verdict needs only the best one's; each analysis compiles programs of its own)."""
-    from .._results._residuals import whiteness
-
     strong = [c for c in results if c.error is None and c.delta_bic < strong_dbic]
     for c in strong[:MAX_ANALYSED]:
+        analyse(c)
+    return strong
+
+
+def analyse(c: CandidateResult):
+    """``c``'s refit analysed (its covariance: ``c.result``) and its residual's whiteness
+    and floor test (``white_after``, ``moving_ratio_after``, ``adequate_after``), once.
+    Returns ``c.result``."""
+    from .._results._residuals import whiteness
+
+    if c.result is None:
         c.result = c.fit.result()
+    if c.adequate_after is None:
         w = whiteness(c.result)
         c.white_after = bool(w.white)
         c.moving_ratio_after = float(w.rms_ratio)
         c.adequate_after = bool(w.at_floor)
-    return strong
+    return c.result

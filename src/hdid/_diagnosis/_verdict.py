@@ -9,6 +9,7 @@ import math
 import numpy as np
 
 from ._candidates import Candidate
+from ._nesting import text as _nesting_text
 from ._result import CandidateResult
 
 #: ΔBIC below this is "very strong" evidence (Kass & Raftery 1995: |ΔBIC| > 10).
@@ -109,20 +110,32 @@ def _likelihood_gap(best: CandidateResult, c: CandidateResult) -> float:
     return lik(b) - lik(a)
 
 
-def _contenders(first, all_cands):
+def _contenders(first, all_cands, with_nested: bool = False):
     """``(best, rivals, same)`` of a round: the strong best, the candidates of other
     families it cannot be told from (:func:`_rivals`), and the strong ones of its own
     family within ``AMBIGUOUS_DBIC`` (the same mark); ``(None, [], [])`` without a strong
-    candidate."""
+    candidate. A richer form at its corner that is a simpler contender is dropped (the
+    nesting rule, :func:`hdid._diagnosis._nesting.resolve`; the round's ``nested``
+    records), the simpler one the best in its place; ``with_nested``: the records applied
+    are returned fourth."""
+    from ._nesting import resolve
+
     ok = [c for c in first["results"] if c.error is None]
     strong = [c for c in ok if c.delta_bic < STRONG_DBIC]
     if not strong:
-        return None, [], []
+        return (None, [], [], []) if with_nested else (None, [], [])
     best = strong[0]
     rivals = _rivals(best, ok, all_cands, first.get("floor"))
-    same = [c for c in strong[1:] if c.delta_bic - best.delta_bic < AMBIGUOUS_DBIC
-            and c not in rivals]
-    return best, rivals, same
+    best, rivals, applied = resolve(best, rivals, first.get("nested") or [])
+    same = [c for c in strong if c is not best and c.delta_bic - best.delta_bic < AMBIGUOUS_DBIC
+            and c not in rivals and c.key not in {r["richer"] for r in applied}
+            and (all_cands[c.key].family or c.key) == (all_cands[best.key].family or best.key)]
+    return (best, rivals, same, applied) if with_nested else (best, rivals, same)
+
+
+def nested_named(rounds, all_cands) -> list[dict]:
+    """The nesting records the verdict of the first round applied (``Diagnosis.nested``)."""
+    return _contenders(rounds[0], all_cands, with_nested=True)[3]
 
 
 def pairs_to_separate(verdict: str, rounds, all_cands) -> list[tuple]:
@@ -160,7 +173,8 @@ def _verdict(rounds, all_cands) -> tuple[str, str, list[str]]:
             f"the residual is above the floor (moving RMS {white.rms_ratio:.2f}× floor, "
             f"Ljung–Box p = {white.p_value:.2g}) but no library effect improves it strongly"
         ), notes
-    best, rivals, same = _contenders(first, all_cands)
+    best, rivals, same, applied = _contenders(first, all_cands, with_nested=True)
+    nested = "".join(f"; {_nesting_text(r)}" for r in applied)
     if same:
         notes.append(
             f"{best.key} and {', '.join(c.key for c in same)} leave the same mark "
@@ -173,7 +187,7 @@ def _verdict(rounds, all_cands) -> tuple[str, str, list[str]]:
             f"ambiguous between {', '.join(names)} (ΔBIC "
             f"{', '.join(f'{c.delta_bic:.1f}' for c in [best] + rivals)}; RMS "
             f"{', '.join(f'{c.rms_after_rad / floor:.2f}' for c in [best] + rivals)}× the "
-            "floor): the log cannot tell them apart"
+            f"floor): the log cannot tell them apart{nested}"
         ), notes
     if best.adequate_after:
         if best.white_after is False:
@@ -186,7 +200,7 @@ def _verdict(rounds, all_cands) -> tuple[str, str, list[str]]:
                if same else "")
         return "missing_effect", (
             f"add {best.label}: RMS {best.rms_before_rad / floor:.2f} → "
-            f"{best.rms_after_rad / floor:.2f}× floor, ΔBIC {best.delta_bic:.1f}{alt}"
+            f"{best.rms_after_rad / floor:.2f}× floor, ΔBIC {best.delta_bic:.1f}{alt}{nested}"
         ), notes
     # several effects missing at once: the ladder may reach the floor in more steps
     if len(rounds) > 1:
@@ -236,7 +250,7 @@ def _warnings(verdict, rounds, all_cands, local_base, fa) -> list[str]:
         out.append(f"the whiteness test has little power here ({white.max_lag} lag(s)): "
                    "'at the floor' rests on the residual's RMS alone")
     if verdict in ("missing_effect", "ambiguous") and strong:
-        best = strong[0]
+        best = _contenders(first, all_cands)[0]  # the nesting rule's where it applied
         if best.white_after is False:
             out.append(f"after adding {best.label} the residual is not white: a second, "
                        "smaller effect may remain")

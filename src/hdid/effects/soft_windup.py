@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import ClassVar
 
 import jax.numpy as jnp
@@ -53,12 +54,24 @@ class ThreeSegmentStiffness(AbstractSpring):
     #: how ``hdid diagnose`` tries it
     candidate: ClassVar[Candidate] = Candidate(
         trial=60, replaces="stiffness",
-        starts=lambda v: [{}, {"K1": 0.6 * v["k1"]}] if "k1" in v else [{}],
+        starts=lambda v: _starts(v),
         mark="the swing period near rest differs from the cubic model's: the phase error "
              "grows as the amplitude decays",
         experiment="a small-amplitude release (inside the first catalog segment) measures "
                    "the centre stiffness K1 directly",
     )
+
+    @staticmethod
+    def free_play_corner(k1: float, backlash: float, ratio: float, twist: float) -> dict[str, float]:
+        """The segments at the corner that *is* a free play: total play ``backlash`` [rad,
+        at the WG] then a linear spring ``k1`` [N m/rad, output side]. ``K1`` → 0 (held at
+        ``CORNER_K1·k1``, the log transform keeps it positive), ``T1/K1 = backlash/2N`` (the
+        zone's half-width at the output), ``K2 = K3 = k1``; the second corner half-way out
+        to the output twist ``twist`` [rad], where a stiffening spring bends."""
+        d1 = 0.5 * backlash / ratio
+        K1 = CORNER_K1 * k1
+        return {"K1": K1, "T1": K1 * d1, "K2": k1, "K3": k1,
+                "dT12": k1 * max(0.5 * twist - d1, d1)}
 
     @classmethod
     def start_from(cls, values: dict[str, float]) -> ThreeSegmentStiffness:
@@ -84,3 +97,27 @@ class ThreeSegmentStiffness(AbstractSpring):
     def torque(self, motion: Motion, state: None) -> Float[Array, ""]:
         del state
         return -self.spring_torque(motion.theta / motion.ratio) / motion.ratio
+
+
+#: Free play's own start fractions of the logged swing (``backlash``'s candidate starts).
+FREE_PLAY_FRACTIONS = (0.016, 0.064)
+#: ``K1/k1`` at the dead-zone corner start: a centre segment 100x softer than the spring
+#: exerts less than 1 % of its torque inside the zone (a free play to the fit's eye).
+CORNER_K1 = 0.01
+
+
+def _starts(v: dict[str, float]) -> list[dict[str, float]]:
+    """``diagnose``'s starts: the catalog shape, a softer centre (0.6 k1), and the
+    dead-zone corner (:meth:`ThreeSegmentStiffness.free_play_corner`) at free play's own
+    start fractions of the logged swing: with ``K1`` → 0 the segments *are* a free play
+    then a spring, a basin the soft-centre starts never reach (a backlash log's soft
+    wind-up fit stayed at K1 0.25 k1 from them). ``N = √(k1/k_wg)``."""
+    if "k1" not in v:
+        return [{}]
+    out = [{}, {"K1": 0.6 * v["k1"]}]
+    k_wg, swing = v.get("_k_wg", math.nan), v.get("_swing", math.nan)
+    if math.isfinite(k_wg) and k_wg > 0 and math.isfinite(swing) and swing > 0:
+        n = math.sqrt(v["k1"] / k_wg)
+        out += [ThreeSegmentStiffness.free_play_corner(v["k1"], f * swing, n, swing / n)
+                for f in FREE_PLAY_FRACTIONS]
+    return out
