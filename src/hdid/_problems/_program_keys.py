@@ -1,7 +1,7 @@
 """The program store's keys without their cost (:mod:`hdid._problems._programs`, issue 37).
 
 A stored program's key (``_programs._key``) is a hash of text — the name, the arguments'
-tree with every static field, their shapes and dtypes, hdid's source — and costs
+tree with every static field, their shapes and dtypes, float64, the versions — and costs
 ~0.1–0.3 ms a call; a fit makes tens of calls with the same kinds of arguments. Here a
 cheap hashable description of a call (:func:`memo_key`) maps to its key once computed
 (:func:`lookup`, :func:`remember`); a problem or model passed again (the same object) is
@@ -78,14 +78,15 @@ def _described(arg):
 def memo_key(name: str, args):
     """``(memo, leaves)``: the arrays of ``args`` (the dynamic leaves, in the order of
     ``eqx.partition(args, eqx.is_array)``'s flattening) and a hashable description of
-    everything the key reads (:func:`_described`, argument by argument). ``memo`` is
+    everything the key reads (:func:`_described`, argument by argument, and float64,
+    a thread-local switch). ``memo`` is
     ``None`` where some part is unhashable."""
     parts, leaves = [], []
     for arg in args:
         d, lv = _described(arg)
         parts.append(d)
         leaves.extend(lv)
-    memo = (name, tuple(parts))
+    memo = (name, bool(jax.config.jax_enable_x64), tuple(parts))
     try:
         hash(memo)
     except TypeError:

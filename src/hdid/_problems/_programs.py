@@ -6,9 +6,12 @@ first — for the stick-exact simulator inside a Levenberg–Marquardt loop that
 per model structure on a shared 2-core machine, most of a warm ``hdid diagnose``.
 :func:`call` keys a program by what determines it — a name, the arguments' tree
 structure (which holds every static field: model structure, free parameters, layout),
-the shapes and dtypes of their arrays, the source of hdid and the versions of JAX and
-its backend — and keeps the traced and lowered program (a :mod:`jax.export`
-``Exported``: StableHLO plus its calling convention) under ``<cache>/programs``. A later
+the shapes and dtypes of their arrays, and the versions of JAX, its backend and the
+libraries traced (:func:`_salt`) — and keeps the traced and lowered program (a :mod:`jax.export`
+``Exported``: StableHLO plus its calling convention) under ``<cache>/programs``, with a record of the source its trace ran
+(:mod:`hdid._problems._program_deps`: the files, their constants, other packages'
+versions). A later process uses it only where all of that is unchanged, so an edit to
+code no trace ran leaves the store warm and an edit to code a trace ran misses. A later
 process reads it instead of tracing: it only wraps the StableHLO in a call, and the XLA
 compile of that call is read from JAX's persistent cache, so what runs is compiled by
 JAX's ordinary path. (An earlier version kept serialized *executables*; some of them did
@@ -36,6 +39,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import json
 import os
 import pickle
 import re
@@ -49,16 +53,12 @@ from typing import Any
 import equinox as eqx
 import jax
 
-from .. import _compile_clock, _config
-from . import _program_keys
+from .. import _compile_clock
+from . import _program_deps, _program_keys, _program_trace
+from ._program_files import (FORMAT, MAX_VERSIONS, STALE_DAYS, VERSIONED,  # noqa: F401
+                             _add_version, _find, _load, _mark_bad, _prune, _salt, _store,
+                             _versions)
 
-#: Modules that only orchestrate (no function of theirs is traced into a stored program:
-#: those come from ``_refit``, ``_residuals`` and the problem, model and effects they
-#: call; this module only wraps them, and a stored program that no longer loads is
-#: traced again): editing them does not invalidate the store.
-UNTRACED = frozenset({"_problems/_programs.py", "_problems/_program_keys.py"})
-#: Packages of such modules: the command line, log reading (NumPy only).
-UNTRACED_PACKAGES = frozenset({"cli", "_log", "_diagnosis"})
 _ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
 #: Compiled programs of this process, most recently used last. Bounded: every XLA:CPU
 #: executable holds memory mappings for its code (see tests/conftest.py).
@@ -74,7 +74,6 @@ MAX_LOADED = 64
 MAX_MAPS_FRACTION = 0.5
 #: Times :func:`release` ran in this process (for tests and benchmarks).
 RELEASES = 0
-_SALT: str | None = None
 #: Programs being read in the background (:func:`prefetch`), by key.
 _PENDING: dict[str, Future] = {}
 _POOL: ThreadPoolExecutor | None = None
@@ -91,77 +90,13 @@ PREFETCH_THREAD = _compile_clock.BACKGROUND_THREAD
 STATS: list[dict[str, Any]] = []
 
 
-def _salt() -> str:
-    """hdid's source, JAX's and the backend's versions: a change invalidates every key."""
-    global _SALT
-    if _SALT is None:
-        h = hashlib.sha256()
-        root = Path(__file__).resolve().parents[1]  # src/hdid
-        for f in sorted(root.rglob("*.py")):
-            rel = f.relative_to(root).as_posix()
-            if rel in UNTRACED or rel.split("/")[0] in UNTRACED_PACKAGES:
-                continue
-            h.update(str(f.relative_to(root)).encode())
-            h.update(f.read_bytes())
-        try:
-            import jaxlib
-
-            h.update(jaxlib.__version__.encode())
-        except ImportError:  # pragma: no cover
-            pass
-        h.update(jax.__version__.encode())
-        dev = jax.devices()[0]
-        h.update(f"{dev.platform}:{getattr(dev, 'device_kind', '')}".encode())
-        h.update(str(jax.config.jax_enable_x64).encode())
-        _SALT = h.hexdigest()
-    return _SALT
-
-
-#: A folder of programs of another source (or JAX) not used for this long is removed.
-STALE_DAYS = 7.0
-
-
-def _store() -> Path | None:
-    """The store's folder for this source and JAX (``<cache>/programs/<salt>``), or
-    ``None`` (``HDID_NO_CACHE=1``, ``HDID_PROGRAM_STORE=0``, or a process whose JAX
-    persistent compilation cache is off: without :func:`hdid.configure` the library
-    writes nothing to disk, and a stored program would be compiled again anyway)."""
-    if os.environ.get("HDID_NO_CACHE") or os.environ.get("HDID_PROGRAM_STORE") == "0":
-        return None
-    if jax.config.jax_compilation_cache_dir is None:
-        return None
-    root = _config._cache_dir() / "programs"
-    path = root / _salt()[:16]
-    if not path.is_dir():
-        try:
-            path.mkdir(parents=True, exist_ok=True)
-        except OSError:
-            return None
-        _prune(root, path)
-    return path
-
-
-def _prune(root: Path, keep: Path) -> None:
-    """Remove other sources' folders unused for :data:`STALE_DAYS` (a new folder is made
-    for every edit of hdid's source)."""
-    now = time.time()
-    for d in root.iterdir():
-        try:
-            if d != keep and d.is_dir() and now - d.stat().st_mtime > STALE_DAYS * 86400:
-                for f in d.iterdir():
-                    f.unlink()
-                d.rmdir()
-        except OSError:
-            pass
-
-
 def _key(name: str, treedef, static, leaves) -> str:
     avals = tuple((tuple(x.shape), str(x.dtype), bool(getattr(x, "weak_type", False)))
                   for x in leaves)
     static_leaves = jax.tree_util.tree_leaves(static)
     text = "|".join([
         name, _ADDRESS.sub("", str(treedef)), _ADDRESS.sub("", repr(static_leaves)),
-        repr(avals), _salt(),
+        repr(avals), f"x64={bool(jax.config.jax_enable_x64)}", _salt(),
     ])
     return hashlib.sha256(text.encode()).hexdigest()
 
@@ -252,23 +187,24 @@ def prefetch(name: str, fn: Callable, *args) -> bool:
         return False
     if key in _LOADED or key in _PENDING:
         return False
-    store = _store()
-    if store is None or not (store / f"{key}.exp").exists() or (store / f"{key}.bad").exists():
+    stem = _find(key)
+    if stem is None:
         return False
     specs = [jax.ShapeDtypeStruct(x.shape, x.dtype, weak_type=bool(getattr(x, "weak_type", False)))
              for x in leaves]
     global _POOL
     if _POOL is None:
         _POOL = ThreadPoolExecutor(PREFETCH_WORKERS, thread_name_prefix=PREFETCH_THREAD)
-    _PENDING[key] = _POOL.submit(_read_compiled, name, key, specs)
+    _PENDING[key] = _POOL.submit(_read_compiled, name, stem, specs)
     return True
 
 
-def _read_compiled(name: str, key: str, specs):
-    """(background thread) The stored program of ``key`` compiled for ``specs`` (JAX's
-    persistent cache read), and its :data:`STATS` row; ``None`` on any failure."""
+def _read_compiled(name: str, stem: str, specs):
+    """(background thread) The stored program ``stem`` (:func:`_find`) compiled for
+    ``specs`` (JAX's persistent cache read), and its :data:`STATS` row; ``None`` on any
+    failure."""
     w0, t0 = time.time(), time.perf_counter()
-    exported = _load(key)
+    exported = _load(stem)
     if exported is None:
         return None
     t1 = time.perf_counter()
@@ -280,7 +216,7 @@ def _read_compiled(name: str, key: str, specs):
         return None
     t3 = time.perf_counter()
     return prog, {"name": name, "how": "stored", "background": True, "prepare_s": t1 - t0,
-                  "wrap_s": t2 - t1, "compile_s": t3 - t2, "key": key[:12],
+                  "wrap_s": t2 - t1, "compile_s": t3 - t2, "key": stem[:12],
                   "background_span": (w0, w0 + t3 - t0)}
 
 
@@ -322,10 +258,11 @@ def _prepare(name, key, fn, treedef, static, leaves):
     """A compiled program for ``key`` and its first result."""
     w0 = time.time()  # (the clock of JAX's compile events, for hdid._fitting._vfit's union)
     t0 = time.perf_counter()
-    exported = _load(key)
+    stem = _find(key)
+    exported = _load(stem) if stem is not None else None
     how = "stored" if exported is not None else "traced"
     if exported is None:
-        exported = _export(key, fn, treedef, static, leaves)
+        exported, stem = _export(name, key, fn, treedef, static, leaves)
     t1 = time.perf_counter()
     if exported is not None:
         try:
@@ -338,7 +275,7 @@ def _prepare(name, key, fn, treedef, static, leaves):
                           "compile_s": t3 - t2, "key": key[:12], "span": (w0, w0 + t3 - t0)})
             return prog, out
         except Exception:  # noqa: BLE001 - never load it again; compile it here
-            _mark_bad(key)
+            _mark_bad(stem or key)
     t1 = time.perf_counter()
     prog = _compile(fn, treedef, static, leaves)
     t2 = time.perf_counter()
@@ -354,56 +291,62 @@ def _flat(fn, treedef, static):
     return flat
 
 
+#: The wrapper's code: where a traced program's tracebacks leave the store
+#: (:func:`hdid._problems._program_trace.traced_files`).
+_STOP = frozenset({_flat(None, None, None).__code__})
+
+
 def _compile(fn, treedef, static, leaves):
     return jax.jit(_flat(fn, treedef, static)).lower(*leaves).compile()
 
 
-def _export(key: str, fn, treedef, static, leaves):
-    """Trace and lower ``fn`` once (a :mod:`jax.export` ``Exported``) and keep it, or
-    ``None`` where the store is off, marked bad, or the program cannot be exported."""
+def _export(name: str, key: str, fn, treedef, static, leaves):
+    """Trace and lower ``fn`` once (a :mod:`jax.export` ``Exported``) and keep it with the
+    record of what its trace ran (:mod:`hdid._problems._program_deps`); ``(exported,
+    stem)``, ``stem`` ``None`` where it was not stored (a record in doubt), ``(None,
+    None)`` where the store is off, the key is marked bad, or it cannot be exported."""
     store = _store()
     if store is None or (store / f"{key}.bad").exists():
-        return None
+        return None, None
     try:
         from jax import export
 
-        exported = export.export(jax.jit(_flat(fn, treedef, static)))(*leaves)
+        jitted = jax.jit(_flat(fn, treedef, static))
+        traced = jitted.trace(*leaves)  # (export reuses this trace: JAX caches it)
+        exported = export.export(jitted)(*leaves)
         # (the VJP hook is a closure and cannot be pickled; the store only calls)
         blob = pickle.dumps(dataclasses.replace(exported, _get_vjp=None))
     except Exception:  # noqa: BLE001 - cannot export here: in-process only
         _mark_bad(key)
-        return None
+        return None, None
+    t0 = time.perf_counter()
+    args = eqx.combine(jax.tree_util.tree_unflatten(treedef, leaves), static)
+    files = _program_trace.traced_files(traced.jaxpr.jaxpr, _STOP)
+    rec = _program_deps.record(None if files is None
+                               else files | _program_trace.object_files([fn, *args]))
+    DEPS_S.append(time.perf_counter() - t0)
+    if rec is None:  # in doubt: this process only
+        UNSTORED.append(name)
+        return exported, None
+    text = json.dumps(rec, sort_keys=True)
+    vid = hashlib.sha256(text.encode()).hexdigest()[:16]
+    stem = f"{key}.{vid}"
     try:
-        tmp = store / f"{key}.{os.getpid()}.tmp"
+        tmp = store / f"{stem}.{os.getpid()}.tmp"
         tmp.write_bytes(blob)
-        os.replace(tmp, store / f"{key}.exp")
+        os.replace(tmp, store / f"{stem}.exp")
+        _add_version(store, key, vid, rec)
         os.utime(store)  # in use: not stale
     except OSError:
         pass
-    return exported
+    return exported, stem
 
 
-def _mark_bad(key: str) -> None:
-    store = _store()
-    if store is not None:
-        try:
-            (store / f"{key}.bad").touch()
-        except OSError:
-            pass
-
-
-def _load(key: str):
-    """The stored ``Exported`` of ``key``, or ``None``."""
-    store = _store()
-    if store is None:
-        return None
-    path = store / f"{key}.exp"
-    if not path.exists() or (store / f"{key}.bad").exists():
-        return None
-    try:
-        return pickle.loads(path.read_bytes())
-    except Exception:  # noqa: BLE001 - stale or unreadable: trace again
-        return None
+#: Seconds spent recording each stored program's dependencies (for benchmarks).
+DEPS_S: list[float] = []
+#: Names of programs traced but not stored: what their trace ran could not be pinned
+#: down (:func:`hdid._problems._program_deps.record`).
+UNSTORED: list[str] = []
 
 
 def phase_reporter(progress):
