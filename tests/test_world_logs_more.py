@@ -98,9 +98,6 @@ def _lvm(path, channel, unit_label):
     return path
 
 
-@pytest.mark.xfail(strict=True, reason="reader (HW, src/hdid/_log/_lvm.py): an .lvm channel header's "
-                   "Y_Unit_Label (Deg) is ignored, the degrees are read as radians (HV9 log00: the fit "
-                   "then says UNITS and asks for a header 'theta [deg]' the file has no place for)")
 def test_an_lvm_channel_in_degrees_by_its_y_unit_label(tmp_path):
     log = read_log(_lvm(tmp_path / "deg.lvm", "Position", "Deg"))
     _, theta = _swing()
@@ -114,6 +111,14 @@ def test_an_lvm_channel_with_its_unit_in_its_name_reads_in_radians(tmp_path):
     log = read_log(_lvm(tmp_path / "deg.lvm", "Position (deg)", "Deg"))
     _, theta = _swing()
     np.testing.assert_allclose(log.runs[0].theta, theta, rtol=0, atol=np.radians(1e-6))
+
+
+def test_an_lvm_label_that_is_no_angle_unit_is_left_out(tmp_path):
+    """Guard: a Y_Unit_Label hdid does not convert (a DAQ's 'Volts') leaves the channel as
+    written, so the file reads as before the label was used (the numbers as they stand)."""
+    log = read_log(_lvm(tmp_path / "v.lvm", "Position", "Volts"))
+    _, theta = _swing()
+    np.testing.assert_allclose(log.runs[0].theta, np.round(np.degrees(theta), 6), rtol=0, atol=1e-12)
 
 
 # An analog encoder (a potentiometer on the motor shaft) read by a slow 12-bit ADC: noise

@@ -10,9 +10,17 @@ is then ``X0 + k·Delta_X``, which this module writes into the text before it is
 names as a log written after the one before; a later segment's channel header becomes
 blank lines, keeping the file's line numbers). A file whose rows carry their times is left
 as it is.
+
+A channel's unit is LabVIEW's ``Y_Unit_Label`` (one cell per channel, e.g. ``Deg``), not part
+of its name (the DAQ task's ``Position``): where the name carries no unit of its own and the
+label is a unit hdid knows, the name gets it in brackets (``Position [Deg]``), so that the
+reader converts the channel as it would ``Position [deg]``. Other labels (``Volts``) are
+left out, as before.
 """
 
 from __future__ import annotations
+
+from .. import _units
 
 _MAGIC = "LabVIEW Measurement"
 _END = "***End_of_Header***"
@@ -23,6 +31,27 @@ def _number(cell: str, comma: bool) -> float | None:
         return float(cell.replace(",", ".") if comma else cell)
     except ValueError:
         return None
+
+
+def _known(label: str) -> bool:
+    """Whether a ``Y_Unit_Label`` is a unit some column of hdid converts."""
+    unit = _units._normal(label)
+    return bool(unit) and unit != "-" and any(unit in table for table in _units.UNITS.values())
+
+
+def _labelled(cells: list[str], labels: list[str]) -> list[str]:
+    """The names row with each channel's known ``Y_Unit_Label`` in brackets after its name."""
+    out, j = [], 0
+    for cell in cells:
+        name = cell.strip()
+        if name in ("X_Value", "Comment") or not name:
+            out.append(cell)
+            continue
+        label = labels[j].strip() if j < len(labels) else ""
+        j += 1
+        has_unit = _units.split(name)[1] is not None
+        out.append(f"{name} [{label}]" if label and not has_unit and _known(label) else cell)
+    return out
 
 
 def fill_lvm_time(text: str) -> str:
@@ -36,6 +65,7 @@ def fill_lvm_time(text: str) -> str:
     fill = None  # "empty": X_Value cells to fill; "absent": a column to add
     k = 0
     seen_names = in_block = False
+    labels: list[str] = []  # the segment's Y_Unit_Label cells, one per channel
     for i, line in enumerate(lines):
         cells = line.rstrip("\r").split(sep)
         head = cells[0].strip()
@@ -52,13 +82,20 @@ def fill_lvm_time(text: str) -> str:
             x0 = _number(cells[1].strip(), comma)
         elif head == "Delta_X" and len(cells) > 1:
             dx = _number(cells[1].strip(), comma)
+        elif head == "Y_Unit_Label":
+            labels = cells[1:]
         elif head == _END:
-            names_next = x0 is not None and dx is not None
+            names_next = (x0 is not None and dx is not None) or bool(labels)
             fill = None
         elif names_next and line.strip():
             names_next, seen_names = False, True
             k = 0
-            if head == "X_Value":
+            if labels:
+                cells = _labelled(cells, labels)
+                lines[i] = sep.join(cells)
+            if x0 is None or dx is None:
+                pass  # the rows carry their times (or none to fill)
+            elif head == "X_Value":
                 fill = "empty"
             elif not any(c.strip() == "X_Value" for c in cells):
                 fill = "absent"
