@@ -81,10 +81,13 @@ class Problem:
 
         self.model = jax.jit(model)
         self.f = jax.jit(resid)
-        self.jac = jax.jit(lambda x: jnp.nan_to_num(jax.jacfwd(resid)(x), nan=0.0, posinf=0.0, neginf=0.0))
+        self.jac = jax.jit(lambda x: jnp.clip(jnp.nan_to_num(jax.jacfwd(resid)(x), nan=0.0, posinf=0.0,
+                                                             neginf=0.0), -1e6, 1e6))
 
     def bounds(self):
-        rot_lo, rot_hi = [1e-4, 0.0, 0.0][:self.nr], [0.9 * self.inertia, 0.5, 2.0][:self.nr]
+        # the arm keeps at least its point mass's m·l² (known geometry)
+        arm = self.ref["mass_kg"] * self.ref["length_m"] ** 2
+        rot_lo, rot_hi = [1e-4, 0.0, 0.0][:self.nr], [self.inertia - arm, 0.5, 2.0][:self.nr]
         tr = np.array([r["tr"] for r in self.runs])
         lo = np.r_[[0.05, 0, 0, 1e-3, 0.5, 0], rot_lo, [-3] * self.R, tr - 0.05]
         hi = np.r_[[20, 1e5, 20, 1e3, 4, 20], rot_hi, [3] * self.R, tr + 0.05]

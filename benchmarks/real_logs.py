@@ -134,8 +134,9 @@ def _sts_row(k, v, add, res, age, wall, load):
 
 def sts_rotor() -> list[dict]:
     """The STS3215 drops by :mod:`_sts_rotor`: one inertia, the rotor behind free play with its
-    three constants free per set-up, then held at their medians over the eight set-ups (one
-    servo: one rotor, one gap, one rotor friction). Starts: the stored hdid base fits' law."""
+    three constants free per set-up (one start: J_r = I/4, b = 0.02 rad, τ_r = τ_s/4), then held at
+    their medians over the eight set-ups (one servo: one rotor, one gap, one rotor friction). Starts:
+    the stored hdid base fits' law."""
     import statistics
 
     import numpy as np
@@ -168,8 +169,8 @@ def sts_rotor() -> list[dict]:
         row(k, "one inertia", one, xb, t0, load)
         load, t0 = os.getloadavg()[0], time.perf_counter()
         free = Problem(real, k, "free")
-        fits = [free.fit(np.r_[xb[:6], 0.25 * free.inertia, b, 0.25 * xb[2], xb[6:]]) for b in (0.01, 0.05)]
-        found[k] = row(k, "rotor, free", free, min(fits, key=lambda x: np.sum(free.residual(x) ** 2)), t0, load)
+        found[k] = row(k, "rotor, free", free, free.fit(np.r_[xb[:6], 0.25 * free.inertia, 0.02, 0.25 * xb[2], xb[6:]]),
+                       t0, load)
     held = [statistics.median(float(x[6 + i]) for x in found.values()) for i in range(3)]
     for k, x in found.items():
         load, t0 = os.getloadavg()[0], time.perf_counter()
