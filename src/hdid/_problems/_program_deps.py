@@ -33,6 +33,7 @@ program warm.
 from __future__ import annotations
 
 import ast
+import dataclasses
 import enum
 import hashlib
 import importlib
@@ -99,8 +100,14 @@ class Doubt(Exception):
 
 
 def _installed(path: str) -> bool:
-    return (path.startswith("<frozen ") or path.startswith(_INSTALLED)
-            or f"{os.sep}site-packages{os.sep}" in path or f"{os.sep}dist-packages{os.sep}" in path)
+    """Whether ``path`` is an installed package's (or the standard library's) file, which
+    the packages' versions stand for; hdid's own files never are (an install of another
+    build under the same version must not reuse programs)."""
+    if not (path.startswith(("<frozen ", *_INSTALLED)) or f"{os.sep}site-packages{os.sep}" in path
+            or f"{os.sep}dist-packages{os.sep}" in path):
+        return False
+    return (path.startswith("<frozen ") or "hdid" not in path
+            or not _name(path).startswith(_HDID))
 
 
 def _name(path: str) -> str:
@@ -286,15 +293,28 @@ def _plain(v, depth: int = 0):
     if isinstance(v, enum.Enum):
         return f"{type(v).__qualname__}.{v.name}"
     if isinstance(v, np.ndarray):
+        if v.dtype.hasobject:
+            return None
         return f"{v.dtype}{v.shape}{hashlib.sha256(np.ascontiguousarray(v).tobytes()).hexdigest()}"
     if isinstance(v, np.generic):
         return f"{v.dtype}:{v!r}"
     if isinstance(v, type):
         return f"{v.__module__}.{v.__qualname__}"
+    if dataclasses.is_dataclass(v) and not isinstance(v, type) and getattr(
+            getattr(v, "__dataclass_params__", None), "frozen", False):  # (equinox modules)
+        items = [f"{f.name}={_plain(getattr(v, f.name, None), depth + 1) or '?'}"
+                 for f in dataclasses.fields(v)]
+        return f"{type(v).__module__}.{type(v).__qualname__}({','.join(items)})"
+    if type(v).__module__.startswith("jax") and hasattr(v, "shape") and hasattr(v, "dtype"):
+        try:
+            return _plain(np.asarray(v), depth)
+        except Exception:  # noqa: BLE001 - not concrete
+            return None
     if isinstance(v, (tuple, frozenset)):
         items = [_plain(x, depth + 1) for x in v]
         items = ["?" if x is None else x for x in items]
-        return f"{type(v).__name__}({','.join(sorted(items) if isinstance(v, frozenset) else items)})"
+        items = sorted(items) if isinstance(v, frozenset) else items
+        return f"{type(v).__name__}({','.join(items)})"
     return None
 
 

@@ -42,8 +42,9 @@ VERSIONED = ("jax", "jaxlib", "equinox", "optimistix", "lineax", "jaxtyping", "n
 def _salt() -> str:
     """What every program depends on besides its own trace: the store's :data:`FORMAT`,
     Python's and the :data:`VERSIONED` packages' versions, the backend and equinox's
-    error mode (``EQX_ON_ERROR``; float64 is in each key: a thread-local switch). hdid's source is not here: each program
-    records the files its trace ran (:mod:`hdid._problems._program_deps`)."""
+    error mode (``EQX_ON_ERROR``; float64 is in each key: a thread-local switch). hdid's
+    source is not here: each program records the files its trace ran
+    (:mod:`hdid._problems._program_deps`)."""
     global _SALT
     if _SALT is None:
         from importlib import metadata

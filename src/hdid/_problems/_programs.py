@@ -6,9 +6,10 @@ first — for the stick-exact simulator inside a Levenberg–Marquardt loop that
 per model structure on a shared 2-core machine, most of a warm ``hdid diagnose``.
 :func:`call` keys a program by what determines it — a name, the arguments' tree
 structure (which holds every static field: model structure, free parameters, layout),
-the shapes and dtypes of their arrays, and the versions of JAX, its backend and the
-libraries traced (:func:`_salt`) — and keeps the traced and lowered program (a :mod:`jax.export`
-``Exported``: StableHLO plus its calling convention) under ``<cache>/programs``, with a record of the source its trace ran
+the shapes and dtypes of their arrays, float64, and the versions of JAX, its backend and
+the libraries traced (:func:`_salt`) — and keeps the traced and lowered program (a
+:mod:`jax.export` ``Exported``: StableHLO plus its calling convention) under
+``<cache>/programs`` with a record of the source its trace ran
 (:mod:`hdid._problems._program_deps`: the files, their constants, other packages'
 versions). A later process uses it only where all of that is unchanged, so an edit to
 code no trace ran leaves the store warm and an edit to code a trace ran misses. A later
