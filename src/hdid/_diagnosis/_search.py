@@ -264,7 +264,7 @@ def driver_refits(s: Search, by_key, results: list[CandidateResult], current, fc
 
 def corner_restarts(s: Search, by_key, results: list[CandidateResult], current, fcheck,
                     strong_dbic: float) -> list[CandidateResult]:
-    """A strong richer form whose optimum sits at its corner that is a strong simpler one
+    """A strong richer form whose optimum sits at its corner that is a simpler one
     (:mod:`hdid._diagnosis._nesting`: soft wind-up with ``K1`` at zero, a free play) while
     the simpler one's refits ended higher: the simpler one refitted from that corner
     mapped back (:func:`hdid._diagnosis._nesting.simple_values`, the shared parameters and
@@ -276,12 +276,12 @@ def corner_restarts(s: Search, by_key, results: list[CandidateResult], current, 
     from .._fitting import _refit
     from ._nesting import NESTINGS, at_corner, simple_values
 
-    strong = {c.key: c for c in results if c.error is None and c.delta_bic < strong_dbic
-              and c.fit is not None and c.fit.finite}
+    fitted = {c.key: c for c in results if c.error is None and c.fit is not None and c.fit.finite}
     changed = False
-    for n in NESTINGS:
-        rich, simple = strong.get(n.rich), strong.get(n.simple)
-        if rich is None or simple is None or simple.fit.cost <= rich.fit.cost:
+    for n in NESTINGS:  # the simpler one strong or not: its refits may have missed the basin
+        rich, simple = fitted.get(n.rich), fitted.get(n.simple)
+        if (rich is None or simple is None or not rich.delta_bic < strong_dbic
+                or simple.fit.cost <= rich.fit.cost):
             continue
         if at_corner(rich.fit.result(), simple.values, n) is None:
             continue
