@@ -144,6 +144,28 @@ def test_tau_that_grows_with_the_chain_says_a_longer_chain_will_not_converge():
     assert tau_outlasts_chain([(2100, 500.0), (3000, 900.0)]) is None
 
 
+def test_burn_in_lets_the_de_step_grow_past_the_cap_that_left_walkers_packed():
+    """``_tune`` scales the DE step by acceptance / 0.25, at most ×1.5 a burn-in stage. On SBC
+    paper logs 36008 and 36003 the DE move still accepted 0.52 / 0.48 after 4 stages (step at
+    its ×1.5⁴ ≈ 5 cap, the walkers packed along a ridge, τ 25 600 / 3 700 steps); the default
+    burn-in's stages must let a step that keeps accepting twice the target grow beyond that
+    cap (8 stages: ×25.6; there the two logs' DE accepted 0.27 / 0.35 and τ fell to 3 400 / 477)."""
+    import math
+
+    import emcee
+
+    from hdid._posterior.ensemble import BURN_IN_STAGES, _Counted, _tune
+
+    D = 18
+    de = emcee.moves.DEMove()
+    counted = [(_Counted(de, "DEMove"), 1.0)]
+    for _ in range(BURN_IN_STAGES):
+        counted[0][0].proposed, counted[0][0].accepted = 1000, 500  # twice the 0.25 target
+        _tune(counted, np.zeros((10, D)), D)
+    growth = de.gamma0 / (2.38 / math.sqrt(2 * D))
+    assert growth > 1.5**4 * 1.01
+
+
 def test_public_api():
     # hdid's entry points run in float64 (hdid._config.float64): the same function inside
     assert hdid.sample_posterior.__wrapped__ is sample_posterior

@@ -71,11 +71,11 @@ def sample_posterior(
     Burn-in (discarded): ``burn_in`` steps of differential evolution plus independence
     Metropolis–Hastings from a t-mixture over the optima (:class:`MixtureProposal`),
     refitted after each of ``BURN_IN_STAGES`` stages; the kept chain uses the last mixture,
-    fixed. Default (:func:`~hdid._posterior.ensemble.default_burn_in`): ``BURN_IN`` = 4000
+    fixed. Default (:func:`~hdid._posterior.ensemble.default_burn_in`): ``BURN_IN`` = 8000
     steps for a chain grown until converged — the walkers start at the optima's Laplace
     width, narrower than the posterior along the friction law's ridge, and need that long
     to spread over it (docs/decisions/emcee-burn-in.md) — and ``n_steps`` clipped to
-    [400, 4000] for a chain of fixed length. (A normalizing flow fitted to the burn-in draws in its place was measured and
+    [400, 8000] for a chain of fixed length. (A normalizing flow fitted to the burn-in draws in its place was measured and
     lost: docs/decisions/normalizing-flow.md; so did emcee in the latent space of a flow
     fitted to an SMC pilot, and that flow as the independence move, under the physical
     priors: the same record.)

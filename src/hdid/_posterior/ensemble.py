@@ -41,16 +41,22 @@ from .moves import (
 from .errors import PosteriorError, walkers_enough
 from .result import BAND, PosteriorResult, _RunNames
 
-#: The burn-in is run in this many stages, the proposal adapted after each.
-BURN_IN_STAGES = 4
+#: The burn-in is run in this many stages, the proposal adapted after each. The DE step may
+#: grow ×1.5 a stage (:func:`_tune`): with 4 stages (×5 at most) SBC paper logs 36008 and
+#: 36003 kept DE acceptance at 0.52 / 0.48 in the kept chain (walkers packed along the
+#: Coulomb–viscous ridge), τ of tau_c/c_v 25 600 / 3 700, not converged in 40 000 steps; with
+#: 8 stages of 1000 steps: acceptance 0.27 / 0.35, τ 3 400 / 477, 36003 converged at 26 550
+#: steps (benchmarks/results/posterior_convergence.md).
+BURN_IN_STAGES = 8
 #: Default burn-in [steps] of a chain grown until it converges. The walkers start at the
 #: optima's Laplace width, narrower than the posterior along the Stribeck ridge: after 400
 #: steps the shipped paper log's ensemble spread in v_s and delta was 0.63-0.65 of the kept
 #: chain's, and the kept chain spent its first thousands of steps widening (τ of tau_c
 #: 843-1076 on 10 000 steps after 400; 321-363 on 6 400-8 400 after 2 000-4 000; R-hat
 #: lower on all 4 pairs; 30 000 kept steps: τ 636 after 4 000, 680 after 8 000):
-#: docs/decisions/emcee-burn-in.md.
-BURN_IN = 4000
+#: docs/decisions/emcee-burn-in.md. 8000 since the stages doubled (:data:`BURN_IN_STAGES`),
+#: each stage as long as before: ≈ +10 s of CPU on a paper log.
+BURN_IN = 8000
 #: Burn-in of a chain of fixed length (``n_steps``, a quick look): ``n_steps`` itself
 #: between this and :data:`BURN_IN`.
 SHORT_BURN_IN = 400
