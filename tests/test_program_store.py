@@ -171,8 +171,30 @@ def test_a_file_written_after_the_process_started_is_not_trusted(pkg, monkeypatc
     a = importlib.import_module("storepkg.a")
     n = len(_programs.UNSTORED)
     how, _ = _how("f", a.f, np.ones(2))
-    assert how == "traced" and _programs.UNSTORED[n:] == ["f"]
+    assert how == "traced" and [u[0] for u in _programs.UNSTORED[n:]] == ["f"]
     assert not list(_programs._store().glob("*.exp"))
+
+    # files hdid noted as read after a moment (the command line's --effect-file) are
+    # trusted until modified after it
+    _new_process(monkeypatch)
+    monkeypatch.setattr(_program_deps, "T0", time.time() - 60.0)
+    monkeypatch.setattr(_program_deps, "LOADED", {})
+    for m in [m for m in sys.modules if m.split(".")[0] == "storepkg"]:
+        del sys.modules[m]
+    before = time.time()
+    a = importlib.import_module("storepkg.a")
+    for f in pkg.iterdir():
+        _program_deps.loaded(f, before)
+    assert _how("f", a.f, np.ones(2))[0] == "traced"
+    assert len(list(_programs._store().glob("*.exp"))) == 1
+    _new_process(monkeypatch)
+    monkeypatch.setattr(_program_deps, "T0", time.time() - 60.0)
+    assert _how("f", a.f, np.ones(2))[0] == "stored"
+    time.sleep(0.01)
+    (pkg / "a.py").write_text((pkg / "a.py").read_text() + "# edited after it was read\n")
+    _new_process(monkeypatch)
+    monkeypatch.setattr(_program_deps, "T0", time.time() - 60.0)
+    assert _how("f", a.f, np.ones(2))[0] == "traced"
 
 
 TINY = textwrap.dedent("""\

@@ -95,6 +95,22 @@ def forget() -> None:
             cache.clear()
 
 
+#: Files that hdid itself executed after this process started (a user's effect file), by
+#: path: a time taken before the file was read. Modified after it: in doubt.
+LOADED: dict[str, float] = {}
+
+
+def loaded(path, before: float) -> None:
+    """Note that the file at ``path`` was read and executed after ``before`` (a
+    ``time.time()`` taken before reading it): its code is the file's while the file is
+    not modified after that."""
+    LOADED[str(Path(path).resolve())] = before
+
+
+#: Why the last :func:`record` was in doubt (for :data:`hdid._problems._programs.UNSTORED`).
+LAST_DOUBT = ""
+
+
 class Doubt(Exception):
     """Something the trace used cannot be pinned down: the program is not stored."""
 
@@ -130,7 +146,7 @@ def file_hash(name: str) -> str | None:
         st = path.stat()
     except OSError:
         return None
-    if st.st_mtime > T0:
+    if st.st_mtime > max(T0, LOADED.get(str(path), T0)):
         return None
     stamp = (st.st_size, st.st_mtime_ns, st.st_ino)
     with _lock:
@@ -389,11 +405,14 @@ def record(files: set[str] | None) -> dict | None:
     (:mod:`hdid._problems._program_trace`): ``{"files": {name: sha256}, "values":
     {module: sha256}, "dists": [...]}``, or ``None`` where something is in doubt (not
     stored)."""
+    global LAST_DOUBT
     if files is None:
+        LAST_DOUBT = "an equation without a traceback"
         return None
     try:
         return _record(files)
-    except Doubt:
+    except Doubt as e:
+        LAST_DOUBT = str(e)
         return None
 
 

@@ -327,7 +327,7 @@ def _export(name: str, key: str, fn, treedef, static, leaves):
                                else files | _program_trace.object_files([fn, *args]))
     DEPS_S.append(time.perf_counter() - t0)
     if rec is None:  # in doubt: this process only
-        UNSTORED.append(name)
+        UNSTORED.append((name, _program_deps.LAST_DOUBT))
         return exported, None
     text = json.dumps(rec, sort_keys=True)
     vid = hashlib.sha256(text.encode()).hexdigest()[:16]
@@ -345,8 +345,8 @@ def _export(name: str, key: str, fn, treedef, static, leaves):
 
 #: Seconds spent recording each stored program's dependencies (for benchmarks).
 DEPS_S: list[float] = []
-#: Names of programs traced but not stored: what their trace ran could not be pinned
-#: down (:func:`hdid._problems._program_deps.record`).
+#: ``(name, why)`` of programs traced but not stored: what their trace ran could not be
+#: pinned down (:func:`hdid._problems._program_deps.record`).
 UNSTORED: list[str] = []
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import sys
+import time
 from pathlib import Path
 
 import click
@@ -440,10 +441,14 @@ def _load_effect_file(path: Path, base):
         raise _Fail(f"--effect-file {path}: no such file")
     spec = importlib.util.spec_from_file_location(f"hdid_user_effect_{path.stem}", path)
     module = importlib.util.module_from_spec(spec)
+    before = time.time()  # (the program store trusts the file unless modified after this)
     try:
         spec.loader.exec_module(module)
     except Exception as exc:  # a user's file: report any failure in one line
         raise _Fail(f"--effect-file {path}: {type(exc).__name__}: {exc}") from None
+    from .._problems import _program_deps
+
+    _program_deps.loaded(path, before)
     found = [v for v in vars(module).values() if isinstance(v, base)]
     if not found:
         raise _Fail(
