@@ -248,3 +248,35 @@ def test_hdid_edits_outside_the_trace_keep_the_store_warm(tmp_path):
     with open(src / "hdid" / "_models" / "_transforms.py", "a") as f:
         f.write("\n# an edit to a file the trace ran\n")
     assert run() == first
+
+
+def test_a_recorded_file_left_in_place_does_not_stand_for_another_copy(tmp_path, monkeypatch):
+    """Two copies of one effect file (a test's temporary folders, say): a program traced
+    with the first copy's class must not be used for the second's, even while the first
+    file still exists unchanged — the second copy's code may differ."""
+    import importlib.util
+
+    monkeypatch.setenv("HDID_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.delenv("HDID_PROGRAM_STORE", raising=False)
+    monkeypatch.delenv("HDID_NO_CACHE", raising=False)
+
+    def load(folder, factor):
+        folder.mkdir()
+        path = folder / "gain.py"
+        path.write_text(f"def gain(x):\n    return x * {factor}\n")
+        spec = importlib.util.spec_from_file_location("gain_effect", path)
+        module = importlib.util.module_from_spec(spec)
+        before = time.time()
+        spec.loader.exec_module(module)  # (as the command line's --effect-file)
+        _program_deps.loaded(path, before)
+        return module.gain
+
+    _new_process(monkeypatch)
+    monkeypatch.setattr(_program_deps, "LOADED", {})
+    x = np.arange(3.0)
+    how, out = _how("gain", load(tmp_path / "one", 2.0), x)
+    assert how == "traced" and np.allclose(out, 2.0 * x)
+    _new_process(monkeypatch)
+    monkeypatch.setattr(_program_deps, "LOADED", {})
+    how, out = _how("gain", load(tmp_path / "two", 3.0), x)
+    assert how == "traced" and np.allclose(out, 3.0 * x)

@@ -449,12 +449,23 @@ def _record(files: set[str]) -> dict:
             "dists": sorted(dists)}
 
 
-def matches(rec: dict) -> bool:
-    """Whether everything ``rec`` (:func:`record`) recorded is unchanged in this process."""
+def matches(rec: dict, given=None) -> bool:
+    """Whether everything ``rec`` (:func:`record`) recorded is unchanged in this process.
+    A file outside hdid must also be the one this process's code comes from: a loaded
+    module's, one hdid read (:func:`loaded`), or one defining what the call is given
+    (``given()``: :func:`hdid._problems._program_trace.object_files` of the function and
+    its arguments) — a recorded file left where it was does not stand for another file
+    of the same classes elsewhere."""
     try:
+        current = None
         for name, digest in rec["files"].items():
             if file_hash(name) != digest:
                 return False
+            if not name.startswith(_HDID) and name not in LOADED and _module_of(name) is None:
+                if current is None:
+                    current = {str(Path(f).resolve()) for f in (given() if given else ())}
+                if name not in current:
+                    return False
         for mod_name, digest in rec["values"].items():
             path = _module_file(mod_name)
             if path is None or _values(mod_name, path) != digest:

@@ -188,7 +188,7 @@ def prefetch(name: str, fn: Callable, *args) -> bool:
         return False
     if key in _LOADED or key in _PENDING:
         return False
-    stem = _find(key)
+    stem = _find(key, lambda: _program_trace.object_files([fn, *args]))
     if stem is None:
         return False
     specs = [jax.ShapeDtypeStruct(x.shape, x.dtype, weak_type=bool(getattr(x, "weak_type", False)))
@@ -259,7 +259,8 @@ def _prepare(name, key, fn, treedef, static, leaves):
     """A compiled program for ``key`` and its first result."""
     w0 = time.time()  # (the clock of JAX's compile events, for hdid._fitting._vfit's union)
     t0 = time.perf_counter()
-    stem = _find(key)
+    stem = _find(key, lambda: _program_trace.object_files(
+        [fn, *eqx.combine(jax.tree_util.tree_unflatten(treedef, leaves), static)]))
     exported = _load(stem) if stem is not None else None
     how = "stored" if exported is not None else "traced"
     if exported is None:
