@@ -280,3 +280,8 @@ def test_a_recorded_file_left_in_place_does_not_stand_for_another_copy(tmp_path,
     monkeypatch.setattr(_program_deps, "LOADED", {})
     how, out = _how("gain", load(tmp_path / "two", 3.0), x)
     assert how == "traced" and np.allclose(out, 3.0 * x)
+    # a third copy, byte for byte the first: the first's program serves it
+    _new_process(monkeypatch)
+    monkeypatch.setattr(_program_deps, "LOADED", {})
+    how, out = _how("gain", load(tmp_path / "three", 2.0), x)
+    assert how == "stored" and np.allclose(out, 2.0 * x)

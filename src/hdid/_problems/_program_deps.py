@@ -454,8 +454,8 @@ def matches(rec: dict, given=None) -> bool:
     A file outside hdid must also be the one this process's code comes from: a loaded
     module's, one hdid read (:func:`loaded`), or one defining what the call is given
     (``given()``: :func:`hdid._problems._program_trace.object_files` of the function and
-    its arguments) — a recorded file left where it was does not stand for another file
-    of the same classes elsewhere."""
+    its arguments), or a copy of it byte for byte — a recorded file left where it was
+    does not stand for another file of the same classes elsewhere."""
     try:
         current = None
         for name, digest in rec["files"].items():
@@ -464,7 +464,8 @@ def matches(rec: dict, given=None) -> bool:
             if not name.startswith(_HDID) and name not in LOADED and _module_of(name) is None:
                 if current is None:
                     current = {str(Path(f).resolve()) for f in (given() if given else ())}
-                if name not in current:
+                if name not in current and not any(  # (or a copy with the same bytes)
+                        not f.startswith(_HDID) and file_hash(f) == digest for f in current):
                     return False
         for mod_name, digest in rec["values"].items():
             path = _module_file(mod_name)
