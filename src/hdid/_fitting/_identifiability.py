@@ -112,6 +112,7 @@ def analyse(
         resolution_note=getattr(prep, "resolution_note", None),
         time_print_unit=getattr(prep, "time_print_unit", None),
         timing_floor_rad=prep.floor if getattr(prep, "time_scale", None) is not None else None,
+        print_rounding_rad=getattr(prep, "print_rms", 0.0) or None,
         sample_period=prep.sample_period,
         n_effective=prep.n_effective,
         n_unknowns=problem.n_unknowns,

@@ -51,16 +51,23 @@ def residual_warnings(prep: Prepared, rms: float, n_unknowns: int = 0) -> list[s
     reached the floor (:func:`floor_test`: χ² of the log's effective readings on their
     degrees of freedom after the fit's ``n_unknowns``, upper tail below
     :data:`~hdid._fitting._limits.FLOOR_TAIL`); none at the floor."""
-    # (the floor: the step's rounding, and the time stamps' where they are rounded instants)
+    # (the floor: the step's rounding, the readings' print rounding where the print unit is
+    # within a few steps, and the time stamps' where they are rounded instants)
     out, floor = [], float(getattr(prep, "floor", prep.resolution / math.sqrt(12)))
-    timed = getattr(prep, "time_scale", None) is not None
+    parts = ["step"] + (["print"] if getattr(prep, "print_rms", 0.0) else []) + (
+        ["time stamps"] if getattr(prep, "time_scale", None) is not None else [])
+    timed = len(parts) > 1
+    rounding = ", ".join(parts[:-1]) + f" and {parts[-1]}"
+    whose = {"step": "the encoder's", "print": "the readings' print",
+             "time stamps": "the time stamps'"}
+    whose = ", ".join(whose[k] for k in parts[:-1]) + f" and {whose[parts[-1]]}"
     if wrong_step := (step_against_readings(prep.theta, prep.lengths, prep.resolution, rms,
                                             RESIDUAL_FLOOR_FACTOR) if prep.quantized else None):
         out.append(wrong_step)
     elif math.isfinite(rms) and rms > RESIDUAL_FLOOR_FACTOR * floor:
         out.append(  # (a noise model's resolution is σ·√12, σ from the still readings)
             f"the RMS residual is {rms / floor:.3g}× the "
-            + (("floor of the encoder's and the time stamps' rounding" if timed else
+            + ((f"floor of {whose} rounding" if timed else
                 "quantization floor") if prep.quantized else "readings' noise")
             + ": the model does not describe this log, and the standard "
             "errors (which assume it does) are not trustworthy — a poorer basin (more "
@@ -72,7 +79,7 @@ def residual_warnings(prep: Prepared, rms: float, n_unknowns: int = 0) -> list[s
         chi2, nu, p, above = test
         out.append(
             f"the RMS residual is {rms / floor:.3g}× the "
-            f"{'rounding (step and time stamps)' if timed else 'quantization'} floor, above the "
+            f"{f'rounding ({rounding})' if timed else 'quantization'} floor, above the "
             f"{above:.3g}× that rounding alone leaves: χ² {chi2:.4g} on ν {nu:.0f} "
             f"({prep.n_effective:.0f} effective readings, {n_unknowns} unknowns), p {p:.2g} "
             f"(tail {FLOOR_TAIL:g}): the fit has not reached the floor — a poorer basin (more "

@@ -20,10 +20,11 @@ window (two half units) holds every printed level (and the search starts 5 % abo
 where a wrong grid still fails a level with a chance of ~1/20). A printed level is a
 multiple of its print unit, so the chance a wrong grid passes it is the share of that
 lattice the window holds, not ``2t/q`` (:mod:`._lattice`: at ``q = 3p`` every level
-difference passes). Between 2 and ~7 print units a step the readings' rounding to the
-print unit adds ``p²/12`` to the quantization variance ``q²/12`` (1/4 of it at 2 units,
-12 % on the floor ``q/√12``; 1/15, 3 %, at 3.83): the readings' floor is
-``√(q² + p²)/√12`` with ``Log.resolution`` and ``Log.print_unit``.
+difference passes). Between 1.1 and ~7 print units a step the readings' rounding to the
+print unit adds about ``p²/12`` to the quantization variance ``q²/12`` (1/4 of it at 2
+units, 12 % on the floor ``q/√12``; 1/15, 3 %, at 3.83): the fit measures it on the
+lattice of ``Log.resolution`` printed to ``Log.print_unit``
+(:mod:`hdid._simulation._print_rounding`).
 """
 
 from __future__ import annotations
@@ -167,7 +168,7 @@ def find_step(theta, print_unit=None, starts=None, *, unit_name: str = "rad") ->
         return found
     note = None if rival is None else (
         f"the readings fit an encoder step of {q:.4g} {unit_name} and one of {rival:.4g} "
-        f"{unit_name} ({q / found.print_unit:.3g} and {rival / found.print_unit:.3g} print "
+        f"{unit_name} ({q / found.print_unit:.4g} and {rival / found.print_unit:.4g} print "
         f"units) about equally: {q:.4g} is taken; the quantization floor may be off by "
         f"{abs(rival / q - 1.0):.1%}")
     return StepFinding(q, found.print_unit, note)

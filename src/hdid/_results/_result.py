@@ -67,6 +67,9 @@ class FitResult:
     #: the floor with that rounding in it [rad] (:mod:`hdid._simulation._timing`)
     time_print_unit: float | None = None
     timing_floor_rad: float | None = None
+    #: RMS print error of the encoder's levels [rad] where the readings are printed to a
+    #: unit within a few steps, in the floor then (:mod:`hdid._simulation._print_rounding`)
+    print_rounding_rad: float | None = None
 
     # -- accessors --------------------------------------------------------------------
     @property
@@ -102,7 +105,7 @@ class FitResult:
         reaches then: :attr:`hdid._simulation._prepare.Prepared.floor`)."""
         if self.timing_floor_rad:
             return self.timing_floor_rad
-        return self.resolution_rad / math.sqrt(12)
+        return math.sqrt(self.resolution_rad**2 / 12 + (self.print_rounding_rad or 0.0) ** 2)
 
     def predict(self, times=None) -> np.ndarray:
         """Model encoder readings per run at the logged times, or at ``times`` ``(R, T')``."""
@@ -168,6 +171,7 @@ class FitResult:
             # (only where the stamps' rounding is in the floor: hdid._simulation._timing)
             **({"time_print_unit": self.time_print_unit,
                 "timing_floor_rad": self.timing_floor_rad} if self.timing_floor_rad else {}),
+            **({"print_rounding_rad": self.print_rounding_rad} if self.print_rounding_rad else {}),
             "quantization_floor_rad": self.quantization_floor_rad,
             "stick_band_halfwidth_rad": self.stick_band_halfwidth_rad,
             "stick_band_halfwidth_std_rad": self.derived["stick_band_halfwidth_rad"][1],
@@ -233,8 +237,11 @@ class FitResult:
                 f"RMS residual {self.rms_residual_rad:.3e} rad = "
                 f"{self.rms_residual_rad / self.resolution_rad:.3f} counts "
                 + (f"(floor {floor:.3e} rad = {floor / self.resolution_rad:.3g} counts: the "
-                   f"step's rounding and the time stamps' to {self.time_print_unit:.3g} s)"
-                   if self.timing_floor_rad else
+                   "step's rounding"
+                   + (" and the readings' print rounding" if self.print_rounding_rad else "")
+                   + (f" and the time stamps' to {self.time_print_unit:.3g} s"
+                      if self.timing_floor_rad else "") + ")"
+                   if self.timing_floor_rad or self.print_rounding_rad else
                    f"(quantization floor {floor:.3e} rad = 0.289 counts)")
             )
         lo = self.derived["stick_band_lower_rad"][0]

@@ -15,6 +15,7 @@ from .._errors import LogError
 from .._log import Log
 from ._noise import grid_noise, noise_sigma
 from ._search_weight import FULL_WEIGHT_TAIL, search_weight as search_weight  # (re-exported)
+from ._print_rounding import print_variance
 from ._timing import time_scales
 
 #: Shortest bracket [s] allowed before the last sample at the hold reading for the
@@ -121,6 +122,9 @@ class Prepared:
     #: to ``time_print_unit`` [s] (:mod:`._timing`; ``weight`` divides by it), else None
     time_scale: np.ndarray = None
     time_print_unit: float | None = None
+    #: RMS print error of the encoder's levels [log units] where the readings' print unit
+    #: is within a few steps (:mod:`._print_rounding`; ``weight`` divides by it too), else 0
+    print_rms: float = 0.0
 
     @property
     def n_runs(self) -> int:
@@ -131,18 +135,28 @@ class Prepared:
         return len(self.setup_names)
 
     @property
+    def error_scale(self) -> np.ndarray | None:
+        """``(R, T)`` each reading's error over ``step/√12``, ``√(s_t² + 12·print_rms²/step²)``
+        (``s_t`` the stamps' :attr:`time_scale`), or None where both are absent."""
+        extra = 12.0 * (self.print_rms / self.resolution) ** 2 if self.print_rms else 0.0
+        if self.time_scale is None and not extra:
+            return None
+        ts = np.ones_like(self.weight) if self.time_scale is None else self.time_scale
+        return np.sqrt(ts**2 + extra)
+
+    @property
     def n_effective(self) -> float:
-        """Effective number of observations, ``Σ w²`` (``w`` before :attr:`time_scale`)."""
-        if self.time_scale is None:
-            return float(np.sum(self.weight**2))
-        return float(np.sum((self.weight * self.time_scale) ** 2))
+        """Effective number of observations, ``Σ w²`` (``w`` before :attr:`error_scale`)."""
+        scale = self.error_scale
+        return float(np.sum(self.weight**2 if scale is None else (self.weight * scale) ** 2))
 
     @property
     def floor(self) -> float:
-        """The residuals' floor [log units]: ``step/√12``, with rounded stamps (:mod:`._timing`)
-        the weighted RMS reached there, ``step/√12·√(n_effective/Σw²)``."""
+        """The residuals' floor [log units]: ``step/√12``; with rounded stamps (:mod:`._timing`)
+        or print rounding (:mod:`._print_rounding`) the weighted RMS reached there,
+        ``step/√12·√(n_effective/Σw²)`` (``√(step² + 12·print_rms²)/√12`` without stamps)."""
         sigma = self.resolution / math.sqrt(12.0)
-        if self.time_scale is None:
+        if self.error_scale is None:
             return sigma
         return sigma * math.sqrt(self.n_effective / float(np.sum(self.weight**2)))
 
@@ -400,13 +414,20 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
             guess[i] = 0.5 * (t[k0] + t[min(k0 + 1, n - 1)])
     speeds = [np.max(np.abs(np.diff(r.theta)) / np.diff(r.time)) for r in runs if len(r.theta) > 1]
     unit = getattr(log, "time_print_unit", None)
-    if (scale := time_scales(runs, unit, step, (R, T)) if quantized else None) is not None:
-        weight = weight / scale  # the stamps' rounding (:mod:`._timing`)
+    scale = time_scales(runs, unit, step, (R, T)) if quantized else None
+    setups = np.array([log.setups.index(r.setup) for r in runs])
+    # the readings' print rounding (:mod:`._print_rounding`; not yet beside rounded stamps:
+    # a 1.4 % change of the slow readings' weights moved a fine-encoder fit's held story
+    # into an 18 000x basin), or the stamps' rounding (:mod:`._timing`)
+    pvar = print_variance(runs, step, getattr(log, "print_unit", None), weight,
+                          setups) if quantized and scale is None else 0.0
+    if scale is not None or pvar:
+        weight = weight / np.sqrt((1.0 if scale is None else scale**2) + 12.0 * pvar / step**2)
     return Prepared(
         source=log.source,
         run_names=tuple(r.name for r in runs),
         setup_names=log.setups,
-        setup_index=np.array([log.setups.index(r.setup) for r in runs]),
+        setup_index=setups,
         added_inertia=np.array([r.added_inertia for r in runs], dtype=float),
         times=times,
         theta=theta,
@@ -434,6 +455,7 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
         tail_start=tail_starts,
         time_scale=scale,
         time_print_unit=unit if scale is not None else None,
+        print_rms=math.sqrt(pvar),
     )
 
 
