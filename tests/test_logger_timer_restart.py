@@ -12,7 +12,9 @@ too; shorter pauses at rest stay inside their run (the break rule).
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from hdid import LogError
 from hdid._log import read_log
 
 
@@ -75,3 +77,25 @@ def test_long_pause_at_rest_starts_a_run_short_one_does_not(tmp_path):
                         + "\n".join(f"{a:.6f},{b:.9f}" for a, b in zip(t, theta)) + "\n")
         log = read_log(str(path))
         assert [(r.name, r.time.size) for r in log.runs] == runs, pause
+
+
+def test_long_pause_inside_a_labelled_run_starts_a_run(tmp_path):
+    # the same pause under a 'run' column (both stretches labelled '3'): a logger stopped
+    # and started again inside one labelled test; the fit would otherwise simulate the
+    # 2000-step pause. 50 steps stay inside the run; time that drops back inside a
+    # labelled run is still refused by the time check (not split)
+    n1, n2, h = 300, 200, 1e-3
+    theta = np.concatenate([_swing(n1, h, 0.4), np.full(n2, 0.01)])
+    for pause, runs in ((2000, [("3", n1), ("3.2", n2)]), (50, [("3", n1 + n2)])):
+        t = np.concatenate([np.arange(n1) * h, (n1 - 1 + pause + np.arange(n2)) * h])
+        path = tmp_path / f"labelled_{pause}.csv"
+        path.write_text("run,time [s],theta [rad]\n"
+                        + "\n".join(f"3,{a:.6f},{b:.9f}" for a, b in zip(t, theta)) + "\n")
+        log = read_log(str(path))
+        assert [(r.name, r.time.size) for r in log.runs] == runs, pause
+        assert any("labelled run" in note for note in log.notes) == (pause > 1000)
+    t = np.concatenate([np.arange(n1) * h, np.arange(n2) * h])  # drops back inside '3'
+    path.write_text("run,time [s],theta [rad]\n"
+                    + "\n".join(f"3,{a:.6f},{b:.9f}" for a, b in zip(t, theta)) + "\n")
+    with pytest.raises(LogError, match=f"row {n1 + 2}: time 0 is not after"):
+        read_log(str(path))

@@ -84,14 +84,17 @@ def fine_step(x: np.ndarray, unit: float, bounds, merge: float,
     peak = peak[np.argsort(power[peak])[::-1][:PEAKS]]
     # the frequencies searched, both aliases: the trials a chance is counted against
     trials = 2.0 * max(power.size - lo, 1) / PAD
-    told = []
+    told, fits = [], []
     for j in peak:
-        for fr in (f[j], 1.0 - f[j]):
+        fj = _refine(runs, float(f[j]), 1.0 / size)
+        for fr in (fj, 1.0 - fj):
             if not (1.0 / Q_MAX <= fr <= 1.0 / Q_MIN):
                 continue
             found = _fit(runs, fr, 1.0 / size, unit)
-            if found is not None and found[1] + math.log10(trials) < math.log10(false_chance):
-                told.append(found)
+            if found is not None:
+                fits.append(found)
+                if found[1] + math.log10(trials) < math.log10(false_chance):
+                    told.append(found)
     if not told:
         return None
     # a grid's alias 1/(1 − 1/Q) fits its levels by chance where they miss the thin slice
@@ -102,10 +105,45 @@ def fine_step(x: np.ndarray, unit: float, bounds, merge: float,
     for c in told[1:]:
         if c[1] < best[1] - CHOICE_MARGIN:
             best = c
-    # another grid within the margin: the log does not choose between them (a note)
-    rivals = [c[0] for c in told
-              if abs(c[0] - best[0]) > 1e-3 * best[0] and c[1] < best[1] + CHOICE_MARGIN]
+    # another grid that fits within the margin, told from chance or not (the bar is the
+    # grid's against an analog log, once one grid passed it): the log does not choose
+    # between them (a note). Another grid is one that moves some level to another
+    # multiple (a step off by more than half a print unit over the levels' span): a
+    # 2.0009-unit grid and its 1.9991 alias are 0.09 % apart but place levels 1.8 units
+    # apart over 1000 steps
+    span = max(float(np.ptp(m)) for m in best[2])
+    rivals = [c[0] for c in fits
+              if abs(c[0] - best[0]) * max(span, 1.0) > 0.5 * unit
+              and c[1] < best[1] + CHOICE_MARGIN]
     return best[0], best[2], (min(rivals, key=lambda r: abs(r - best[0])) if rivals else None)
+
+
+#: Frequencies tried across a peak's bin (to 1/32 of a bin).
+_ZOOM = 65
+
+
+def _refine(runs, f0: float, df: float) -> float:
+    """The frequency within ``f0 ± df`` (one FFT bin) whose phases ``n·f mod 1`` of every
+    run's levels lie in the narrowest arc (against ``f``, the arc's width on the grid
+    ``1/f``). A level ``n`` print units from its run's first is placed by its phase: at
+    the bin's own frequency the phase drifts by up to ``span·df`` (a quarter cycle at
+    the padding's 4) across a run, and a grid of 2.1 units a step over 2200 units had
+    its far levels put on wrong multiples (its fit failed, and its alias 1.91 units,
+    which fits the levels of any grid of 2-3 units, was taken without a note). The
+    Rayleigh power does not place ``f`` that finely: its peak is ``1/span`` wide and,
+    with a hundred levels, off the grid's frequency by a good part of that."""
+    best, at = np.inf, f0
+    for f in f0 + df * np.linspace(-1.0, 1.0, _ZOOM):
+        excess = max(_arc_width(np.mod(n * f, 1.0)) for n in runs) - f
+        if excess < best:
+            best, at = excess, float(f)
+    return at
+
+
+def _arc_width(phase: np.ndarray) -> float:
+    """Width of the shortest arc of the circle (circumference 1) holding every ``phase``."""
+    ph = np.sort(phase)
+    return float(1.0 - np.max(np.diff(np.append(ph, ph[0] + 1.0))))
 
 
 def _window(n: np.ndarray) -> np.ndarray:

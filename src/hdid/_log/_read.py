@@ -260,11 +260,12 @@ def read_log(
         take_rows(table, keep)
         jumps = jumps[keep]
         n = int(keep.size)
-    if _RUN not in cols:
-        run_labels, restart_notes = runs_at_restarts(time, run_labels, table.lines,
-                                                     min_samples_per_run,
-                                                     np.flatnonzero(jumps))
-        order_notes += restart_notes
+    # (a labelled run splits at a forward jump only: hdid._log._time_order)
+    run_labels, restart_notes = runs_at_restarts(time, run_labels, table.lines,
+                                                 min_samples_per_run, np.flatnonzero(jumps),
+                                                 labelled=_RUN in cols)
+    order_notes += restart_notes
+    if restart_notes or _RUN not in cols:
         time, again = _uniform_stamps(time, run_labels, table, cols, unit_scale, stamped,
                                       order_notes)
         rebuilt = rebuilt or again

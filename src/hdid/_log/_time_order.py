@@ -71,13 +71,17 @@ def take_rows(table: _Table, keep: np.ndarray) -> None:
 
 
 def runs_at_restarts(time: np.ndarray, run_labels: np.ndarray | None, lines: np.ndarray,
-                     min_samples: int, jumps: np.ndarray | None = None
-                     ) -> tuple[np.ndarray | None, list[str]]:
+                     min_samples: int, jumps: np.ndarray | None = None,
+                     labelled: bool = False) -> tuple[np.ndarray | None, list[str]]:
     """Run labels for a log without a ``run`` column whose time restarts, and a note
     (``run_labels`` unchanged and no note when it does not, or when a stretch would be
     too short to be a run: the time check then names the row). ``jumps``: positions of
     rows at which the timer reader found a restart (a forward jump); forward steps over
-    :data:`RESTART_PERIODS` median steps are restarts too."""
+    :data:`RESTART_PERIODS` median steps are restarts too. ``labelled``: the labels are
+    the log's own ``run`` column; only forward jumps split a run then (``'3'`` becomes
+    ``'3'``, ``'3.2'``: a logger paused and started again inside one labelled test, where
+    the fit would otherwise simulate the pause), and time that drops back inside a
+    labelled run stays the time check's error."""
     n = time.size
     if n < 2:
         return run_labels, []
@@ -93,7 +97,8 @@ def runs_at_restarts(time: np.ndarray, run_labels: np.ndarray | None, lines: np.
     if jumps is not None:
         forward[np.asarray(jumps, dtype=np.int64)] = True
     forward &= ~block_start
-    drops = np.flatnonzero(((steps < 0) & ~block_start[1:]) | forward[1:]) + 1
+    back = np.zeros(n - 1, dtype=bool) if labelled else (steps < 0) & ~block_start[1:]
+    drops = np.flatnonzero(back | forward[1:]) + 1
     if drops.size == 0:
         return run_labels, []
     starts = np.flatnonzero(block_start)
@@ -124,9 +129,13 @@ def runs_at_restarts(time: np.ndarray, run_labels: np.ndarray | None, lines: np.
     shown = ", ".join(f"{int(lines[i])} ({time[i - 1]:.6g} s → {time[i]:.6g} s"
                       f"{', a forward jump' if forward[i] else ''})" for i in drops[:5])
     more = f" and {drops.size - 5} more" if drops.size > 5 else ""
+    listed = f"{', '.join(repr(m) for m in names[:6])}{', …' if len(names) > 6 else ''}"
+    if labelled:
+        return labels, [f"time jumps forward inside a labelled run at row(s) {shown}{more} (over "
+                        f"{RESTART_PERIODS:g} median steps or a timer restart: the logger "
+                        f"started again): each stretch is a run ({listed})"]
     return labels, [f"time restarts at row(s) {shown}{more} and the log has no 'run' column: "
-                    f"each stretch is a run ({', '.join(repr(m) for m in names[:6])}"
-                    f"{', …' if len(names) > 6 else ''})"]
+                    f"each stretch is a run ({listed})"]
 
 
 def group_interleaved(run_labels: np.ndarray | None, time: np.ndarray, lines: np.ndarray
