@@ -15,6 +15,13 @@ def _jaxprs(params):
     return core.jaxprs_in_params(params)
 
 
+def generated(code) -> bool:
+    """Whether ``code`` is a method :mod:`dataclasses` wrote (``__init__``, ``__eq__``,
+    ...: no file; what it does follows from the class's fields, which the key holds)."""
+    return code.co_filename == "<string>" and getattr(code, "co_qualname", "").startswith(
+        "__create_fn__.<locals>.")
+
+
 def traced_files(jaxpr, stop_codes=frozenset()) -> set[str] | None:
     """Files of every frame in the equations' tracebacks (sub-programs included), up to
     (not past) a frame whose code is in ``stop_codes`` (the store's own wrapper);
@@ -36,6 +43,8 @@ def traced_files(jaxpr, stop_codes=frozenset()) -> set[str] | None:
             for c in codes:  # innermost first
                 if c in stop_codes:
                     break
+                if generated(c):
+                    continue
                 if id(c) not in seen_codes:
                     seen_codes.add(id(c))
                     files.add(c.co_filename)
@@ -83,4 +92,9 @@ def object_files(objs) -> set[str]:
             f = getattr(mod, "__file__", None)
             if f:
                 files.add(f)
+            else:  # a module not registered (a file executed by path): its methods' file
+                for v in vars(k).values():
+                    code = getattr(getattr(v, "__func__", v), "__code__", None)
+                    if code is not None and hasattr(code, "co_filename") and not generated(code):
+                        files.add(code.co_filename)
     return files
