@@ -3,7 +3,7 @@ convergence, time; emcee and SMC on the same fits); ``--cli``: ``hdid fit LOG --
 as a process, the result's CLI-speed section (each mode keeps the other's section).
 
     taskset -c 1 python benchmarks/posterior_sbc.py [--paper-logs 20 --rich-logs 20] [--seed0 34000]
-        [--max-steps 20000] [--budget-min 600] [--method emcee,smc]
+        [--max-steps 20000] [--end-by S] [--method emcee,smc]
     taskset -c 1 python benchmarks/posterior_sbc.py --cli [--logs 1] [--repeats 3]
     python benchmarks/posterior_sbc.py [--cli] --render [--interpretation FILE]
 """
@@ -88,9 +88,9 @@ def inside_cut(values, ratio, design):
 
 def draw_noise(gen, seed, noise="prior"):
     """The log's noise σ_n [rad] before rounding: ``"prior"``, from the sampler's prior
-    (log-uniform on ``density.SIGMA_BOUNDS`` steps, its own stream); ``"moving"``, the same after
-    each release only (:func:`draw_log`: the holds noiseless); ``"none"``, 0 (rounding alone);
-    ``"analog"``, ``step/√12`` on readings left unrounded (:func:`draw_log`)."""
+    (log-uniform on ``density.SIGMA_BOUNDS`` steps, its own stream); ``"none"``, 0 (rounding alone);
+    ``"analog"``, ``step/√12`` on readings left unrounded (:func:`draw_log`). (``"moving"``, noise after each
+    release only, ran at ec586c5: the check section of ``results/posterior_sbc.md``.)"""
     from hdid._posterior.density import SIGMA_BOUNDS
 
     if noise == "none":
@@ -111,10 +111,6 @@ def draw_log(gen, design_name, seed, noise="prior"):
     sigma = draw_noise(gen, seed, noise)
     df, info = gen.make_log(truth, **dict(design, seed=seed), noise_std=sigma, return_truth=True,
                             quantize=noise != "analog")
-    if noise == "moving":  # the holds read as without noise (the same release instants)
-        clean = gen.make_log(truth, **dict(design, seed=seed))
-        held = df.time.to_numpy() <= df.run.map({r["run"]: r["t_release"] for r in info["runs"]}).to_numpy()
-        df.loc[held, "theta"] = clean.loc[held, "theta"]
     return truth, df, info, {"band_rejects": band_rejects, "order_rejects": order_rejects, "noise_sigma_rad": sigma}
 
 
@@ -368,7 +364,6 @@ def main(argv=None):
     ap.add_argument("--rich-logs", type=int, default=20)
     ap.add_argument("--seed0", type=int, default=34000)
     ap.add_argument("--max-steps", type=int, default=20000, help="emcee's chain length cap")
-    ap.add_argument("--budget-min", type=float, default=600.0, help="start no log after this")
     ap.add_argument("--end-by", type=float, metavar="S", help="start no log that would end after S seconds from the "
                     "start, judged by the latest log of its design in this process (before any: --expect-s)")
     ap.add_argument("--expect-s", default="", metavar="DESIGN:S,...",
@@ -377,9 +372,8 @@ def main(argv=None):
                     help="every paper log before any rich one (a cut budget drops rich logs first)")
     ap.add_argument("--name", default="posterior_sbc", help="results/NAME.{json,md}")
     ap.add_argument("--method", default="emcee,smc", help="samplers, comma-separated (one fit and optima a log)")
-    ap.add_argument("--noise", choices=("prior", "moving", "none", "analog"), default="prior",
-                    help="noise before rounding: the sampler's σ_n prior, that after each release only, or none; "
-                         "analog: step/√12 on unrounded readings (the likelihood exact)")
+    ap.add_argument("--noise", choices=("prior", "none", "analog"), default="prior", help="noise before rounding: "
+                    "the sampler's σ_n prior or none; analog: step/√12 on unrounded readings (the likelihood exact)")
     ap.add_argument("--seeds", default="", metavar="DESIGN:SEED,...", help="run exactly these logs, in this order")
     ap.add_argument("--shard", default="0/1", help="K/N: run every N-th log from the K-th")
     ap.add_argument("--merge", nargs="+", metavar="JSON", help="join shards' results into NAME")
@@ -425,8 +419,6 @@ def main(argv=None):
     expect = {d: float(v) for d, v in (x.split(":") for x in args.expect_s.split(",") if x)}
     for name, seed in sched[k::n]:
         now = time.perf_counter() - t_start
-        if now > 60 * args.budget_min:
-            break
         if args.end_by is not None and now + expect.get(name, 0.0) > args.end_by:
             res["skipped"] = res.get("skipped", []) + [{"design": name, "seed": seed, "at_s": now}]
             _common.write_result(args.name, res, render, indent=1)
