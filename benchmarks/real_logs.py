@@ -8,7 +8,6 @@
     python benchmarks/real_logs.py --sts reading_age   # + the readings' age (clock scanned, then held)
     python benchmarks/real_logs.py --sts back_emf@clamp  # + back_emf, w_e held at the supply's clamp speed
     python benchmarks/real_logs.py --energy  # STS3215: friction laws by energy per half-swing (no fit)
-    python benchmarks/real_logs.py --rotor   # STS3215: one inertia against the rotor behind free play
 """
 
 import argparse
@@ -19,7 +18,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from pathlib import Path
 
 from _common import ROOT, interpretation_section, parse_or_render, run_meta, stored, write_result
 
@@ -132,77 +130,15 @@ def _sts_row(k, v, add, res, age, wall, load):
     return row
 
 
-def sts_rotor() -> list[dict]:
-    """The STS3215 drops by :mod:`_sts_rotor`: one inertia, the rotor behind free play with its
-    three constants free per set-up (one start: J_r = I/4, b = 0.02 rad, τ_r = τ_s/4), then held at
-    their medians over the eight set-ups (one servo: one rotor, one gap, one rotor friction). Starts:
-    the stored hdid base fits' law."""
-    import statistics
-
-    import numpy as np
-    from _sts_rotor import LAW, Problem, median_quarters
-
-    real = ROOT.parent / "shared" / "data" / "real" / "sts3215_drop"
-    base = {r["setup"]: r["parameters"] for r in stored("real_logs").get("sts", []) if not r["add"]}
-    rows, found = [], {}
-
-    def row(k, label, prob, x, t0, load):
-        v, mgl = prob.ref, float(x[0])
-        r = dict(setup=k, model=label, rms=prob.rms(x), fast=prob.fast(x), mgl=mgl,
-                 mgl_point=v["mgl_point_mass_Nm"], armature=v["mgl_point_mass_Nm"] * prob.inertia / mgl
-                 - v["mass_kg"] * v["length_m"] ** 2, quarters=median_quarters(prob.quarters(x)),
-                 law=dict(zip(LAW, map(float, x[:6]))), wall_s=time.perf_counter() - t0, load=load,
-                 meta=run_meta())
-        if prob.rotor is not None:
-            r["rotor"] = dict(zip(["j_r", "backlash", "tau_r"], map(float, x[6:9] if prob.rotor == "free"
-                                                                     else prob.rotor)))
-        print(k, label, f"rms {r['rms']:.2f}x fast {r['fast']:.2f}x mgl {mgl:.4g}", r.get("rotor", ""),
-              [None if q is None else round(q, 1) for q in r["quarters"]], f"{r['wall_s']:.0f} s", flush=True)
-        rows.append(r)
-        (Path(tempfile.gettempdir()) / "real_logs_rotor_rows.json").write_text(json.dumps(rows))  # a crash keeps them
-        return x
-
-    for k in json.loads((real / "reference.json").read_text())["setups"]:
-        load, t0 = os.getloadavg()[0], time.perf_counter()
-        one = Problem(real, k)
-        xb = one.fit([base[k][n] for n in LAW] + [r["th0"] for r in one.runs] + [r["tr"] for r in one.runs])
-        row(k, "one inertia", one, xb, t0, load)
-        load, t0 = os.getloadavg()[0], time.perf_counter()
-        free = Problem(real, k, "free")
-        found[k] = row(k, "rotor, free", free, free.fit(np.r_[xb[:6], 0.25 * free.inertia, 0.02, 0.25 * xb[2], xb[6:]]),
-                       t0, load)
-    held = [statistics.median(float(x[6 + i]) for x in found.values()) for i in range(3)]
-    for k, x in found.items():
-        load, t0 = os.getloadavg()[0], time.perf_counter()
-        prob = Problem(real, k, tuple(held))
-        row(k, "rotor, held", prob, prob.fit(np.r_[x[:6], x[9:]]), t0, load)
-    return rows
-
-
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--measured", action="store_true", help="fit the measured logs instead")
     ap.add_argument("--sts", nargs="*", metavar="EFFECT",
                     help="fit the STS3215 drops with the base model plus these effects (none: the base)")
-    ap.add_argument("--rotor", action="store_true", help="STS3215: one inertia against the motor's "
-                    "rotor behind the gear's free play, one fitting machinery (minutes)")
-    ap.add_argument("--rotor-signature", action="store_true", help="STS3215: noiseless drops made with "
-                    "a rotor behind free play, fitted with one inertia (what the rotor leaves in the quarters)")
     ap.add_argument("--energy", action="store_true", help="STS3215: friction laws judged by the "
                     "energy lost per half-swing (model-free, seconds)")
     if (args := parse_or_render(ap, argv, "real_logs", render, indent=1)) is None:
         return
-    if args.rotor:
-        return write_result("real_logs", {**stored("real_logs"), "sts_rotor": sts_rotor()}, render, indent=1)
-    if args.rotor_signature:
-        from _sts_rotor import signature
-
-        res = stored("real_logs")
-        law = next(r["law"] for r in res["sts_rotor"] if r["setup"] == "m1.168_l0.15" and r["model"] == "one inertia")
-        held = next(r["rotor"] for r in res["sts_rotor"] if r["model"] == "rotor, held")
-        rotors = [(held["j_r"], held["backlash"], held["tau_r"]), (0.024, 0.02, 0.01), (0.024, 0.05, 0.03)]
-        return write_result("real_logs", {**res, "sts_rotor_signature": signature(
-            ROOT.parent / "shared" / "data" / "real" / "sts3215_drop", "m1.168_l0.15", law, rotors)}, render, indent=1)
     if args.energy:
         res = stored("real_logs")
         fits = [r for r in res.get("sts", []) if not r["add"]]
@@ -276,18 +212,8 @@ def render(res: dict) -> str:
         lines += sts_section(res["sts"])
     if res.get("sts_energy"):
         lines += energy_section(res["sts_energy"])
-    if res.get("sts_rotor"):
-        lines += rotor_section(res["sts_rotor"])
-    if res.get("sts_rotor_signature"):
-        lines += ["", "What a rotor behind free play leaves in a one-inertia fit (`--rotor-signature`: noiseless drops "
-                  "at m1.168_l0.15's instants, releases and arm law, fitted with one inertia; the log's own signs are "
-                  "in the table above):", "", "| rotor: J_r, b, τ_r | RMS/floor | mgl fit / true | R→B | B→T | T→B "
-                  "| B→T | T→B |", "|---|---|---|---|---|---|---|---|"]
-        for r in res["sts_rotor_signature"]:
-            rot = r["rotor"]
-            lines.append(f"| {rot['j_r']:.3g}, {rot['backlash']:.3g}, {rot['tau_r']:.3g} | {r['rms']:.2f} | "
-                         f"{r['mgl']:.4g} / {r['mgl_true']:.4g} | " + " | ".join(
-                             "—" if q is None else f"{q:+.1f}" for q in r["quarters"]) + " |")
+    if res.get("sts_rotor_md"):  # retired experiment: its tables as last rendered
+        lines += ["", res["sts_rotor_md"]]
     return "\n".join(lines + [""] + interpretation_section(res)).rstrip("\n") + "\n"
 
 
@@ -459,41 +385,6 @@ def energy_section(e: dict) -> list[str]:
                    + (", ".join(f"{n} {_g(min(p))} … {_g(max(p))}" for n, p in zip(names, per)) or "(its fit's)")
                    + f" | {pooled} | "
                    + ", ".join(f"{n} {_g(c)}" for n, c in zip(names, law["pooled_coef"])) + " |")
-    return out
-
-
-def rotor_section(rows: list[dict]) -> list[str]:
-    """The STS3215 drops, one inertia against the rotor behind free play (:func:`sts_rotor`)."""
-    import statistics
-
-    def q(x):
-        return "—" if x is None else f"{x:+.1f}"
-
-    out = ["", "## STS3215: the rotor behind the gear's free play (`--rotor`)", "",
-           "One fitting machinery for both (`benchmarks/_sts_rotor.py`, `hdid.effects._rotor_free_play`): readings "
-           "from the release until the arm last moves, unweighted, floor = step/√12; quarters = data − model "
-           "duration [ms], median over the runs: release→bottom (R→B), bottom→turning point (B→T, decelerating), "
-           "T→B (accelerating), B→T, T→B. Held = the medians of the free fits over the eight set-ups.", "",
-           "| set-up | model | RMS/floor | sample-to-sample | mgl (vs m·g·l) | armature [kg m²] | R→B | B→T | T→B "
-           "| B→T | T→B | rotor: J_r [kg m²], b [rad], τ_r [N m] | wall [s] (load) |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for r in rows:
-        rot = r.get("rotor")
-        out.append(f"| {r['setup']} | {r['model']} | {r['rms']:.2f} | {r['fast']:.2f} | {r['mgl']:.4g} "
-                   f"({r['mgl'] / r['mgl_point'] - 1:+.1%}) | {r['armature']:.4f} | "
-                   + " | ".join(q(x) for x in r["quarters"]) + " | "
-                   + (f"{rot['j_r']:.3g}, {rot['backlash']:.3g}, {rot['tau_r']:.3g}" if rot else "") +
-                   f" | {r['wall_s']:.0f} ({r['load']:.1f}) |")
-    out += ["", "| model | RMS/floor (median) | sample-to-sample (median) | mgl error (range) | armature mean ± sd "
-            "| B→T, first (median over set-ups) | T→B, first |", "|---|---|---|---|---|---|---|"]
-    for name in dict.fromkeys(r["model"] for r in rows):
-        sel = [r for r in rows if r["model"] == name]
-        err, arm = [r["mgl"] / r["mgl_point"] - 1 for r in sel], [r["armature"] for r in sel]
-        first = [statistics.median(x) for j in (1, 2)
-                 for x in [[r["quarters"][j] for r in sel if r["quarters"][j] is not None] or [math.nan]]]
-        out.append(f"| {name} | {statistics.median(r['rms'] for r in sel):.2f} | "
-                   f"{statistics.median(r['fast'] for r in sel):.2f} | {min(err):+.1%} … {max(err):+.1%} | "
-                   f"{statistics.mean(arm):.4f} ± {statistics.stdev(arm):.4f} | {first[0]:+.1f} | {first[1]:+.1f} |")
     return out
 
 
