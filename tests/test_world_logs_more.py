@@ -206,9 +206,6 @@ def _held_beside_swings():
     return pd.concat(rows, ignore_index=True)
 
 
-@pytest.mark.xfail(strict=True, reason="reader (HW, src/hdid/_log/_validate.py check_motion): a run that "
-                   "never moves is always 'kept as a rest point inside the stick band', even held "
-                   "farther from the other runs' rests than the turning points they slid on from")
 def test_a_run_held_beyond_where_the_others_slid_on_is_no_rest_point():
     log = read_log(_held_beside_swings())
     said = [n for n in log.notes if "'3'" in n]

@@ -106,7 +106,9 @@ def read_log(
     ``added_inertia`` are constant within a run; time strictly increases within
     a run; each run has enough samples; some run shows motion (at least 2 encoder
     steps, or 1e-9 rad when the resolution is unknown: a run that never moves is
-    kept, a rest point inside the stick band, and named in ``Log.notes``). The
+    kept, a rest point inside the stick band, and named in ``Log.notes``; one held
+    beyond a turning point another run of its set-up slid on from was never released:
+    left out, named in ``Log.notes``, :mod:`._unreleased`). The
     sample period is the median time step; the steps may vary (jitter, dropped
     samples) and a run is split at a break (a step over 5 of its median steps, the
     gear moving on both sides), named in ``Log.notes``; without a ``run`` column, a
@@ -358,10 +360,13 @@ def read_log(
         output_resolution = find_step(
             theta_out[kept], None if printed_out is None else printed_out[kept], run_starts
         ).step
+    left_out: list[int] = []  # still runs never released (hdid._log._unreleased)
     if not driven:  # a driven run may stay stuck
-        notes += check_motion(theta[kept], run_starts, run_starts + lengths, names,
-                              resolution, lambda m, key=None, pos=None: fail(
-                                  m, key, None if pos is None else int(kept[pos])))
+        motion_notes, left_out = check_motion(
+            theta[kept], run_starts, run_starts + lengths, names, resolution,
+            lambda m, key=None, pos=None: fail(m, key, None if pos is None else int(kept[pos])),
+            None if setups is None else [str(setups[a]) for a in starts])
+        notes += motion_notes
 
     def part(values: np.ndarray | None, k: int) -> np.ndarray | None:
         return None if values is None else values[rows[k]]
@@ -378,7 +383,7 @@ def read_log(
             theta_out=part(theta_out, k),
             load_torque=part(load, k),
         )
-        for k in range(len(starts))
+        for k in range(len(starts)) if k not in left_out
     )
     return Log(
         source=table.source,

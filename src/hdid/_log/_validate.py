@@ -16,6 +16,7 @@ from .._errors import LogError
 from ._columns import _first
 from ._names import _INERTIA, _MIN_MOTION_UNQUANTIZED, _RUN, _SETUP, _THETA, _TIME
 from ._table import _show
+from ._unreleased import unreleased_runs
 
 Fail = Callable[..., LogError]
 
@@ -203,9 +204,13 @@ def still_runs(theta, starts, ends, names, resolution: float | None) -> list[int
     return [int(r) for r in np.flatnonzero(still)]
 
 
-def check_motion(theta, starts, ends, names, resolution: float | None, fail: Fail) -> list[str]:
-    """At least one run moves (a log of still runs has nothing to fit); a run that never
-    moves is kept and named in the returned note."""
+def check_motion(theta, starts, ends, names, resolution: float | None, fail: Fail,
+                 setups=None) -> tuple[list[str], list[int]]:
+    """At least one run moves (a log of still runs has nothing to fit). Returns ``(notes,
+    left_out)``: a run that never moves is kept as a rest point and named in a note, unless
+    it is held beyond a turning point a moving run of its set-up (``setups``: one label per
+    run) slid on from — a run never released, left out (its index in ``left_out``) and
+    named with the turning point that rules it out (:mod:`._unreleased`)."""
     still = still_runs(theta, starts, ends, names, resolution)
     why = (f"less than 2 encoder steps of {resolution:.6g} rad" if resolution is not None
            else f"less than {_MIN_MOTION_UNQUANTIZED:g} rad")
@@ -217,10 +222,16 @@ def check_motion(theta, starts, ends, names, resolution: float | None, fail: Fai
             int(starts[0]),
         )
     if not still:
-        return []
-    label = ", ".join(_show(names[r]) for r in still)
-    return [f"run(s) {label} never move ({why}): kept as rest points inside the stick band "
-            "(released from inside it, they stay stuck)"]
+        return [], []
+    left_out, notes = unreleased_runs(theta, starts, ends, names,
+                                      setups if setups is not None else ["1"] * len(starts),
+                                      still, resolution)
+    kept = [r for r in still if r not in left_out]
+    if kept:
+        label = ", ".join(_show(names[r]) for r in kept)
+        notes.append(f"run(s) {label} never move ({why}): kept as rest points inside the "
+                     "stick band (released from inside it, they stay stuck)")
+    return notes, left_out
 
 
 def _held_level(held: np.ndarray) -> float | None:
