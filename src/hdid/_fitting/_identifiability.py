@@ -83,7 +83,7 @@ def analyse(
             "sensitivities at its optimum); check the units (time in s, angles in rad or "
             "--resolution), the ratio and the inertia, or fix parameters the log cannot determine")
     fisher_data, cov, null, std_u, std_u_data = _uncertainty(problem, J, s2_used)
-    flags = _identifiability(problem, labels, J, fisher_data, std_u, std_u_data, warnings)
+    flags = _identifiability(problem, labels, J, fisher_data, cov, std_u, std_u_data, warnings)
     corr = _correlations(labels, P, cov, std_u, warnings)
     values, model, params = _parameters(problem, u, std_u, flags)
     derived = _derived(problem, u, cov, null, pre.get("derived"))
@@ -212,7 +212,7 @@ def _uncertainty(problem: Problem, J, s2_used: float):
         cov_data, null_data, d_data)
 
 
-def _identifiability(problem: Problem, labels, J, fisher_data, std_u, std_u_data,
+def _identifiability(problem: Problem, labels, J, fisher_data, cov, std_u, std_u_data,
                      warnings: list[str]) -> dict[str, str]:
     """What the data determine: a flag per physical parameter that they do not (no effect,
     only a combination, set by the prior, poorly determined), and warnings for the
@@ -256,7 +256,7 @@ def _identifiability(problem: Problem, labels, J, fisher_data, std_u, std_u_data
         )
     for name, why in flags.items():
         warnings.append(f"{name}: {why}")
-    warnings += _shape_warnings(problem, flags)
+    warnings += _shape_warnings(problem, flags, cov, std_u)
     return flags
 
 
@@ -452,13 +452,21 @@ def _trust_warnings(problem: Problem, u, params, std_u, values) -> list[str]:
     return out
 
 
-def _shape_warnings(problem: Problem, flags: dict[str, str]) -> list[str]:
+def _shape_warnings(problem: Problem, flags: dict[str, str], cov, std_u) -> list[str]:
     """A Stribeck law's levels (``tau_c``, ``tau_s``) get standard errors linearised at its
     fitted shape (``v_s``, ``delta``); where the log does not determine that shape, the
     likelihood is far from Gaussian along it and the levels' errors are too small (an
     independent csf20 paper-design log: v_s 0.63 ± 0.83 against a true 3.6, tau_c 3.8
-    standard errors from the truth at a fit below the truth's own residual)."""
+    standard errors from the truth at a fit below the truth's own residual).
+
+    Any other determined parameter whose variance runs mostly along the law's undetermined
+    parameters (multiple correlation above ``HIGH_CORRELATION`` in the covariance of the
+    unknowns, ``cov``) has the same doubt: its standard error is the shape's linearised
+    spread carried over (a world-test log with ``v_s`` far above the peak speed: ``c_v``
+    traded with the Stribeck slope, multiple correlation 0.996, and sat 8.8 of its
+    standard errors from the truth)."""
     out = []
+    free = list(problem.free)
     for law in problem.base.effects:
         if type(law) is not StribeckFriction:
             continue
@@ -471,6 +479,41 @@ def _shape_warnings(problem: Problem, flags: dict[str, str]) -> list[str]:
                 f"({', '.join(shape)}), which this log does not determine, and may be too "
                 "small — sample the posterior (--posterior) for intervals over the shape"
             )
+        if not shape:
+            continue
+        loose = [n for n in names if n in flags and n in free and math.isfinite(std_u[free.index(n)])]
+        for name, r2 in _carried(free, cov, std_u, flags, loose, exclude=set(names)):
+            out.append(
+                f"{name}: {100 * r2:.0f} % of its variance runs along the Stribeck law's "
+                f"undetermined {', '.join(loose)} (multiple correlation {math.sqrt(r2):.3f} > "
+                f"{HIGH_CORRELATION}): its standard error is that shape's linearised spread "
+                f"carried over ({1 / math.sqrt(max(1 - r2, 1e-300)):.3g}× its error at a "
+                "fixed shape) and is too small by as much as the shape's real spread is "
+                "wider — sample the posterior (--posterior) for intervals over the shape"
+            )
+    return out
+
+
+def _carried(free: list[str], cov, std_u, flags, along: list[str], exclude: set[str]):
+    """``(name, R²)`` for each determined free parameter (not flagged, finite std, not in
+    ``exclude``) whose squared multiple correlation with the parameters ``along`` exceeds
+    ``HIGH_CORRELATION²``: ``R² = c_xSᵀ C_SS⁺ c_xS / c_xx`` from the covariance ``cov`` of
+    the unknowns (the fraction of its variance explained by ``along``; the remainder
+    ``1 − R²`` is its variance at fixed ``along``)."""
+    s = [free.index(n) for n in along]
+    if not s:
+        return []
+    C = np.asarray(cov, dtype=float)[:len(free), :len(free)]
+    d = np.sqrt(np.clip(np.diag(C), 1e-300, None))
+    R = C / np.outer(d, d)  # correlations: the pseudo-inverse's cut is then unit-free
+    rss_pinv = np.linalg.pinv(R[np.ix_(s, s)], hermitian=True)
+    out = []
+    for i, name in enumerate(free):
+        if name in exclude or name in flags or not math.isfinite(std_u[i]) or C[i, i] <= 0:
+            continue
+        r2 = min(max(float(R[i, s] @ rss_pinv @ R[i, s]), 0.0), 1.0)
+        if r2 > HIGH_CORRELATION**2:
+            out.append((name, r2))
     return out
 
 
