@@ -153,9 +153,6 @@ def _floor(prep) -> float:
     return prep.resolution / np.sqrt(12.0)
 
 
-@pytest.mark.xfail(strict=True, reason="noise floor (HW, src/hdid/_simulation/_prepare.py, prepare(): "
-                   "grid_noise only counts still-stretch jumps of >= 2 LSB, and noise below 2x LSB/sqrt(12) "
-                   "keeps the grid): 0.45 LSB of noise ahead of the ADC is weighed as LSB/sqrt(12), 1.85x small")
 def test_noise_ahead_of_a_slow_adc_sets_the_floor():
     got = _floor(_adc_log(0.45))
     # Sheppard: the readings' error is sqrt(s^2 + LSB^2/12) = 0.535 LSB; the still stretches

@@ -201,3 +201,92 @@ def _ar2_sigma(runs) -> float:
         return np.inf
     e = np.concatenate(scaled)
     return 1.4826 * float(np.median(np.abs(e - np.median(e))))
+
+
+#: Noise ahead of the rounding counts where it raises the readings' error above the grid's
+#: step/√12 by over 10 % (σ ≥ 0.13 step) and the still stretches say so beyond chance: the
+#: likelihood at the estimate exceeds that at σ = 0.1 step by more than 3 (χ²₁ of 6,
+#: p ≈ 0.01). A clean grid's still level (one reading, or a flicker between two adjacent
+#: ones) is as likely without noise: an encoder never gains a floor.
+ADC_MIN_SIGMA, ADC_NULL_SIGMA, ADC_MIN_GAIN = 0.13, 0.1, 3.0
+
+#: Share of a still stretch's readings allowed to be anything (:func:`_level_loglik`):
+#: 0.45 steps of noise reads 2 steps off 1 time in 1000, at 20× this mixture's density.
+ADC_OUTLIER = 1e-3
+
+
+def _level_loglik(k: np.ndarray, s: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Log-likelihood ``(len(s), len(x))`` of integer readings ``k`` [steps] of a held level
+    ``x`` [steps] read through Gaussian noise ``s`` [steps] and rounded to the step:
+    ``P(k) = Φ((k + ½ − x)/s) − Φ((k − ½ − x)/s)``, mixed with :data:`ADC_OUTLIER` of
+    readings spread over ±10 steps (a stretch's first or last sample of motion, a glitch,
+    costs a bounded amount instead of setting ``s``)."""
+    from scipy.special import ndtr
+
+    levels, counts = np.unique(k, return_counts=True)
+    z = (levels[None, None, :] - x[None, :, None]) / s[:, None, None]
+    half = 0.5 / s[:, None, None]
+    hi, lo = z + half, z - half
+    # upper tail where both are above 0 (Φ(−lo) − Φ(−hi) there, no cancellation)
+    p = np.where(lo > 0, ndtr(-lo) - ndtr(-hi), ndtr(hi) - ndtr(lo))
+    p = (1.0 - ADC_OUTLIER) * p + ADC_OUTLIER / 21.0
+    return np.sum(counts * np.log(p), axis=-1)
+
+
+def adc_noise(runs, step: float) -> float:
+    """Noise σ [log units] ahead of the rounding to a grid of ``step`` (an analog sensor read
+    by an ADC), from how the still stretches' readings spread over the levels; 0 where it
+    is not significant (:data:`ADC_MIN_SIGMA`).
+
+    A still stretch at ``x`` (in steps, any offset from the levels) read through noise ``s``
+    gives reading ``k`` with probability ``Φ((k+½−x)/s) − Φ((k−½−x)/s)``: a level near the
+    middle of a step flickers out to its neighbours ever more often as ``s`` grows, one near
+    a boundary splits between two levels whatever ``s``. The maximum-likelihood ``s``,
+    common to the stretches (each its own ``x``), over a log grid of 0.02–3 steps; the
+    stretches are every run's head and tail (as :func:`grid_noise`), per run the stiller
+    (its own maximum-likelihood ``s``), those within :data:`STILL_SPREAD` of the runs'
+    median (or within half a step) pooled. Moving stretches spread far wider."""
+    pieces, owner, stretches = [], [], []
+    for k, run in enumerate(runs):
+        th = np.asarray(run.theta, dtype=float)
+        m = max(4, min(50, len(th) // 10))
+        for seg in (th[:m], th[-m:]):
+            if seg.size >= 4:
+                lv = np.round((seg - float(np.median(seg))) / step)
+                stretches.append(lv)
+                pieces.append(np.diff(seg))
+                owner.append(k)
+    if not stretches:
+        return 0.0
+    s = np.geomspace(0.02, 3.0, 40)  # [steps] (14 % apart)
+    x = np.linspace(-1.0, 1.0, 161)  # (0.0125 steps)
+    ll = np.array([np.max(_level_loglik(lv, s, x), axis=1) for lv in stretches])  # (n, s)
+    own = s[np.argmax(ll, axis=1)]
+    per_run, use = _per_run(pieces, np.asarray(owner, dtype=int), own)
+    ref = float(np.median(per_run))
+    keep = use & (own <= max(STILL_SPREAD * ref, 0.5))
+    total = np.sum(ll[keep], axis=0)
+    best = int(np.argmax(total))
+    null = float(np.interp(ADC_NULL_SIGMA, s, total))
+    if s[best] < ADC_MIN_SIGMA or total[best] - null <= ADC_MIN_GAIN:
+        return 0.0
+    if 0 < best < s.size - 1:  # the parabola's vertex in log s
+        y0, y1, y2 = total[best - 1:best + 2]
+        den = y0 - 2.0 * y1 + y2
+        shift = 0.5 * (y0 - y2) / den if den < 0 else 0.0
+        return float(s[best] * (s[1] / s[0]) ** shift) * step
+    return float(s[best]) * step
+
+
+def noise_ahead(runs, step: float) -> float:
+    """The readings' error σ [log units], rounding to the ``step`` grid included, where noise
+    ahead of the rounding counts; 0 where the grid's ``step/√12`` stands. Noise of half a
+    step and more jumps still stretches by two steps (:func:`grid_noise`); below that the
+    spread over the levels says (:func:`adc_noise`), and the error is
+    ``√(σ² + step²/12)`` (Sheppard: the moving readings' offsets from the levels are spread
+    evenly)."""
+    jumps = grid_noise(runs, step)
+    if jumps > 2.0 * step / math.sqrt(12.0):
+        return jumps
+    s = adc_noise(runs, step)
+    return math.sqrt(s * s + step * step / 12.0) if s > 0.0 else 0.0

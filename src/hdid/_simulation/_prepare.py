@@ -13,7 +13,7 @@ import numpy as np
 
 from .._errors import LogError
 from .._log import Log
-from ._noise import grid_noise, noise_sigma
+from ._noise import noise_ahead, noise_sigma
 from ._search_weight import FULL_WEIGHT_TAIL, search_weight as search_weight  # (re-exported)
 from ._print_rounding import print_variance
 from ._timing import time_scales
@@ -247,15 +247,15 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
         # A grid found in the readings may be the printing precision of a noisy analog
         # sensor, not an encoder: then the still stretches wander over many levels.
         # Or noise ahead of an encoder's rounding: its still stretches jump by 2 steps or
-        # more; noise below step/2 (σ within 2× step/√12) keeps the grid (:func:`grid_noise`)
+        # more, or below that spreads a still level over its neighbours (:func:`noise_ahead`)
         # A given step (counts per revolution) is the grid, but not the readings' error:
         # noise ahead of the rounding jumps still stretches by 2 steps or more there too
         # (0.86 steps ahead of a 14-bit count log, read on its given grid: 8x the noise).
         if source == "estimated" and noise_sigma(runs, None, still_only=True) > 2.0 * step:
             step = noise_sigma(runs, None) * math.sqrt(12.0)
             source = "noise"
-        elif (jumps := grid_noise(runs, step)) > 2.0 * step / math.sqrt(12.0):
-            step = jumps * math.sqrt(12.0)  # (the readings' error, rounding included)
+        elif (err := noise_ahead(runs, step)) > 0.0:  # (below step/2: the levels' spread)
+            step = err * math.sqrt(12.0)  # (the readings' error, rounding included)
             source = "noise"
     else:
         # (never below the printing's own rounding, print unit/√12)
