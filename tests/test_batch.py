@@ -193,14 +193,15 @@ def test_a_log_one_octave_coarser_than_the_batch_shares_its_finer_substep(monkey
     assert [s.problem.max_substep for s in setups.values()] == [1e-3, 1e-3, 5e-4] and not calls
 
 
-@pytest.mark.parametrize("nested, symptom, checked", [
-    ("auto", False, False), ("auto", True, True), (True, False, True), (False, True, False),
-    (None, True, False),
+@pytest.mark.parametrize("nested, symptom, floor, checked", [
+    ("auto", False, False, False), ("auto", True, False, True), (True, False, False, True),
+    (False, True, False, False), (None, True, False, True), (None, True, True, False),
 ])
-def test_the_batch_checks_the_nested_case_like_fit(monkeypatch, nested, symptom, checked):
+def test_the_batch_checks_the_nested_case_like_fit(monkeypatch, nested, symptom, floor,
+                                                   checked):
     # fit()'s nested Coulomb check (hdid._fitting._nested) in the vectorised batch: "auto" only on a
     # symptom, True always, False never — with the log and the caller's options; the
-    # batch's default (None) warns on a symptom instead.
+    # batch's default (None) as "auto" where the fit has not reached the floor, never at it.
     import hdid._fitting._vfit as V
 
     seen = []
@@ -210,25 +211,23 @@ def test_the_batch_checks_the_nested_case_like_fit(monkeypatch, nested, symptom,
         return res
 
     monkeypatch.setattr(V, "needs_check", lambda res, fixed: symptom)
-    monkeypatch.setattr(V, "reached_floor", lambda res: False)  # (the example's fit is)
+    monkeypatch.setattr(V, "reached_floor", lambda res: floor)
     monkeypatch.setattr(V, "nested_check", check)
     tab = hdid.fit_many([EXAMPLE], nested=nested, n_starts=2, fix={"delta": 1.0})
     assert tab.error.isna().all()
     assert len(seen) == int(checked)
-    warned = any("nested Coulomb case" in w for w in tab.result.iloc[0].warnings)
-    # (the default warns on a residual above the floor, as if it were here)
-    assert warned == (nested is None and symptom)
     if checked:
         log, kw = seen[0]
-        assert isinstance(log, hdid.Log) and kw["nested"] == nested
+        assert isinstance(log, hdid.Log) and kw["nested"] == (nested or "auto")
         assert kw["fix"] == {"delta": 1.0} and kw["n_starts"] == 2
+        assert kw["solutions"] is not None  # the fit's local fits, as hdid.fit passes them
 
 
-def test_the_batch_warns_where_fit_would_check_its_limits():
-    # nested=None: the batch does not run hdid.fit's limit checks but says so wherever
-    # hdid.fit would run them all — a residual that has not reached the floor
-    # (_limits.reached_floor: the 99.9 % point of √(χ²_ν/n), ν = n − unknowns: the 1.2×
-    # minimum for this log's 35 readings and 17 unknowns).
+def test_the_batch_checks_the_limits_exactly_above_the_floor(monkeypatch):
+    # nested=None: hdid.fit's limit checks wherever hdid.fit would run them all — a
+    # residual that has not reached the floor (_limits.reached_floor: the 99.9 % point of
+    # √(χ²_ν/n), ν = n − unknowns: the 1.2× minimum for this log's 35 readings and 17
+    # unknowns); a fit at the floor is left as it is.
     # A residual of 1.5× the floor is such a fit (a paper log of batch_speed's sat there,
     # Δχ² = 80 above hdid.fit's optimum, under the former 2× trigger without a word).
     import hdid._fitting._vfit as V
@@ -238,11 +237,14 @@ def test_the_batch_warns_where_fit_would_check_its_limits():
     setup = V._setup(EXAMPLE)
     floor, trigger = res.quantization_floor_rad, above_floor(res.n_effective, res.n_unknowns)
     assert 1.2 <= trigger < 1.5
-    for ratio, warned in ((1.0, False), (0.99 * trigger, False), (1.5, True)):
-        res.warnings = []
+    seen = []
+    monkeypatch.setattr(V, "nested_check", lambda r, *a, **kw: seen.append(kw) or r)
+    for ratio, checked in ((1.0, False), (0.99 * trigger, False), (1.5, True)):
+        seen.clear()
         res.rms_residual_rad = ratio * floor
         V._nested(res, EXAMPLE, setup, {}, 2, 300)
-        assert any("poorer optimum" in w for w in res.warnings) == warned, ratio
+        assert len(seen) == int(checked), ratio
+        assert not checked or seen[0]["nested"] == "auto"
 
 
 def test_fit_many_takes_an_executor_like_emcees_pool(tmp_path):

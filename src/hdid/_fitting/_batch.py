@@ -44,7 +44,8 @@ def fit_many(
         Fit the logs as a batch (default): each log through :func:`hdid.fit`'s own
         multi-start driver, the logs of one model structure and length bucket (runs
         padded to a multiple of 16 samples) sharing its compiled programs
-        (:mod:`hdid._fitting._vfit`), no limit checks and no band bracket by default (below).
+        (:mod:`hdid._fitting._vfit`), the limit checks only above the floor and no band
+        bracket by default (below).
         ``False``: one :func:`hdid.fit` after another (the reference).
     band_bracket:
         Compute each log's model-free stick-band bracket (``stick_band_bracket_*``
@@ -80,9 +81,11 @@ def fit_many(
         task. The caller owns the executor (this call neither starts nor shuts it down).
     **options:
         Passed to :func:`hdid.fit` (``inertia``, ``fix``, ``counts_per_rev``, ``n_starts``,
-        …). In the batch, ``nested`` defaults to ``None``: a fit with a symptom of a poorer
-        optimum gets a warning instead of :func:`hdid.fit`'s check against the nested
-        Coulomb case, which runs one log at a time (``nested="auto"``: check them).
+        …). In the batch, ``nested`` defaults to ``None``: :func:`hdid.fit`'s checks against
+        the model's limits (the nested Coulomb case, no friction, the linear spring, one
+        log at a time) run where a log's fit has not reached the floor, as ``"auto"`` does
+        there; a fit at the floor is left as it is (``nested="auto"``: its verdicts on a
+        vanishing term too).
 
     Returns
     -------
@@ -100,8 +103,8 @@ def fit_many(
     iterations, the best ones to convergence, the restart of an optimum that holds moving
     runs, the restarts of a cubic gone to 0, a stuck release or an aliased swing, the refit
     at the RK4 substep a swing above the log's Nyquist frequency wants), so its numbers are
-    :func:`hdid.fit`'s up to rounding (the padding reorders sums) and the limit checks;
-    logs whose problems have the same structure and padded shape share one compiled
+    :func:`hdid.fit`'s up to rounding (the padding reorders sums) and, at the floor, the
+    limit checks; logs whose problems have the same structure and padded shape share one compiled
     program per step. A log whose fit diverges gets an error in its row. A log with runs
     that move from their first samples is fitted by :func:`hdid.fit` itself, which weighs
     both stories of their first readings (:mod:`hdid._fitting._first_reading`).

@@ -8,7 +8,8 @@ runs the log shows moving, the analysis at the best start, then :func:`hdid.fit`
 restarts and substep refit by the same functions (:func:`_settled`: a cubic gone to 0, a
 release stuck on its bracket's end, a swing on an alias above the log's Nyquist frequency
 folded back, the RK4 substep its fitted swing wants) — so a log gets the fit it gets
-alone, up to rounding and the limit checks (below). There is no driver of the batch's own. Logs that
+alone, up to rounding and, at the floor, the limit checks (:func:`_nested`). There is no
+driver of the batch's own. Logs that
 :func:`hdid.fit` fits in more than one pass — runs that move from their first samples (both
 stories of the first reading), logs on no grid (the search's weights, then the polish in
 the likelihood's, :mod:`hdid._fitting._polish`) — go through :func:`hdid.fit` itself.
@@ -53,7 +54,7 @@ from .._problems._problem import Problem
 from .._simulation._prepare import search_weight
 from . import _cubic_restart, _first_reading, _log_lanes, _substep
 from ._fit import _finish, _setup, _stored_analysis, _untrapped, fit, nested_check
-from ._limits import above_floor, needs_check, reached_floor
+from ._limits import needs_check, reached_floor
 from ._one_lane import LANES
 from ._one_lane import _local_fits as _one_lane
 from ._starts import _grid_starts, log_scales
@@ -323,7 +324,7 @@ def _analysed(item, setup, padded: Problem, solutions, options: dict, bracket: b
             finite, costs, np.inf)))]), setup.problem)
     res = _finish(setup, U, costs, ok, steps, t_start, bracket=bracket, precomputed=pre)
     return _nested(res, item, setup, options, int(options.get("n_starts", 6)),
-                   int(options.get("max_steps", 300)))
+                   int(options.get("max_steps", 300)), solutions)
 
 
 def _settled(res, item, setup, padded: Problem, solutions, start, options: dict,
@@ -396,29 +397,26 @@ def _local_fits(problem: Problem, U0, max_steps: int, lanes: int):
     return _one_lane(problem, U0, max_steps, lanes)[:4]
 
 
-def _nested(res, item, setup, options: dict, n_starts: int, max_steps: int):
+def _nested(res, item, setup, options: dict, n_starts: int, max_steps: int, solutions=None):
     """fit()'s check against its model's limits (:mod:`hdid._fitting._limits`: the nested
-    Coulomb case, no friction, the linear spring), one log at a time: ``nested="auto"``
-    when the residual is above the floor or a term may vanish, ``True`` always,
-    ``False`` never. The batch's default (``None``) only warns where :func:`hdid.fit`
-    would check every limit: a residual that has not reached the floor
-    (:func:`hdid._fitting._limits.reached_floor`, the 99.9 % point of the floor's χ²_ν,
-    at least 1.2×); 1000 paper logs took 538 s in one process with the check against
-    228 s without it (load 2.4–3.9). (The warning's former trigger, 2× the floor, let a
-    paper log at 1.51× the floor pass silently in a basin Δχ² = 80 above hdid.fit's.)"""
+    Coulomb case, no friction, the linear spring) by :func:`hdid._fitting._fit.nested_check`,
+    one log at a time, as :func:`hdid.fit` calls it (with the local fits ``solutions`` on
+    the padded problem, whose costs are the log's own up to rounding; the limits' grid
+    starts in one schedule, ``_limits.LIMIT_GRID_STARTS`` wide):
+    ``nested="auto"`` when the residual is above the floor or a term may vanish, ``True``
+    always, ``False`` never. The batch's default (``None``) runs it, as ``"auto"`` does,
+    exactly where the residual has not reached the floor
+    (:func:`hdid._fitting._limits.reached_floor`, the 99.9 % point of the floor's χ²_ν, at
+    least 1.2×: every limit and the restarts next to their optima), and leaves a fit at the
+    floor as it is (its verdicts on a vanishing term only, which cost most logs of a batch
+    their time: 1000 paper logs took 538 s in one process with ``"auto"`` against 228 s
+    without it, load 2.4–3.9). Without the check 20 stiff-gear paper logs reached the floor
+    in 0 (hdid.fit: 13)."""
     nested = options.get("nested")
     if nested is None:
-        # (a degenerate law at the floor is named by the trust warnings already)
-        if needs_check(res, setup.fixed) and not reached_floor(res):
-            ratio = res.rms_residual_rad / res.quantization_floor_rad
-            res.warnings.append(
-                f"the RMS residual is {ratio:.3g}× the floor, a symptom of a poorer optimum "
-                f"(above {above_floor(res.n_effective, res.n_unknowns):.3g}×, where hdid.fit "
-                "checks its "
-                "limits); the batch did not check it against its limits (nested Coulomb "
-                "case, no friction, linear spring): refit this log with hdid.fit, or the "
-                "batch with nested='auto'")
-        return res
+        if reached_floor(res) or not needs_check(res, setup.fixed):
+            return res
+        nested = "auto"
     if nested is False or nested == "auto" and not needs_check(res, setup.fixed):
         return res
     log = item if isinstance(item, Log) else read_log(
@@ -430,7 +428,7 @@ def _nested(res, item, setup, options: dict, n_starts: int, max_steps: int):
                         inertia_prior=options.get("inertia_prior"),
                         release_time=options.get("release_time"),
                         max_substep=options.get("max_substep"), n_starts=n_starts,
-                        max_steps=max_steps)
+                        max_steps=max_steps, solutions=solutions)
 
 
 def _check_finite(res) -> None:
