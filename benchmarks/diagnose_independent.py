@@ -267,25 +267,31 @@ def render(res: dict) -> str:
                   *_suite_lines(res["fixed_plant"]["records"], "fixed plant, ")]
     if "floor_rule" in res:
         lines += _floor_rule_lines(res["floor_rule"])
-    if "driver_refits" in res:
-        lines += _driver_lines(res)
+    for section in [k for k in res if k == "driver_refits" or k.startswith("check_")]:  # dated checks too
+        lines += _driver_lines(res, section)
     return "\n".join(lines) + "\n"
 
 
-def _driver_lines(res: dict) -> list[str]:
+def _driver_lines(res: dict, section: str = "driver_refits") -> list[str]:
     """``driver_refits``: the drawn logs where a strong candidate's refit stayed above 1.3× the floor (the only ones
-    hdid.fit's driver refits act on), diagnosed again; the suite's rates with those rows replaced."""
-    part = res["driver_refits"]
+    hdid.fit's driver refits act on), diagnosed again; the suite's rates with those rows replaced. ``check_*``: a
+    dated check of the same shape (stored with ``--driver-refits`` from a JSON holding ``key`` and ``title``)."""
+    part = res[section]
     m, after = part["meta"], {(r["design"], r["seed"]): r for r in part["records"]}
-    L = ["# Rates with the driver refits (`--driver-refits`)", "",
+    swd = lambda r: next((f"{c['delta_bic']:.0f}" for c in r.get("candidates") or []  # noqa: E731
+                          if c["effect"] == "soft_windup"), "–")
+    esc = lambda s: s.replace("|", "\\|")  # noqa: E731  (an ambiguous A|B inside a table cell)
+    L = [f"# {part.get('title', 'Rates with the driver refits (`--driver-refits`)')}", "",
          f"{m.get('cpu', '')}; src {m.get('src', '')}; load {m.get('load', '')} → "
          f"{m.get('load_end', '?')}. " + m.get("note", ""), "",
-         *header("design", "seed", "hidden", "before", "after", "grade before → after", "s")]
-    old = {(r["design"], r["seed"]): r for r in res["records"]}
+         *header("design", "seed", "hidden", "before", "after", "grade before → after", "soft_windup ΔBIC", "s")]
+    old = {(r["design"], r["seed"]): r for r in [*res["records"], *res.get("fixed_plant", {}).get("records", [])]}
     for key, r in after.items():
         b = old[key]
-        L.append(f"| {key[0]} | {key[1]} | {r['hidden']} | {b['named']} | {r.get('named', 'FAILED')} | {_grade(b)} → "
-                 f"{_grade(r) if 'error' not in r else 'failed'} | {r.get('wall_s', math.nan):.0f} |")
+        L.append(f"| {key[0]} | {key[1]} | {r['hidden']} | {esc(b['named'])} | {esc(r.get('named', 'FAILED'))} | "
+                 f"{_grade(b)} → "
+                 f"{_grade(r) if 'error' not in r else 'failed'} | {swd(b)} → {swd(r)} | "
+                 f"{r.get('wall_s', math.nan):.0f} |")
     L += ["", *header("design", "logs", "right before → after", "honest", "wrong", "false alarms (none)")]
     for design in ("rich", "paper"):
         rows = [r for r in res["records"] if r["design"] == design and "error" not in r]
@@ -313,11 +319,12 @@ def main(argv=None) -> None:
                     help="re-diagnose the stored logs the floor-level rule can change")
     ap.add_argument("--seeds", help="with --floor-rule: only these seeds (comma-separated)")
     ap.add_argument("--driver-refits", metavar="JSON",
-                    help="store re-diagnosed records ({meta, records}) as that section")
+                    help="store re-diagnosed records ({meta, records[, key check_*, title]}) as that section")
     if (args := parse_or_render(ap, argv, NAME, render)) is None:
         return
     if args.driver_refits:
-        return store("driver_refits", json.loads(open(args.driver_refits).read()))
+        part = json.loads(open(args.driver_refits).read())
+        return store(part.get("key", "driver_refits"), part)
     if args.floor_rule:
         return floor_rule({int(x) for x in args.seeds.split(",")} if args.seeds else None)
     designs, seed0 = args.designs or ["rich", "paper"], args.seed0
