@@ -33,6 +33,8 @@ SCANNED = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md")),
 #: A script, with or without its folder (``benchmarks/long_log.py``, ``long_log.py``).
 _SCRIPT = re.compile(r"(?<![\w/.-])(?:(benchmarks|calibration)/)?([a-z_][a-z0-9_]*)\.py\b")
 _OPTION = re.compile(r"(?<![\w-])--[a-z][a-z0-9-]*")
+#: ``git checkout <commit> -- <paths>``: how a record brings back a script retired from the tree.
+_RESTORE = re.compile(r"git checkout [0-9a-f]{7,40} --")
 #: Where a shown command ends: a table cell's edge (``\|`` is a pipe inside the cell; the
 #: cell's later code spans, such as ``--fixed-plant``, continue the command), a shell comment, the
 #: next script named on the line, or outside a table the end of its code span.
@@ -65,6 +67,8 @@ def wrong_commands(text: str, root: Path = ROOT) -> list[str]:
     whose options the script does not take."""
     bad = []
     for line in text.splitlines():
+        if _RESTORE.search(line):
+            continue  # a retired script's restore command names a file gone on purpose
         mentions = list(_SCRIPT.finditer(line))
         for k, m in enumerate(mentions):
             script = _resolve(m.group(1), m.group(2), root)
@@ -114,7 +118,8 @@ def test_a_retired_script_or_option_is_caught(tmp_path):
     page = ("| `gpu_path.py` | the GPU path | `python benchmarks/gpu_path.py --tag cpu`; then"
             " `--tag gpu --reference cpu.json` | 7 min |\n"
             f"    python {retired} --removed   # base pieces\n"
-            "`gpu_path.py --tag gpu` on the GPU, `--fresh` elsewhere | `--other` |\n")
+            "`gpu_path.py --tag gpu` on the GPU, `--fresh` elsewhere | `--other` |\n"
+            f"restore it: `git checkout 5dde407 -- {retired}`\n")
     # (the prose after a command's code span is not the command: `--fresh` is not read)
     assert wrong_commands(page, tmp_path) == [
         "benchmarks/gpu_path.py: --reference is not an option of it", f"{retired}: no such script"]

@@ -30,6 +30,8 @@ _PATH = re.compile(
 #: section "…"") or by issue ("issue 17, section "…"").
 _DIARY = re.compile(r'benchmarks/README(?:\.md)?[,;]?\s+(?:issue\s+\d+,\s*)?(?:sections?\s+)?"'
                     r'|benchmarks/README(?:\.md)?,\s+[A-Z]|issue\s+\d+,\s+sections?\s+"')
+#: ``git checkout <commit> -- <paths>``: how a record brings back a file retired from the tree.
+_RESTORE = re.compile(r"git checkout [0-9a-f]{7,40} --")
 #: Folders and files whose text is checked.
 SCANNED = [("src", "*.py"), ("src", "*.json"), ("tests", "*.py"), ("notebooks", "*.ipynb"),
            ("benchmarks", "*.py"), ("benchmarks", "*.md"), ("calibration", "*.py"),
@@ -52,7 +54,10 @@ def dangling(text: str, root: Path = ROOT) -> list[str]:
     citations of a section of the former benchmark diary."""
     bad = [f"a section of the former benchmark diary: {m.group(0)!r} (now docs/decisions/)"
            for m in _DIARY.finditer(text)]
-    for cited in _PATH.findall(text):
+    # a record's restore command names a file retired on purpose (``git checkout <commit> --
+    # benchmarks/x.py``): the commit holds it
+    kept = "\n".join(line for line in text.splitlines() if not _RESTORE.search(line))
+    for cited in _PATH.findall(kept):
         path = cited.rstrip(".")
         if path.endswith("/") or re.search(r"[<>*…]", path):
             continue  # a folder or a pattern (src/hdid/effects/<key>.py), not a file
@@ -91,6 +96,9 @@ def test_every_cited_repository_path_exists():
      ["diary", "benchmarks/README"]),
     ('data allow (issue 17,\n    section "tau_c flat in value")', ["diary"]),
     ("Calibration: benchmarks/README.md, Posterior.", ["diary"]),
+    # a restore command's paths are retired on purpose; the same path in prose is not
+    ("restore: `git checkout 5dde407 -- benchmarks/simulator_schemes.py`\n"
+     "measured by benchmarks/simulator_schemes.py", ["benchmarks/simulator_schemes.py"]),
     # what stays: existing files, records, folders, patterns, a test node
     ("``docs/decisions/simulator-scheme.md``, calibration/results/rival_scale.{json,md}, "
      "benchmarks/results/, src/hdid/effects/<key>.py, f'src/hdid/{name}', "
