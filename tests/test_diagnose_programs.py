@@ -78,7 +78,11 @@ def test_stored_lapack_program_runs_in_a_fresh_process(store, tmp_path):
     """A fresh process reads the program from the store (it does not trace ``_solve``)
     and gets the same numbers; the LAPACK kernels it calls are registered on load (a
     segfault when they were not)."""
+    n_unstored = len(_programs.UNSTORED)
     _programs.call("solve", _solve, *_args())
+    # the parent stored it (else the child's miss below is the parent's doubt, not a load)
+    assert len(_programs.UNSTORED) == n_unstored and list(store.glob("*.exp")), \
+        f"not stored: {_programs.UNSTORED[n_unstored:]}"
     code = textwrap.dedent(f"""
         import sys, numpy as np
         sys.path.insert(0, {str(Path(__file__).parent)!r})
