@@ -65,17 +65,24 @@ def test_ms_timer_restart_is_found_by_the_register_not_the_pause_length(tmp_path
     assert [(r.name, r.time.size) for r in log.runs] == [("1", n1), ("2", n2)]
 
 
-def test_long_pause_at_rest_starts_a_run_short_one_does_not(tmp_path):
-    # time in seconds (no timer): a pause of 2000 steps with the gear at rest after it is a
-    # new start; one of 50 steps at rest stays inside its run (the break rule's reading)
+def _paused_log(tmp_path, pause: int, labelled: bool):
+    """A 300-sample swing, a pause of ``pause`` steps, then 200 samples at rest (1 ms
+    steps, time in seconds, no timer), all in run '3' where ``labelled``."""
     n1, n2, h = 300, 200, 1e-3
     theta = np.concatenate([_swing(n1, h, 0.4), np.full(n2, 0.01)])
-    for pause, runs in ((2000, [("1", n1), ("2", n2)]), (50, [("1", n1 + n2)])):
-        t = np.concatenate([np.arange(n1) * h, (n1 - 1 + pause + np.arange(n2)) * h])
-        path = tmp_path / f"pause_{pause}.csv"
-        path.write_text("time [s],theta [rad]\n"
-                        + "\n".join(f"{a:.6f},{b:.9f}" for a, b in zip(t, theta)) + "\n")
-        log = read_log(str(path))
+    t = np.concatenate([np.arange(n1) * h, (n1 - 1 + pause + np.arange(n2)) * h])
+    path = tmp_path / f"pause_{pause}_{labelled}.csv"
+    run, head = ("3,", "run,") if labelled else ("", "")
+    path.write_text(head + "time [s],theta [rad]\n"
+                    + "\n".join(f"{run}{a:.6f},{b:.9f}" for a, b in zip(t, theta)) + "\n")
+    return read_log(str(path))
+
+
+def test_long_pause_at_rest_starts_a_run_short_one_does_not(tmp_path):
+    # a pause of 2000 steps with the gear at rest after it is a new start; one of 50 steps
+    # at rest stays inside its run (the break rule's reading)
+    for pause, runs in ((2000, [("1", 300), ("2", 200)]), (50, [("1", 500)])):
+        log = _paused_log(tmp_path, pause, labelled=False)
         assert [(r.name, r.time.size) for r in log.runs] == runs, pause
 
 
@@ -84,18 +91,10 @@ def test_long_pause_inside_a_labelled_run_starts_a_run(tmp_path):
     # and started again inside one labelled test; the fit would otherwise simulate the
     # 2000-step pause. 50 steps stay inside the run; time that drops back inside a
     # labelled run is still refused by the time check (not split)
-    n1, n2, h = 300, 200, 1e-3
-    theta = np.concatenate([_swing(n1, h, 0.4), np.full(n2, 0.01)])
-    for pause, runs in ((2000, [("3", n1), ("3.2", n2)]), (50, [("3", n1 + n2)])):
-        t = np.concatenate([np.arange(n1) * h, (n1 - 1 + pause + np.arange(n2)) * h])
-        path = tmp_path / f"labelled_{pause}.csv"
-        path.write_text("run,time [s],theta [rad]\n"
-                        + "\n".join(f"3,{a:.6f},{b:.9f}" for a, b in zip(t, theta)) + "\n")
-        log = read_log(str(path))
+    for pause, runs in ((2000, [("3", 300), ("3.2", 200)]), (50, [("3", 500)])):
+        log = _paused_log(tmp_path, pause, labelled=True)
         assert [(r.name, r.time.size) for r in log.runs] == runs, pause
         assert any("labelled run" in note for note in log.notes) == (pause > 1000)
-    t = np.concatenate([np.arange(n1) * h, np.arange(n2) * h])  # drops back inside '3'
-    path.write_text("run,time [s],theta [rad]\n"
-                    + "\n".join(f"3,{a:.6f},{b:.9f}" for a, b in zip(t, theta)) + "\n")
-    with pytest.raises(LogError, match=f"row {n1 + 2}: time 0 is not after"):
-        read_log(str(path))
+    # a pause of -299 steps: the second stretch starts again at t = 0, inside '3'
+    with pytest.raises(LogError, match=f"row {300 + 2}: time 0 is not after"):
+        _paused_log(tmp_path, -(300 - 1), labelled=True)

@@ -23,14 +23,10 @@ BAND = 0.004  # [rad], friction band of the ring-downs below: they slide on from
 
 
 def _ring_down(t, a, release=0.03, f=20.0):
-    th = np.full(t.size, float(a))
-    x, s0, w = float(a), release, 2 * np.pi * f
-    while abs(x) > BAND:
-        c = np.sign(x) * BAND
-        m = t >= s0
-        th[m] = c + (x - c) * np.cos(np.minimum(w * (t[m] - s0), np.pi))
-        x, s0 = 2 * c - x, s0 + 0.5 / f
-    return th
+    """HV's Coulomb ring-down (tests/test_world_logs_more.py) in this file's band."""
+    from test_world_logs_more import _coulomb_swing
+
+    return _coulomb_swing(t, a, band=BAND, f=f, release=release)
 
 
 def _log(held, step=STEP, noise=0.0, setup_of_held="A"):
