@@ -100,6 +100,14 @@ def _how(name, fn, *args):
     return (rows[-1]["how"] if rows else "loaded"), np.asarray(out)
 
 
+def _imported_f_is(x, how: str, want) -> None:
+    """``storepkg.a.f(x)`` imported afresh is ``how`` ("traced"/"stored") and gives ``want``."""
+    a = importlib.import_module("storepkg.a")
+    got, out = _how("f", a.f, x)
+    assert got == how
+    np.testing.assert_allclose(out, want, rtol=1e-14)
+
+
 def test_an_edit_to_a_traced_file_or_a_constant_it_reads_misses_and_another_hits(pkg, monkeypatch):
     x = np.linspace(0.1, 1.0, 4)
     a = importlib.import_module("storepkg.a")
@@ -111,32 +119,20 @@ def test_an_edit_to_a_traced_file_or_a_constant_it_reads_misses_and_another_hits
 
     # an unrelated module changes: the stored program is used (no trace)
     _edit(pkg / "other.py", "return 1", "return 2", monkeypatch)
-    a = importlib.import_module("storepkg.a")
-    how, out = _how("f", a.f, x)
-    assert how == "stored"
-    np.testing.assert_allclose(out, np.sin(x) * 2.0, rtol=1e-14)
+    _imported_f_is(x, "stored", np.sin(x) * 2.0)
 
     # c.C changes: a.f's file is the same, but K (b's constant, from c) is not
     _edit(pkg / "c.py", "C = 1.0", "C = 2.25", monkeypatch)
-    a = importlib.import_module("storepkg.a")
-    how, out = _how("f", a.f, x)
-    assert how == "traced"
-    np.testing.assert_allclose(out, np.sin(x) * 3.25, rtol=1e-14)
+    _imported_f_is(x, "traced", np.sin(x) * 3.25)
 
     # the traced file itself changes
     _edit(pkg / "a.py", "jnp.sin(x) * K", "jnp.cos(x) * K", monkeypatch)
-    a = importlib.import_module("storepkg.a")
-    how, out = _how("f", a.f, x)
-    assert how == "traced"
-    np.testing.assert_allclose(out, np.cos(x) * 3.25, rtol=1e-14)
+    _imported_f_is(x, "traced", np.cos(x) * 3.25)
 
     # and back: the first version is still stored, and its numbers come back
     _edit(pkg / "a.py", "jnp.cos(x) * K", "jnp.sin(x) * K", monkeypatch)
     _edit(pkg / "c.py", "C = 2.25", "C = 1.0", monkeypatch)
-    a = importlib.import_module("storepkg.a")
-    how, out = _how("f", a.f, x)
-    assert how == "stored"
-    np.testing.assert_allclose(out, np.sin(x) * 2.0, rtol=1e-14)
+    _imported_f_is(x, "stored", np.sin(x) * 2.0)
 
 
 def test_a_loop_body_jax_reuses_from_its_cache_is_still_a_dependency(pkg, monkeypatch):
