@@ -142,8 +142,10 @@ class DesignResult:
         return self.report()
 
     def to_dict(self) -> dict[str, Any]:
-        """Strict JSON (no NaN/inf: ``null``); schema ``hdid/schema/design.schema.json``."""
+        """Strict JSON (no NaN/inf: ``null``, each listed in ``non_finite``); schema
+        ``hdid/schema/design.schema.json``."""
         from .._results._saved import finite, hdid_version
+        from ._saved import non_finite
 
         def pred(i, p: Prediction):
             return {
@@ -179,6 +181,7 @@ class DesignResult:
             "warnings": list(self.warnings),
             "wall_time_s": self.wall_time_s,
         }
+        d["non_finite"] = non_finite(d)  # which null is NaN, inf or -inf: load restores it
         return finite(d)
 
     def save(self, path) -> None:
@@ -189,11 +192,13 @@ class DesignResult:
 
     @classmethod
     def load(cls, path) -> DesignResult:
-        """Read a result written by :meth:`save` or ``hdid design --json``: the same report
-        and JSON (the ranking, every candidate's predicted stds, the check)."""
+        """Read a result written by :meth:`save` or ``hdid design --json``: the same report,
+        JSON and plot (the ranking, every candidate's predicted stds, the check). A file of
+        another kind, an incomplete one or one of a newer layout is refused in one line
+        naming the file and the fix."""
         from ._saved import load
 
-        return load(path, cls)
+        return load(path, cls, SCHEMA_VERSION)
 
     def plot(self, *, ax=None):
         """Predicted std of each candidate relative to this log's (log scale), one row of
