@@ -374,3 +374,17 @@ def test_load_refuses_a_driven_json_in_one_line(driven_json, tmp_path):
     assert res.exit_code == 2 and len(res.stderr.strip().splitlines()) == 1, res.output
     assert "the JSON of a driven fit" in res.stderr
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_every_shipped_schema_is_reachable_through_schema():
+    """Every ``hdid/schema/<kind>.schema.json`` the package ships loads through
+    ``schema(kind)`` (docs/json.md promises it); "design" was missing from the list once."""
+    from importlib.resources import files
+
+    from hdid._results._saved import SCHEMA_KINDS, schema
+
+    shipped = {p.name.removesuffix(".schema.json") for p in files("hdid").joinpath("schema").iterdir()
+               if p.name.endswith(".schema.json")}
+    assert shipped == set(SCHEMA_KINDS)
+    for kind in shipped:
+        jsonschema.Draft202012Validator.check_schema(schema(kind))

@@ -29,13 +29,14 @@ SCHEMA_VERSION = 1
 
 
 #: The JSON files hdid writes, each with its schema in ``hdid/schema/<kind>.schema.json``.
-SCHEMA_KINDS = ("fit", "driven", "diagnose")
+SCHEMA_KINDS = ("fit", "driven", "diagnose", "design")
 
 
 def schema(kind: str = "fit") -> dict:
     """The JSON Schema (draft 2020-12) of a JSON file hdid writes, shipped with the
     package: ``"fit"`` (``hdid fit --json``, :meth:`FitResult.save`), ``"driven"`` (a
-    driven or joint fit) or ``"diagnose"`` (``hdid diagnose --json``)."""
+    driven or joint fit), ``"diagnose"`` (``hdid diagnose --json``) or ``"design"``
+    (``hdid design --json``, :meth:`DesignResult.save`)."""
     from importlib.resources import files
 
     if kind not in SCHEMA_KINDS:
