@@ -281,3 +281,27 @@ def test_a_recorded_file_left_in_place_does_not_stand_for_another_copy(tmp_path,
     monkeypatch.setattr(_program_deps, "LOADED", {})
     how, out = _how("gain", load(tmp_path / "three", 2.0), x)
     assert how == "stored" and np.allclose(out, 2.0 * x)
+
+
+def test_a_process_s_state_is_not_a_module_s_constants(pkg, monkeypatch):
+    """A module's recorded constants are what its source makes of it, seen as they are
+    now: not the public names ``hdid.__getattr__`` keeps once used (a fresh process
+    lacks them, so it missed every program stored after ``hdid.Model`` was used), and
+    not a cached hash of an earlier state (a constant rebound since is seen, and a miss
+    names the module)."""
+    import hdid
+    from hdid._problems import _program_values
+
+    monkeypatch.delitem(vars(hdid), "Model", raising=False)
+    before = _program_values.values("hdid", hdid.__file__)
+    assert hdid.Model and "Model" in vars(hdid)
+    assert _program_values.values("hdid", hdid.__file__) == before
+
+    b = importlib.import_module("storepkg.b")
+    rec = _program_deps.record({b.__file__})
+    assert rec is not None and "storepkg.b" in rec["values"]
+    assert _program_deps.mismatch(rec) is None
+    monkeypatch.setattr(b, "K", 3.0)
+    assert _program_deps.mismatch(rec).startswith("constants of storepkg.b: recorded ")
+    monkeypatch.setattr(b, "K", 2.0)  # (C + 1.0: the source's value)
+    assert _program_deps.mismatch(rec) is None

@@ -17,35 +17,33 @@ that is unchanged:
   the SHA-256 of its bytes; hdid's files by their path inside the package, so that a
   fresh clone elsewhere reuses them.
 - **values**: each of those modules' constants (numbers, strings, tuples, arrays,
-  classes' plain attributes; not names a function rebinds with ``global``), hashed, so
-  a constant computed at import from a module not listed still counts.
+  classes' plain attributes; not a process's state: :mod:`._program_values`), hashed,
+  so a constant computed at import from a module not listed still counts.
 - **dists**: the version of any other installed package whose code appears.
 
 Where in doubt — code from a file that cannot be read (``<string>``, a notebook cell not
 on disk), or a file modified after this process started (the code that ran may not be
 the file's) — :func:`record` returns ``None`` and the program is not stored; and a
 stored program is used only when every recorded hash equals the current one
-(:func:`matches`). A changed numerics file therefore always misses; an edit to a module
-no trace touched (the command line, the posterior, diagnose's driver) leaves every
-program warm.
+(:func:`matches`; :func:`mismatch` says which differs, :data:`MISSES` keeps the latest).
+A changed numerics file therefore always misses; an edit to a module no trace touched
+(the command line, the posterior, diagnose's driver) leaves every program warm.
 """
 
 from __future__ import annotations
 
 import ast
-import dataclasses
-import enum
 import hashlib
-import importlib
+import logging
 import os
-import re
 import sys
 import sysconfig
 import threading
 import time
+from collections import deque
 from pathlib import Path
 
-import numpy as np
+from . import _program_values
 
 #: hdid's package folder; its files are recorded by their path inside it (``hdid:...``).
 HDID_ROOT = Path(__file__).resolve().parents[1]
@@ -54,7 +52,8 @@ _HDID = "hdid:"
 #: arguments) is where tracebacks stop (``_program_trace.traced_files``), so they are not
 #: followed as imports either; a change to that wrapper must change ``FORMAT``.
 STORE_MODULES = frozenset(f"{_HDID}_problems/{m}.py" for m in (
-    "_programs", "_program_keys", "_program_deps", "_program_files", "_program_trace"))
+    "_programs", "_program_keys", "_program_deps", "_program_files", "_program_trace",
+    "_program_values"))
 
 
 def _process_start() -> float:
@@ -81,8 +80,6 @@ _INSTALLED = tuple({str(Path(p).resolve()) + os.sep for k in ("purelib", "platli
 _lock = threading.RLock()
 _FILE_HASH: dict[str, tuple[tuple, str | None]] = {}
 _EDGES: dict[str, tuple[tuple, tuple[str, ...]]] = {}
-_GLOBALS: dict[str, frozenset] = {}
-_VALUES: dict[str, str | None] = {}
 _MODULE_OF: dict[str, str] = {}
 _DIST_OF: dict[str, str] = {}
 _TREES: dict[str, tuple[tuple, ast.Module | None]] = {}
@@ -91,8 +88,9 @@ _TREES: dict[str, tuple[tuple, ast.Module | None]] = {}
 def forget() -> None:
     """Drop every cached hash, import list and module value (as a new process starts)."""
     with _lock:
-        for cache in (_FILE_HASH, _EDGES, _GLOBALS, _VALUES, _MODULE_OF, _DIST_OF, _TREES):
+        for cache in (_FILE_HASH, _EDGES, _MODULE_OF, _DIST_OF, _TREES):
             cache.clear()
+    _program_values.forget()
 
 
 #: Files that hdid itself executed after this process started (a user's effect file), by
@@ -166,13 +164,21 @@ def _module_of(path: str) -> str | None:
     """The imported module whose file is ``path`` (``None``: none, e.g. ``exec``'d code)."""
     with _lock:
         got = _MODULE_OF.get(path)
-        if got is not None:
+        if got is not None and _file_is(got, path):
             return got
+        _MODULE_OF.pop(path, None)  # (a module since removed or imported from elsewhere)
         for mod_name, mod in list(sys.modules.items()):
             f = getattr(mod, "__file__", None)
             if f and not _installed(f):
                 _MODULE_OF.setdefault(str(Path(f).resolve()), mod_name)
-        return _MODULE_OF.get(path)
+        got = _MODULE_OF.get(path)
+        return got if got is not None and _file_is(got, path) else None
+
+
+def _file_is(mod_name: str, path: str) -> bool:
+    """Whether the imported module ``mod_name`` is the file at ``path`` (resolved)."""
+    f = getattr(sys.modules.get(mod_name), "__file__", None)
+    return bool(f) and (f == path or str(Path(f).resolve()) == path)
 
 
 def _module_file(mod_name: str) -> str | None:
@@ -277,93 +283,6 @@ def _imports(path: str, mod_name: str) -> tuple[str, ...]:
     return files
 
 
-def _rebound(path: str) -> frozenset:
-    """Module-level names some function of the module rebinds (``global``): state, not
-    constants."""
-    with _lock:
-        got = _GLOBALS.get(path)
-    if got is None:
-        try:
-            text = Path(path).read_text(errors="replace")
-        except OSError:
-            text = ""
-        got = frozenset(n.strip() for names in _GLOBAL.findall(text) for n in names.split(","))
-        with _lock:
-            _GLOBALS[path] = got
-    return got
-
-
-_GLOBAL = re.compile(r"^[ \t]+global[ \t]+([\w \t,]+)", re.M)
-
-
-def _plain(v, depth: int = 0):
-    """A process-independent text of an immutable plain value, or ``None`` (skipped)."""
-    if depth > 4:
-        return None
-    if v is None or isinstance(v, (bool, int, str, bytes)):
-        return repr(v)
-    if isinstance(v, float):
-        return v.hex()
-    if isinstance(v, complex):
-        return f"{v.real.hex()},{v.imag.hex()}"
-    if isinstance(v, enum.Enum):
-        return f"{type(v).__qualname__}.{v.name}"
-    if isinstance(v, np.ndarray):
-        if v.dtype.hasobject:
-            return None
-        return f"{v.dtype}{v.shape}{hashlib.sha256(np.ascontiguousarray(v).tobytes()).hexdigest()}"
-    if isinstance(v, np.generic):
-        return f"{v.dtype}:{v!r}"
-    if isinstance(v, type):
-        return f"{v.__module__}.{v.__qualname__}"
-    if dataclasses.is_dataclass(v) and not isinstance(v, type) and getattr(
-            getattr(v, "__dataclass_params__", None), "frozen", False):  # (equinox modules)
-        items = [f"{f.name}={_plain(getattr(v, f.name, None), depth + 1) or '?'}"
-                 for f in dataclasses.fields(v)]
-        return f"{type(v).__module__}.{type(v).__qualname__}({','.join(items)})"
-    if type(v).__module__.startswith("jax") and hasattr(v, "shape") and hasattr(v, "dtype"):
-        try:
-            return _plain(np.asarray(v), depth)
-        except Exception:  # noqa: BLE001 - not concrete
-            return None
-    if isinstance(v, (tuple, frozenset)):
-        items = [_plain(x, depth + 1) for x in v]
-        items = ["?" if x is None else x for x in items]
-        items = sorted(items) if isinstance(v, frozenset) else items
-        return f"{type(v).__name__}({','.join(items)})"
-    return None
-
-
-def _values(mod_name: str, path: str) -> str | None:
-    """Hash of the module's constants and its classes' plain attributes (:func:`_plain`)."""
-    with _lock:
-        if mod_name in _VALUES:
-            return _VALUES[mod_name]
-    mod = sys.modules.get(mod_name)
-    if mod is None and mod_name.split(".")[0] == "hdid":
-        try:
-            mod = importlib.import_module(mod_name)
-        except Exception:  # noqa: BLE001 - in doubt
-            mod = None
-    if mod is None:
-        return None
-    skip = _rebound(path)
-    h = hashlib.sha256()
-    for k, v in sorted(vars(mod).items()):
-        if k.startswith("__") or k in skip:
-            continue
-        if isinstance(v, type) and v.__module__ == mod_name:
-            for ck, cv in sorted(vars(v).items()):
-                if not ck.startswith("__") and (t := _plain(cv)) is not None:
-                    h.update(f"{k}.{ck}={t}\n".encode())
-        elif (t := _plain(v)) is not None:
-            h.update(f"{k}={t}\n".encode())
-    digest = h.hexdigest()
-    with _lock:
-        _VALUES[mod_name] = digest
-    return digest
-
-
 #: Packages whose versions are in every key already (``_programs.VERSIONED``).
 KEYED = frozenset({"jax", "jaxlib", "equinox", "optimistix", "lineax", "jaxtyping", "numpy",
                    "scipy"})
@@ -441,16 +360,26 @@ def _record(files: set[str]) -> dict:
             raise Doubt(p)
         out_files[name] = digest
         if mod_name is not None:
-            v = _values(mod_name, p)
+            v = _program_values.values(mod_name, p)
             if v is None:
                 raise Doubt(mod_name)
             out_values[mod_name] = v
-    return {"files": dict(sorted(out_files.items())), "values": dict(sorted(out_values.items())),
-            "dists": sorted(dists)}
+    out = {"files": dict(sorted(out_files.items())), "values": dict(sorted(out_values.items())),
+           "dists": sorted(dists)}
+    if DEBUG:
+        out["value_lines"] = {m: list(_program_values.lines(m)) for m in out_values}
+    return out
 
 
 def matches(rec: dict, given=None) -> bool:
-    """Whether everything ``rec`` (:func:`record`) recorded is unchanged in this process.
+    """Whether everything ``rec`` (:func:`record`) recorded is unchanged in this process
+    (:func:`mismatch` finds nothing)."""
+    return mismatch(rec, given) is None
+
+
+def mismatch(rec: dict, given=None) -> str | None:
+    """Why ``rec`` (:func:`record`) does not hold in this process — the first recorded
+    file, module's constants or package version that differs, old and new — or ``None``.
     A file outside hdid must also be the one this process's code comes from: a loaded
     module's, one hdid read (:func:`loaded`), or one defining what the call is given
     (``given()``: :func:`hdid._problems._program_trace.object_files` of the function and
@@ -459,25 +388,56 @@ def matches(rec: dict, given=None) -> bool:
     try:
         current = None
         for name, digest in rec["files"].items():
-            if file_hash(name) != digest:
-                return False
+            now = file_hash(name)
+            if now != digest:
+                return (f"file {name}: recorded {digest[:12]}, now "
+                        f"{now[:12] if now else 'unreadable or modified after the start'}")
             if not name.startswith(_HDID) and name not in LOADED and _module_of(name) is None:
                 if current is None:
                     current = {str(Path(f).resolve()) for f in (given() if given else ())}
                 if name not in current and not any(  # (or a copy with the same bytes)
                         not f.startswith(_HDID) and file_hash(f) == digest for f in current):
-                    return False
+                    return f"file {name}: not where this process's code comes from"
         for mod_name, digest in rec["values"].items():
             path = _module_file(mod_name)
-            if path is None or _values(mod_name, path) != digest:
-                return False
+            now = _program_values.values(mod_name, path) if path is not None else None
+            if now != digest:
+                return (f"constants of {mod_name}: recorded {digest[:12]}, now "
+                        f"{now[:12] if now else 'not importable'} "
+                        f"{_diff(rec.get('value_lines', {}).get(mod_name), mod_name)}").rstrip()
         for d in rec.get("dists", ()):
-            top = d.split("==")[0]
-            if not _dist_current(d, top):
-                return False
-    except (KeyError, TypeError, AttributeError):
-        return False
-    return True
+            if not _dist_current(d, d.split("==")[0]):
+                return f"package {d}: not installed at that version"
+    except (KeyError, TypeError, AttributeError) as e:
+        return f"unreadable record ({type(e).__name__}: {e})"
+    return None
+
+
+#: Set (``HDID_PROGRAM_DEBUG=1``) to keep each module's hashed constants in the records
+#: stored (``value_lines``), so that a miss names the constants that differ, and to print
+#: every miss's reason to stderr; misses are logged (``hdid.programs``, DEBUG) anyway.
+DEBUG = os.environ.get("HDID_PROGRAM_DEBUG", "") not in ("", "0")
+#: ``(stored version, reason)`` of the latest misses of a stored program in this process.
+MISSES: deque = deque(maxlen=64)
+_log = logging.getLogger("hdid.programs")
+
+
+def missed(stem: str, reason: str) -> None:
+    """Note that the stored version ``stem`` was not used, and why (:func:`mismatch`)."""
+    MISSES.append((stem, reason))
+    _log.debug("program %s not used: %s", stem, reason)
+    if DEBUG:
+        print(f"hdid: stored program {stem} not used: {reason}", file=sys.stderr)
+
+
+def _diff(old, mod_name: str) -> str:
+    """The constants' lines that differ (where the record kept them: :data:`DEBUG`)."""
+    if not old:
+        return ""
+    new = set(_program_values.lines(mod_name))
+    gone = sorted(set(old) - new)[:4]
+    added = sorted(new - set(old))[:4]
+    return "(" + "; ".join([f"-{x.strip()}" for x in gone] + [f"+{x.strip()}" for x in added]) + ")"
 
 
 def _dist_current(text: str, top: str) -> bool:

@@ -141,15 +141,18 @@ def _add_version(store: Path, key: str, vid: str, rec: dict) -> None:
 def _find(key: str, given=None) -> str | None:
     """The stored version of ``key`` whose recorded dependencies all hold in this process
     (``<key>.<id>``, newest first), or ``None``; ``given()``: the files defining what the
-    call is given (:func:`hdid._problems._program_deps.matches`)."""
+    call is given (:func:`hdid._problems._program_deps.matches`). A version that does not hold
+    is noted with its reason (:data:`hdid._problems._program_deps.MISSES`)."""
     store = _store()
     if store is None or (store / f"{key}.bad").exists():
         return None
     for v in reversed(_versions(store, key)):
         stem = f"{key}.{v['id']}"
-        if ((store / f"{stem}.exp").exists() and not (store / f"{stem}.bad").exists()
-                and _program_deps.matches(v["deps"], given)):
-            return stem
+        if (store / f"{stem}.exp").exists() and not (store / f"{stem}.bad").exists():
+            why = _program_deps.mismatch(v["deps"], given)
+            if why is None:
+                return stem
+            _program_deps.missed(stem, why)
     return None
 
 
