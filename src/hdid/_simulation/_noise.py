@@ -179,6 +179,36 @@ def noise_sigma(runs, step: float | None, still_only: bool = False) -> float:
     return max(sig, 1e-4 * span)
 
 
+#: Closest distinct readings of a run, in print units, at which the print lattice is the
+#: readings' resolution (:func:`print_floor`): one unit (with floating-point slack).
+PRINT_LATTICE_GAP = 1.5
+
+
+def print_floor(runs, unit: float | None) -> float:
+    """Error σ [log units] of readings whose resolution is their print unit: ``unit/√12``
+    where every still stretch repeats one printed level (:func:`noise_sigma`'s still
+    estimate 0: the noise is below the unit) and a run's readings step by one unit (its
+    closest distinct levels within :data:`PRINT_LATTICE_GAP` units); 0 otherwise.
+
+    An encoder finer than the print unit (2^20 counts printed in degrees to 3 decimals:
+    0.34 units) or a quiet sensor printed coarsely reads each angle rounded to the unit:
+    a moving reading's error is uniform on ``±unit/2`` (``unit²/12``, plus an unknown
+    ``q²/12 < unit²/12`` from an encoder step ``q`` that no level difference shows), a
+    still stretch one value printed again and again. The noise estimate there has nothing
+    to measure: its floor was the simulator's accuracy (``1e-4`` of the span, 6× this on a
+    0.3 rad swing in degrees). Readings printed far finer than their steps (a processed
+    log at 1e-10) have no levels one unit apart and keep the noise estimate."""
+    if not unit or not np.isfinite(unit) or unit <= 0.0:
+        return 0.0
+    if noise_sigma(runs, None, still_only=True) != 0.0:
+        return 0.0
+    gaps = [np.diff(np.unique(np.asarray(r.theta, dtype=float))) for r in runs]
+    gaps = [g for g in gaps if g.size]
+    if not gaps or float(np.min(np.concatenate(gaps))) > PRINT_LATTICE_GAP * unit:
+        return 0.0
+    return unit / math.sqrt(12.0)
+
+
 def _ar2_sigma(runs) -> float:
     """Noise σ [log units] from how well each run's readings follow from their two
     predecessors: ``θₙ = a₁θₙ₋₁ + a₂θₙ₋₂ + c`` holds exactly for a damped sinusoid (a

@@ -21,7 +21,11 @@ On an encoder printed far finer than its step the term is at most ``3/Q²`` of t
 ``q²/12`` (every error at ``p/2``) and is left out below :data:`NEGLIGIBLE_PRINT`: the
 floor of logs printed with many decimals is unchanged. At ``Q = 1.92`` (2^15 counts printed
 to 0.1 mrad) it is ``1/Q²``: the floor ``√(q² + p²)/√12`` is 1.13× the step's alone.
-Where the time stamps are rounded instants too (:mod:`._timing`) it is not added yet.
+Beside rounded time stamps (:mod:`._timing`: reading ``i``'s error ``s_i·q/√12``) the
+term adds ``v`` to every reading's variance, and what it moves is the floor the fit's
+weights (``1/s_i²``) reach: ``12·v/q²·Σ(w²/s⁴)/Σ(w²/s²)`` of its square, the fast readings'
+share damped by their large ``s``. It is left out where that is below
+:data:`NEGLIGIBLE_PRINT` (the floor within 1 %), as without stamps (``s = 1``).
 """
 
 from __future__ import annotations
@@ -63,14 +67,16 @@ def print_errors(theta: list[np.ndarray], step: float, unit: float) -> list[np.n
 
 
 def print_variance(runs, step: float, unit: float | None, weight: np.ndarray,
-                   setup_index: np.ndarray) -> float:
+                   setup_index: np.ndarray, time_scale: np.ndarray | None = None) -> float:
     """Variance [log units²] the print rounding adds to every reading's error (module
     notes): the readings' print errors' mean square about their set-up's mean, weighted by
     ``weight²`` (``(R, T)``, the fit's weights before any timing scale); 0 where it is
     below :data:`NEGLIGIBLE_PRINT` of ``step²/12`` or the readings are not the lattice
     printed to ``unit``. A set-up's runs share one offset (one encoder, one zero) where
     their levels allow it (a run that never moves then has its print error too), else
-    each run has its own (an encoder homed again between runs)."""
+    each run has its own (an encoder homed again between runs). ``time_scale`` (``(R, T)``,
+    :func:`._timing.time_scales`): the stamps' scale on each reading's error, where the
+    term counts if it moves the floor the weights reach by 1 % (module notes)."""
     if not unit or not np.isfinite(unit) or unit <= 0.0 or not step > 0.0:
         return 0.0
     if 3.0 * (unit / step) ** 2 < NEGLIGIBLE_PRINT:  # even every error at p/2 is negligible
@@ -96,4 +102,15 @@ def print_variance(runs, step: float, unit: float | None, weight: np.ndarray,
     if norm <= 0.0:
         return 0.0
     v = total / norm
-    return v if 12.0 * v / step**2 >= NEGLIGIBLE_PRINT else 0.0
+    return v if 12.0 * v / step**2 * _damping(weight, time_scale) >= NEGLIGIBLE_PRINT else 0.0
+
+
+def _damping(weight: np.ndarray, time_scale: np.ndarray | None) -> float:
+    """``Σ(w²/s⁴)/Σ(w²/s²)``: the share of a variance added to every reading that reaches the
+    floor of readings of error scales ``s`` weighted ``w/s`` (1 without stamps)."""
+    if time_scale is None:
+        return 1.0
+    w2 = np.asarray(weight, dtype=float) ** 2
+    s2 = np.asarray(time_scale, dtype=float) ** 2
+    den = float(np.sum(w2 / s2))
+    return float(np.sum(w2 / s2**2)) / den if den > 0.0 else 1.0
