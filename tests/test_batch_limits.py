@@ -39,3 +39,35 @@ def test_the_batch_checks_the_limits_of_a_fit_above_the_floor(stiff):
     assert reached_floor(default)
     assert abs(default.parameters["k1"].value / STIFF["k1"] - 1) < 0.05
     assert not any("did not check it against its limits" in w for w in default.warnings)
+
+
+def test_the_batch_schedules_its_limit_checks_as_hdid_fit(monkeypatch):
+    """The limit checks' starts and schedule follow the fit's number of grid starts
+    (``nested_check(lanes=…)``: each limit ``lanes − 1`` grid starts beside the fit's
+    optimum, its rows scheduled ``lanes`` at a time). hdid.fit passes its starts' count;
+    the batch passed none, so its checks above the floor had 2 grid starts a limit in one
+    schedule — other optima than hdid.fit's on the same log. The checks are replaced by a
+    recorder here (no limit fitted): the call's arguments are the claim."""
+    from pathlib import Path
+
+    from hdid._fitting import _fit, _vfit
+
+    calls: dict = {}
+
+    def recorder(tag):
+        def check(result, log, setup, **kw):
+            calls.setdefault(tag, []).append(kw)
+            result.limits, result.restarted_from = [], None
+            return result
+        return check
+
+    monkeypatch.setattr(_fit, "nested_check", recorder("fit"))
+    monkeypatch.setattr(_vfit, "nested_check", recorder("batch"))
+    example = Path(__file__).resolve().parents[1] / "data" / "synthetic" / "csf8_paper.csv"
+    hdid.fit(example, nested=True)
+    hdid.fit_many([example], nested=True)
+    fit_kw, batch_kw = calls["fit"][0], calls["batch"][0]
+    assert fit_kw["lanes"] >= 2  # (hdid.fit: its grid starts)
+    assert batch_kw.get("lanes") == fit_kw["lanes"]
+    # the same local fits handed to the check (the batch's on the padded problem)
+    assert len(batch_kw["solutions"][0]) == len(fit_kw["solutions"][0])

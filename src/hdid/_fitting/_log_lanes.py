@@ -211,10 +211,12 @@ class _Lanes:
 
 def fit_bucket(setups, padded: list[Problem], options: dict, width: int, timing, phase):
     """Fit the logs of one bucket (``setups`` and their padded problems, one model
-    structure and shape) as lanes. Returns per log ``(U, costs, ok, steps, pre, start)``:
+    structure and shape) as lanes. Returns per log ``(U, costs, ok, steps, pre, start,
+    n_first)``:
     the local fits of :func:`hdid._fitting._vfit._fit_log`, the analysis' precomputed parts
     on the padded problem (``None`` where every start diverged) and the log's first start
-    (the data's release guesses, for the fold-back restart), or the exception that
+    (the data's release guesses, for the fold-back restart) and its number of grid starts
+    (the limit checks' schedule, as :func:`hdid.fit`'s), or the exception that
     stopped that log. ``phase(name)``: a context adding to ``timing``'s phases."""
     n_starts = int(options.get("n_starts", 6))
     max_steps = int(options.get("max_steps", 300))
@@ -235,7 +237,7 @@ def fit_bucket(setups, padded: list[Problem], options: dict, width: int, timing,
             log_of.append(np.full(len(U), i))
         log_of_c = np.concatenate(log_of)
         cost = lanes.costs(log_of_c, np.concatenate(cands)) if len(log_of_c) else np.zeros(0)
-        starts, start_log, first = [], [], {}
+        starts, start_log, first, starts_of = [], [], {}, {}
         at = 0
         for i, (st, p) in enumerate(zip(setups, padded)):
             c = cost[at:at + len(cands[i])]
@@ -251,6 +253,7 @@ def fit_bucket(setups, padded: list[Problem], options: dict, width: int, timing,
                 continue
             starts.append(U0)
             first[i] = np.asarray(U0)[0]
+            starts_of[i] = U0
             start_log.append(np.full(len(U0), i))
     if not starts:
         return out
@@ -291,7 +294,7 @@ def fit_bucket(setups, padded: list[Problem], options: dict, width: int, timing,
             c = costs[sel]
             out[g] = (U[sel], c, ok[sel], steps[sel],
                       _precomputed(padded[g], pre[g]) if np.isfinite(c).any() else None,
-                      first[g])
+                      first[g], len(starts_of[g]))
     return out
 
 

@@ -302,9 +302,9 @@ def _fit_log(item, setup, padded: Problem, options: dict, lanes: int, bracket: b
             timing.lane_steps += int(np.sum(steps))
         with _Phase(timing, "analyse"):
             res = _analysed(item, setup, padded, (U, costs, ok, steps), options, bracket,
-                            t_start)
+                            t_start, n_first=len(U0))
         res = _settled(res, item, setup, padded, (U, costs, ok, steps), U0[0], options,
-                       bracket, timing, t_start, lanes)
+                       bracket, timing, t_start, lanes, len(U0))
         _check_finite(res)
     except LOG_ERRORS as exc:
         return exc
@@ -312,11 +312,11 @@ def _fit_log(item, setup, padded: Problem, options: dict, lanes: int, bracket: b
 
 
 def _analysed(item, setup, padded: Problem, solutions, options: dict, bracket: bool,
-              t_start: float, pre=None):
+              t_start: float, pre=None, n_first: int | None = None):
     """The :class:`~hdid.FitResult` of the local fits ``solutions`` ``(U, costs, ok,
     steps)``: the analysis' JAX parts at the best row on the padded problem (``pre``
     where already computed), the rest on the log's own (:func:`_finish`), then the
-    batch's limit check (:func:`_nested`)."""
+    batch's limit check (:func:`_nested`; ``n_first``: the log's number of grid starts)."""
     U, costs, ok, steps = solutions
     finite = np.isfinite(costs)
     if pre is None and finite.any():
@@ -324,11 +324,12 @@ def _analysed(item, setup, padded: Problem, solutions, options: dict, bracket: b
             finite, costs, np.inf)))]), setup.problem)
     res = _finish(setup, U, costs, ok, steps, t_start, bracket=bracket, precomputed=pre)
     return _nested(res, item, setup, options, int(options.get("n_starts", 6)),
-                   int(options.get("max_steps", 300)), solutions)
+                   int(options.get("max_steps", 300)), solutions, n_first)
 
 
 def _settled(res, item, setup, padded: Problem, solutions, start, options: dict,
-             bracket: bool, timing: BatchTiming, t_start: float, lanes: int = LANES):
+             bracket: bool, timing: BatchTiming, t_start: float, lanes: int = LANES,
+             n_first: int | None = None):
     """:func:`hdid.fit`'s steps after its local fits, by the same functions: the restarts
     of an optimum whose cubic went to 0, whose release stuck on its bracket's end or whose
     swing sits on an alias above the log's Nyquist frequency
@@ -338,14 +339,16 @@ def _settled(res, item, setup, padded: Problem, solutions, start, options: dict,
     (:func:`hdid._fitting._substep.refined`: this batch's own steps again, warm from the
     fitted model, at that substep). A log that needs none of them costs a few NumPy
     checks. ``start``: the first start (the data's release guesses); ``lanes``: starts per
-    call of the restarts' Levenberg–Marquardt program."""
+    call of the restarts' Levenberg–Marquardt program; ``n_first``: the log's number of
+    grid starts (the limit checks' schedule, :func:`_nested`)."""
     max_steps = int(options.get("max_steps", 300))
     prob, prep, model = setup.problem, setup.prep, setup.model
     with _Phase(timing, "solve"):
         res, _ = _cubic_restart.restarted(
             res, prob, model, log_scales(prep, model, np.asarray(prob.offset0)), solutions,
             lambda U0: _local_fits(padded, U0, max_steps, lanes),
-            lambda sol: _analysed(item, setup, padded, sol, options, bracket, t_start),
+            lambda sol: _analysed(item, setup, padded, sol, options, bracket, t_start,
+                                  n_first=n_first),
             log_hz=prep.frequency_hz, start=np.asarray(start))
 
     def again(log, **opts):  # this log through the batch's own steps at another substep
@@ -379,13 +382,14 @@ def _fit_lanes(items, setups: dict, padded: dict, buckets: set, timing, bracket,
                 done(i, f)
                 continue
             try:
-                U, costs, ok, steps, pre, start = f
+                U, costs, ok, steps, pre, start, n_first = f
                 sol = (U, costs, ok, steps)
                 with _Phase(timing, "analyse"):
                     res = _analysed(items[i], setups[i], padded[i], sol, options, bracket,
-                                    t_start, None if pre is None else _unpad(pre, setups[i].problem))
+                                    t_start, None if pre is None else _unpad(
+                                        pre, setups[i].problem), n_first)
                 res = _settled(res, items[i], setups[i], padded[i], sol, start, options,
-                               bracket, timing, t_start)
+                               bracket, timing, t_start, n_first=n_first)
                 _check_finite(res)
             except LOG_ERRORS as exc:
                 res = exc
@@ -397,12 +401,16 @@ def _local_fits(problem: Problem, U0, max_steps: int, lanes: int):
     return _one_lane(problem, U0, max_steps, lanes)[:4]
 
 
-def _nested(res, item, setup, options: dict, n_starts: int, max_steps: int, solutions=None):
+def _nested(res, item, setup, options: dict, n_starts: int, max_steps: int, solutions=None,
+            n_first: int | None = None):
     """fit()'s check against its model's limits (:mod:`hdid._fitting._limits`: the nested
     Coulomb case, no friction, the linear spring) by :func:`hdid._fitting._fit.nested_check`,
     one log at a time, as :func:`hdid.fit` calls it (with the local fits ``solutions`` on
-    the padded problem, whose costs are the log's own up to rounding; the limits' grid
-    starts in one schedule, ``_limits.LIMIT_GRID_STARTS`` wide):
+    the padded problem, whose costs are the log's own up to rounding, and ``n_first``, the
+    log's number of grid starts, as hdid.fit's ``lanes``: above the floor each limit then
+    gets ``n_first − 1`` grid starts, its rows scheduled ``n_first`` at a time — without
+    it the batch's checks had 2 grid starts a limit in one schedule, other starts and other
+    optima than hdid.fit's on the same log):
     ``nested="auto"`` when the residual is above the floor or a term may vanish, ``True``
     always, ``False`` never. The batch's default (``None``) runs it, as ``"auto"`` does,
     exactly where the residual has not reached the floor
@@ -428,7 +436,7 @@ def _nested(res, item, setup, options: dict, n_starts: int, max_steps: int, solu
                         inertia_prior=options.get("inertia_prior"),
                         release_time=options.get("release_time"),
                         max_substep=options.get("max_substep"), n_starts=n_starts,
-                        max_steps=max_steps, solutions=solutions)
+                        max_steps=max_steps, solutions=solutions, lanes=n_first)
 
 
 def _check_finite(res) -> None:
