@@ -254,3 +254,19 @@ def width_ratios(problem, draws_u: np.ndarray, centre, half_width: float,
         out[n] = {"posterior_over_prior_width": r, "verdict": verdict,
                   "set_by_prior": bool(r > SET_BY_PRIOR)}
     return out
+
+
+def mode_shares(found, mix, X, what: str, tail: str):
+    """Each optimum's share of the draws ``X`` (the mode whose weighted Laplace density
+    ``mix`` is highest at the draw), and the MULTIMODAL warning when the fit's cost has
+    several optima (``what``: "draws" / "particles"; ``tail`` ends the sentence), or None."""
+    comp = np.argmax(mix.component_logpdf(X), axis=1)
+    share = np.bincount(comp, minlength=len(found)) / comp.size
+    optima = [i for i, m in enumerate(found) if m.kind == "optimum"]
+    if len(optima) < 2:
+        return share, None
+    return share, (
+        f"MULTIMODAL: {len(optima)} separate optima of the fit's cost (Laplace weights "
+        + ", ".join(f"{found[i].weight:.2f}" for i in optima)
+        + f"; share of the {what} " + ", ".join(f"{share[i]:.2f}" for i in optima)
+        + "); " + tail)

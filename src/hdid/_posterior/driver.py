@@ -56,7 +56,10 @@ def sample_posterior(
     ``prior`` are emcee's.
 
     Modes: with ``modes="auto"`` (default) :func:`find_modes` restarts the local fit
-    around ``fit`` and keeps every distinct optimum with its Laplace mass; the walkers
+    around ``fit`` — started also at the aliases ``k·fs ± f`` of the fit's swing whose k1
+    the prior finds plausible (:mod:`~hdid._posterior.aliases`: a log that does not resolve
+    its swing may be fitted on the wrong alias) — and keeps every distinct optimum with
+    its Laplace mass; the walkers
     start spread over them in proportion to that mass; it adds the *limit fits* of the
     parameters whose prior is flat in value (each held near zero, the rest refitted:
     :mod:`~hdid._posterior.limits`), which keep a share of the independence proposal, and

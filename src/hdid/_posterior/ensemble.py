@@ -23,11 +23,12 @@ from .diagnostics import (
     convergence,
     tau_outlasts_chain,
     diagnostic_stride,
+    mode_shares,
     tau_pooled,
     width_ratios,
 )
 from .limits import assess_limits, limit_proposal_weights, limit_shares
-from .modes import RIDGE_SAMPLERS, found_limits, mode_shares, sampled_modes
+from .modes import RIDGE_SAMPLERS, found_limits, sampled_modes
 from .moves import (
     START_SCALE,
     MixtureProposal,

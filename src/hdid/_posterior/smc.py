@@ -331,7 +331,7 @@ def sample_smc(fit, *, n_particles: int = N_PARTICLES, n_runs: int = N_RUNS,
     from .density import PRIOR_HALF_WIDTH, physical_draws, to_physical
     from .diagnostics import width_ratios
     from .limits import assess_limits, limit_shares
-    from .modes import mode_shares
+    from .diagnostics import mode_shares
     from .result import BAND, _RunNames
     from .result import PosteriorResult
 
