@@ -142,7 +142,7 @@ class Convergence:
 #: over a doubling (a stationary chain: g → 0 once it is tens of τ long; walkers that
 #: never cross between optima or along a ridge: g ≈ 1, the correlations outlast the chain),
 #: on a chain still under ``OUTLAST_TAU`` τ, means a longer chain will not converge.
-#: Measured on the calibration's paper logs (benchmarks/results/posterior_convergence.md):
+#: Measured on the calibration's paper logs (docs/decisions/emcee-calibration-logs.md):
 #: seed 36008 g = 0.98 at 1.6 τ (not converged at 40 000 steps; τ of tau_c, c_v ≈ 25 000), 36027 g = 0.10 (converged at 15 262 steps); 36 AR(1) walkers of τ ≈ 200 at
 #: 7.5 → 15 τ: g sd ≈ 0.25, largest of 20 seeds 0.73; 36 random walks: g 0.91–1.16.
 OUTLAST_GROWTH = 0.8

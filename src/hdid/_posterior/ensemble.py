@@ -47,7 +47,7 @@ from .result import BAND, PosteriorResult, _RunNames
 #: 36003 kept DE acceptance at 0.52 / 0.48 in the kept chain (walkers packed along the
 #: Coulomb–viscous ridge), τ of tau_c/c_v 25 600 / 3 700, not converged in 40 000 steps; with
 #: 8 stages of 1000 steps: acceptance 0.27 / 0.35, τ 3 400 / 477, 36003 converged at 26 550
-#: steps (benchmarks/results/posterior_convergence.md).
+#: steps (docs/decisions/emcee-calibration-logs.md).
 BURN_IN_STAGES = 8
 #: Default burn-in [steps] of a chain grown until it converges. The walkers start at the
 #: optima's Laplace width, narrower than the posterior along the Stribeck ridge: after 400
