@@ -24,8 +24,11 @@ Refits (:mod:`hdid._fitting._refit`)
     credited with anything: ΔBIC < 0) with the added effect removed (a piece the
     candidate replaced at the current fit's values). When one of those restarts finds
     the current model a better basin, the candidates are started again from the new
-    optimum and the current model again from their new optima (``BASIN_PASSES``). A
-    candidate is credited only with what the current model cannot reach from there.
+    optimum, and each also from every other candidate's optimum credited with anything
+    against it (that effect removed, its own added: a candidate must not win by a basin
+    of the shared parameters its own refits missed), and the current model again from
+    their new optima (``BASIN_PASSES``). A candidate is credited only with what the
+    current model cannot reach from there.
 Orders
     Position-periodic candidates (``ripple``, ``kinematic_error``) scan every integer
     order 1–48 (the ripple also the residual periodogram's two peaks): each screened by

@@ -1,8 +1,9 @@
 """One round of :func:`hdid.diagnose`'s search, step by step: look at the current fit's
 residual, refit every candidate from it, give the current model every start a candidate
-got (and start the candidates again where that finds it a better basin), and tabulate the
-candidates against it. The rules that judge the table are in :mod:`._verdict`; the order
-of the steps and why is the module docstring of :mod:`._diagnose`."""
+got (and start the candidates again where that finds it a better basin, each also from
+the others' optima), and tabulate the candidates against it. The rules that judge the
+table are in :mod:`._verdict`; the order of the steps and why is the module docstring of
+:mod:`._diagnose`."""
 
 from __future__ import annotations
 
@@ -15,7 +16,8 @@ import numpy as np
 
 from ._candidates import _candidate_setups, _merge, _ripple_orders, _shape_is_unusual, _shape_reset
 from ._ladder import bic_value
-from ._refits import _base_starts, _cand_bic, _candidate_fits, _own_optimum, _record, sf_key
+from ._refits import (_base_starts, _cand_bic, _candidate_fits, _cross_starts, _own_optimum,
+                      _record, sf_key)
 from ._result import CandidateResult
 
 #: A current fit with RMS above this many quantization floors is a poor warm start ...
@@ -190,7 +192,34 @@ def current_from_candidates(s: Search, current, look: Residual, by_key, hints):
                         s.scans, s.refitted)
                 except Exception:  # the first pass's refits stand
                     pass
+            cross_refits(s, current, by_key)
     return current, look
+
+
+def cross_refits(s: Search, current, by_key) -> None:
+    """After the current model found a better basin: every candidate also starts from
+    every other candidate's optimum that would be credited with anything against the new
+    optimum (ΔBIC < 0), that optimum's effect removed and its own added
+    (:func:`~hdid._diagnosis._refits._cross_starts`; one refit of its best set-up). Where
+    the fits have several basins a candidate's refits may miss the basin of the shared
+    parameters another's reached, and the verdict would credit the other's start, not
+    its effect. ``by_key`` gains the new refits."""
+    from .._fitting import _refit
+
+    bic_now = bic_value(current.cost, current.n_effective, current.n_unknowns)
+    own = {k: _own_optimum(v) for k, v in by_key.items()}
+    others = [sf for k, sf in own.items() if sf is not None
+              and _cand_bic(sf, s.all_cands[k]) - bic_now < 0]
+    if not others:
+        return
+    s.say(f"  candidates again from {len(others)} other candidates' optima")
+    for key, sf in own.items():
+        starts = _cross_starts(sf, current, others) if sf is not None else []
+        if starts:
+            try:
+                by_key[key] = [*by_key[key], _refit.run(sf.label, sf.setup, starts)]
+            except Exception:  # the earlier refits stand
+                continue
 
 
 def candidate_table(s: Search, by_key, current, fcheck) -> list[CandidateResult]:
