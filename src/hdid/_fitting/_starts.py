@@ -121,6 +121,9 @@ def _grid_candidates(problem: Problem, prep: Prepared, model: Model, from_model:
     # (loop invariants hoisted: this runs for every log of a batch)
     med_inertia = float(np.median(inertia))
     decrement = float(np.median(np.abs(theta0) - np.minimum(rest, np.abs(theta0))))
+    moving = (np.zeros(prep.n_runs, bool) if prep.moving_start is None
+              else np.asarray(prep.moving_start, dtype=bool))
+    w_moving = np.where(moving, np.asarray(prep.omega_guess, dtype=float), 0.0)
     free = problem.free
     pack = _packer(problem, specs)
     base = log_scales(prep, model, np.asarray(problem.offset0))
@@ -144,8 +147,11 @@ def _grid_candidates(problem: Problem, prep: Prepared, model: Model, from_model:
             cands.append(pack(current, tr))
             keys.append(-1.0)
             continue
+        amp_f, dec_f = amp, decrement
+        if moving.any():  # a run cut in mid-swing: its swing's amplitude at this frequency
+            amp_f, dec_f = _swing_amplitude(theta0, w_moving, wr, rest, moving)
         levels = np.concatenate([
-            k_wg * decrement / (2 * GRID_HALF_CYCLES), GRID_COULOMB_FRACTIONS * k_wg * amp
+            k_wg * dec_f / (2 * GRID_HALF_CYCLES), GRID_COULOMB_FRACTIONS * k_wg * amp_f
         ])
         tau_c = np.maximum(levels, 1e-3 * k_wg * amp)  # one candidate per level
         vals = {n: np.empty_like(tau_c) for n in ruled}
@@ -163,6 +169,16 @@ def _grid_candidates(problem: Problem, prep: Prepared, model: Model, from_model:
         cands.extend(pack(full, tr))
         keys.extend([f] * len(tau_c))
     return np.array(cands), np.array(keys)
+
+
+def _swing_amplitude(theta0, omega0, wr, rest, moving):
+    """``(amplitude, decrement)`` medians over the runs for the grid's friction levels, a
+    run that starts moving (``moving``) counted at its swing's amplitude
+    ``√(θ0² + (ω0/ω_n)²)`` at the grid's natural frequency ``wr`` (its energy), not at its
+    first reading: a log cut in mid-swing reads near the spring's zero at full speed, and
+    its first reading put every grid level far below the friction."""
+    swing = np.where(moving, np.hypot(theta0, omega0 / wr), np.abs(theta0))
+    return float(np.median(swing)), float(np.median(swing - np.minimum(rest, swing)))
 
 
 def _choose_starts(U, cost, keys, n_starts: int, from_model: bool = False):
