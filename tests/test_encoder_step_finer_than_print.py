@@ -50,8 +50,6 @@ def _printed_log(tmp_path, degrees: bool, seed: int):
     return path, unit, errors
 
 
-@pytest.mark.xfail(strict=True, reason="prepare takes the floor from the noise estimate "
-                   "until it asks print_floor first")
 @pytest.mark.parametrize("degrees", [True, False], ids=["deg3", "rad4"])
 def test_the_print_unit_sets_the_floor_of_a_finer_encoder(tmp_path, degrees):
     for seed in (1, 2):

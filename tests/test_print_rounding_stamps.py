@@ -60,8 +60,6 @@ def _ratio(tmp_path, seed: int) -> tuple[float, object]:
     return math.sqrt(np.sum(w2 * err**2) / np.sum(w2)) / prep.floor, prep
 
 
-@pytest.mark.xfail(strict=True, reason="prepare leaves the print term out beside rounded "
-                   "stamps until it passes their scale to print_variance")
 def test_the_floor_holds_print_and_stamp_rounding_together(tmp_path):
     # Each log has ~2500 effective readings (holds and stuck tails one each): the RMS of
     # uniform-like errors is within ~1 % (one sd, ~0.45/sqrt(n_eff); 0.9 % over seeds

@@ -13,7 +13,7 @@ import numpy as np
 
 from .._errors import LogError
 from .._log import Log
-from ._noise import noise_ahead, noise_sigma
+from ._noise import noise_ahead, noise_sigma, print_floor
 from ._search_weight import FULL_WEIGHT_TAIL, search_weight as search_weight  # (re-exported)
 from ._print_rounding import print_variance
 from ._timing import time_scales
@@ -258,9 +258,11 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
             step = err * math.sqrt(12.0)  # (the readings' error, rounding included)
             source = "noise"
     else:
-        # (never below the printing's own rounding, print unit/√12)
-        step = max(noise_sigma(runs, None) * math.sqrt(12.0),
-                   float(getattr(log, "print_unit", None) or 0.0))
+        # (never below the printing's own rounding, print unit/√12; that rounding itself
+        # where it is the readings' resolution, :func:`print_floor`)
+        printed = float(getattr(log, "print_unit", None) or 0.0)
+        step = (print_floor(runs, printed) * math.sqrt(12.0)
+                or max(noise_sigma(runs, None) * math.sqrt(12.0), printed))
         source = "noise"
     quantized = source != "noise"
     sigma = step / math.sqrt(12.0)
@@ -416,11 +418,10 @@ def prepare(log: Log, release_time: float | None = None) -> Prepared:
     unit = getattr(log, "time_print_unit", None)
     scale = time_scales(runs, unit, step, (R, T)) if quantized else None
     setups = np.array([log.setups.index(r.setup) for r in runs])
-    # the readings' print rounding (:mod:`._print_rounding`; not yet beside rounded stamps:
-    # a 1.4 % change of the slow readings' weights moved a fine-encoder fit's held story
-    # into an 18 000x basin), or the stamps' rounding (:mod:`._timing`)
+    # the readings' print rounding (:mod:`._print_rounding`; beside rounded stamps where it
+    # moves the floor their weights reach by 1 %), and the stamps' rounding (:mod:`._timing`)
     pvar = print_variance(runs, step, getattr(log, "print_unit", None), weight,
-                          setups) if quantized and scale is None else 0.0
+                          setups, scale) if quantized else 0.0
     if scale is not None or pvar:
         weight = weight / np.sqrt((1.0 if scale is None else scale**2) + 12.0 * pvar / step**2)
     return Prepared(
