@@ -10,14 +10,16 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ._base import AbstractEffect, Motion, ScalePrior, StartValues, parameter
 from ._candidate import Candidate
+from .arm_gravity import ArmGravity
 
 
 class _WithGravity(Candidate):
     """A candidate meaningful only on a model that holds a pendulum (a ``gravity`` effect):
-    without one there is no gravity torque for the friction to follow."""
+    without one there is no gravity torque for the friction to follow; nor on one whose
+    gravity is :class:`~hdid.effects.arm_gravity.ArmGravity`, which carries this friction."""
 
     def applies(self, model) -> bool:
-        return (any(e.name == "gravity" for e in model.effects)
+        return (any(e.name == "gravity" and not isinstance(e, ArmGravity) for e in model.effects)
                 and super().applies(model))
 
 
