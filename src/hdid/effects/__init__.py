@@ -65,6 +65,7 @@ __all__ = [
     "AbstractFriction",
     "AbstractReading",
     "AbstractSpring",
+    "ArmGravity",
     "AsymmetricStribeckFriction",
     "AsymmetricViscousFriction",
     "BackEmfBraking",
